@@ -1,0 +1,99 @@
+"""An agent's decision logic: one sensor frame in, one turn rate out.
+
+`AgentBrain` is what runs inside every agent process and, unchanged, inside the
+in-process engine `swarm sim`; that is why the two produce the same trajectories.
+It sees only its own sensor frames (never ground truth) and keeps a little state:
+the leader's circle-circle plan, the follower's current out-neighbour and last command.
+Pure: no I/O, no clocks.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from agents.laws import make_follower_law
+from agents.leader import CCPath, on_orbit_command, plan_cc
+from agents.selection import select
+from swarm.scenario import AgentSpec, GainsSpec, SensingSpec
+from world.sensing import SensorFrame
+
+
+@dataclass(frozen=True, slots=True)
+class Decision:
+    """What an agent decided at one tick."""
+
+    tick: int
+    u: float  # commanded turn rate over [t_k, t_k + dt) (rad/s)
+    out: int | None  # chosen out-neighbour (None for leaders and lost followers)
+    phase: str  # leaders: "arc1" | "arc2" | "orbit"; followers: "track" | "lost"
+    fallback: bool = False  # pinned out-neighbour not sensed, nearest used instead
+
+
+def _overlap(a: float, b: float, lo: float, hi: float) -> float:
+    return max(0.0, min(b, hi) - max(a, lo))
+
+
+def saturate(u: float, limit: float | None) -> float:
+    if limit is None:
+        return u
+    return max(-limit, min(limit, u))
+
+
+class AgentBrain:
+    """Decision logic of one agent; call `decide` once per tick with its frame."""
+
+    def __init__(self, spec: AgentSpec, gains: GainsSpec, sensing: SensingSpec, dt: float):
+        self.spec = spec
+        self.sensing = sensing
+        self.dt = dt
+        self.is_leader = spec.role == "leader"
+        self.law = None if self.is_leader else make_follower_law(gains.law, gains.c1, gains.c2)
+        self.plan: CCPath | None = None
+        self.plan_tick = 0
+        self.out: int | None = None
+        self.last_u = 0.0
+
+    # -- leaders -------------------------------------------------------------------
+    def _leader(self, frame: SensorFrame) -> Decision:
+        s = self.spec
+        if frame.target is None:
+            raise ValueError(f"leader {s.id}: sensor frame has no target information")
+        px, py = -frame.target[0], -frame.target[1]  # own position relative to the target
+        sign = s.direction_sign
+        if self.plan is None:
+            self.plan = plan_cc(px, py, frame.heading, s.speed, s.orbit_radius, sign, s.max_turn_rate)
+            self.plan_tick = frame.tick
+        p = self.plan
+        a = (frame.tick - self.plan_tick) * self.dt
+        b = a + self.dt
+        t12 = p.t1 + p.t2
+        if a >= t12:
+            u = on_orbit_command(px, py, frame.heading, s.speed, s.orbit_radius, sign, s.max_turn_rate)
+            phase = "orbit"
+        else:
+            u_orbit = sign * s.speed / s.orbit_radius
+            # Average turn rate over the tick: the switch between arcs rarely falls on a tick.
+            u = (p.u1 * _overlap(a, b, 0.0, p.t1) + p.u2 * _overlap(a, b, p.t1, t12)
+                 + u_orbit * _overlap(a, b, t12, math.inf)) / self.dt
+            phase = "arc1" if a < p.t1 else "arc2"
+        return Decision(frame.tick, saturate(u, s.max_turn_rate), None, phase)
+
+    # -- followers -----------------------------------------------------------------
+    def _follower(self, frame: SensorFrame) -> Decision:
+        choice = select(frame.contacts, mode=self.sensing.selection, pinned=self.spec.follow,
+                        current=self.out, hysteresis=self.sensing.hysteresis)
+        self.out = choice.out
+        if choice.contact is None:
+            # Nobody in sight: loiter on the last turn rate instead of spinning or bolting.
+            return Decision(frame.tick, self.last_u, None, "lost", choice.fallback)
+        c = choice.contact
+        u = saturate(self.law(frame.heading, c.heading, c.bearing), self.spec.max_turn_rate)
+        if not math.isfinite(u):
+            u = self.last_u
+        return Decision(frame.tick, u, c.id, "track", choice.fallback)
+
+    def decide(self, frame: SensorFrame) -> Decision:
+        d = self._leader(frame) if self.is_leader else self._follower(frame)
+        self.last_u = d.u
+        return d

@@ -1,0 +1,163 @@
+"""The `swarm` command line: small typer command groups, failures as one message and an exit code."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from swarm.scenario import Scenario, ScenarioError, load_scenario, scenario_json_schema
+
+app = typer.Typer(
+    help="swarm: an agent-per-process runtime for bearing-based circumnavigation over zenoh.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+ScenarioArg = Annotated[Path, typer.Argument(help="scenario file (TOML), e.g. scenarios/case2.toml",
+                                             show_default=False)]
+
+
+def fail(message: str, code: int = 2) -> "typer.Exit":
+    typer.secho(message, err=True, fg=typer.colors.RED)
+    return typer.Exit(code)
+
+
+def read_scenario(path: Path) -> Scenario:
+    try:
+        return load_scenario(path)
+    except ScenarioError as e:
+        raise fail(str(e), 2) from None
+
+
+def default_out(scenario_path: Path, kind: str) -> Path:
+    return Path("runs") / f"{scenario_path.stem}-{kind}-{time.strftime('%Y%m%d-%H%M%S')}"
+
+
+@app.command()
+def check(scenario: ScenarioArg) -> None:
+    """Validate a scenario file and print a short summary of it.
+
+    Example: swarm check scenarios/case2.toml
+    """
+    s = read_scenario(scenario)
+    r = s.run
+    typer.echo(f"{scenario}: ok - {s.name or scenario.stem}")
+    typer.echo(f"  run: dt={r.dt} s, duration={r.duration} s ({r.ticks} ticks), clock={r.clock}, "
+               f"seed={r.seed}, on_dropout={r.on_dropout}")
+    typer.echo(f"  target: ({s.target.x}, {s.target.y}) m; gains: law={s.gains.law}, "
+               f"c1={s.gains.c1}, c2={s.gains.c2}")
+    sens = s.sensing
+    typer.echo(f"  sensing: range={'unlimited' if sens.range is None else f'{sens.range} m'}, "
+               f"fov={'all round' if sens.fov is None else f'{sens.fov} rad'}, "
+               f"selection={sens.selection}, hysteresis={sens.hysteresis}")
+    for a in s.agents:
+        extra = (f"R={a.orbit_radius} m {a.direction}" if a.role == "leader"
+                 else f"follow={a.follow}" if a.follow is not None else "follow=nearest")
+        lim = "" if a.max_turn_rate is None else f", |u|<={a.max_turn_rate} rad/s"
+        typer.echo(f"  agent {a.id:>3} {a.role:<8} at ({a.x:g}, {a.y:g}) heading {a.heading:g} rad, "
+                   f"{a.speed:g} m/s, {extra}{lim}")
+
+
+@app.command()
+def schema() -> None:
+    """Print the JSON Schema of scenario files (for editors and tools).
+
+    Example: swarm schema > scenario.schema.json
+    """
+    typer.echo(json.dumps(scenario_json_schema(), indent=2))
+
+
+def _progress_bar(total: int, label: str):
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+    prog = Progress(TextColumn(label), BarColumn(), TextColumn("{task.completed}/{task.total} ticks"),
+                    TimeRemainingColumn(), transient=True, disable=not sys.stderr.isatty())
+    return prog
+
+
+def _print_summary(summary: dict, out: Path) -> None:
+    typer.echo(f"converged: {summary['converged']}  ticks: {summary['ticks']}  "
+               f"sim time: {summary['sim_time']:.2f} s")
+    typer.echo(f"  {'id':>3} {'role':<8} {'out':>4} {'root':>4} {'radius':>9} {'expected':>9} "
+               f"{'error %':>8} {'rate':>8} {'settle s':>8}")
+    for aid, a in summary["agents"].items():
+        def f(v, fmt):
+            return "-" if v is None else format(v, fmt)
+        typer.echo(f"  {aid:>3} {a['role']:<8} {f(a['out_neighbour'], 'd'):>4} {f(a['root'], 'd'):>4} "
+                   f"{a['final_radius']:9.3f} {f(a['expected_radius'], '9.3f'):>9} "
+                   f"{f(None if a['relative_error'] is None else 100 * a['relative_error'], '8.3f'):>8} "
+                   f"{f(a['angular_rate'], '8.4f'):>8} {f(a['settling_time'], '8.2f'):>8}"
+                   + ("" if a["alive"] else "  (dropped)"))
+    typer.echo(f"results: {out}")
+
+
+def _plots(out: Path) -> None:
+    from swarm.plots import PlotError, render_plots
+
+    try:
+        files = render_plots(out)
+    except PlotError as e:
+        raise fail(str(e), 1) from None
+    typer.echo("plots: " + ", ".join(p.name for p in files))
+
+
+@app.command()
+def sim(
+    scenario: ScenarioArg,
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="output directory "
+                                                "(default runs/<scenario>-sim-<time>)")] = None,
+    duration: Annotated[Optional[float], typer.Option(help="simulated seconds (default: the "
+                                                      "scenario's run.duration)", min=0.0)] = None,
+    plots: Annotated[bool, typer.Option(help="render PNG plots")] = True,
+) -> None:
+    """Run a scenario in one process (the reference engine) and write its results.
+
+    Writes summary.json, trajectory.npz and PNG plots into --out.
+
+    Example: swarm sim scenarios/case2.toml --out runs/case2
+    """
+    from swarm.recording import write_run
+    from swarm.sim import run_sim
+
+    s = read_scenario(scenario)
+    if duration is not None and duration < s.run.dt:
+        raise fail(f"--duration {duration} s is shorter than one step (dt = {s.run.dt} s)")
+    out = out or default_out(scenario, "sim")
+    total = int(round((duration or s.run.duration) / s.run.dt))
+    t0 = time.perf_counter()
+    with _progress_bar(total, f"sim {scenario.stem}") as prog:
+        task = prog.add_task("sim", total=total)
+        result = run_sim(s, duration, lambda k, n: prog.update(task, completed=k))
+    wall = time.perf_counter() - t0
+    result.extra["wall_time"] = wall
+    result.extra["sim_seconds_per_wall_second"] = total * s.run.dt / wall if wall > 0 else None
+    summary = write_run(result, out)
+    _print_summary(summary, out)
+    typer.echo(f"speed: {total * s.run.dt / wall:.1f} simulated s per wall s ({total / wall:.0f} ticks/s)")
+    if plots:
+        _plots(out)
+
+
+@app.command()
+def plot(run_dir: Annotated[Path, typer.Argument(help="a run directory written by swarm sim / swarm up")]) -> None:
+    """Re-render the PNG plots of a run from its trajectory.npz and summary.json.
+
+    Example: swarm plot runs/case2
+    """
+    if not run_dir.is_dir():
+        raise fail(f"{run_dir}: not a directory", 2)
+    _plots(run_dir)
+
+
+def main() -> None:
+    app()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,106 @@
+"""A run's recording: every tick of ground truth, written as trajectory.npz, plus
+summary.json. The layout is documented in README.md ("Outputs of a run").
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from swarm.scenario import Scenario
+from world.metrics import agent_metrics, converged
+
+
+class Recorder:
+    """Preallocated per-tick arrays; row k is the state at tick k (rows 0..ticks)."""
+
+    def __init__(self, scenario: Scenario, ticks: int):
+        n = len(scenario.agents)
+        self.scenario = scenario
+        self.ticks = ticks
+        self.rows = 0
+        self.t = np.full(ticks + 1, np.nan)
+        self.x = np.full((ticks + 1, n), np.nan)
+        self.y = np.full((ticks + 1, n), np.nan)
+        self.heading = np.full((ticks + 1, n), np.nan)
+        self.u = np.full((ticks + 1, n), np.nan)
+        self.out = np.full((ticks + 1, n), -1, dtype=np.int64)
+        self.alive = np.zeros((ticks + 1, n), dtype=bool)
+
+    def record(self, tick: int, time: float, x, y, heading, u, out, alive) -> None:
+        """Store tick `tick`: pose at t_k and the turn rate applied over [t_k, t_k+1)."""
+        self.t[tick] = time
+        self.x[tick] = x
+        self.y[tick] = y
+        self.heading[tick] = heading
+        self.u[tick] = u
+        self.out[tick] = out
+        self.alive[tick] = alive
+        self.rows = max(self.rows, tick + 1)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        s = self.scenario
+        n = self.rows
+        return {
+            "ids": np.array(s.ids, dtype=np.int64),
+            "role": np.array([a.role for a in s.agents]),
+            "speed": np.array([a.speed for a in s.agents], dtype=float),
+            "orbit_radius": np.array([a.orbit_radius if a.orbit_radius else math.nan for a in s.agents]),
+            "target": np.array([s.target.x, s.target.y], dtype=float),
+            "dt": np.array(s.run.dt),
+            "t": self.t[:n], "x": self.x[:n], "y": self.y[:n], "heading": self.heading[:n],
+            "u": self.u[:n], "out": self.out[:n], "alive": self.alive[:n],
+        }
+
+
+@dataclass
+class RunResult:
+    scenario: Scenario
+    recorder: Recorder
+    events: list[dict] = field(default_factory=list)
+    extra: dict = field(default_factory=dict)  # engine-specific figures for summary.json
+
+    def summary(self) -> dict:
+        a = self.recorder.arrays()
+        if len(a["t"]) == 0:
+            agents: dict = {}
+        else:
+            agents = agent_metrics(ids=a["ids"], roles=a["role"], speeds=a["speed"],
+                                   orbit_radius=a["orbit_radius"], t=a["t"], x=a["x"], y=a["y"],
+                                   alive=a["alive"], out_final=a["out"][-1], target=a["target"])
+        ticks = max(len(a["t"]) - 1, 0)
+        return {
+            "scenario": self.scenario.name,
+            "converged": converged(agents),
+            "ticks": ticks,
+            "sim_time": float(a["t"][-1]) if len(a["t"]) else 0.0,
+            "dt": self.scenario.run.dt,
+            "agents": agents,
+            "events": self.events,
+            **self.extra,
+        }
+
+
+def _json_default(o):
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.floating,)):
+        return float(o)
+    if isinstance(o, np.bool_):
+        return bool(o)
+    raise TypeError(f"not JSON serialisable: {type(o)}")
+
+
+def write_run(result: RunResult, out_dir: Path) -> dict:
+    """Write trajectory.npz and summary.json into out_dir; returns the summary."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(out_dir / "trajectory.npz", **result.recorder.arrays())
+    summary = result.summary()
+    tmp = out_dir / "summary.json.tmp"
+    tmp.write_text(json.dumps(summary, indent=2, default=_json_default) + "\n")
+    tmp.replace(out_dir / "summary.json")
+    return summary

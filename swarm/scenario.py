@@ -1,0 +1,246 @@
+"""Scenario files: TOML read into strict, frozen pydantic models.
+
+The field names here are the contract between users, tools and every process of a
+run. Units: metres, seconds, radians, m/s and rad/s throughout.
+
+`load_scenario(path)` is the one entry point; every problem with a file comes out of
+it as a `ScenarioError` whose message names the file and the field.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from pathlib import Path
+from typing import Annotated, Literal
+
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+
+PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class RunSpec(_Strict):
+    """[run]: how the world steps."""
+
+    dt: PositiveFloat = Field(0.01, description="world step (s)")
+    duration: PositiveFloat = Field(60.0, description="simulated time to run (s)")
+    clock: Literal["lockstep", "realtime"] = Field(
+        "lockstep", description="lockstep: step when every agent answered; realtime: wall clock"
+    )
+    seed: int = Field(0, description="seed for every random choice of the run")
+    on_dropout: Literal["leave", "coast"] = Field(
+        "leave",
+        description="what the world does with a dead agent: leave the world, or coast uncontrolled",
+    )
+    lockstep_deadline: PositiveFloat = Field(
+        0.5,
+        description="lockstep: wall seconds to wait for a live agent's command before holding its last one",
+    )
+
+    @property
+    def ticks(self) -> int:
+        """Number of world steps in the run."""
+        return int(round(self.duration / self.dt))
+
+
+class TargetSpec(_Strict):
+    """[target]: the stationary target (m)."""
+
+    x: Finite = 0.0
+    y: Finite = 0.0
+
+
+class GainsSpec(_Strict):
+    """[gains]: the follower law and its gains."""
+
+    c1: PositiveFloat = Field(description="gain on the heading difference wrap(g_j - g_i) (1/s)")
+    c2: PositiveFloat = Field(description="gain on sin(lambda_ij - g_i) (rad/s)")
+    law: str = Field(
+        "bearing",
+        description="follower law: a registered name, or 'module:function' (see agents/laws.py)",
+    )
+
+
+class SensingSpec(_Strict):
+    """[sensing]: who senses whom, and how followers pick their out-neighbour."""
+
+    range: PositiveFloat | None = Field(None, description="sensing range (m); unlimited if absent")
+    fov: Annotated[float, Field(gt=0, le=2 * math.pi)] | None = Field(
+        None, description="full field of view (rad) centred on the heading; 2*pi or absent = all round"
+    )
+    selection: Literal["nearest", "fixed"] = Field(
+        "nearest", description="nearest sensed agent, or the agent named by each follower's `follow`"
+    )
+    hysteresis: Annotated[float, Field(ge=0, lt=1)] = Field(
+        0.0,
+        description="switch to a new nearest agent only if it is this fraction closer than the current one",
+    )
+
+
+class AgentSpec(_Strict):
+    """[[agents]]: one unicycle."""
+
+    id: Annotated[int, Field(ge=0)]
+    role: Literal["leader", "follower"]
+    x: Finite
+    y: Finite
+    heading: Finite = Field(description="initial heading (rad)")
+    speed: PositiveFloat = Field(description="constant forward speed (m/s)")
+    orbit_radius: PositiveFloat | None = Field(None, description="leaders: orbit radius (m)")
+    direction: Literal["ccw", "cw"] = Field("ccw", description="leaders: orbit direction")
+    follow: int | None = Field(None, description="followers: fixed out-neighbour id")
+    max_turn_rate: PositiveFloat | None = Field(None, description="turn-rate limit (rad/s)")
+
+    @model_validator(mode="after")
+    def _role_fields(self) -> "AgentSpec":
+        if self.role == "leader":
+            if self.orbit_radius is None:
+                raise ValueError("orbit_radius: a leader needs an orbit radius (m)")
+            if self.follow is not None:
+                raise ValueError("follow: a leader has no out-neighbour; remove `follow`")
+            if self.max_turn_rate is not None and self.orbit_radius < self.speed / self.max_turn_rate:
+                raise ValueError(
+                    f"orbit_radius: {self.orbit_radius} m is not reachable: speed / max_turn_rate = "
+                    f"{self.speed / self.max_turn_rate:.6g} m"
+                )
+        else:
+            if self.orbit_radius is not None:
+                raise ValueError("orbit_radius: only leaders have one; a follower's radius follows from its speed")
+        return self
+
+    @property
+    def direction_sign(self) -> int:
+        """+1 for counter-clockwise, -1 for clockwise."""
+        return 1 if self.direction == "ccw" else -1
+
+
+class Scenario(_Strict):
+    """A whole scenario file."""
+
+    name: str = Field("", description="free-text name")
+    description: str = Field("", description="free text: where the numbers come from")
+    run: RunSpec = RunSpec()
+    target: TargetSpec = TargetSpec()
+    gains: GainsSpec
+    sensing: SensingSpec = SensingSpec()
+    agents: list[AgentSpec] = Field(min_length=1)
+
+    @field_validator("agents")
+    @classmethod
+    def _unique_ids(cls, agents: list[AgentSpec]) -> list[AgentSpec]:
+        seen: set[int] = set()
+        for a in agents:
+            if a.id in seen:
+                raise ValueError(f"duplicate agent id {a.id}")
+            seen.add(a.id)
+        return agents
+
+    @model_validator(mode="after")
+    def _graph(self) -> "Scenario":
+        ids = {a.id for a in self.agents}
+        if not any(a.role == "leader" for a in self.agents):
+            raise ValueError("agents: at least one agent must have role = \"leader\"")
+        for k, a in enumerate(self.agents):
+            if a.follow is not None:
+                if a.follow not in ids:
+                    raise ValueError(f"agents[{k}].follow: no agent has id {a.follow}")
+                if a.follow == a.id:
+                    raise ValueError(f"agents[{k}].follow: an agent cannot follow itself")
+        if self.sensing.selection == "fixed":
+            by_id = {a.id: a for a in self.agents}
+            for k, a in enumerate(self.agents):
+                if a.role == "follower" and a.follow is None:
+                    raise ValueError(
+                        f"agents[{k}].follow: selection = \"fixed\" needs `follow` on every follower"
+                    )
+            for a in self.agents:
+                seen = [a.id]
+                cur = a
+                while cur.role == "follower" and cur.follow is not None:
+                    cur = by_id[cur.follow]
+                    if cur.id in seen:
+                        cycle = " -> ".join(str(i) for i in seen[seen.index(cur.id):] + [cur.id])
+                        raise ValueError(f"agents: follower-only cycle in the fixed graph: {cycle}")
+                    seen.append(cur.id)
+        return self
+
+    def agent(self, agent_id: int) -> AgentSpec:
+        for a in self.agents:
+            if a.id == agent_id:
+                return a
+        raise KeyError(agent_id)
+
+    @property
+    def ids(self) -> list[int]:
+        return [a.id for a in self.agents]
+
+
+class ScenarioError(Exception):
+    """A scenario that cannot be used; the message names the file and the field."""
+
+
+def _loc(loc: tuple) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += ("." if out else "") + str(part)
+    return out
+
+
+def format_validation_error(source: str, err: ValidationError) -> str:
+    lines = [f"{source}: invalid scenario"]
+    for e in err.errors():
+        where = _loc(tuple(p for p in e["loc"] if p not in ("function-after",)))
+        msg = e["msg"]
+        if msg.startswith("Value error, "):
+            msg = msg[len("Value error, "):]
+        if e["type"] == "extra_forbidden":
+            msg = "unknown key"
+        m = re.match(r"^([a-z_]+): (.*)$", msg, re.S)
+        if m and where:
+            where, msg = f"{where}.{m.group(1)}", m.group(2)
+        lines.append(f"  {where}: {msg}" if where else f"  {msg}")
+    return "\n".join(lines)
+
+
+def parse_scenario(data: dict, source: str = "<scenario>") -> Scenario:
+    """Validate an already-parsed TOML document."""
+    try:
+        return Scenario.model_validate(data)
+    except ValidationError as err:
+        raise ScenarioError(format_validation_error(source, err)) from None
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario file; raise ScenarioError naming file and field."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ScenarioError(f"{p}: no such file") from None
+    except (IsADirectoryError, PermissionError, UnicodeDecodeError) as e:
+        raise ScenarioError(f"{p}: cannot read: {e}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ScenarioError(f"{p}: TOML syntax error: {e}") from None
+    return parse_scenario(data, str(p))
+
+
+def scenario_json_schema() -> dict:
+    return Scenario.model_json_schema()

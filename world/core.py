@@ -1,0 +1,116 @@
+"""Ground truth of one run: poses, who is in the world, one step at a time.
+
+`WorldCore` is the physics and the sensors, nothing else: the in-process engine and
+the world process both drive it, which is why their trajectories agree. Per agent
+it keeps one of three states:
+
+- "active":   controlled by a live agent process; integrates the last command.
+- "coasting": its process died and the scenario says on_dropout = "coast": it stays
+              in the world (others still sense it) and moves straight (u = 0).
+- "gone":     not in the world (dropped, or not joined yet): nobody senses it; its
+              pose is kept so that a restarted process rejoins from where it dropped.
+
+Commands are sanitised here, where physics is: a non-finite turn rate is never
+integrated (the last good one is held), and one above the agent's limit is saturated.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from swarm.scenario import Scenario
+from world.kinematics import step
+from world.sensing import SensorFrame, build_frames
+
+ACTIVE, COASTING, GONE = "active", "coasting", "gone"
+
+
+class WorldCore:
+    def __init__(self, scenario: Scenario, *, joined: bool = True):
+        self.scenario = scenario
+        agents = scenario.agents
+        self.ids = np.array([a.id for a in agents], dtype=np.int64)
+        self.index = {a.id: k for k, a in enumerate(agents)}
+        self.x = np.array([a.x for a in agents], dtype=float)
+        self.y = np.array([a.y for a in agents], dtype=float)
+        self.heading = np.array([a.heading for a in agents], dtype=float)
+        self.speed = np.array([a.speed for a in agents], dtype=float)
+        self.limit = np.array([a.max_turn_rate or math.inf for a in agents], dtype=float)
+        self.is_leader = np.array([a.role == "leader" for a in agents], dtype=bool)
+        self.u = np.zeros(len(agents))  # last applied turn rate (rad/s)
+        self.state = [ACTIVE if joined else GONE for _ in agents]
+        self.target = (scenario.target.x, scenario.target.y)
+        self.dt = scenario.run.dt
+        self.tick = 0
+        self.rejected = 0  # non-finite commands refused
+
+    @property
+    def time(self) -> float:
+        """Simulated time of the current tick (s)."""
+        return self.tick * self.dt
+
+    def active_ids(self) -> list[int]:
+        return [int(self.ids[k]) for k, s in enumerate(self.state) if s == ACTIVE]
+
+    def present_mask(self) -> np.ndarray:
+        return np.array([s != GONE for s in self.state], dtype=bool)
+
+    def alive_mask(self) -> np.ndarray:
+        return np.array([s == ACTIVE for s in self.state], dtype=bool)
+
+    def frames(self, only: list[int] | None = None) -> dict[int, SensorFrame]:
+        """Sensor frames of the current tick for the active agents (or `only` those)."""
+        wanted = self.active_ids() if only is None else only
+        receivers = [self.index[i] for i in wanted]
+        sens = self.scenario.sensing
+        return build_frames(self.tick, self.time, self.ids, self.x, self.y, self.heading,
+                            self.present_mask(), receivers, self.is_leader, self.target,
+                            sens.range, sens.fov)
+
+    def set_command(self, agent_id: int, u: float) -> bool:
+        """Latch agent_id's turn rate for the next step; False if it was refused."""
+        k = self.index[agent_id]
+        if not math.isfinite(u):
+            self.rejected += 1
+            return False
+        self.u[k] = max(-self.limit[k], min(self.limit[k], u))
+        return True
+
+    def applied(self) -> np.ndarray:
+        """Turn rates that the next step will integrate (NaN for agents not in the world)."""
+        out = self.u.copy()
+        for k, s in enumerate(self.state):
+            if s == COASTING:
+                out[k] = 0.0
+            elif s == GONE:
+                out[k] = math.nan
+        return out
+
+    def step(self) -> None:
+        """Advance every agent in the world by one dt with the latched commands."""
+        u = self.applied()
+        moving = ~np.isnan(u)
+        nx, ny, ng = step(self.x, self.y, self.heading, self.speed, np.where(moving, u, 0.0), self.dt)
+        self.x = np.where(moving, nx, self.x)
+        self.y = np.where(moving, ny, self.y)
+        self.heading = np.where(moving, ng, self.heading)
+        self.tick += 1
+
+    def drop(self, agent_id: int) -> str:
+        """An agent's process died: it leaves the world or coasts (scenario on_dropout)."""
+        k = self.index[agent_id]
+        self.state[k] = COASTING if self.scenario.run.on_dropout == "coast" else GONE
+        return self.state[k]
+
+    def join(self, agent_id: int) -> None:
+        """An agent's process (re)joined: controlled again from its current pose."""
+        k = self.index[agent_id]
+        if self.state[k] != ACTIVE:
+            self.u[k] = 0.0
+        self.state[k] = ACTIVE
+
+    def pose(self, agent_id: int) -> tuple[float, float, float]:
+        k = self.index[agent_id]
+        return float(self.x[k]), float(self.y[k]), float(self.heading[k])

@@ -1,0 +1,102 @@
+"""Metrics of a run, from its recorded ground truth. Pure numpy.
+
+- expected radius R_i = v_i / omega_root, omega_root = v_L / R_L of the leader L at
+  the end of agent i's path in the final communication graph (paper, Theorem 1);
+- radial error |r_i(T) - R_i| (m) at the end of the run;
+- angular rate about the target (rad/s, ccw positive) over the last part of the run;
+- settling time: the earliest time after which |r_i - R_i| <= band * R_i for good.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+SETTLING_BAND = 0.02  # 2% band
+CONVERGED_TOL = 0.01  # a run has converged when every live agent is within 1% of R_i
+
+
+def root_of(agent: int, out: dict[int, int | None], leaders: set[int]) -> tuple[int | None, int | None]:
+    """Follow out-neighbours from `agent` to a leader: (root id, hops), (None, None) if none."""
+    seen = set()
+    cur, hops = agent, 0
+    while cur not in leaders:
+        if cur in seen or out.get(cur) is None:
+            return None, None
+        seen.add(cur)
+        cur = out[cur]
+        hops += 1
+    return cur, hops
+
+
+def settling_time(t: np.ndarray, r: np.ndarray, R: float, band: float = SETTLING_BAND) -> float | None:
+    """Earliest t after which |r - R| stays within band * R; None if it ends outside."""
+    outside = np.abs(r - R) > band * R
+    if outside[-1]:
+        return None
+    idx = np.flatnonzero(outside)
+    return float(t[0]) if idx.size == 0 else float(t[min(idx[-1] + 1, len(t) - 1)])
+
+
+def angular_rate(t: np.ndarray, x: np.ndarray, y: np.ndarray, target, window: float) -> float:
+    """Mean angular rate about the target (rad/s) over the last `window` seconds."""
+    k0 = int(np.searchsorted(t, t[-1] - window))
+    k0 = min(k0, len(t) - 2)
+    if k0 < 0 or len(t) < 2:
+        return math.nan
+    theta = np.unwrap(np.arctan2(y[k0:] - target[1], x[k0:] - target[0]))
+    return float((theta[-1] - theta[0]) / (t[-1] - t[k0]))
+
+
+def agent_metrics(*, ids, roles, speeds, orbit_radius, t, x, y, alive, out_final, target,
+                  window: float | None = None) -> dict[str, dict]:
+    """Per-agent metrics keyed by str(id), as written to summary.json."""
+    leaders = {int(i) for i, r in zip(ids, roles) if r == "leader"}
+    alive_final = {int(i): bool(alive[-1, k]) for k, i in enumerate(ids)}
+    out = {int(i): (None if not alive_final[int(i)] or out_final[k] < 0 else int(out_final[k]))
+           for k, i in enumerate(ids)}
+    # Dead leaders do not root anybody.
+    live_leaders = {i for i in leaders if alive_final[i]}
+    col = {int(i): k for k, i in enumerate(ids)}
+    if window is None:
+        window = max(0.1 * (t[-1] - t[0]), t[1] - t[0] if len(t) > 1 else 0.0)
+    result: dict[str, dict] = {}
+    for k, i in enumerate(ids):
+        i = int(i)
+        r = np.hypot(x[:, k] - target[0], y[:, k] - target[1])
+        root, hops = root_of(i, out, live_leaders) if alive_final[i] else (None, None)
+        if root is not None:
+            R_root = float(orbit_radius[col[root]])
+            omega_root = float(speeds[col[root]]) / R_root
+            expected = float(speeds[k]) / omega_root
+            err = float(abs(r[-1] - expected))
+            settle = settling_time(t, r, expected)
+        else:
+            expected = err = settle = None
+        result[str(i)] = {
+            "role": str(roles[k]),
+            "out_neighbour": out[i],
+            "root": root,
+            "hops": hops,
+            "final_radius": float(r[-1]),
+            "expected_radius": expected,
+            "radial_error": err,
+            "relative_error": None if err is None else err / expected,
+            "angular_rate": _finite_or_none(angular_rate(t, x[:, k], y[:, k], target, window)),
+            "settling_time": settle,
+            "alive": alive_final[i],
+        }
+    return result
+
+
+def _finite_or_none(v: float) -> float | None:
+    return v if math.isfinite(v) else None
+
+
+def converged(agents: dict[str, dict], tol: float = CONVERGED_TOL) -> bool:
+    """Every live agent has a root and ends within tol * R_i of its expected radius."""
+    live = [a for a in agents.values() if a["alive"]]
+    return bool(live) and all(
+        a["relative_error"] is not None and a["relative_error"] < tol for a in live
+    )

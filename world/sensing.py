@@ -1,0 +1,72 @@
+"""Simulated sensors: who senses whom, and each agent's own sensor frame.
+
+A frame holds only what the agent's sensors give it (paper, section "Main Results"):
+for every agent it can sense, the line-of-sight angle lambda_ij, that agent's heading
+and a range (used only to rank candidates), plus its own heading; leaders also get
+the target's position relative to themselves. Pure numpy, no I/O.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from world.kinematics import wrap
+
+
+@dataclass(frozen=True, slots=True)
+class Contact:
+    """One sensed agent, as agent i sees it."""
+
+    id: int
+    bearing: float  # line-of-sight angle lambda_ij from i to j, world frame (rad)
+    heading: float  # heading g_j of the sensed agent (rad)
+    range: float  # distance r_ij (m); only for ranking candidates
+
+
+@dataclass(frozen=True, slots=True)
+class SensorFrame:
+    """Everything agent `agent` learns at tick `tick`."""
+
+    tick: int
+    time: float  # simulated time of the tick (s)
+    agent: int
+    heading: float  # own heading (rad)
+    contacts: tuple[Contact, ...]  # sorted by id
+    target: tuple[float, float] | None = None  # leaders: target minus own position (m)
+
+
+def sensing_matrix(x, y, heading, present, sense_range: float | None, fov: float | None):
+    """Boolean (N, N) matrix S with S[i, j] true when agent i senses agent j.
+
+    present: (N,) bool, agents that are in the world. sense_range (m) or None for
+    unlimited; fov: full field of view (rad) centred on the heading, or None.
+    Also returns the bearing (N, N) and range (N, N) matrices.
+    """
+    dx = x[None, :] - x[:, None]
+    dy = y[None, :] - y[:, None]
+    rng = np.hypot(dx, dy)
+    bearing = np.arctan2(dy, dx)
+    s = present[:, None] & present[None, :]
+    np.fill_diagonal(s, False)
+    if sense_range is not None:
+        s &= rng <= sense_range
+    if fov is not None and fov < 2 * np.pi:
+        s &= np.abs(wrap(bearing - heading[:, None])) <= 0.5 * fov
+    return s, bearing, rng
+
+
+def build_frames(tick, time, ids, x, y, heading, present, receivers, is_leader, target,
+                 sense_range=None, fov=None) -> dict[int, SensorFrame]:
+    """One SensorFrame per receiver index (agents that need a frame this tick)."""
+    s, bearing, rng = sensing_matrix(x, y, heading, present, sense_range, fov)
+    frames: dict[int, SensorFrame] = {}
+    for i in receivers:
+        contacts = tuple(
+            Contact(int(ids[j]), float(bearing[i, j]), float(heading[j]), float(rng[i, j]))
+            for j in np.flatnonzero(s[i])
+        )
+        tgt = (float(target[0] - x[i]), float(target[1] - y[i])) if is_leader[i] else None
+        frames[int(ids[i])] = SensorFrame(int(tick), float(time), int(ids[i]), float(heading[i]), contacts, tgt)
+    return frames
