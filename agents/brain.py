@@ -13,10 +13,9 @@ import math
 from dataclasses import dataclass
 
 from agents.laws import make_follower_law
-from agents.leader import CCPath, on_orbit_command, plan_cc
 from agents.selection import select
 from swarm.scenario import AgentSpec, GainsSpec, SensingSpec
-from world.sensing import SensorFrame
+from world.frames import SensorFrame
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,7 +48,7 @@ class AgentBrain:
         self.dt = dt
         self.is_leader = spec.role == "leader"
         self.law = None if self.is_leader else make_follower_law(gains.law, gains.c1, gains.c2)
-        self.plan: CCPath | None = None
+        self.plan = None  # agents.leader.CCPath once planned
         self.plan_tick = 0
         self.out: int | None = None
         self.last_u = 0.0
@@ -61,6 +60,9 @@ class AgentBrain:
             raise ValueError(f"leader {s.id}: sensor frame has no target information")
         px, py = -frame.target[0], -frame.target[1]  # own position relative to the target
         sign = s.direction_sign
+        # Imported here: the planner needs numpy, which follower processes never load.
+        from agents.leader import on_orbit_command, plan_cc
+
         if self.plan is None:
             self.plan = plan_cc(px, py, frame.heading, s.speed, s.orbit_radius, sign, s.max_turn_rate)
             self.plan_tick = frame.tick

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from world.sensing import Contact
+from world.frames import Contact
 
 
 @dataclass(frozen=True, slots=True)

@@ -155,6 +155,73 @@ def plot(run_dir: Annotated[Path, typer.Argument(help="a run directory written b
     _plots(run_dir)
 
 
+def _new_run_id(scenario_path: Path) -> str:
+    import re
+    import secrets
+
+    stem = re.sub(r"[^A-Za-z0-9_.-]", "-", scenario_path.stem)[:40] or "run"
+    return f"{stem}-{secrets.token_hex(3)}"
+
+
+@app.command()
+def world(
+    scenario: ScenarioArg,
+    listen: Annotated[Optional[str], typer.Option(help="zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 "
+                                                  "or unixsock-stream/PATH (default: a Unix socket in "
+                                                  "$SWARM_RUNTIME_DIR or /tmp/swarm-<uid>)")] = None,
+    run: Annotated[Optional[str], typer.Option(help="run id: the key prefix (default <scenario>-<random>)")] = None,
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="where to write the results")] = None,
+    duration: Annotated[Optional[float], typer.Option(help="simulated seconds", min=0.0)] = None,
+    clock: Annotated[Optional[str], typer.Option(help="lockstep | realtime (default: the scenario's)")] = None,
+    speed: Annotated[float, typer.Option(help="realtime: simulated seconds per wall second", min=1e-6)] = 1.0,
+    join_timeout: Annotated[Optional[float], typer.Option(help="give up if not every agent joined "
+                                                          "within this many s (default: wait)")] = None,
+) -> None:
+    """Run the world of a scenario by hand: the hub, physics, sensors and the recording.
+
+    Agents join with `swarm agent --id N --connect ENDPOINT` from any terminal or machine.
+
+    Example: swarm world scenarios/case2.toml --listen tcp/0.0.0.0:7447 --out runs/case2
+    """
+    from swarm.transport import default_endpoint
+    from swarm.wire import WireError, check_run_id
+    from world.process import WorldConfig, run_world
+
+    s = read_scenario(scenario)
+    run = run or _new_run_id(scenario)
+    try:
+        check_run_id(run)
+    except WireError as e:
+        raise fail(str(e)) from None
+    clock = clock or s.run.clock
+    if clock not in ("lockstep", "realtime"):
+        raise fail(f"--clock must be lockstep or realtime, not {clock!r}")
+    listen = listen or default_endpoint(run)
+    out = out or default_out(scenario, "up")
+    typer.echo(f"run {run} on {listen}; results in {out}", err=True)
+    code = run_world(WorldConfig(s, run, listen, out, clock, speed, duration, join_timeout))
+    if code in (0, 130, 143) and (out / "trajectory.npz").exists():
+        _plots(out)
+    raise typer.Exit(code)
+
+
+@app.command()
+def agent(
+    id: Annotated[int, typer.Option("--id", help="the agent's id in the scenario", min=0)],
+    connect: Annotated[str, typer.Option(help="the world's endpoint, e.g. tcp/HOST:7447 or "
+                                         "unixsock-stream/PATH")],
+    run: Annotated[Optional[str], typer.Option(help="run id (default: the only run on the endpoint)")] = None,
+    wait_world: Annotated[bool, typer.Option(help="keep waiting when the world vanishes")] = False,
+) -> None:
+    """Run one agent process; it takes its initial state from the world, so only its id is needed.
+
+    Example: swarm agent --id 3 --connect tcp/127.0.0.1:7447
+    """
+    from agents.process import run_agent
+
+    raise typer.Exit(run_agent(id, connect, run, wait_world))
+
+
 def main() -> None:
     app()
 

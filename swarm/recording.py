@@ -63,6 +63,7 @@ class RunResult:
     recorder: Recorder
     events: list[dict] = field(default_factory=list)
     extra: dict = field(default_factory=dict)  # engine-specific figures for summary.json
+    agent_extra: dict = field(default_factory=dict)  # str(id) -> engine figures per agent
 
     def summary(self) -> dict:
         a = self.recorder.arrays()
@@ -72,6 +73,9 @@ class RunResult:
             agents = agent_metrics(ids=a["ids"], roles=a["role"], speeds=a["speed"],
                                    orbit_radius=a["orbit_radius"], t=a["t"], x=a["x"], y=a["y"],
                                    alive=a["alive"], out_final=a["out"][-1], target=a["target"])
+        for aid, more in self.agent_extra.items():
+            if aid in agents:
+                agents[aid].update(more)
         ticks = max(len(a["t"]) - 1, 0)
         return {
             "scenario": self.scenario.name,

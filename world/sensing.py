@@ -8,33 +8,12 @@ the target's position relative to themselves. Pure numpy, no I/O.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
+from world.frames import Contact, SensorFrame
 from world.kinematics import wrap
 
-
-@dataclass(frozen=True, slots=True)
-class Contact:
-    """One sensed agent, as agent i sees it."""
-
-    id: int
-    bearing: float  # line-of-sight angle lambda_ij from i to j, world frame (rad)
-    heading: float  # heading g_j of the sensed agent (rad)
-    range: float  # distance r_ij (m); only for ranking candidates
-
-
-@dataclass(frozen=True, slots=True)
-class SensorFrame:
-    """Everything agent `agent` learns at tick `tick`."""
-
-    tick: int
-    time: float  # simulated time of the tick (s)
-    agent: int
-    heading: float  # own heading (rad)
-    contacts: tuple[Contact, ...]  # sorted by id
-    target: tuple[float, float] | None = None  # leaders: target minus own position (m)
+__all__ = ["Contact", "SensorFrame", "sensing_matrix", "build_frames"]
 
 
 def sensing_matrix(x, y, heading, present, sense_range: float | None, fov: float | None):

@@ -1,0 +1,252 @@
+"""One agent process: one unicycle's brain on the bus.
+
+Connects to the run's endpoint as a client, claims its id with the world's join query
+(which also hands it the scenario: only the id is needed), declares its liveliness
+token, and then answers each of its own sensor frames with a command. It never reads
+ground truth. It publishes its status (role, out-neighbour, path to a leader and hops,
+leader phase, counters) on change and a few times per second.
+
+Callbacks only enqueue; the main thread decides and publishes. Exit codes:
+0 the run ended, 3 refused (id live, unknown, no world), 4 the world vanished,
+128+signal when stopped by a signal.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import signal
+import socket
+import sys
+import time
+
+from swarm import wire
+from swarm.transport import open_client
+
+STATUS_PERIOD = 0.2  # s of wall time between periodic status messages
+EXIT_OK, EXIT_REFUSED, EXIT_WORLD_GONE = 0, 3, 4
+
+
+class AgentExit(Exception):
+    def __init__(self, code: int, message: str = ""):
+        super().__init__(message)
+        self.code = code
+        self.message = message
+
+
+def _log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def find_run(session, timeout: float = 2.0) -> str:
+    """The one run whose world is reachable through `session`."""
+    runs = sorted({wire.run_of_key(str(r.ok.key_expr))
+                   for r in session.liveliness().get(wire.ANY_WORLD_ALIVE, timeout=timeout) if r.ok})
+    if not runs:
+        raise AgentExit(EXIT_REFUSED, "no world is running on this endpoint")
+    if len(runs) > 1:
+        raise AgentExit(EXIT_REFUSED, f"several runs on this endpoint ({', '.join(runs)}): pick one with --run")
+    return runs[0]
+
+
+def claim(session, run: str, agent_id: int, timeout: float = 5.0) -> dict:
+    """Ask the world for agent_id; returns its reply or raises AgentExit."""
+    req = wire.encode_json({"id": agent_id, "pid": os.getpid(), "host": socket.gethostname()})
+    replies = list(session.get(wire.world_join_key(run), payload=req, timeout=timeout))
+    for r in replies:
+        if r.ok is None:
+            continue
+        try:
+            rep = wire.decode_json(r.ok.payload.to_bytes(), "join reply")
+        except wire.WireError as e:
+            raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: bad join reply: {e}") from None
+        if not rep.get("ok"):
+            raise AgentExit(EXIT_REFUSED, f"agent {agent_id} refused: {rep.get('error')}")
+        return rep
+    raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: no world answered on run {run!r}")
+
+
+class AgentNode:
+    """The process shell around an AgentBrain."""
+
+    def __init__(self, session, run: str, agent_id: int, reply: dict, wait_world: bool):
+        import zenoh
+
+        from agents.brain import AgentBrain
+        from swarm.scenario import parse_scenario
+
+        self.zenoh = zenoh
+        self.session = session
+        self.run = run
+        self.id = agent_id
+        self.wait_world = wait_world
+        self.scenario = parse_scenario(reply["scenario"], "join reply")
+        self.spec = self.scenario.agent(agent_id)
+        s = self.scenario
+        self.brain = AgentBrain(self.spec, s.gains, s.sensing, s.run.dt)
+        self.inbox: queue.SimpleQueue = queue.SimpleQueue()
+        self.hops_of: dict[int, int | None] = {}
+        self.commands = 0
+        self.garbage = 0
+        self.last_tick = -1
+        self.last = None  # last Decision
+        self.world_alive = True
+        self.status_sent = 0.0
+        self.last_status: dict | None = None
+
+    def open(self) -> None:
+        ses, run, put = self.session, self.run, self.inbox.put
+        self.cmd_pub = ses.declare_publisher(wire.agent_key(run, self.id, "cmd"), express=True)
+        self.status_pub = ses.declare_publisher(wire.agent_key(run, self.id, "status"))
+        self.subs = [
+            ses.declare_subscriber(wire.agent_key(run, self.id, "sense"),
+                                   lambda s: put(("sense", s.payload.to_bytes()))),
+            ses.declare_subscriber(wire.world_control_key(run),
+                                   lambda s: put(("control", s.payload.to_bytes()))),
+            ses.declare_subscriber(wire.agent_key(run, "*", "status"),
+                                   lambda s: put(("status", str(s.key_expr), s.payload.to_bytes()))),
+            ses.liveliness().declare_subscriber(wire.world_alive_key(run),
+                                                lambda s: put(("world", s.kind)), history=True),
+        ]
+        self.token = ses.liveliness().declare_token(wire.agent_key(run, self.id, "alive"))
+
+    # -- status ----------------------------------------------------------------------------------
+    def hops(self) -> int | None:
+        if self.brain.is_leader:
+            return 0
+        if self.last is None or self.last.out is None:
+            return None
+        h = self.hops_of.get(self.last.out)
+        return None if h is None or h + 1 > len(self.scenario.agents) else h + 1
+
+    def status(self) -> dict:
+        d = self.last
+        hops = self.hops()
+        return {
+            "id": self.id, "role": self.spec.role, "pid": os.getpid(), "host": socket.gethostname(),
+            "out": None if d is None else d.out, "rooted": hops is not None, "hops": hops,
+            "phase": None if d is None else d.phase,
+            "fallback": False if d is None else d.fallback,
+            "pinned": self.spec.follow,
+            "u": None if d is None else d.u,
+            "commands": self.commands, "last_tick": self.last_tick, "garbage": self.garbage,
+        }
+
+    def maybe_publish_status(self, force: bool = False) -> None:
+        now = time.monotonic()
+        st = self.status()
+        key = {k: st[k] for k in ("out", "hops", "phase", "fallback")}
+        changed = self.last_status != key
+        if force or changed or now - self.status_sent >= STATUS_PERIOD:
+            self.status_pub.put(wire.encode_json(st))
+            self.status_sent = now
+            self.last_status = key
+
+    # -- main loop -------------------------------------------------------------------------------
+    def on_sense(self, payload: bytes) -> None:
+        try:
+            frame = wire.decode_sense(payload)
+            if frame.agent != self.id:
+                raise wire.WireError(f"frame for agent {frame.agent}")
+            if self.brain.is_leader and frame.target is None:
+                raise wire.WireError("leader frame without target")
+        except wire.WireError:
+            self.garbage += 1
+            return
+        if frame.tick <= self.last_tick:
+            return  # duplicate or old frame
+        d = self.brain.decide(frame)
+        self.cmd_pub.put(wire.encode_cmd(wire.Command(self.id, frame.tick, d.u, d.out, d.phase)))
+        self.commands += 1
+        self.last_tick = frame.tick
+        if self.last is None or d.out != self.last.out or d.phase != self.last.phase:
+            if self.last is not None and d.out != self.last.out:
+                why = "pinned out-neighbour not sensed, nearest used" if d.fallback else "nearest sensed agent"
+                _log(f"[agent {self.id}] tick {frame.tick}: out-neighbour {self.last.out} -> {d.out} ({why})")
+        self.last = d
+
+    def on_status(self, key: str, payload: bytes) -> None:
+        try:
+            aid = wire.agent_of_key(key)
+            st = wire.decode_status(payload)
+            if st["id"] != aid:
+                raise wire.WireError("status id does not match its key")
+        except wire.WireError:
+            self.garbage += 1
+            return
+        if aid != self.id:
+            self.hops_of[aid] = st.get("hops")
+
+    def on_world(self, kind) -> None:
+        if kind == self.zenoh.SampleKind.PUT:
+            self.world_alive = True
+            return
+        self.world_alive = False
+        if not self.wait_world:
+            raise AgentExit(EXIT_WORLD_GONE, f"agent {self.id}: the world of run {self.run} vanished; exiting "
+                                             "(use --wait-world to wait for it)")
+        _log(f"[agent {self.id}] the world vanished; waiting for it to come back")
+
+    def loop(self) -> int:
+        self.maybe_publish_status(force=True)
+        while True:
+            try:
+                item = self.inbox.get(timeout=STATUS_PERIOD)
+            except queue.Empty:
+                item = None
+            if item is not None:
+                kind = item[0]
+                if kind == "sense":
+                    self.on_sense(item[1])
+                elif kind == "status":
+                    self.on_status(item[1], item[2])
+                elif kind == "world":
+                    self.on_world(item[1])
+                elif kind == "control":
+                    try:
+                        msg = wire.decode_json(item[1], "control")
+                    except wire.WireError:
+                        self.garbage += 1
+                        continue
+                    if msg.get("kind") == "end":
+                        return EXIT_OK
+            self.maybe_publish_status()
+
+
+def _raise_exit(signum, _frame):
+    raise AgentExit(128 + signum, "")
+
+
+def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: bool = False) -> int:
+    """Entry point of an agent process; returns its exit code."""
+    signal.signal(signal.SIGTERM, _raise_exit)
+    signal.signal(signal.SIGINT, _raise_exit)
+    try:
+        session = open_client(connect)
+    except Exception as e:
+        _log(f"swarm agent {agent_id}: cannot connect to {connect}: {e}")
+        return EXIT_REFUSED
+    try:
+        run = run or find_run(session)
+        reply = claim(session, run, agent_id)
+        node = AgentNode(session, run, agent_id, reply, wait_world)
+        node.open()
+        return node.loop()
+    except AgentExit as e:
+        if e.message:
+            _log(f"swarm agent: {e.message}")
+        return e.code
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        session.close()
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Lean entry for launchers: `python -m agents.process ID ENDPOINT [RUN]` (no typer/rich)."""
+    args = sys.argv[1:] if argv is None else argv
+    sys.exit(run_agent(int(args[0]), args[1], args[2] if len(args) > 2 else None))
+
+
+if __name__ == "__main__":
+    main()

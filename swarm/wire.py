@@ -1,0 +1,263 @@
+"""The wire format of a run: key expressions, payloads, units, versions. Nothing else
+in the project builds a key or packs a payload; docs/protocol.md describes the same.
+
+Keys (every key of a run starts with `swarm/<run>`, so runs never hear each other):
+
+    swarm/<run>/world/alive          liveliness token of the world process
+    swarm/<run>/world/join           queryable: an agent claims its id, gets the scenario
+    swarm/<run>/world/info           queryable: run info (scenario, clock, tick, agents)
+    swarm/<run>/world/control        world -> all: run-wide notices (JSON), e.g. the end
+    swarm/<run>/truth                world -> observers: ground truth of one tick (binary)
+    swarm/<run>/events               world -> observers: one event (JSON)
+    swarm/<run>/agent/<id>/alive     liveliness token of agent <id>'s process
+    swarm/<run>/agent/<id>/sense     world -> agent <id>: its sensor frame (binary)
+    swarm/<run>/agent/<id>/cmd       agent <id> -> world: its command (binary)
+    swarm/<run>/agent/<id>/status    agent <id> -> all: its status (JSON)
+
+Hot-path payloads (sense, cmd, truth) are little-endian binary records led by a kind
+byte and a version byte; cold-path payloads are UTF-8 JSON objects with "v": 1.
+Units: metres, seconds, radians, rad/s. Decoders reject anything malformed with
+`WireError` (never another exception), including NaN/inf where a number must be finite.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import struct
+from dataclasses import dataclass
+
+from world.frames import Contact, SensorFrame
+
+VERSION = 1
+PREFIX = "swarm"
+KIND_SENSE, KIND_CMD, KIND_TRUTH = 1, 2, 3
+MAX_AGENTS = 10_000
+MAX_JSON_BYTES = 1 << 20
+
+RUN_ID_RE = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
+
+
+class WireError(ValueError):
+    """A payload or key that does not follow this protocol."""
+
+
+# --- key expressions ------------------------------------------------------------------
+def check_run_id(run: str) -> str:
+    if not RUN_ID_RE.match(run):
+        raise WireError(f"run id {run!r}: use 1-64 of A-Z a-z 0-9 _ . -")
+    return run
+
+
+def run_prefix(run: str) -> str:
+    return f"{PREFIX}/{check_run_id(run)}"
+
+
+def world_alive_key(run: str) -> str:
+    return f"{run_prefix(run)}/world/alive"
+
+
+def world_join_key(run: str) -> str:
+    return f"{run_prefix(run)}/world/join"
+
+
+def world_info_key(run: str) -> str:
+    return f"{run_prefix(run)}/world/info"
+
+
+def world_control_key(run: str) -> str:
+    return f"{run_prefix(run)}/world/control"
+
+
+def truth_key(run: str) -> str:
+    return f"{run_prefix(run)}/truth"
+
+
+def events_key(run: str) -> str:
+    return f"{run_prefix(run)}/events"
+
+
+def agent_key(run: str, agent: int | str, leaf: str) -> str:
+    """Key of one agent's `leaf` (alive, sense, cmd, status); agent may be '*'."""
+    return f"{run_prefix(run)}/agent/{agent}/{leaf}"
+
+
+ANY_WORLD_ALIVE = f"{PREFIX}/*/world/alive"
+
+
+def run_of_key(key: str) -> str:
+    """The run id inside any key of this protocol."""
+    parts = str(key).split("/")
+    if len(parts) < 3 or parts[0] != PREFIX:
+        raise WireError(f"not a swarm key: {key!r}")
+    return parts[1]
+
+
+def agent_of_key(key: str) -> int:
+    """Agent id in `swarm/<run>/agent/<id>/...`."""
+    parts = str(key).split("/")
+    try:
+        if parts[2] != "agent":
+            raise ValueError
+        return int(parts[3])
+    except (IndexError, ValueError):
+        raise WireError(f"not an agent key: {key!r}") from None
+
+
+# --- binary hot path --------------------------------------------------------------------
+# sense: kind, version, has_target, reserved, agent, tick, time (s), heading (rad),
+#        target dx, dy (m; NaN when absent), n contacts; then n contact records.
+SENSE_HEAD = struct.Struct("<BBBBiqddddI")
+CONTACT = struct.Struct("<iddd")  # id, bearing (rad), heading (rad), range (m)
+# cmd: kind, version, reserved x2, agent, tick, u (rad/s), out-neighbour (-1 none), phase code
+CMD = struct.Struct("<BBBBiqdiB")
+# truth: kind, version, reserved x2, n agents, tick, time (s); then n agent records.
+TRUTH_HEAD = struct.Struct("<BBBBIqd")
+TRUTH_FIELDS = [("id", "<i4"), ("x", "<f8"), ("y", "<f8"), ("heading", "<f8"),
+                ("u", "<f8"), ("out", "<i4"), ("state", "u1")]  # numpy dtype of one record
+
+PHASES = ("track", "lost", "arc1", "arc2", "orbit")
+STATES = ("active", "coasting", "gone")
+
+
+def _check_head(buf: bytes, head: struct.Struct, kind: int, what: str) -> tuple:
+    if len(buf) < head.size:
+        raise WireError(f"{what}: {len(buf)} bytes, shorter than its {head.size}-byte header")
+    fields = head.unpack_from(buf)
+    if fields[0] != kind:
+        raise WireError(f"{what}: kind byte {fields[0]}, expected {kind}")
+    if fields[1] != VERSION:
+        raise WireError(f"{what}: protocol version {fields[1]}, this build speaks {VERSION}")
+    return fields
+
+
+def encode_sense(frame: SensorFrame) -> bytes:
+    has_t = frame.target is not None
+    tx, ty = frame.target if has_t else (math.nan, math.nan)
+    head = SENSE_HEAD.pack(KIND_SENSE, VERSION, int(has_t), 0, frame.agent, frame.tick, frame.time,
+                           frame.heading, tx, ty, len(frame.contacts))
+    return head + b"".join(CONTACT.pack(c.id, c.bearing, c.heading, c.range) for c in frame.contacts)
+
+
+def decode_sense(buf: bytes) -> SensorFrame:
+    f = _check_head(buf, SENSE_HEAD, KIND_SENSE, "sense frame")
+    _, _, has_t, _, agent, tick, time, heading, tx, ty, n = f
+    if n > MAX_AGENTS:
+        raise WireError(f"sense frame: {n} contacts, more than {MAX_AGENTS}")
+    expected = SENSE_HEAD.size + n * CONTACT.size
+    if len(buf) != expected:
+        raise WireError(f"sense frame: {len(buf)} bytes, expected {expected} for {n} contacts")
+    contacts = tuple(Contact(*rec) for rec in CONTACT.iter_unpack(memoryview(buf)[SENSE_HEAD.size:]))
+    isfinite = math.isfinite
+    if not (isfinite(time) and isfinite(heading) and (not has_t or (isfinite(tx) and isfinite(ty)))
+            and all(isfinite(c.bearing) and isfinite(c.heading) and isfinite(c.range) for c in contacts)):
+        raise WireError("sense frame: non-finite number")
+    if tick < 0:
+        raise WireError(f"sense frame: negative tick {tick}")
+    return SensorFrame(tick, time, agent, heading, contacts, (tx, ty) if has_t else None)
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    agent: int
+    tick: int
+    u: float  # rad/s
+    out: int | None
+    phase: str
+
+
+def encode_cmd(c: Command) -> bytes:
+    return CMD.pack(KIND_CMD, VERSION, 0, 0, c.agent, c.tick, c.u, -1 if c.out is None else c.out,
+                    PHASES.index(c.phase))
+
+
+def decode_cmd(buf: bytes) -> Command:
+    if len(buf) != CMD.size:
+        raise WireError(f"command: {len(buf)} bytes, expected {CMD.size}")
+    _, _, _, _, agent, tick, u, out, phase = _check_head(buf, CMD, KIND_CMD, "command")
+    if not math.isfinite(u):
+        raise WireError("command: non-finite turn rate")
+    if phase >= len(PHASES):
+        raise WireError(f"command: unknown phase code {phase}")
+    if tick < 0:
+        raise WireError(f"command: negative tick {tick}")
+    return Command(agent, tick, u, None if out < 0 else out, PHASES[phase])
+
+
+def encode_truth(tick: int, time: float, ids, x, y, heading, u, out, states: list[str]) -> bytes:
+    import numpy as np
+
+    recs = np.empty(len(ids), dtype=np.dtype(TRUTH_FIELDS))
+    recs["id"], recs["x"], recs["y"], recs["heading"] = ids, x, y, heading
+    recs["u"], recs["out"] = u, out
+    recs["state"] = [STATES.index(s) for s in states]
+    return TRUTH_HEAD.pack(KIND_TRUTH, VERSION, 0, 0, len(ids), tick, time) + recs.tobytes()
+
+
+def decode_truth(buf: bytes):
+    """(tick, time, records): records is a numpy structured array with TRUTH_FIELDS."""
+    import numpy as np
+
+    dtype = np.dtype(TRUTH_FIELDS)
+    _, _, _, _, n, tick, time = _check_head(buf, TRUTH_HEAD, KIND_TRUTH, "truth")
+    if n > MAX_AGENTS or len(buf) != TRUTH_HEAD.size + n * dtype.itemsize:
+        raise WireError(f"truth: {len(buf)} bytes do not hold {n} agent records")
+    return tick, time, np.frombuffer(buf, dtype=dtype, count=n, offset=TRUTH_HEAD.size)
+
+
+# --- JSON cold path ----------------------------------------------------------------------
+def _reject_constant(name: str):
+    raise WireError(f"JSON: {name} is not allowed")
+
+
+def encode_json(obj: dict) -> bytes:
+    return json.dumps({"v": VERSION, **obj}, separators=(",", ":"), allow_nan=False).encode()
+
+
+def decode_json(buf: bytes, what: str = "message") -> dict:
+    if len(buf) > MAX_JSON_BYTES:
+        raise WireError(f"{what}: {len(buf)} bytes, more than {MAX_JSON_BYTES}")
+    try:
+        obj = json.loads(bytes(buf).decode("utf-8"), parse_constant=_reject_constant)
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
+        raise WireError(f"{what}: not JSON: {e}") from None
+    if not isinstance(obj, dict):
+        raise WireError(f"{what}: expected a JSON object")
+    if obj.get("v") != VERSION:
+        raise WireError(f"{what}: protocol version {obj.get('v')!r}, this build speaks {VERSION}")
+    return obj
+
+
+def _field(obj: dict, name: str, types, what: str, optional: bool = False):
+    if name not in obj:
+        if optional:
+            return None
+        raise WireError(f"{what}: missing field {name!r}")
+    v = obj[name]
+    if v is None and optional:
+        return None
+    if isinstance(v, bool) and bool not in (types if isinstance(types, tuple) else (types,)):
+        raise WireError(f"{what}: field {name!r} has the wrong type")
+    if not isinstance(v, types):
+        raise WireError(f"{what}: field {name!r} has the wrong type")
+    return v
+
+
+def decode_status(buf: bytes) -> dict:
+    """An agent's status; checks the fields that other agents and the CLI rely on."""
+    obj = decode_json(buf, "status")
+    _field(obj, "id", int, "status")
+    _field(obj, "role", str, "status")
+    _field(obj, "out", int, "status", optional=True)
+    _field(obj, "hops", int, "status", optional=True)
+    _field(obj, "rooted", bool, "status")
+    return obj
+
+
+def decode_join_request(buf: bytes) -> dict:
+    obj = decode_json(buf, "join request")
+    _field(obj, "id", int, "join request")
+    _field(obj, "pid", int, "join request")
+    _field(obj, "host", str, "join request")
+    return obj

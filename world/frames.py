@@ -1,0 +1,28 @@
+"""What an agent's sensors give it at one tick. Plain dataclasses, no numpy, so that
+agent processes stay small (see README, "Speed and memory")."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True, slots=True)
+class Contact:
+    """One sensed agent, as agent i sees it."""
+
+    id: int
+    bearing: float  # line-of-sight angle lambda_ij from i to j, world frame (rad)
+    heading: float  # heading g_j of the sensed agent (rad)
+    range: float  # distance r_ij (m); only for ranking candidates
+
+
+@dataclass(frozen=True, slots=True)
+class SensorFrame:
+    """Everything agent `agent` learns at tick `tick`."""
+
+    tick: int
+    time: float  # simulated time of the tick (s)
+    agent: int
+    heading: float  # own heading (rad)
+    contacts: tuple[Contact, ...]  # sorted by id
+    target: tuple[float, float] | None = None  # leaders: target minus own position (m)

@@ -1,0 +1,423 @@
+"""The world process: hub of a run, ground truth, physics, sensors, the recording.
+
+It opens the run's zenoh endpoint (router mode, so a local run needs no router
+binary), answers join queries, watches the agents' liveliness tokens, and each tick
+sends every live agent its own sensor frame, collects commands, steps `WorldCore`
+and records the tick. At the end (or on SIGTERM/SIGINT) it writes trajectory.npz
+and summary.json into its output directory, announces the end and closes.
+
+All zenoh callbacks only put (kind, ...) tuples on one inbox queue; everything else
+happens on the main thread.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import queue
+import signal
+import socket
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from swarm import wire
+from swarm.recording import Recorder, RunResult, write_run
+from swarm.scenario import Scenario
+from swarm.transport import open_hub, socket_path
+from world.core import ACTIVE, GONE, WorldCore
+
+CLAIM_TTL = 10.0  # s: an accepted join claim waits this long for the agent's token
+
+
+class Stop(Exception):
+    """Raised on the main thread by SIGTERM/SIGINT."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+@dataclass
+class AgentBook:
+    """What the world keeps about one agent's process (not its physics)."""
+
+    pid: int | None = None
+    host: str | None = None
+    claim_until: float = 0.0  # join accepted, waiting for the token until then (monotonic s)
+    commands: int = 0
+    missed: int = 0  # lockstep: ticks stepped on a held command after the deadline
+    stale_sum: int = 0  # realtime: sum over ticks of (tick - tick of the command used)
+    stale_max: int = 0
+    last_cmd_tick: int = -1
+    last_cmd_wall: float = 0.0
+    joins: int = 0
+    drops: int = 0
+    garbage: int = 0
+
+
+@dataclass
+class WorldConfig:
+    scenario: Scenario
+    run: str
+    listen: str
+    out: Path | None
+    clock: str = "lockstep"
+    speed: float = 1.0
+    duration: float | None = None
+    join_timeout: float | None = None  # s to wait for every agent before tick 0; None = forever
+    deadline: float | None = None  # lockstep deadline override (s)
+    progress: bool = True
+
+
+@dataclass
+class World:
+    cfg: WorldConfig
+    core: WorldCore = field(init=False)
+    inbox: queue.SimpleQueue = field(default_factory=queue.SimpleQueue)
+
+    def __post_init__(self):
+        s = self.cfg.scenario
+        self.core = WorldCore(s, joined=False)
+        self.ticks = int(round((self.cfg.duration or s.run.duration) / s.run.dt))
+        self.book = {i: AgentBook() for i in s.ids}
+        self.out = np.full(len(s.ids), -1, dtype=np.int64)
+        self.events: list[dict] = []
+        self.rec = Recorder(s, self.ticks)
+        self.garbage = 0  # malformed or foreign messages on keys the world listens to
+        self.ignored = 0
+        self.deadline = self.cfg.deadline or s.run.lockstep_deadline
+        self.stopped_by: int | None = None
+        self.t_start = 0.0
+
+    # -- zenoh plumbing (callbacks: enqueue only) -----------------------------------------
+    def _open(self):
+        run = self.cfg.run
+        self.session = open_hub(self.cfg.listen)
+        ses = self.session
+        put = self.inbox.put
+        self._subs = [
+            ses.declare_subscriber(wire.agent_key(run, "*", "cmd"),
+                                   lambda s: put(("cmd", str(s.key_expr), s.payload.to_bytes()))),
+            ses.liveliness().declare_subscriber(wire.agent_key(run, "*", "alive"),
+                                                lambda s: put(("alive", str(s.key_expr), s.kind)),
+                                                history=True),
+            ses.declare_queryable(wire.world_join_key(run), lambda q: put(("join", q))),
+            ses.declare_queryable(wire.world_info_key(run), lambda q: put(("info", q))),
+        ]
+        self.sense_pub = {i: ses.declare_publisher(wire.agent_key(run, i, "sense"), express=True)
+                          for i in self.cfg.scenario.ids}
+        self.truth_pub = ses.declare_publisher(wire.truth_key(run))
+        self.events_pub = ses.declare_publisher(wire.events_key(run))
+        self.control_pub = ses.declare_publisher(wire.world_control_key(run))
+        self.token = ses.liveliness().declare_token(wire.world_alive_key(run))
+
+    def _close(self):
+        try:
+            self.control_pub.put(wire.encode_json({"kind": "end", "tick": self.core.tick}))
+        except Exception:
+            pass
+        self.session.close()
+
+    # -- events -----------------------------------------------------------------------------
+    def event(self, kind: str, agent: int | None, reason: str, **more) -> None:
+        ev = {"tick": self.core.tick, "time": self.core.time, "wall_time": time.time(),
+              "agent": agent, "kind": kind, "reason": reason, **more}
+        self.events.append(ev)
+        try:
+            self.events_pub.put(wire.encode_json({"event": ev}))
+        except Exception:
+            pass
+        if self.cfg.progress:
+            print(f"[world] t={self.core.time:8.2f}s tick {self.core.tick}: {kind} agent {agent}: {reason}",
+                  file=sys.stderr, flush=True)
+
+    # -- inbox handling ----------------------------------------------------------------------
+    def handle(self, item, pending: set[int] | None) -> None:
+        kind = item[0]
+        if kind == "cmd":
+            self._on_cmd(item[1], item[2], pending)
+        elif kind == "alive":
+            self._on_alive(item[1], item[2], pending)
+        elif kind == "join":
+            self._on_join(item[1])
+        elif kind == "info":
+            self._on_info(item[1])
+
+    def _on_cmd(self, key: str, payload: bytes, pending: set[int] | None) -> None:
+        try:
+            aid = wire.agent_of_key(key)
+            cmd = wire.decode_cmd(payload)
+            if cmd.agent != aid:
+                raise wire.WireError(f"command for agent {cmd.agent} on agent {aid}'s key")
+        except wire.WireError:
+            self.garbage += 1
+            return
+        k = self.core.index.get(aid)
+        if k is None or self.core.state[k] != ACTIVE or cmd.tick > self.core.tick:
+            self.ignored += 1
+            return
+        b = self.book[aid]
+        if cmd.tick <= b.last_cmd_tick:
+            self.ignored += 1  # duplicate or late
+            return
+        if not self.core.set_command(aid, cmd.u):
+            b.garbage += 1
+            return
+        b.commands += 1
+        b.last_cmd_tick = cmd.tick
+        b.last_cmd_wall = time.monotonic()
+        new = -1 if cmd.out is None else cmd.out
+        if new != self.out[k] and self.core.scenario.agents[k].role == "follower":
+            self.event("switch", aid, "out-neighbour chosen", **{"from": None if self.out[k] < 0
+                                                               else int(self.out[k]), "to": cmd.out})
+        self.out[k] = new
+        if pending is not None and cmd.tick == self.core.tick:
+            pending.discard(aid)
+
+    def _on_alive(self, key: str, kind, pending: set[int] | None) -> None:
+        import zenoh
+
+        try:
+            aid = wire.agent_of_key(key)
+        except wire.WireError:
+            self.garbage += 1
+            return
+        if aid not in self.core.index:
+            self.ignored += 1
+            return
+        k = self.core.index[aid]
+        b = self.book[aid]
+        if kind == zenoh.SampleKind.PUT:
+            if self.core.state[k] == ACTIVE:
+                return
+            rejoin = b.joins > 0
+            self.core.join(aid)
+            b.joins += 1
+            b.claim_until = 0.0
+            b.last_cmd_tick = self.core.tick - 1
+            self.event("rejoin" if rejoin else "join", aid,
+                       f"liveliness token appeared (pid {b.pid} on {b.host})", pid=b.pid, host=b.host)
+        else:
+            if self.core.state[k] != ACTIVE:
+                return
+            state = self.core.drop(aid)
+            b.drops += 1
+            self.out[k] = -1
+            if pending is not None:
+                pending.discard(aid)
+            self.event("drop", aid, "liveliness token lost", now=state)
+
+    def _on_join(self, query) -> None:
+        try:
+            req = wire.decode_join_request(query.payload.to_bytes() if query.payload else b"")
+            aid = req["id"]
+            if aid not in self.core.index:
+                raise wire.WireError(f"agent {aid} is not in scenario {self.cfg.scenario.name!r} "
+                                     f"(ids: {', '.join(map(str, self.cfg.scenario.ids))})")
+            k = self.core.index[aid]
+            b = self.book[aid]
+            now = time.monotonic()
+            if self.core.state[k] == ACTIVE or b.claim_until > now:
+                raise wire.WireError(f"agent {aid} is already live (pid {b.pid} on {b.host})")
+            b.pid, b.host, b.claim_until = req["pid"], req["host"], now + CLAIM_TTL
+            x, y, h = self.core.pose(aid)
+            reply = {"ok": True, "run": self.cfg.run, "agent": aid, "tick": self.core.tick,
+                     "clock": self.cfg.clock, "pose": [x, y, h],
+                     "scenario": self.cfg.scenario.model_dump(mode="json")}
+        except wire.WireError as e:
+            reply = {"ok": False, "error": str(e)}
+        query.reply(wire.world_join_key(self.cfg.run), wire.encode_json(reply))
+
+    def info(self) -> dict:
+        return {
+            "run": self.cfg.run, "scenario": self.cfg.scenario.name, "clock": self.cfg.clock,
+            "endpoint": self.cfg.listen, "pid": os.getpid(), "host": socket.gethostname(),
+            "tick": self.core.tick, "time": self.core.time, "ticks": self.ticks, "dt": self.core.dt,
+            "agents": {str(i): {"state": self.core.state[self.core.index[i]], "pid": b.pid,
+                                "host": b.host, "missed": b.missed, "commands": b.commands}
+                       for i, b in self.book.items()},
+            "garbage": self.garbage,
+        }
+
+    def _on_info(self, query) -> None:
+        query.reply(wire.world_info_key(self.cfg.run), wire.encode_json(self.info()))
+
+    def drain(self, pending: set[int] | None, timeout: float | None) -> bool:
+        """Handle one inbox item, waiting up to `timeout` s; False when none came."""
+        try:
+            item = self.inbox.get(timeout=timeout) if timeout is None or timeout > 0 else self.inbox.get_nowait()
+        except queue.Empty:
+            return False
+        self.handle(item, pending)
+        return True
+
+    # -- the run ---------------------------------------------------------------------------------
+    def wait_for_agents(self) -> None:
+        ids = self.cfg.scenario.ids
+        t_end = None if self.cfg.join_timeout is None else time.monotonic() + self.cfg.join_timeout
+        last_note = 0.0
+        while True:
+            missing = [i for i in ids if self.core.state[self.core.index[i]] != ACTIVE]
+            if not missing:
+                return
+            now = time.monotonic()
+            if t_end is not None and now > t_end:
+                raise TimeoutError(f"agents {', '.join(map(str, missing))} did not join within "
+                                   f"{self.cfg.join_timeout} s")
+            if self.cfg.progress and now - last_note > 5.0:
+                last_note = now
+                print(f"[world] waiting for agents {', '.join(map(str, missing))}: "
+                      f"swarm agent --id N --connect {self.cfg.listen}", file=sys.stderr, flush=True)
+            self.drain(None, 0.1)
+
+    def publish_frames(self) -> set[int]:
+        frames = self.core.frames()
+        for aid, fr in frames.items():
+            self.sense_pub[aid].put(wire.encode_sense(fr))
+        return set(frames)
+
+    def record_and_step(self) -> None:
+        c = self.core
+        u = c.applied()
+        self.rec.record(c.tick, c.time, c.x, c.y, c.heading, u, self.out, c.alive_mask())
+        try:
+            self.truth_pub.put(wire.encode_truth(c.tick, c.time, c.ids, c.x, c.y, c.heading,
+                                                 u, self.out, c.state))
+        except Exception:
+            pass
+        c.step()
+
+    def lockstep_tick(self) -> None:
+        pending = self.publish_frames()
+        t_end = time.monotonic() + self.deadline
+        while pending:
+            left = t_end - time.monotonic()
+            if left <= 0:
+                for aid in pending:
+                    self.book[aid].missed += 1
+                break
+            self.drain(pending, left)
+        while self.drain(None, 0):  # joins/drops that arrived meanwhile take effect now
+            pass
+
+    def realtime_tick(self, t_next: float) -> None:
+        tick = self.core.tick
+        self.publish_frames()
+        while True:
+            left = t_next - time.monotonic()
+            if left <= 0:
+                break
+            self.drain(None, left)
+        for aid in self.core.active_ids():
+            b = self.book[aid]
+            stale = tick - b.last_cmd_tick if b.last_cmd_tick >= 0 else tick + 1
+            b.stale_sum += stale
+            b.stale_max = max(b.stale_max, stale)
+
+    def run(self) -> int:
+        self.t_start = time.monotonic()
+        period = self.core.dt / self.cfg.speed
+        last_note = time.monotonic()
+        t0_ticks = time.monotonic()
+        self.wait_for_agents()
+        self.event("start", None, f"all {len(self.book)} agents joined; clock {self.cfg.clock}",
+                   startup_s=time.monotonic() - self.t_start)
+        t_next = time.monotonic() + period
+        t0_ticks = time.monotonic()
+        while self.core.tick < self.ticks:
+            if self.cfg.clock == "lockstep":
+                self.lockstep_tick()
+            else:
+                self.realtime_tick(t_next)
+                t_next += period
+            self.record_and_step()
+            now = time.monotonic()
+            if self.cfg.progress and now - last_note > 2.0:
+                last_note = now
+                rate = self.core.tick / max(now - t0_ticks, 1e-9)
+                print(f"[world] tick {self.core.tick}/{self.ticks} t={self.core.time:.2f}s {rate:.0f} ticks/s",
+                      file=sys.stderr, flush=True)
+        self.wall_ticks = time.monotonic() - t0_ticks
+        return 0
+
+    def finish(self) -> dict | None:
+        """Record the final state row and write the results; returns the summary."""
+        c = self.core
+        if c.tick <= self.ticks and self.rec.rows <= c.tick:
+            self.rec.record(c.tick, c.time, c.x, c.y, c.heading, np.full(len(c.ids), np.nan),
+                            self.out, c.alive_mask())
+        if self.cfg.out is None:
+            return None
+        agent_extra = {}
+        for aid, b in self.book.items():
+            n_rt = max(self.core.tick, 1)
+            agent_extra[str(aid)] = {
+                "pid": b.pid, "host": b.host, "commands": b.commands, "missed_ticks": b.missed,
+                "joins": b.joins, "drops": b.drops, "garbage": b.garbage,
+                **({"staleness_mean_ticks": b.stale_sum / n_rt, "staleness_max_ticks": b.stale_max}
+                   if self.cfg.clock == "realtime" else {}),
+            }
+        wall = getattr(self, "wall_ticks", None)
+        result = RunResult(self.cfg.scenario, self.rec, self.events, {
+            "engine": "up", "run": self.cfg.run, "endpoint": self.cfg.listen, "clock": self.cfg.clock,
+            "speed": self.cfg.speed, "completed": self.stopped_by is None and c.tick >= self.ticks,
+            "stopped_by_signal": self.stopped_by, "garbage_messages": self.garbage,
+            "ignored_messages": self.ignored, "rejected_commands": c.rejected,
+            "wall_time": wall, "ticks_per_second": (c.tick / wall) if wall else None,
+        }, agent_extra)
+        return write_run(result, self.cfg.out)
+
+
+def _raise_stop(signum, _frame):
+    raise Stop(signum)
+
+
+def run_world(cfg: WorldConfig) -> int:
+    """Run a world to the end; exit code 0 when the run completed, 128+signal when stopped."""
+    world = World(cfg)
+    sock = socket_path(cfg.listen)
+    if sock is not None and sock.exists():
+        # A stale socket from a crashed run blocks listening; a live one belongs to a run.
+        import socket as so
+
+        s = so.socket(so.AF_UNIX, so.SOCK_STREAM)
+        try:
+            s.connect(str(sock))
+            s.close()
+            print(f"swarm world: {cfg.listen} is in use by another run", file=sys.stderr)
+            return 2
+        except OSError:
+            sock.unlink(missing_ok=True)
+    old = {sig: signal.signal(sig, _raise_stop) for sig in (signal.SIGTERM, signal.SIGINT)}
+    code = 0
+    try:
+        try:
+            world._open()
+        except Exception as e:  # zenoh.ZError: endpoint unusable
+            print(f"swarm world: cannot listen on {cfg.listen}: {e}", file=sys.stderr)
+            return 2
+        if cfg.progress:
+            print(f"[world] run {cfg.run} listening on {cfg.listen}", file=sys.stderr, flush=True)
+        try:
+            code = world.run()
+        except Stop as s:
+            world.stopped_by = s.signum
+            code = 128 + s.signum
+        except TimeoutError as e:
+            print(f"swarm world: {e}", file=sys.stderr)
+            code = 3
+        # Results are written even when stopped: nothing recorded is lost.
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        world.finish()
+        world._close()
+    finally:
+        for sig, h in old.items():
+            signal.signal(sig, h)
+        if sock is not None:
+            sock.unlink(missing_ok=True)
+    return code
