@@ -176,6 +176,7 @@ def world(
     speed: Annotated[float, typer.Option(help="realtime: simulated seconds per wall second", min=1e-6)] = 1.0,
     join_timeout: Annotated[Optional[float], typer.Option(help="give up if not every agent joined "
                                                           "within this many s (default: wait)")] = None,
+    plots: Annotated[bool, typer.Option(help="render PNG plots at the end")] = True,
 ) -> None:
     """Run the world of a scenario by hand: the hub, physics, sensors and the recording.
 
@@ -200,8 +201,82 @@ def world(
     out = out or default_out(scenario, "up")
     typer.echo(f"run {run} on {listen}; results in {out}", err=True)
     code = run_world(WorldConfig(s, run, listen, out, clock, speed, duration, join_timeout))
-    if code in (0, 130, 143) and (out / "trajectory.npz").exists():
+    if plots and code in (0, 130, 143) and (out / "trajectory.npz").exists():
         _plots(out)
+    raise typer.Exit(code)
+
+
+@app.command()
+def up(
+    scenario: ScenarioArg,
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="output directory "
+                                                "(default runs/<scenario>-up-<time>)")] = None,
+    duration: Annotated[Optional[float], typer.Option(help="simulated seconds (default: the "
+                                                      "scenario's run.duration)", min=0.0)] = None,
+    clock: Annotated[Optional[str], typer.Option(help="lockstep | realtime (default: the scenario's)")] = None,
+    speed: Annotated[float, typer.Option(help="realtime: simulated seconds per wall second", min=1e-6)] = 1.0,
+    listen: Annotated[Optional[str], typer.Option(help="endpoint of the run (default: a Unix socket in "
+                                                  "$SWARM_RUNTIME_DIR or /tmp/swarm-<uid>)")] = None,
+    plots: Annotated[bool, typer.Option(help="render PNG plots at the end")] = True,
+) -> None:
+    """Run a scenario as a distributed system: a world process and one OS process per agent.
+
+    Prints the endpoint and run id (so another terminal can attach), live progress, and a
+    summary; writes summary.json, trajectory.npz, plots and logs/ into --out. Ctrl-C stops
+    cleanly: results written, no process left behind, exit 130 (143 for SIGTERM).
+
+    Example: swarm up scenarios/case2.toml --out runs/case2
+    """
+    from swarm.launcher import Launcher, UpConfig
+
+    s = read_scenario(scenario)
+    if clock is not None and clock not in ("lockstep", "realtime"):
+        raise fail(f"--clock must be lockstep or realtime, not {clock!r}")
+    if duration is not None and duration < s.run.dt:
+        raise fail(f"--duration {duration} s is shorter than one step (dt = {s.run.dt} s)")
+    out = out or default_out(scenario, "up")
+    run_id = _new_run_id(scenario)
+    launcher = Launcher(UpConfig(scenario, s, out, run_id, listen, duration, clock, speed))
+    typer.echo(f"run {run_id}  endpoint {launcher.endpoint}  agents {len(s.agents)}  "
+               f"clock {clock or s.run.clock}")
+    typer.echo(f"attach from another terminal: swarm agent --id N --connect {launcher.endpoint} --run {run_id}")
+    total = int(round((duration or s.run.duration) / s.run.dt))
+    tty = sys.stdout.isatty()
+    state = {"last": 0.0, "tick": 0, "wall": 0.0}
+
+    def show(p, wall):
+        if p is None:
+            return
+        now = time.monotonic()
+        if not tty and now - state["last"] < 2.0 and p["tick"] < total - 1:
+            return
+        rate = (p["tick"] - state["tick"]) / max(wall - state["wall"], 1e-9)
+        state.update(last=now, tick=p["tick"], wall=wall)
+        errs = " ".join(f"{i}:{'-' if e is None else f'{100 * e:.1f}%'}" for i, e in sorted(p["errors"].items()))
+        drop = f"  dropped {p['dropped']}" if p["dropped"] else ""
+        line = (f"t={p['time']:7.2f}s tick {p['tick']}/{total} {rate:6.0f} ticks/s  "
+                f"radial error {errs}{drop}")
+        if tty:
+            typer.echo("\r\033[K" + line[:200], nl=False)
+        else:
+            typer.echo(line)
+
+    code = launcher.run(show)
+    if tty:
+        typer.echo("")
+    summary_path = out / "summary.json"
+    if launcher.stop_signal is not None:
+        typer.echo(f"stopped by signal {launcher.stop_signal}; partial results in {out}")
+        code = 128 + launcher.stop_signal
+    elif code != 0:
+        typer.secho(f"the world exited with code {code}; see {out / 'logs' / 'world.log'}", err=True,
+                    fg=typer.colors.RED)
+        code = 1
+    if summary_path.exists():
+        summary = json.loads(summary_path.read_text())
+        _print_summary(summary, out)
+        if plots:
+            _plots(out)
     raise typer.Exit(code)
 
 

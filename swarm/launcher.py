@@ -1,0 +1,244 @@
+"""`swarm up`: start a world and one OS process per agent, supervise, show progress.
+
+All children run in one process group that the launcher owns (led by the world, which
+is not reaped until the end, so the group outlives any agent). The world writes the
+results; the launcher watches the run over zenoh like any observer would (ground truth
+and events), prints progress, and on Ctrl-C/SIGTERM stops the world first (so the
+results are written), then the agents, then anything left in the group.
+Each child's output goes to `<out>/logs/`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from swarm import wire
+from swarm.scenario import Scenario
+from swarm.transport import default_endpoint, open_client
+from world.metrics import root_of
+
+EXIT_WORLD_FAILED = 1
+
+
+@dataclass
+class UpConfig:
+    scenario_path: Path
+    scenario: Scenario
+    out: Path
+    run: str
+    listen: str | None = None
+    duration: float | None = None
+    clock: str | None = None
+    speed: float = 1.0
+    join_timeout: float = 60.0
+
+
+class Launcher:
+    def __init__(self, cfg: UpConfig, say: Callable[[str], None] = print):
+        self.cfg = cfg
+        self.say = say
+        self.endpoint = cfg.listen or default_endpoint(cfg.run)
+        self.world: subprocess.Popen | None = None
+        self.agents: dict[int, subprocess.Popen] = {}
+        self.pgid: int | None = None
+        self.stop_signal: int | None = None
+        self.lock = threading.Lock()
+        self.latest_truth: bytes | None = None
+        self.events: list[dict] = []
+        self.logs = cfg.out / "logs"
+
+    # -- processes --------------------------------------------------------------------------
+    def _spawn(self, args: list[str], log_name: str) -> subprocess.Popen:
+        log = open(self.logs / log_name, "ab")
+        try:
+            return subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
+                                    process_group=0 if self.pgid is None else self.pgid)
+        finally:
+            log.close()
+
+    def start_world(self) -> None:
+        c = self.cfg
+        args = [sys.executable, "-m", "swarm", "world", str(c.scenario_path), "--listen", self.endpoint,
+                "--run", c.run, "--out", str(c.out), "--speed", str(c.speed), "--no-plots",
+                "--join-timeout", str(c.join_timeout)]
+        if c.duration is not None:
+            args += ["--duration", str(c.duration)]
+        if c.clock is not None:
+            args += ["--clock", c.clock]
+        self.world = self._spawn(args, "world.log")
+        self.pgid = self.world.pid
+
+    def start_agent(self, agent_id: int) -> subprocess.Popen:
+        p = self._spawn([sys.executable, "-m", "agents.process", str(agent_id), self.endpoint, self.cfg.run],
+                        f"agent-{agent_id}.log")
+        self.agents[agent_id] = p
+        return p
+
+    def world_exit_code(self) -> int | None:
+        """The world's exit status without reaping it (it leads the process group)."""
+        assert self.world is not None
+        if self.world.returncode is not None:
+            return self.world.returncode
+        try:
+            info = os.waitid(os.P_PID, self.world.pid, os.WEXITED | os.WNOHANG | os.WNOWAIT)
+        except ChildProcessError:
+            return self.world.poll()
+        if info is None:
+            return None
+        return info.si_status if info.si_code == os.CLD_EXITED else -info.si_status
+
+    def group_alive(self) -> bool:
+        if self.pgid is None:
+            return False
+        try:
+            os.killpg(self.pgid, 0)
+        except ProcessLookupError:
+            return False
+        except PermissionError:
+            return True
+        # Zombies count as members until reaped: reap what has exited, then look again.
+        for p in [self.world, *self.agents.values()]:
+            if p is not None and p is not self.world:
+                p.poll()
+        return any(p.poll() is None for p in self.agents.values()) or self.world_exit_code() is None
+
+    def stop_all(self, grace: float = 10.0) -> None:
+        """World first (it writes the results), then agents, then the whole group."""
+        if self.world is not None and self.world_exit_code() is None:
+            try:
+                os.kill(self.world.pid, signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+            self._wait(lambda: self.world_exit_code() is not None, grace)
+        if self.pgid is not None:
+            self._wait(lambda: all(p.poll() is not None for p in self.agents.values()), 3.0)
+            for sig in (signal.SIGTERM, signal.SIGKILL):
+                if not any(p.poll() is None for p in self.agents.values()) and self.world_exit_code() is not None:
+                    break
+                try:
+                    os.killpg(self.pgid, sig)
+                except ProcessLookupError:
+                    break
+                self._wait(lambda: all(p.poll() is not None for p in self.agents.values())
+                           and self.world_exit_code() is not None, 3.0)
+        for p in [*self.agents.values(), self.world]:
+            if p is not None:
+                try:
+                    p.wait(timeout=5)
+                except subprocess.TimeoutExpired:
+                    pass
+        # Anything else that joined the group (a grandchild) goes too.
+        if self.pgid is not None:
+            try:
+                os.killpg(self.pgid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+
+    @staticmethod
+    def _wait(cond: Callable[[], bool], timeout: float) -> bool:
+        t_end = time.monotonic() + timeout
+        while time.monotonic() < t_end:
+            if cond():
+                return True
+            time.sleep(0.02)
+        return cond()
+
+    # -- observing -------------------------------------------------------------------------------
+    def connect(self, timeout: float = 15.0):
+        """Open an observer session once the world listens; None if the world died first."""
+        t_end = time.monotonic() + timeout
+        while time.monotonic() < t_end and self.stop_signal is None:
+            if self.world_exit_code() is not None:
+                return None
+            try:
+                ses = open_client(self.endpoint, timeout_ms=500)
+            except Exception:
+                time.sleep(0.05)
+                continue
+            alive = [r for r in ses.liveliness().get(wire.world_alive_key(self.cfg.run), timeout=1.0) if r.ok]
+            if alive:
+                return ses
+            ses.close()
+            time.sleep(0.05)
+        return None
+
+    def _on_truth(self, sample) -> None:
+        self.latest_truth = sample.payload.to_bytes()
+
+    def _on_event(self, sample) -> None:
+        try:
+            ev = wire.decode_json(sample.payload.to_bytes(), "event")["event"]
+        except (wire.WireError, KeyError):
+            return
+        with self.lock:
+            self.events.append(ev)
+
+    def progress(self) -> dict | None:
+        """Figures for the progress line from the latest ground truth."""
+        buf = self.latest_truth
+        if buf is None:
+            return None
+        try:
+            tick, t, recs = wire.decode_truth(buf)
+        except wire.WireError:
+            return None
+        s = self.cfg.scenario
+        leaders = {a.id for a in s.agents if a.role == "leader"}
+        alive = {int(r["id"]) for r in recs if r["state"] == 0}
+        out = {int(r["id"]): (int(r["out"]) if r["out"] >= 0 else None) for r in recs}
+        errs = {}
+        for r in recs:
+            aid = int(r["id"])
+            if aid not in alive:
+                continue
+            root, _ = root_of(aid, out, leaders & alive)
+            if root is None:
+                errs[aid] = None
+                continue
+            L, me = s.agent(root), s.agent(aid)
+            R = me.speed * L.orbit_radius / L.speed
+            errs[aid] = abs(math.hypot(r["x"] - s.target.x, r["y"] - s.target.y) - R) / R
+        return {"tick": tick, "time": t, "errors": errs, "dropped": sorted(set(out) - alive)}
+
+    # -- the run -------------------------------------------------------------------------------
+    def run(self, show: Callable[[dict | None, float], None]) -> int:
+        """Start everything, supervise until the world ends; returns the world's exit code."""
+        self.logs.mkdir(parents=True, exist_ok=True)
+        handlers = {sig: signal.signal(sig, self._on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+        session = None
+        try:
+            self.start_world()
+            for a in self.cfg.scenario.agents:
+                self.start_agent(a.id)
+            session = self.connect()
+            subs = []
+            if session is not None:
+                subs = [session.declare_subscriber(wire.truth_key(self.cfg.run), self._on_truth),
+                        session.declare_subscriber(wire.events_key(self.cfg.run), self._on_event)]
+            t0 = time.monotonic()
+            while self.stop_signal is None:
+                code = self.world_exit_code()
+                if code is not None:
+                    break
+                show(self.progress(), time.monotonic() - t0)
+                time.sleep(0.25)
+        finally:
+            if session is not None:
+                session.close()
+            self.stop_all()
+            for sig, h in handlers.items():
+                signal.signal(sig, h)
+        code = self.world.returncode if self.world is not None else EXIT_WORLD_FAILED
+        return code
+
+    def _on_signal(self, signum, _frame) -> None:
+        self.stop_signal = signum
