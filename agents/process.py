@@ -84,6 +84,8 @@ class AgentNode:
         self.spec = self.scenario.agent(agent_id)
         s = self.scenario
         self.brain = AgentBrain(self.spec, s.gains, s.sensing, s.run.dt)
+        if self.brain.is_leader:
+            import agents.leader  # noqa: F401  (load numpy and the planner before the first frame)
         self.inbox: queue.SimpleQueue = queue.SimpleQueue()
         self.hops_of: dict[int, int | None] = {}
         self.commands = 0
@@ -92,7 +94,7 @@ class AgentNode:
         self.last = None  # last Decision
         self.world_alive = True
         self.status_sent = 0.0
-        self.last_status: dict | None = None
+        self.last_status: tuple | None = None
 
     def open(self) -> None:
         ses, run, put = self.session, self.run, self.inbox.put
@@ -133,12 +135,13 @@ class AgentNode:
         }
 
     def maybe_publish_status(self, force: bool = False) -> None:
+        """Publish on change of what others rely on, and every STATUS_PERIOD s anyway."""
         now = time.monotonic()
-        st = self.status()
-        key = {k: st[k] for k in ("out", "hops", "phase", "fallback")}
-        changed = self.last_status != key
-        if force or changed or now - self.status_sent >= STATUS_PERIOD:
-            self.status_pub.put(wire.encode_json(st))
+        d = self.last
+        key = (None, None, False) if d is None else (d.out, d.phase, d.fallback)
+        key = (*key, self.hops())
+        if force or key != self.last_status or now - self.status_sent >= STATUS_PERIOD:
+            self.status_pub.put(wire.encode_json(self.status()))
             self.status_sent = now
             self.last_status = key
 
@@ -191,13 +194,19 @@ class AgentNode:
         self.maybe_publish_status(force=True)
         while True:
             try:
-                item = self.inbox.get(timeout=STATUS_PERIOD)
+                batch = [self.inbox.get(timeout=STATUS_PERIOD)]
             except queue.Empty:
-                item = None
-            if item is not None:
+                batch = []
+            while True:  # take whatever else is waiting: only the newest frame is answered
+                try:
+                    batch.append(self.inbox.get_nowait())
+                except queue.Empty:
+                    break
+            newest = None
+            for item in batch:
                 kind = item[0]
                 if kind == "sense":
-                    self.on_sense(item[1])
+                    newest = item[1]
                 elif kind == "status":
                     self.on_status(item[1], item[2])
                 elif kind == "world":
@@ -210,6 +219,8 @@ class AgentNode:
                         continue
                     if msg.get("kind") == "end":
                         return EXIT_OK
+            if newest is not None:
+                self.on_sense(newest)
             self.maybe_publish_status()
 
 

@@ -245,7 +245,7 @@ def up(
     state = {"last": 0.0, "tick": 0, "wall": 0.0}
 
     def show(p, wall):
-        if p is None:
+        if p is None or (p["tick"] == state["tick"] and state["wall"] > 0):
             return
         now = time.monotonic()
         if not tty and now - state["last"] < 2.0 and p["tick"] < total - 1:

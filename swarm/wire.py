@@ -140,6 +140,21 @@ def encode_sense(frame: SensorFrame) -> bytes:
     return head + b"".join(CONTACT.pack(c.id, c.bearing, c.heading, c.range) for c in frame.contacts)
 
 
+CONTACT_FIELDS = [("id", "<i4"), ("bearing", "<f8"), ("heading", "<f8"), ("range", "<f8")]  # == CONTACT
+
+
+def encode_sense_arrays(tick: int, time: float, agent: int, heading: float,
+                        target: tuple[float, float] | None, ids, bearing, headings, ranges) -> bytes:
+    """encode_sense for a frame given as numpy columns (the world's fast path); same bytes."""
+    import numpy as np
+
+    recs = np.empty(len(ids), dtype=np.dtype(CONTACT_FIELDS))
+    recs["id"], recs["bearing"], recs["heading"], recs["range"] = ids, bearing, headings, ranges
+    tx, ty = target if target is not None else (math.nan, math.nan)
+    return SENSE_HEAD.pack(KIND_SENSE, VERSION, int(target is not None), 0, agent, tick, time, heading,
+                           tx, ty, len(ids)) + recs.tobytes()
+
+
 def decode_sense(buf: bytes) -> SensorFrame:
     f = _check_head(buf, SENSE_HEAD, KIND_SENSE, "sense frame")
     _, _, has_t, _, agent, tick, time, heading, tx, ty, n = f

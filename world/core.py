@@ -22,7 +22,7 @@ import numpy as np
 
 from swarm.scenario import Scenario
 from world.kinematics import step
-from world.sensing import SensorFrame, build_frames
+from world.sensing import SensorFrame, build_frames, sensing_matrix
 
 ACTIVE, COASTING, GONE = "active", "coasting", "gone"
 
@@ -68,6 +68,11 @@ class WorldCore:
         return build_frames(self.tick, self.time, self.ids, self.x, self.y, self.heading,
                             self.present_mask(), receivers, self.is_leader, self.target,
                             sens.range, sens.fov)
+
+    def sensing(self):
+        """(S, bearing, range) matrices of the current tick: S[i, j] when i senses j."""
+        sens = self.scenario.sensing
+        return sensing_matrix(self.x, self.y, self.heading, self.present_mask(), sens.range, sens.fov)
 
     def set_command(self, agent_id: int, u: float) -> bool:
         """Latch agent_id's turn rate for the next step; False if it was refused."""

@@ -275,10 +275,20 @@ class World:
             self.drain(None, 0.1)
 
     def publish_frames(self) -> set[int]:
-        frames = self.core.frames()
-        for aid, fr in frames.items():
-            self.sense_pub[aid].put(wire.encode_sense(fr))
-        return set(frames)
+        """Send every active agent its frame of this tick (the same numbers as WorldCore.frames)."""
+        c = self.core
+        sensed, bearing, rng = c.sensing()
+        sent = set()
+        tx, ty = c.target
+        for aid in c.active_ids():
+            k = c.index[aid]
+            js = np.flatnonzero(sensed[k])
+            target = (float(tx - c.x[k]), float(ty - c.y[k])) if c.is_leader[k] else None
+            self.sense_pub[aid].put(wire.encode_sense_arrays(
+                c.tick, c.time, aid, float(c.heading[k]), target, c.ids[js], bearing[k, js],
+                c.heading[js], rng[k, js]))
+            sent.add(aid)
+        return sent
 
     def record_and_step(self) -> None:
         c = self.core

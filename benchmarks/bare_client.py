@@ -1,0 +1,87 @@
+"""One client of the bare-zenoh lockstep baseline (see bare_hub.py).
+
+    python benchmarks/bare_client.py INDEX ENDPOINT RUN [--timeout S]
+
+Connects to the hub as a zenoh client (swarm.transport.client_config, like an agent),
+subscribes to its own tick key, declares a liveliness token (how the hub knows it is
+ready) and answers each tick with one small message on its own ack key. The callback
+only enqueues; the main thread publishes (the same structure as agents/process.py,
+without decoding, law or status traffic). Exits on the hub's end message, or after
+--timeout seconds whatever happens.
+"""
+
+from __future__ import annotations
+
+import argparse
+import queue
+import struct
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+TICK = struct.Struct("<q")  # tick
+ACK = struct.Struct("<iq")  # client index, tick
+
+
+def key(run: str, index: int | str, leaf: str) -> str:
+    return f"bench/{run}/c/{index}/{leaf}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("index", type=int)
+    ap.add_argument("endpoint")
+    ap.add_argument("run")
+    ap.add_argument("--timeout", type=float, default=300.0, help="exit after this many s in any case")
+    ap.add_argument("--handler", choices=("callback", "channel"), default="callback",
+                    help="callback: Python callback enqueues (like agents/process.py); "
+                         "channel: zenoh's FIFO channel, the main thread blocks in recv()")
+    a = ap.parse_args(argv)
+
+    import zenoh
+
+    from swarm.transport import client_config
+
+    deadline = time.monotonic() + a.timeout
+    inbox: queue.SimpleQueue = queue.SimpleQueue()
+    put = inbox.put
+    session = zenoh.open(client_config(a.endpoint))
+    try:
+        ack = session.declare_publisher(key(a.run, a.index, "ack"), express=True)
+        me = a.index
+        pack, unpack = ACK.pack, TICK.unpack
+        if a.handler == "channel":
+            # The hub ends with a 1-byte message on every tick key: one blocking recv() per tick.
+            sub = session.declare_subscriber(key(a.run, a.index, "tick"))
+            token = session.liveliness().declare_token(key(a.run, a.index, "alive"))  # noqa: F841
+            while time.monotonic() < deadline:
+                buf = sub.recv().payload.to_bytes()
+                if len(buf) != TICK.size:
+                    break
+                (tick,) = unpack(buf)
+                ack.put(pack(me, tick))
+            return 0
+        subs = [  # noqa: F841 (kept alive until close)
+            session.declare_subscriber(key(a.run, a.index, "tick"),
+                                       lambda s: put(s.payload.to_bytes())),
+            session.declare_subscriber(f"bench/{a.run}/end", lambda s: put(None)),
+        ]
+        token = session.liveliness().declare_token(key(a.run, a.index, "alive"))  # noqa: F841
+        while time.monotonic() < deadline:
+            try:
+                item = inbox.get(timeout=1.0)
+            except queue.Empty:
+                continue
+            if item is None or len(item) != TICK.size:
+                break
+            (tick,) = unpack(item)
+            ack.put(pack(me, tick))
+    finally:
+        session.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
