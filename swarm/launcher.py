@@ -55,6 +55,7 @@ class Launcher:
         self.latest_truth: bytes | None = None
         self.events: list[dict] = []
         self.logs = cfg.out / "logs"
+        self.failed = False
 
     # -- processes --------------------------------------------------------------------------
     def _spawn(self, args: list[str], log_name: str) -> subprocess.Popen:
@@ -217,15 +218,18 @@ class Launcher:
         session = None
         try:
             self.start_world()
-            for a in self.cfg.scenario.agents:
-                self.start_agent(a.id)
-            session = self.connect()
-            subs = []
+            session = self.connect()  # agents start once the world listens
             if session is not None:
-                subs = [session.declare_subscriber(wire.truth_key(self.cfg.run), self._on_truth),
-                        session.declare_subscriber(wire.events_key(self.cfg.run), self._on_event)]
+                self._subs = [session.declare_subscriber(wire.truth_key(self.cfg.run), self._on_truth),
+                              session.declare_subscriber(wire.events_key(self.cfg.run), self._on_event)]
+                for a in self.cfg.scenario.agents:
+                    self.start_agent(a.id)
+            elif self.stop_signal is None and self.world_exit_code() is None:
+                self.say(f"swarm up: cannot reach the world at {self.endpoint}; stopping "
+                         f"(see {self.logs / 'world.log'})")
+                self.failed = True
             t0 = time.monotonic()
-            while self.stop_signal is None:
+            while self.stop_signal is None and not self.failed:
                 code = self.world_exit_code()
                 if code is not None:
                     break
@@ -237,8 +241,9 @@ class Launcher:
             self.stop_all()
             for sig, h in handlers.items():
                 signal.signal(sig, h)
-        code = self.world.returncode if self.world is not None else EXIT_WORLD_FAILED
-        return code
+        if self.failed or self.world is None:
+            return EXIT_WORLD_FAILED
+        return self.world.returncode
 
     def _on_signal(self, signum, _frame) -> None:
         self.stop_signal = signum

@@ -14,7 +14,7 @@ import tempfile
 from pathlib import Path
 
 LEASE_MS = 1000  # a frozen (SIGSTOP) process is dropped after ~0.95 s
-CONNECT_TIMEOUT_MS = 5000
+CONNECT_TIMEOUT_MS = 10000
 
 
 def _config(settings: dict):
