@@ -182,6 +182,14 @@ class AgentNode:
 
     def on_world(self, kind) -> None:
         if kind == self.zenoh.SampleKind.PUT:
+            if not self.world_alive:
+                # A world came back (--wait-world): its ticks start afresh, and so does the brain.
+                from agents.brain import AgentBrain
+
+                s = self.scenario
+                self.brain = AgentBrain(self.spec, s.gains, s.sensing, s.run.dt)
+                self.last_tick, self.last = -1, None
+                _log(f"[agent {self.id}] the world is back; rejoining")
             self.world_alive = True
             return
         self.world_alive = False

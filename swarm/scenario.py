@@ -93,7 +93,7 @@ class SensingSpec(_Strict):
 class AgentSpec(_Strict):
     """[[agents]]: one unicycle."""
 
-    id: Annotated[int, Field(ge=0)]
+    id: Annotated[int, Field(ge=0, le=2**31 - 1, description="agent id (fits the int32 wire fields)")]
     role: Literal["leader", "follower"]
     x: Finite
     y: Finite

@@ -37,6 +37,8 @@ MAX_AGENTS = 10_000
 MAX_JSON_BYTES = 1 << 20
 
 RUN_ID_RE = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
+AGENT_ID_RE = re.compile(r"^(0|[1-9][0-9]{0,9})$")  # canonical decimal; ids fit the int32 wire fields
+MAX_AGENT_ID = 2**31 - 1
 
 
 class WireError(ValueError):
@@ -97,12 +99,9 @@ def run_of_key(key: str) -> str:
 def agent_of_key(key: str) -> int:
     """Agent id in `swarm/<run>/agent/<id>/...`."""
     parts = str(key).split("/")
-    try:
-        if parts[2] != "agent":
-            raise ValueError
-        return int(parts[3])
-    except (IndexError, ValueError):
-        raise WireError(f"not an agent key: {key!r}") from None
+    if len(parts) < 5 or parts[0] != PREFIX or parts[2] != "agent" or not AGENT_ID_RE.match(parts[3]):
+        raise WireError(f"not an agent key: {key!r}")
+    return int(parts[3])
 
 
 # --- binary hot path --------------------------------------------------------------------
@@ -226,6 +225,13 @@ def _reject_constant(name: str):
     raise WireError(f"JSON: {name} is not allowed")
 
 
+def _finite_float(text: str) -> float:
+    v = float(text)
+    if not math.isfinite(v):
+        raise WireError(f"JSON: {text} is not a finite number")
+    return v
+
+
 def encode_json(obj: dict) -> bytes:
     return json.dumps({"v": VERSION, **obj}, separators=(",", ":"), allow_nan=False).encode()
 
@@ -234,12 +240,13 @@ def decode_json(buf: bytes, what: str = "message") -> dict:
     if len(buf) > MAX_JSON_BYTES:
         raise WireError(f"{what}: {len(buf)} bytes, more than {MAX_JSON_BYTES}")
     try:
-        obj = json.loads(bytes(buf).decode("utf-8"), parse_constant=_reject_constant)
+        obj = json.loads(bytes(buf).decode("utf-8"), parse_constant=_reject_constant,
+                         parse_float=_finite_float)
     except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
         raise WireError(f"{what}: not JSON: {e}") from None
     if not isinstance(obj, dict):
         raise WireError(f"{what}: expected a JSON object")
-    if obj.get("v") != VERSION:
+    if type(obj.get("v")) is not int or obj["v"] != VERSION:
         raise WireError(f"{what}: protocol version {obj.get('v')!r}, this build speaks {VERSION}")
     return obj
 

@@ -24,5 +24,5 @@ class SensorFrame:
     time: float  # simulated time of the tick (s)
     agent: int
     heading: float  # own heading (rad)
-    contacts: tuple[Contact, ...]  # sorted by id
+    contacts: tuple[Contact, ...]  # in scenario order
     target: tuple[float, float] | None = None  # leaders: target minus own position (m)

@@ -156,6 +156,9 @@ class World:
         except wire.WireError:
             self.garbage += 1
             return
+        if cmd.out is not None and (cmd.out == aid or cmd.out not in self.core.index):
+            self.garbage += 1
+            return
         k = self.core.index.get(aid)
         if k is None or self.core.state[k] != ACTIVE or cmd.tick > self.core.tick:
             self.ignored += 1

@@ -1,0 +1,392 @@
+"""Helpers for the multi-process runtime tests (tests/test_runtime*.py).
+
+Everything here drives real processes over real zenoh; nothing is mocked. The test
+process itself never opens a zenoh session (zenoh is not fork-safe and the tests start
+processes): it observes runs through their files (logs/world.log, the launcher's
+output, summary.json, trajectory.npz) and through psutil.
+
+- `ProcessTracker` starts every process in its own session (so its pgid is its pid),
+  records every descendant (pid + create time) while they run, and at the end kills
+  only the groups it created and the descendants it recorded.
+- `wait_for` is the only way to wait: a condition polled until a deadline.
+- `replay_events` rebuilds the `out` and `alive` columns a run must have recorded from
+  its event list (the world applies a tick's events before recording that tick).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import psutil
+
+REPO = Path(__file__).resolve().parents[1]
+SCENARIOS = REPO / "scenarios"
+
+# "[world] t=    5.16s tick 516: drop agent 3: liveliness token lost"
+WORLD_EVENT_RE = re.compile(r"^\[world\] t=\s*\S+s tick (\d+): (\w+) agent (\S+): (.*)$", re.M)
+# launcher progress line: "t=   1.84s tick 184/500 ..."
+PROGRESS_RE = re.compile(r"^t=\s*\S+s tick (\d+)/(\d+)", re.M)
+# launcher banner: "run case2-734b0c  endpoint unixsock-stream//tmp/... agents 6  clock lockstep"
+BANNER_RE = re.compile(r"^run (\S+)\s+endpoint (\S+)\s+agents", re.M)
+
+
+def swarm_cmd(*args) -> list[str]:
+    return [sys.executable, "-m", "swarm", *map(str, args)]
+
+
+def agent_cmd(agent_id: int, endpoint: str, run: str) -> list[str]:
+    return [sys.executable, "-m", "agents.process", str(agent_id), endpoint, run]
+
+
+def wait_for(cond: Callable[[], object], timeout: float, what: str, interval: float = 0.01):
+    """Poll `cond` until it returns something truthy (returned) or fail after `timeout` s."""
+    t_end = time.monotonic() + timeout
+    while True:
+        value = cond()
+        if value:
+            return value
+        if time.monotonic() > t_end:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(interval)
+
+
+def read_text(path: Path) -> str:
+    try:
+        return Path(path).read_text(errors="replace")
+    except FileNotFoundError:
+        return ""
+
+
+def short_runtime_dir() -> str:
+    """A private directory short enough for Unix socket paths (< 108 bytes)."""
+    return tempfile.mkdtemp(prefix="sw", dir="/tmp")
+
+
+# --- processes ------------------------------------------------------------------------------
+@dataclass
+class Tracked:
+    """One process this test started (a session leader: pgid == pid)."""
+
+    name: str
+    popen: subprocess.Popen
+    log: Path
+    started: float  # time.time() at start
+
+    @property
+    def pid(self) -> int:
+        return self.popen.pid
+
+    def text(self) -> str:
+        return read_text(self.log)
+
+    def poll(self) -> int | None:
+        return self.popen.poll()
+
+    def wait(self, timeout: float) -> int:
+        try:
+            return self.popen.wait(timeout)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(f"{self.name} (pid {self.pid}) still running after {timeout} s; "
+                                 f"its output:\n{self.text()[-3000:]}") from None
+
+
+@dataclass
+class Seen:
+    pid: int
+    create_time: float
+    cmdline: list[str]
+    root: int  # pid of the tracked process it descends from
+
+
+class ProcessTracker:
+    """Starts processes in their own sessions and remembers every descendant."""
+
+    POLL_S = 0.05
+
+    def __init__(self, env: dict, log_dir: Path, cwd: Path | None = None):
+        self.env = env
+        self.log_dir = Path(log_dir)
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        self.cwd = cwd
+        self.roots: list[Tracked] = []
+        self.seen: dict[int, Seen] = {}
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, name="process-tracker", daemon=True)
+        self._thread.start()
+
+    def spawn(self, args: list[str], name: str, cwd: Path | None = None) -> Tracked:
+        log = self.log_dir / f"{name}.out"
+        with open(log, "ab") as f:
+            p = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=f, stderr=subprocess.STDOUT,
+                                 env=self.env, cwd=cwd or self.cwd, start_new_session=True)
+        t = Tracked(name, p, log, time.time())
+        with self._lock:
+            self.roots.append(t)
+            try:
+                ct = psutil.Process(p.pid).create_time()
+                self.seen[p.pid] = Seen(p.pid, ct, args, p.pid)
+            except psutil.NoSuchProcess:
+                pass
+        self.poll_once()
+        return t
+
+    def poll_once(self) -> None:
+        """Record the current descendants of every tracked process still running."""
+        with self._lock:
+            roots = [r for r in self.roots if r.popen.returncode is None]
+        for r in roots:
+            try:
+                kids = psutil.Process(r.pid).children(recursive=True)
+            except psutil.NoSuchProcess:
+                continue
+            for k in kids:
+                if k.pid in self.seen:
+                    continue
+                try:
+                    seen = Seen(k.pid, k.create_time(), k.cmdline(), r.pid)
+                except (psutil.NoSuchProcess, psutil.ZombieProcess, psutil.AccessDenied):
+                    continue
+                with self._lock:
+                    self.seen.setdefault(k.pid, seen)
+
+    def _watch(self) -> None:
+        while not self._stop.wait(self.POLL_S):
+            try:
+                self.poll_once()
+            except Exception:  # never let the watcher die; the next poll retries
+                pass
+
+    def descendants(self, root: Tracked) -> list[Seen]:
+        with self._lock:
+            return [s for s in self.seen.values() if s.root == root.pid and s.pid != root.pid]
+
+    def agent_pids(self, root: Tracked) -> dict[int, int]:
+        """{agent id: pid} of the agent processes started under `root` (by their command line)."""
+        out = {}
+        for s in self.descendants(root):
+            cl = s.cmdline
+            if "agents.process" in cl:
+                i = cl.index("agents.process")
+                out[int(cl[i + 1])] = s.pid
+        return out
+
+    def world_pid(self, root: Tracked) -> int | None:
+        for s in self.descendants(root):
+            if "swarm" in s.cmdline and "world" in s.cmdline:
+                return s.pid
+        return None
+
+    @staticmethod
+    def _is_alive(s: Seen) -> bool:
+        try:
+            p = psutil.Process(s.pid)
+            if abs(p.create_time() - s.create_time) > 0.01:
+                return False  # pid reused by another process
+            return p.status() != psutil.STATUS_ZOMBIE
+        except (psutil.NoSuchProcess, psutil.ZombieProcess):
+            return False
+
+    def living(self) -> list[str]:
+        """Every process this tracker started or saw that is still alive (not a zombie)."""
+        for r in self.roots:
+            r.popen.poll()  # reap what has exited
+        with self._lock:
+            seen = list(self.seen.values())
+        return [f"pid {s.pid}: {' '.join(s.cmdline[:6])}" for s in seen if self._is_alive(s)]
+
+    def assert_none_left(self, timeout: float = 10.0) -> None:
+        t_end = time.monotonic() + timeout
+        while True:
+            left = self.living()
+            if not left:
+                return
+            if time.monotonic() > t_end:
+                raise AssertionError("processes left alive:\n  " + "\n  ".join(left))
+            time.sleep(0.02)
+
+    def close(self) -> list[str]:
+        """Stop watching; kill what is left (only our groups and recorded descendants).
+
+        Returns what was still alive before killing it.
+        """
+        self._stop.set()
+        self._thread.join(timeout=2)
+        left = self.living()
+        for r in self.roots:
+            if r.popen.poll() is None:  # not reaped: its pid, and so its group id, are still ours
+                try:
+                    os.killpg(r.pid, signal.SIGKILL)
+                except (ProcessLookupError, PermissionError):
+                    pass
+        with self._lock:
+            seen = list(self.seen.values())
+        for s in seen:
+            if self._is_alive(s):
+                try:
+                    os.kill(s.pid, signal.SIGKILL)
+                except (ProcessLookupError, PermissionError):
+                    pass
+        for r in self.roots:
+            try:
+                r.popen.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                pass
+        return left
+
+
+def make_env(runtime_dir: str) -> dict:
+    env = dict(os.environ)
+    env["SWARM_RUNTIME_DIR"] = runtime_dir
+    env["PYTHONUNBUFFERED"] = "1"  # so the launcher's progress lines reach its log at once
+    env.pop("PYTHONFAULTHANDLER", None)
+    return env
+
+
+class Runtime:
+    """A private runtime dir + a process tracker; `close()` cleans both."""
+
+    def __init__(self, log_dir: Path, cwd: Path | None = None):
+        self.dir = short_runtime_dir()
+        self.env = make_env(self.dir)
+        self.tracker = ProcessTracker(self.env, log_dir, cwd=cwd or log_dir)
+
+    def close(self) -> list[str]:
+        try:
+            return self.tracker.close()
+        finally:
+            shutil.rmtree(self.dir, ignore_errors=True)
+
+
+# --- runs -------------------------------------------------------------------------------------
+@dataclass
+class UpRun:
+    """A `swarm up` started by a test."""
+
+    launcher: Tracked
+    out: Path
+    tracker: ProcessTracker
+    t_start_seen: float | None = None
+    notes: dict = field(default_factory=dict)
+
+    @property
+    def world_log(self) -> Path:
+        return self.out / "logs" / "world.log"
+
+    def world_text(self) -> str:
+        return read_text(self.world_log)
+
+    def world_events(self) -> list[tuple[int, str, str, str]]:
+        """(tick, kind, agent, reason) of the events the world has printed so far."""
+        return [(int(m[0]), m[1], m[2], m[3]) for m in WORLD_EVENT_RE.findall(self.world_text())]
+
+    def has_event(self, kind: str, agent: int | None = None) -> tuple | None:
+        for ev in self.world_events():
+            if ev[1] == kind and (agent is None or ev[2] == str(agent)):
+                return ev
+        return None
+
+    def banner(self) -> tuple[str, str]:
+        """(run id, endpoint) printed by the launcher."""
+        m = wait_for(lambda: BANNER_RE.search(self.launcher.text()), 15, "the launcher's banner")
+        return m[1], m[2]
+
+    def progress_tick(self) -> int:
+        ticks = [int(m[0]) for m in PROGRESS_RE.findall(self.launcher.text())]
+        return max(ticks) if ticks else -1
+
+    def wait_started(self, timeout: float = 30.0) -> None:
+        """Until the world reports its `start` event (every agent joined, tick 0 next)."""
+        def started():
+            if self.launcher.poll() is not None:
+                raise AssertionError(f"launcher exited early ({self.launcher.poll()}):\n"
+                                     f"{self.launcher.text()[-3000:]}\n{self.world_text()[-3000:]}")
+            return self.has_event("start")
+        wait_for(started, timeout, "the world's start event")
+        self.t_start_seen = time.time()
+        self.tracker.poll_once()
+
+    def summary(self) -> dict:
+        return json.loads((self.out / "summary.json").read_text())
+
+    def trajectory(self) -> dict[str, np.ndarray]:
+        return load_trajectory(self.out)
+
+
+def start_up(tracker: ProcessTracker, scenario: Path | str, out: Path, *extra, name: str = "up") -> UpRun:
+    args = swarm_cmd("up", scenario, "--out", out, "--no-plots", *extra)
+    return UpRun(tracker.spawn(args, name), Path(out), tracker)
+
+
+def load_trajectory(out: Path) -> dict[str, np.ndarray]:
+    with np.load(Path(out) / "trajectory.npz", allow_pickle=False) as z:
+        return {k: z[k] for k in z.files}
+
+
+def run_sim(tracker: ProcessTracker, scenario: Path | str, out: Path, *extra, timeout: float = 120.0):
+    """`swarm sim` as a process; returns (trajectory arrays, summary)."""
+    p = tracker.spawn(swarm_cmd("sim", scenario, "--out", out, "--no-plots", *extra), f"sim-{Path(out).name}")
+    rc = p.wait(timeout)
+    assert rc == 0, f"swarm sim exited {rc}:\n{p.text()[-3000:]}"
+    return load_trajectory(out), json.loads((Path(out) / "summary.json").read_text())
+
+
+def replay_events(events: list[dict], ids, rows: int) -> tuple[np.ndarray, np.ndarray]:
+    """The (out, alive) arrays a recording must hold given its events.
+
+    join/rejoin -> alive; drop -> not alive and out -1; switch -> out = its `to`. The
+    events of tick k take effect in row k (the world records a tick after handling them).
+    """
+    col = {int(a): k for k, a in enumerate(ids)}
+    n = len(col)
+    cur_out = np.full(n, -1, dtype=np.int64)
+    cur_alive = np.zeros(n, dtype=bool)
+    out = np.empty((rows, n), dtype=np.int64)
+    alive = np.empty((rows, n), dtype=bool)
+    evs = sorted((e for e in events if e.get("agent") is not None), key=lambda e: e["tick"])  # stable
+    i = 0
+    for t in range(rows):
+        while i < len(evs) and evs[i]["tick"] <= t:
+            e = evs[i]
+            k = col[int(e["agent"])]
+            if e["kind"] in ("join", "rejoin"):
+                cur_alive[k] = True
+            elif e["kind"] == "drop":
+                cur_alive[k] = False
+                cur_out[k] = -1
+            elif e["kind"] == "switch":
+                cur_out[k] = -1 if e["to"] is None else int(e["to"])
+            i += 1
+        out[t] = cur_out
+        alive[t] = cur_alive
+    return out, alive
+
+
+def events_of(summary: dict, kind: str, agent: int | None = None) -> list[dict]:
+    return [e for e in summary["events"] if e["kind"] == kind and (agent is None or e["agent"] == agent)]
+
+
+def check_time_column(traj: dict, ticks: int, dt: float) -> None:
+    """ticks+1 rows, t strictly increasing by dt."""
+    t = traj["t"]
+    assert t.shape == (ticks + 1,), f"t has {t.shape[0]} rows, expected {ticks + 1}"
+    assert np.all(np.isfinite(t))
+    d = np.diff(t)
+    assert np.all(d > 0), "t is not strictly increasing"
+    np.testing.assert_allclose(d, dt, rtol=0, atol=1e-9)
+    assert t[0] == 0.0
+    for k in ("x", "y", "heading", "out", "alive"):
+        assert traj[k].shape[0] == ticks + 1, f"{k} has {traj[k].shape[0]} rows"

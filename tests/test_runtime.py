@@ -1,0 +1,213 @@
+"""The distributed runtime as a whole: `swarm up` against `swarm sim`, convergence,
+stopping with Ctrl-C/SIGTERM, and two runs side by side.
+
+Real processes over real zenoh (Unix sockets in a short private $SWARM_RUNTIME_DIR per
+test). Every process is started in its own session, every descendant is recorded while
+it runs, and each test ends by checking that none of them is left.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import time
+
+import numpy as np
+import pytest
+
+from runtime_helpers import (
+    SCENARIOS,
+    Runtime,
+    check_time_column,
+    events_of,
+    replay_events,
+    run_sim,
+    start_up,
+    wait_for,
+)
+from swarm.scenario import load_scenario
+
+pytestmark = pytest.mark.slow
+
+EQUIV_SCENARIOS = ["case1", "case2", "turtlebot"]
+
+
+@pytest.fixture
+def rt(tmp_path):
+    r = Runtime(tmp_path)
+    yield r
+    left = r.close()
+    assert not left, "processes left alive after the test (now killed):\n  " + "\n  ".join(left)
+
+
+@pytest.fixture(scope="module")
+def lockstep_runs(tmp_path_factory):
+    """get(name) -> the scenario run, full duration, by `swarm sim` and `swarm up --clock lockstep`.
+
+    Each pair runs once per module (the case2 run serves equivalence and convergence).
+    """
+    base = tmp_path_factory.mktemp("lockstep")
+    r = Runtime(base)
+    cache: dict[str, dict] = {}
+
+    def get(name: str) -> dict:
+        if name not in cache:
+            scen = SCENARIOS / f"{name}.toml"
+            sim_traj, sim_summary = run_sim(r.tracker, scen, base / f"{name}-sim")
+            up = start_up(r.tracker, scen, base / f"{name}-up", "--clock", "lockstep", name=f"up-{name}")
+            t0 = time.monotonic()
+            rc = up.launcher.wait(240)
+            wall = time.monotonic() - t0
+            r.tracker.assert_none_left(timeout=10)
+            cache[name] = {"rc": rc, "run": up, "wall": wall, "sim": sim_traj, "sim_summary": sim_summary,
+                           "traj": up.trajectory(), "summary": up.summary(),
+                           "scenario": load_scenario(scen)}
+            print(f"\n[timing] swarm up {name}: {wall:.1f} s wall, "
+                  f"{cache[name]['summary']['ticks_per_second']:.0f} ticks/s")
+        return cache[name]
+
+    yield get
+    left = r.close()
+    assert not left, "processes left alive (now killed):\n  " + "\n  ".join(left)
+
+
+def switches(events: list[dict]) -> list[tuple]:
+    return [(e["tick"], e["agent"], e["from"], e["to"]) for e in events if e["kind"] == "switch"]
+
+
+# --- 1. equivalence ---------------------------------------------------------------------------
+@pytest.mark.parametrize("name", EQUIV_SCENARIOS)
+def test_lockstep_up_equals_sim(lockstep_runs, name):
+    res = lockstep_runs(name)
+    assert res["rc"] == 0, res["run"].launcher.text()[-3000:]
+    s = res["scenario"]
+    up, sim = res["traj"], res["sim"]
+    ticks = s.run.ticks
+    check_time_column(up, ticks, s.run.dt)
+    check_time_column(sim, ticks, s.run.dt)
+    assert list(up["ids"]) == list(sim["ids"]) == [a.id for a in s.agents]
+    np.testing.assert_array_equal(up["t"], sim["t"])
+    dx = np.max(np.abs(up["x"] - sim["x"]))
+    dy = np.max(np.abs(up["y"] - sim["y"]))
+    print(f"\n[equivalence] {name}: max |dx| = {dx:.3g} m, max |dy| = {dy:.3g} m over {ticks + 1} ticks")
+    assert np.all(np.isfinite(up["x"])) and np.all(np.isfinite(up["y"]))
+    assert dx < 1e-9 and dy < 1e-9, f"{name}: swarm up differs from swarm sim by {max(dx, dy)} m"
+    np.testing.assert_array_equal(up["out"], sim["out"])
+    assert np.abs(up["heading"] - sim["heading"]).max() < 1e-9
+    assert up["alive"].all(), "an agent was not alive for the whole lockstep run"
+    # Same out-neighbour choices at the same ticks.
+    assert switches(res["summary"]["events"]) == switches(res["sim_summary"]["events"])
+    # And the recorded out columns are exactly what the events say.
+    rep_out, rep_alive = replay_events(res["summary"]["events"], up["ids"], ticks + 1)
+    np.testing.assert_array_equal(up["out"], rep_out)
+    assert rep_alive.all()
+    summ = res["summary"]
+    assert summ["completed"] is True and summ["ticks"] == ticks and summ["clock"] == "lockstep"
+
+
+# --- 2. convergence ---------------------------------------------------------------------------
+def test_case2_converges_through_up(lockstep_runs):
+    res = lockstep_runs("case2")
+    summ = res["summary"]
+    assert res["rc"] == 0
+    assert summ["engine"] == "up" and summ["completed"] is True
+    assert summ["ticks"] == res["scenario"].run.ticks
+    assert summ["converged"] is True
+    assert set(summ["agents"]) == {str(a.id) for a in res["scenario"].agents}
+    for aid, a in summ["agents"].items():
+        assert a["expected_radius"] is not None, f"agent {aid} has no expected radius"
+        err = abs(a["final_radius"] - a["expected_radius"]) / a["expected_radius"]
+        assert err < 0.01, f"agent {aid}: radius {a['final_radius']} vs {a['expected_radius']}"
+        assert a["relative_error"] < 0.01
+        assert a["missed_ticks"] == 0, f"agent {aid} missed {a['missed_ticks']} ticks"
+        assert a["joins"] == 1 and a["drops"] == 0
+        assert a["commands"] == summ["ticks"]
+        assert a["alive"] is True
+    assert events_of(summ, "drop") == []
+
+
+# --- 5. Ctrl-C / SIGTERM on `swarm up` -------------------------------------------------------------
+STOP_TIMES: list[float] = []
+
+
+def _stop_up(rt: Runtime, out_dir, sig: int, expected: int) -> float:
+    # A long run (4000 s of turtlebot is minutes of lockstep), stopped once it ticks.
+    run = start_up(rt.tracker, SCENARIOS / "turtlebot.toml", out_dir / "run", "--duration", "4000")
+    run.wait_started(timeout=60)
+    desc = rt.tracker.descendants(run.launcher)
+    agents = rt.tracker.agent_pids(run.launcher)
+    assert sorted(agents) == [1, 2], f"agent processes under the launcher: {agents}"
+    assert rt.tracker.world_pid(run.launcher) is not None
+    assert run.launcher.poll() is None
+    t0 = time.monotonic()
+    os.killpg(run.launcher.pid, sig)  # what the terminal does on Ctrl-C: the launcher's group
+    rc = run.launcher.wait(30)
+    stop_s = time.monotonic() - t0
+    assert rc == expected, f"swarm up exited {rc} on signal {sig}, expected {expected}:\n" \
+                           f"{run.launcher.text()[-2000:]}"
+    # Every process the launcher started is gone.
+    rt.tracker.assert_none_left(timeout=5)
+    assert len(desc) >= 3
+    # Results were written, and say the run was stopped.
+    assert (run.out / "summary.json").exists(), "no summary.json after the stop"
+    summ = run.summary()
+    assert summ["completed"] is False
+    assert summ["stopped_by_signal"] in (signal.SIGTERM, signal.SIGINT)
+    traj = run.trajectory()
+    check_time_column(traj, summ["ticks"], 0.05)
+    assert "stopped by signal" in run.launcher.text()
+    # The world removed its socket.
+    assert not [f for f in os.listdir(rt.dir) if f.endswith(".sock")], os.listdir(rt.dir)
+    STOP_TIMES.append(stop_s)
+    print(f"\n[timing] signal {sig} -> launcher exit {stop_s:.3f} s "
+          f"(max so far {max(STOP_TIMES):.3f} s over {len(STOP_TIMES)})")
+    return stop_s
+
+
+@pytest.mark.parametrize("attempt", range(20))
+def test_ctrl_c_leaves_no_process(rt, tmp_path, attempt):
+    _stop_up(rt, tmp_path, signal.SIGINT, 130)
+
+
+def test_sigterm_leaves_no_process(rt, tmp_path):
+    _stop_up(rt, tmp_path, signal.SIGTERM, 143)
+
+
+# --- 7. two runs side by side -----------------------------------------------------------------------
+def test_two_runs_side_by_side(rt, tmp_path):
+    scen = SCENARIOS / "case2.toml"
+    duration = "10"
+    a = start_up(rt.tracker, scen, tmp_path / "a", "--duration", duration, "--clock", "lockstep", name="up-a")
+    b = start_up(rt.tracker, scen, tmp_path / "b", "--duration", duration, "--clock", "lockstep", name="up-b")
+    ref, _ = run_sim(rt.tracker, scen, tmp_path / "sim", "--duration", duration)
+    a.wait_started(60)
+    b.wait_started(60)
+    rc_a, rc_b = a.launcher.wait(120), b.launcher.wait(120)
+    assert (rc_a, rc_b) == (0, 0), (a.launcher.text()[-2000:], b.launcher.text()[-2000:])
+    rt.tracker.assert_none_left(timeout=10)
+    pids_a = {d.pid for d in rt.tracker.descendants(a.launcher)}
+    pids_b = {d.pid for d in rt.tracker.descendants(b.launcher)}
+    assert pids_a and pids_b and not pids_a & pids_b
+    sa, sb = a.summary(), b.summary()
+    assert sa["run"] != sb["run"] and sa["endpoint"] != sb["endpoint"]
+    for summ, own, other in ((sa, pids_a, pids_b), (sb, pids_b, pids_a)):
+        joins = events_of(summ, "join")
+        assert sorted(e["agent"] for e in joins) == [1, 2, 3, 4, 5, 6]
+        pids = {e["pid"] for e in joins} | {a_["pid"] for a_ in summ["agents"].values()}
+        assert pids <= own, f"run {summ['run']} recorded pids {pids - own} that it did not start"
+        assert not pids & other
+        for e in summ["events"]:  # every event that names a process names one of this run's
+            if e.get("pid") is not None:
+                assert e["pid"] in own, e
+        assert events_of(summ, "drop") == [] and events_of(summ, "rejoin") == []
+        assert summ["garbage_messages"] == 0 and summ["completed"] is True
+        for aid, ag in summ["agents"].items():
+            assert ag["joins"] == 1 and ag["commands"] == summ["ticks"]
+    for run in (a, b):
+        traj = run.trajectory()
+        check_time_column(traj, int(round(float(duration) / 0.01)), 0.01)
+        d = max(np.abs(traj["x"] - ref["x"]).max(), np.abs(traj["y"] - ref["y"]).max())
+        assert d < 1e-9, f"{run.out.name}: differs from swarm sim by {d} m"
+        np.testing.assert_array_equal(traj["out"], ref["out"])
+    assert math.isfinite(sa["ticks_per_second"]) and math.isfinite(sb["ticks_per_second"])
