@@ -57,6 +57,20 @@ def resolve_law(name: str) -> FollowerLaw:
     return fn
 
 
+def check_law(name: str) -> FollowerLaw:
+    """Resolve `name` and check that it takes the five documented arguments."""
+    import inspect
+
+    law = resolve_law(name)
+    try:
+        inspect.signature(law).bind(0.0, 0.0, 0.0, 1.0, 1.0)
+    except TypeError:
+        raise LawError(f"follower law {name!r} does not take (g_i, g_j, lambda_ij, c1, c2)") from None
+    except ValueError:
+        pass  # builtins without a signature: trust them
+    return law
+
+
 def make_follower_law(name: str, c1: float, c2: float) -> Callable[[float, float, float], float]:
     """Check the gains once and return u(g_i, g_j, lambda_ij) with them bound."""
     if not (math.isfinite(c1) and math.isfinite(c2)):

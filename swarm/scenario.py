@@ -29,7 +29,8 @@ Finite = Annotated[float, Field(allow_inf_nan=False)]
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # strict: a TOML string "1.5" or a boolean is not a number; integers are fine for floats.
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
 
 
 class RunSpec(_Strict):
@@ -72,6 +73,18 @@ class GainsSpec(_Strict):
         "bearing",
         description="follower law: a registered name, or 'module:function' (see agents/laws.py)",
     )
+
+
+    @field_validator("law")
+    @classmethod
+    def _law_resolves(cls, name: str) -> str:
+        from agents.laws import LawError, check_law
+
+        try:
+            check_law(name)
+        except LawError as e:
+            raise ValueError(str(e)) from None
+        return name
 
 
 class SensingSpec(_Strict):
@@ -141,11 +154,11 @@ class Scenario(_Strict):
     @field_validator("agents")
     @classmethod
     def _unique_ids(cls, agents: list[AgentSpec]) -> list[AgentSpec]:
-        seen: set[int] = set()
-        for a in agents:
+        seen: dict[int, int] = {}
+        for k, a in enumerate(agents):
             if a.id in seen:
-                raise ValueError(f"duplicate agent id {a.id}")
-            seen.add(a.id)
+                raise ValueError(f"agents[{k}].id: duplicate agent id {a.id} (also agents[{seen[a.id]}])")
+            seen[a.id] = k
         return agents
 
     @model_validator(mode="after")
@@ -166,14 +179,14 @@ class Scenario(_Strict):
                     raise ValueError(
                         f"agents[{k}].follow: selection = \"fixed\" needs `follow` on every follower"
                     )
-            for a in self.agents:
+            for k, a in enumerate(self.agents):
                 seen = [a.id]
                 cur = a
                 while cur.role == "follower" and cur.follow is not None:
                     cur = by_id[cur.follow]
                     if cur.id in seen:
                         cycle = " -> ".join(str(i) for i in seen[seen.index(cur.id):] + [cur.id])
-                        raise ValueError(f"agents: follower-only cycle in the fixed graph: {cycle}")
+                        raise ValueError(f"agents[{k}].follow: follower-only cycle in the fixed graph: {cycle}")
                     seen.append(cur.id)
         return self
 

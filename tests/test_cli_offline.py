@@ -164,8 +164,6 @@ def bad_law_file(base, write_toml):
     return write_toml(base)
 
 
-@pytest.mark.xfail(strict=True, reason="gains.law is not validated by the scenario loader: "
-                   "`swarm sim` dies in AgentBrain with an uncaught LawError (exit 1, traceback)")
 def test_sim_with_unknown_law_exits_2_naming_the_field(bad_law_file, tmp_path):
     res = invoke("sim", bad_law_file, "--out", tmp_path / "o", "--no-plots", "--duration", "0.1")
     assert res.exit_code == 2
@@ -173,8 +171,6 @@ def test_sim_with_unknown_law_exits_2_naming_the_field(bad_law_file, tmp_path):
     assert "gains.law" in res.stderr and "no_such_law" in res.stderr
 
 
-@pytest.mark.xfail(strict=True, reason="gains.law is not validated: `swarm check` says ok for a "
-                   "scenario that `swarm sim` cannot run")
 def test_check_with_unknown_law_exits_2_naming_the_field(bad_law_file):
     res = invoke("check", bad_law_file)
     assert res.exit_code == 2

@@ -113,7 +113,5 @@ def test_wrap_values():
     assert np.all(np.abs(np.sin(w) - np.sin(a)) < 1e-12)
 
 
-@pytest.mark.xfail(strict=True, reason="world/kinematics.py wrap() is documented to return (-pi, pi] "
-                   "but atan2(sin(-pi), cos(-pi)) gives -pi (agents/leader.py wrap gives pi)")
 def test_wrap_minus_pi_is_pi():
     assert wrap(-math.pi) == math.pi

@@ -223,8 +223,6 @@ def test_shipped_scenarios_load(path):
     [pytest.param(("agents", 1, "speed"), "1.5", id="string-speed"),
      pytest.param(("agents", 1, "x"), True, id="bool-x")],
 )
-@pytest.mark.xfail(strict=True, reason="scenario models use pydantic lax mode: a TOML string "
-                   "'1.5' or a boolean is silently coerced to a number instead of rejected")
 def test_wrong_toml_type_is_rejected_not_coerced(base, write_toml, where, value):
     base[where[0]][where[1]][where[2]] = value
     path = write_toml(base)

@@ -13,7 +13,8 @@ import numpy as np
 
 def wrap(angle):
     """Wrap an angle (rad), or an array of them, to (-pi, pi]."""
-    return np.arctan2(np.sin(angle), np.cos(angle))
+    w = np.arctan2(np.sin(angle), np.cos(angle))
+    return w + 2.0 * np.pi * (w <= -np.pi)
 
 
 def step(x, y, heading, speed, turn_rate, dt: float):
