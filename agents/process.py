@@ -27,7 +27,7 @@ STATUS_PERIOD = 0.2  # s of wall time between periodic status messages
 EXIT_OK, EXIT_REFUSED, EXIT_WORLD_GONE = 0, 3, 4
 
 
-class AgentExit(Exception):
+class AgentExit(BaseException):  # also raised by signal handlers: never swallowed by `except Exception`
     def __init__(self, code: int, message: str = ""):
         super().__init__(message)
         self.code = code
@@ -95,6 +95,7 @@ class AgentNode:
         self.world_alive = True
         self.status_sent = 0.0
         self.last_status: tuple | None = None
+        self.stalled = 0.0  # s this process was not running before the current batch
 
     def open(self) -> None:
         ses, run, put = self.session, self.run, self.inbox.put
@@ -192,19 +193,39 @@ class AgentNode:
                 _log(f"[agent {self.id}] the world is back; rejoining")
             self.world_alive = True
             return
+        if self.stalled and self._world_still_there():
+            _log(f"[agent {self.id}] this process was stalled ({self.stalled:.1f} s) and lost its link; "
+                 "the world is still there: rejoining")
+            return
         self.world_alive = False
         if not self.wait_world:
             raise AgentExit(EXIT_WORLD_GONE, f"agent {self.id}: the world of run {self.run} vanished; exiting "
                                              "(use --wait-world to wait for it)")
         _log(f"[agent {self.id}] the world vanished; waiting for it to come back")
 
+    def _world_still_there(self, timeout: float = 3.0) -> bool:
+        """After a stall (SIGSTOP, starvation) our own link may have expired, which looks
+        like the world vanishing: wait for the link to come back and ask again."""
+        t_end = time.monotonic() + timeout
+        while time.monotonic() < t_end:
+            if list(self.session.info.routers_zid()):
+                replies = self.session.liveliness().get(wire.world_alive_key(self.run), timeout=1.0)
+                return any(r.ok is not None for r in replies)
+            time.sleep(0.05)
+        return False
+
     def loop(self) -> int:
         self.maybe_publish_status(force=True)
+        woke = time.monotonic()
         while True:
             try:
                 batch = [self.inbox.get(timeout=STATUS_PERIOD)]
             except queue.Empty:
                 batch = []
+            now = time.monotonic()
+            gap = now - woke - STATUS_PERIOD  # time beyond the longest wait: we were not running
+            self.stalled = gap if gap > 0.5 else 0.0
+            woke = now
             while True:  # take whatever else is waiting: only the newest frame is answered
                 try:
                     batch.append(self.inbox.get_nowait())

@@ -154,14 +154,17 @@ class ProcessTracker:
             except psutil.NoSuchProcess:
                 continue
             for k in kids:
-                if k.pid in self.seen:
-                    continue
                 try:
                     seen = Seen(k.pid, k.create_time(), k.cmdline(), r.pid)
                 except (psutil.NoSuchProcess, psutil.ZombieProcess, psutil.AccessDenied):
                     continue
                 with self._lock:
-                    self.seen.setdefault(k.pid, seen)
+                    old = self.seen.get(k.pid)
+                    if old is None or abs(old.create_time - seen.create_time) < 0.01:
+                        # (re)record: a child seen between fork and exec still shows its
+                        # parent's command line, so refresh it while the process lives.
+                        self.seen[k.pid] = seen if old is None else Seen(k.pid, old.create_time,
+                                                                         seen.cmdline, old.root)
 
     def _watch(self) -> None:
         while not self._stop.wait(self.POLL_S):
@@ -183,6 +186,14 @@ class ProcessTracker:
                 i = cl.index("agents.process")
                 out[int(cl[i + 1])] = s.pid
         return out
+
+    def wait_agent_pids(self, root: Tracked, n: int, timeout: float = 10.0) -> dict[int, int]:
+        """{agent id: pid} once `n` agent processes run under `root`."""
+        def found():
+            self.poll_once()
+            pids = self.agent_pids(root)
+            return pids if len(pids) >= n else None
+        return wait_for(found, timeout, f"{n} agent processes under {root.name}")
 
     def world_pid(self, root: Tracked) -> int | None:
         for s in self.descendants(root):

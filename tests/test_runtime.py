@@ -8,9 +8,11 @@ it runs, and each test ends by checking that none of them is left.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import signal
+import sys
 import time
 
 import numpy as np
@@ -19,6 +21,7 @@ import pytest
 from runtime_helpers import (
     SCENARIOS,
     Runtime,
+    agent_cmd,
     check_time_column,
     events_of,
     replay_events,
@@ -97,7 +100,8 @@ def test_lockstep_up_equals_sim(lockstep_runs, name):
     assert np.abs(up["heading"] - sim["heading"]).max() < 1e-9
     assert up["alive"].all(), "an agent was not alive for the whole lockstep run"
     # Same out-neighbour choices at the same ticks.
-    assert switches(res["summary"]["events"]) == switches(res["sim_summary"]["events"])
+    # (Within one tick the world logs switches in arrival order, the sim in agent order.)
+    assert sorted(switches(res["summary"]["events"])) == sorted(switches(res["sim_summary"]["events"]))
     # And the recorded out columns are exactly what the events say.
     rep_out, rep_alive = replay_events(res["summary"]["events"], up["ids"], ticks + 1)
     np.testing.assert_array_equal(up["out"], rep_out)
@@ -135,13 +139,16 @@ def _stop_up(rt: Runtime, out_dir, sig: int, expected: int) -> float:
     # A long run (4000 s of turtlebot is minutes of lockstep), stopped once it ticks.
     run = start_up(rt.tracker, SCENARIOS / "turtlebot.toml", out_dir / "run", "--duration", "4000")
     run.wait_started(timeout=60)
+    agents = rt.tracker.wait_agent_pids(run.launcher, 2)
     desc = rt.tracker.descendants(run.launcher)
-    agents = rt.tracker.agent_pids(run.launcher)
     assert sorted(agents) == [1, 2], f"agent processes under the launcher: {agents}"
     assert rt.tracker.world_pid(run.launcher) is not None
     assert run.launcher.poll() is None
     t0 = time.monotonic()
     os.killpg(run.launcher.pid, sig)  # what the terminal does on Ctrl-C: the launcher's group
+    # 30 s covers the launcher's escalation (10 s grace for the world, then SIGTERM and
+    # SIGKILL to its group); a prompt stop is the normal case (~0.2-0.5 s measured), but see
+    # test_world_honours_sigterm_while_publishing for why ~13 s stops happen now and then.
     rc = run.launcher.wait(30)
     stop_s = time.monotonic() - t0
     assert rc == expected, f"swarm up exited {rc} on signal {sig}, expected {expected}:\n" \
@@ -172,6 +179,50 @@ def test_ctrl_c_leaves_no_process(rt, tmp_path, attempt):
 
 def test_sigterm_leaves_no_process(rt, tmp_path):
     _stop_up(rt, tmp_path, signal.SIGTERM, 143)
+
+
+# The world turns SIGTERM/SIGINT into `Stop(Exception)` raised wherever its main thread is;
+# `World.record_and_step` and `World.event` wrap their publishing in `except Exception: pass`,
+# so a signal that lands there is swallowed and the world runs on. Under `swarm up` that
+# shows as a Ctrl-C taking ~13.5 s (launcher grace 10 s + 3 s, then a second SIGTERM) now
+# and then, and, if the second signal is swallowed too, a SIGKILLed world with no results.
+# This test makes the timing deterministic: the world process sends itself SIGTERM while it
+# encodes ground truth (inside that try block); everything else is the real world process.
+SIGNAL_IN_TRUTH = """
+import os, signal, sys
+from swarm import wire
+orig = wire.encode_truth
+def encode_truth(*a, **k):
+    if not getattr(encode_truth, "fired", False):
+        encode_truth.fired = True
+        print("[test] SIGTERM to myself at tick", a[0], file=sys.stderr, flush=True)
+        os.kill(os.getpid(), signal.SIGTERM)
+    return orig(*a, **k)
+wire.encode_truth = encode_truth
+sys.argv = ["swarm"] + sys.argv[1:]
+from swarm.cli import main
+main()
+"""
+
+
+def test_world_honours_sigterm_while_publishing(rt, tmp_path):
+    endpoint = f"unixsock-stream/{rt.dir}/w.sock"
+    w = rt.tracker.spawn([sys.executable, "-c", SIGNAL_IN_TRUTH, "world", str(SCENARIOS / "turtlebot.toml"),
+                          "--listen", endpoint, "--run", "sig", "--out", str(tmp_path / "out"),
+                          "--duration", "20", "--no-plots", "--join-timeout", "60"], "world")
+    if not wait_for(lambda: "listening on" in w.text() or w.poll() is not None, 30, "the world"):
+        pytest.fail("world did not start")
+    agents = [rt.tracker.spawn(agent_cmd(i, endpoint, "sig"), f"agent-{i}") for i in (1, 2)]
+    rc = w.wait(60)
+    for a in agents:
+        a.wait(15)
+    rt.tracker.assert_none_left(timeout=5)
+    if "[test] SIGTERM to myself at tick 0" not in w.text():
+        pytest.fail(f"the signal was not sent as planned:\n{w.text()[-2000:]}")
+    summ = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert rc == 143 and summ["stopped_by_signal"] == signal.SIGTERM, \
+        f"world exited {rc} after SIGTERM at tick 0 and ran {summ['ticks']} ticks " \
+        f"(completed={summ['completed']})"
 
 
 # --- 7. two runs side by side -----------------------------------------------------------------------

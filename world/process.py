@@ -33,8 +33,9 @@ from world.core import ACTIVE, GONE, WorldCore
 CLAIM_TTL = 10.0  # s: an accepted join claim waits this long for the agent's token
 
 
-class Stop(Exception):
-    """Raised on the main thread by SIGTERM/SIGINT."""
+class Stop(BaseException):
+    """Raised on the main thread by SIGTERM/SIGINT (a BaseException, so that no
+    `except Exception` around publishing can swallow it)."""
 
     def __init__(self, signum: int):
         super().__init__(signum)

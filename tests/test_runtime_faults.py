@@ -1,0 +1,311 @@
+"""Faults in a distributed run: killed, restarted, duplicated, frozen agents and a
+vanishing world. Real processes over real zenoh; see tests/runtime_helpers.py.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+
+import numpy as np
+import pytest
+
+from runtime_helpers import (
+    SCENARIOS,
+    Runtime,
+    agent_cmd,
+    check_time_column,
+    events_of,
+    replay_events,
+    start_up,
+    swarm_cmd,
+    wait_for,
+)
+
+pytestmark = pytest.mark.slow
+
+DROP_LATENCY_S = 0.1  # a SIGKILLed process's socket closes: the world must notice at once
+FROZEN_DROP_S = 2.0  # a SIGSTOPped one is only noticed by its 1 s link lease
+
+
+@pytest.fixture
+def rt(tmp_path):
+    r = Runtime(tmp_path)
+    yield r
+    left = r.close()
+    assert not left, "processes left alive after the test (now killed):\n  " + "\n  ".join(left)
+
+
+# --- 3 + 4: SIGKILL a follower and a leader mid-run, restart the follower ----------------------------
+# s simulated: case2's full 15000 ticks (~10 s of wall time). A restarted agent process
+# needs ~1-4 s to import, connect and claim its id on 2 busy cores while the lockstep
+# world runs at full speed, so the run must last well beyond the faults.
+FAULT_DURATION = 150.0
+
+
+@pytest.fixture(scope="module")
+def fault_run(tmp_path_factory):
+    """case2 through `swarm up`: SIGKILL follower 4 (5 pins it), then leader 1 (2 and 3 pin it),
+    then start agent 4 again by hand; the run goes on to its end."""
+    base = tmp_path_factory.mktemp("faults")
+    r = Runtime(base)
+    tr = r.tracker
+    try:
+        up = start_up(tr, SCENARIOS / "case2.toml", base / "run", "--duration", FAULT_DURATION,
+                      "--clock", "lockstep")
+        run_id, endpoint = up.banner()
+        up.wait_started(60)
+        pids = tr.wait_agent_pids(up.launcher, 6)
+        # Mid-run: the launcher has reported a tick > 0.
+        wait_for(lambda: up.progress_tick() > 0, 30, "a progress line with a tick > 0")
+        assert up.launcher.poll() is None and not up.has_event("drop")
+        res = {"up": up, "run_id": run_id, "endpoint": endpoint, "pids": dict(pids), "kill_time": {}}
+
+        for victim in (4, 1):
+            res["kill_time"][victim] = time.time()
+            os.kill(pids[victim], signal.SIGKILL)
+            wait_for(lambda: up.has_event("drop", victim), 10, f"the world's drop event for agent {victim}")
+        assert up.launcher.poll() is None, "the run ended before the faults were done: make it longer"
+
+        t_again = time.monotonic()
+        again = tr.spawn(agent_cmd(4, endpoint, run_id), "agent-4-again")
+        res["again"] = again
+        wait_for(lambda: up.has_event("rejoin", 4) or up.launcher.poll() is not None, 60,
+                 "the rejoin event of agent 4")
+        assert up.has_event("rejoin", 4), \
+            f"the run ended before the restarted agent 4 rejoined:\n{again.text()}\n{up.world_text()[-2000:]}"
+        res["restart_to_rejoin_s"] = time.monotonic() - t_again
+        print(f"\n[timing] restart of agent 4 -> rejoin seen in world.log: {res['restart_to_rejoin_s']:.2f} s")
+        res["progress_at_rejoin"] = up.progress_tick()
+        res["rc"] = up.launcher.wait(120)
+        res["again_rc"] = again.wait(15)
+        tr.assert_none_left(timeout=10)
+        res["summary"] = up.summary()
+        res["traj"] = up.trajectory()
+        yield res
+    finally:
+        left = r.close()
+    assert not left, "processes left alive (now killed):\n  " + "\n  ".join(left)
+
+
+def _drop_event(summ: dict, agent: int) -> dict:
+    drops = events_of(summ, "drop", agent)
+    assert len(drops) == 1, f"agent {agent}: drop events {drops}"
+    return drops[0]
+
+
+def _check_followers_switch(res: dict, victim: int, expected_followers: set[int]) -> None:
+    summ, traj = res["summary"], res["traj"]
+    ids = [int(i) for i in traj["ids"]]
+    col = {a: k for k, a in enumerate(ids)}
+    drop = _drop_event(summ, victim)
+    k = drop["tick"]
+    assert k >= 1, "the kill happened before the run was ticking"
+    # Who had the victim as out-neighbour just before the drop took effect.
+    followers = {a for a in ids if traj["out"][k - 1, col[a]] == victim}
+    assert expected_followers <= followers, f"followers of {victim} before its drop: {followers}"
+    for f in sorted(followers):
+        sw = [e for e in events_of(summ, "switch", f) if e["tick"] >= k]
+        assert sw, f"agent {f} never switched away from dropped agent {victim}"
+        first = sw[0]
+        assert first["tick"] <= k + 1, \
+            f"agent {f} switched at tick {first['tick']}, more than one tick after drop tick {k}"
+        assert first["from"] == victim and first["to"] is not None and first["to"] != victim, first
+        # The recording shows the new neighbour from the switch until f's next switch.
+        nxt = sw[1]["tick"] if len(sw) > 1 else len(traj["t"])
+        seg = traj["out"][first["tick"]:nxt, col[f]]
+        assert (seg == first["to"]).all(), f"agent {f}: out column {np.unique(seg)} after its switch"
+        assert (traj["out"][k:first["tick"], col[f]] == victim).all()
+
+
+def test_sigkill_follower_detected_and_replaced(fault_run):
+    res = fault_run
+    drop = _drop_event(res["summary"], 4)
+    latency = drop["wall_time"] - res["kill_time"][4]
+    print(f"\n[timing] SIGKILL follower 4 -> drop event {1000 * latency:.1f} ms")
+    assert 0 <= latency < DROP_LATENCY_S, f"drop recorded {latency:.3f} s after the kill"
+    assert "liveliness" in drop["reason"] and drop["now"] == "gone"
+    _check_followers_switch(res, 4, {5})
+
+
+def test_sigkill_leader_detected_and_replaced(fault_run):
+    res = fault_run
+    drop = _drop_event(res["summary"], 1)
+    latency = drop["wall_time"] - res["kill_time"][1]
+    print(f"\n[timing] SIGKILL leader 1 -> drop event {1000 * latency:.1f} ms")
+    assert 0 <= latency < DROP_LATENCY_S, f"drop recorded {latency:.3f} s after the kill"
+    assert "liveliness" in drop["reason"] and drop["now"] == "gone"
+    _check_followers_switch(res, 1, {2, 3})
+
+
+def test_run_completes_after_kills(fault_run):
+    res = fault_run
+    summ, traj = res["summary"], res["traj"]
+    assert res["rc"] == 0, res["up"].launcher.text()[-3000:]
+    ticks = int(round(FAULT_DURATION / 0.01))
+    assert summ["completed"] is True and summ["ticks"] == ticks
+    check_time_column(traj, ticks, 0.01)
+    # The events tell the story, with reasons, in order.
+    kinds = [(e["kind"], e["agent"]) for e in summ["events"] if e["kind"] in ("drop", "rejoin")]
+    assert kinds == [("drop", 4), ("drop", 1), ("rejoin", 4)], kinds
+    for e in summ["events"]:
+        assert e.get("reason"), e
+    assert summ["agents"]["1"]["drops"] == 1 and summ["agents"]["1"]["alive"] is False
+    assert summ["agents"]["4"]["drops"] == 1 and summ["agents"]["4"]["joins"] == 2
+    for aid in ("2", "3", "5", "6"):
+        assert summ["agents"][aid]["drops"] == 0 and summ["agents"][aid]["joins"] == 1
+    # The world's join events name the processes the launcher started (found with psutil).
+    joins = {e["agent"]: e["pid"] for e in events_of(summ, "join")}
+    assert joins == res["pids"], (joins, res["pids"])
+    # The out and alive columns are exactly what the events say, at every tick.
+    rep_out, rep_alive = replay_events(summ["events"], traj["ids"], ticks + 1)
+    np.testing.assert_array_equal(traj["out"], rep_out)
+    np.testing.assert_array_equal(traj["alive"], rep_alive)
+    # Poses are finite throughout (dropped agents are frozen, not NaN).
+    assert np.isfinite(traj["x"]).all() and np.isfinite(traj["y"]).all()
+    assert summ["garbage_messages"] == 0
+
+
+def test_restarted_agent_rejoins_from_its_drop_pose(fault_run):
+    res = fault_run
+    summ, traj = res["summary"], res["traj"]
+    col = {int(a): k for k, a in enumerate(traj["ids"])}[4]
+    drop = _drop_event(summ, 4)
+    rejoins = events_of(summ, "rejoin", 4)
+    assert len(rejoins) == 1, rejoins
+    rj = rejoins[0]
+    assert rj["pid"] == res["again"].pid, f"rejoin names pid {rj['pid']}, restarted pid {res['again'].pid}"
+    assert rj["pid"] != res["pids"][4]
+    kd, kr = drop["tick"], rj["tick"]
+    assert kd < kr < summ["ticks"], (kd, kr)
+    assert traj["alive"][:kd, col].all()
+    assert not traj["alive"][kd:kr, col].any()
+    assert traj["alive"][kr:, col].all(), "agent 4 is not alive from its rejoin to the end"
+    # "leave": frozen while gone, and back in the world exactly where it dropped.
+    for key in ("x", "y", "heading"):
+        a = traj[key][kd:kr + 1, col]
+        assert (a == a[0]).all(), f"agent 4's {key} changed while it was gone"
+    pose_drop = [traj[k][kd, col] for k in ("x", "y", "heading")]
+    pose_rejoin = [traj[k][kr, col] for k in ("x", "y", "heading")]
+    assert pose_drop == pose_rejoin
+    assert traj["x"][kr + 2, col] != pose_rejoin[0] or traj["y"][kr + 2, col] != pose_rejoin[1], \
+        "agent 4 does not move after rejoining"
+    # It is controlled again: commands after the rejoin, and its pinned follower 5 returns to it.
+    assert summ["agents"]["4"]["pid"] == res["again"].pid
+    back = [e for e in events_of(summ, "switch", 5) if e["tick"] >= kr and e["to"] == 4]
+    assert back and back[0]["tick"] <= kr + 1, f"follower 5 did not return to 4 after its rejoin: {back}"
+    # The restarted process ended with the run.
+    assert res["again_rc"] == 0, res["again"].text()
+
+
+# --- 6. duplicate and unknown ids ---------------------------------------------------------------------
+def _world_by_hand(rt: Runtime, tmp_path, scenario: str, *extra):
+    endpoint = f"unixsock-stream/{rt.dir}/w.sock"
+    run_id = "byhand"
+    w = rt.tracker.spawn(swarm_cmd("world", SCENARIOS / scenario, "--listen", endpoint, "--run", run_id,
+                                   "--out", tmp_path / "world-out", "--no-plots", *extra), "world")
+    wait_for(lambda: "listening on" in w.text() or w.poll() is not None, 30, "the world to listen")
+    assert w.poll() is None, w.text()
+    return w, endpoint, run_id
+
+
+def test_duplicate_and_unknown_ids_are_refused(rt, tmp_path):
+    w, ep, run_id = _world_by_hand(rt, tmp_path, "case2.toml", "--join-timeout", "600")
+    first = rt.tracker.spawn(agent_cmd(1, ep, run_id), "agent-1")
+    wait_for(lambda: "join agent 1:" in w.text(), 30, "agent 1 to join")
+
+    dup = rt.tracker.spawn(agent_cmd(1, ep, run_id), "agent-1-dup")
+    rc = dup.wait(20)
+    assert rc == 3, f"second agent 1 exited {rc}: {dup.text()}"
+    assert "already live" in dup.text() and f"pid {first.pid}" in dup.text(), dup.text()
+
+    # The same through the CLI, and with the run id looked up on the endpoint.
+    dup2 = rt.tracker.spawn(swarm_cmd("agent", "--id", 1, "--connect", ep), "agent-1-dup-cli")
+    assert dup2.wait(20) == 3 and "already live" in dup2.text(), dup2.text()
+
+    unknown = rt.tracker.spawn(agent_cmd(99, ep, run_id), "agent-99")
+    rc = unknown.wait(20)
+    assert rc == 3, f"agent 99 exited {rc}: {unknown.text()}"
+    assert "not in scenario" in unknown.text(), unknown.text()
+
+    # The live agent 1 was not disturbed.
+    assert first.poll() is None
+    assert "drop agent 1" not in w.text() and w.text().count("join agent 1:") == 1
+    assert "join agent 99" not in w.text()
+
+    os.killpg(w.pid, signal.SIGTERM)
+    assert w.wait(20) == 143, w.text()[-2000:]
+    rc1 = first.wait(10)
+    print(f"\n[info] agent 1 exited {rc1} after the world was stopped with SIGTERM")
+    assert rc1 in (0, 4), f"agent 1 exited {rc1} when the world stopped: {first.text()}"
+    rt.tracker.assert_none_left(timeout=5)
+
+
+# --- 8. the world vanishes ------------------------------------------------------------------------------
+def test_agents_exit_when_the_world_vanishes(rt, tmp_path):
+    w, ep, run_id = _world_by_hand(rt, tmp_path, "turtlebot.toml", "--duration", "4000", "--join-timeout", "120")
+    agents = {i: rt.tracker.spawn(agent_cmd(i, ep, run_id), f"agent-{i}") for i in (1, 2)}
+    wait_for(lambda: ": start agent" in w.text() or w.poll() is not None, 60, "the run to start")
+    assert w.poll() is None, w.text()
+    wait_for(lambda: "switch agent 2" in w.text(), 10, "the first tick")
+    t0 = time.monotonic()
+    os.killpg(w.pid, signal.SIGKILL)
+    exits = {}
+    while len(exits) < len(agents) and time.monotonic() - t0 < 10:
+        for i, a in agents.items():
+            if i not in exits and a.poll() is not None:
+                exits[i] = time.monotonic() - t0
+        time.sleep(0.005)
+    print("\n[timing] world SIGKILL -> agents exit: " + ", ".join(f"{i}: {1000 * s:.0f} ms"
+                                                                    for i, s in sorted(exits.items())))
+    assert w.wait(5) == -signal.SIGKILL
+    for i, a in agents.items():
+        assert i in exits, f"agent {i} still running 10 s after the world died"
+        assert a.poll() == 4, f"agent {i} exited {a.poll()}: {a.text()}"
+        assert exits[i] < 1.5, f"agent {i} took {exits[i]:.2f} s to notice"
+        assert "vanished" in a.text(), a.text()
+    rt.tracker.assert_none_left(timeout=5)
+
+
+# --- 9. a frozen agent ----------------------------------------------------------------------------
+def test_frozen_agent_is_dropped(rt, tmp_path):
+    up = start_up(rt.tracker, SCENARIOS / "case2.toml", tmp_path / "run", "--duration", "30",
+                  "--clock", "lockstep")
+    up.wait_started(60)
+    pids = rt.tracker.wait_agent_pids(up.launcher, 6)
+    wait_for(lambda: up.progress_tick() > 0, 30, "a progress line with a tick > 0")
+    victim = pids[3]
+    t_stop = time.time()
+    os.kill(victim, signal.SIGSTOP)
+    try:
+        wait_for(lambda: up.has_event("drop", 3), 10, "the drop of the frozen agent 3")
+        t_seen = time.time()
+    finally:
+        os.kill(victim, signal.SIGCONT)
+    rc = up.launcher.wait(120)
+    assert rc == 0, up.launcher.text()[-3000:]
+    rt.tracker.assert_none_left(timeout=10)
+    summ = up.summary()
+    drops = events_of(summ, "drop")
+    assert drops and drops[0]["agent"] == 3, drops
+    latency = drops[0]["wall_time"] - t_stop
+    print(f"\n[timing] SIGSTOP agent 3 -> drop event {latency:.3f} s (seen in world.log after "
+          f"{t_seen - t_stop:.3f} s)")
+    assert 0 < latency < FROZEN_DROP_S, f"frozen agent dropped {latency:.2f} s after SIGSTOP"
+    # Nobody else was dropped while the world waited for the frozen one.
+    assert {e["agent"] for e in drops} == {3}, drops
+    assert summ["completed"] is True
+    traj = up.trajectory()
+    check_time_column(traj, summ["ticks"], 0.01)
+    col = {int(a): k for k, a in enumerate(traj["ids"])}[3]
+    k = drops[0]["tick"]
+    assert traj["alive"][:k, col].all()
+    # After SIGCONT the process may come back briefly (its link reconnects and its token
+    # reappears: a rejoin and another drop), but it must not outlive the run.
+    after = [(e["kind"], e["tick"]) for e in summ["events"] if e["agent"] == 3 and e["tick"] >= k
+             and e["kind"] != "switch"]
+    print(f"[info] agent 3 after SIGCONT: events {after}, log: {up.out.joinpath('logs', 'agent-3.log').read_text().strip()!r}")
+    rep_out, rep_alive = replay_events(summ["events"], traj["ids"], summ["ticks"] + 1)
+    np.testing.assert_array_equal(traj["alive"], rep_alive)
+    np.testing.assert_array_equal(traj["out"], rep_out)
