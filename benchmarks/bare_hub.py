@@ -2,6 +2,7 @@
 
     python benchmarks/bare_hub.py --listen ENDPOINT --run RUN --n N --ticks T
                                   [--warmup W] [--join-timeout S] [--tick-timeout S] --result FILE
+                                  [--ready FILE] [--linger S] [--handler callback|channel]
 
 A router-mode session with swarm's own hub config (swarm.transport.hub_config). It
 waits until N bare_client.py processes have declared their liveliness tokens, then per
@@ -9,8 +10,9 @@ tick sends one 8-byte message to each client on that client's own key and waits 
 every client answered with one 12-byte message for that tick. The first W ticks warm
 up; ticks/s is measured over the next T ticks. Callbacks only enqueue; the main thread
 does the rest (the structure of world/process.py's lockstep loop). Writes one JSON
-object to --result and exits 0; exits 2 when the clients did not all join or a tick
-timed out.
+object to --result, lingers --linger s (so that the clients' memory can be sampled
+undisturbed), ends the clients and exits 0; exits 2 when the clients did not all join
+or a tick timed out.
 """
 
 from __future__ import annotations
@@ -38,6 +40,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--join-timeout", type=float, default=90.0)
     ap.add_argument("--tick-timeout", type=float, default=5.0)
     ap.add_argument("--result", required=True)
+    ap.add_argument("--ready", help="touch this file when every client joined (ticking starts)")
+    ap.add_argument("--linger", type=float, default=0.0,
+                    help="s to wait after writing the result before ending the clients (to sample their memory)")
     ap.add_argument("--handler", choices=("callback", "channel"), default="callback",
                     help="callback: Python callback enqueues (like world/process.py); "
                          "channel: zenoh's FIFO channel, the main thread blocks in recv() (no tick timeout)")
@@ -84,6 +89,8 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             (alive.add if put else alive.discard)(k)
         result["join_s"] = time.monotonic() - t_start
+        if a.ready:
+            Path(a.ready).touch()
 
         # -- lockstep ----------------------------------------------------------------------
         n, pack, unpack = a.n, TICK.pack, ACK.unpack
@@ -121,6 +128,8 @@ def main(argv: list[str] | None = None) -> int:
                       tick_ms_p50=1e3 * statistics.median(durations),
                       tick_ms_p99=1e3 * durations[min(len(durations) - 1, int(0.99 * len(durations)))],
                       tick_ms_max=1e3 * durations[-1])
+        write(a.result, result)
+        time.sleep(a.linger)
         for p in pubs:
             p.put(b"e")
         end.put(b"end")
@@ -128,7 +137,14 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     finally:
         session.close()
-        Path(a.result).write_text(json.dumps(result) + "\n")
+        if not Path(a.result).exists():
+            write(a.result, result)
+
+
+def write(path: str, result: dict) -> None:
+    tmp = Path(path + ".tmp")
+    tmp.write_text(json.dumps(result) + "\n")
+    tmp.replace(path)
 
 
 if __name__ == "__main__":

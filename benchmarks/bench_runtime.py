@@ -1,7 +1,7 @@
 """Runtime figures of `swarm up` against a bare-zenoh lockstep floor (a benchmark, not a test).
 
-    python benchmarks/bench_runtime.py [--quick] [--json FILE] [--sizes 6,20,50]
-                                       [--repeat R] [--profile] [--keep]
+    python benchmarks/bench_runtime.py [--quick] [--json FILE] [--sizes 6,20,50] [--repeat R]
+                                       [--quiet-wait S] [--swarm-seconds S] [--profile] [--keep]
 
 Measured in one run, on this machine:
 
@@ -19,11 +19,13 @@ Measured in one run, on this machine:
    RSS counts shared pages (libpython, the zenoh .so, numpy) in every process; USS is
    what each process adds on its own.
 
-The machine is shared and has 2 cores: baseline and swarm runs of one N are interleaved,
---repeat R repeats each pair and the table uses the best (least disturbed) run of each;
-the 1-minute load average before each run is in the JSON. --profile adds a separate
-(unmeasured) 20-agent run with py-spy attached to the world, one follower agent, one
-leader agent and the launcher while ticking, and prints their hottest functions.
+Also printed: CPU per tick of each kind of process while ticking (psutil cpu_times), and
+how busy the machine was with processes not started here. The machine is shared and has
+2 cores: before each run the benchmark waits (up to --quiet-wait s) for the machine to
+quieten, baseline and swarm runs of one N are interleaved, --repeat R repeats each pair
+and the table uses the best (least disturbed) run of each; every run is in the JSON.
+--profile adds a separate (unmeasured) 20-agent run (--profile-n): CPU per thread of the world, one
+follower agent, one leader agent and the launcher, then py-spy attached to each of them.
 
 Every process is started here (own process group; `swarm up` starts its world and
 agents in a group of its own, which is found through psutil and swept at the end), every
@@ -191,6 +193,67 @@ class MemSampler:
         return {"rss": s(self.rss), "uss": s(self.uss)}
 
 
+class CpuMeter:
+    """CPU seconds (user + system) of named groups of processes between samples, and of the machine."""
+
+    def __init__(self):
+        self.samples: list[tuple[float, float, dict]] = []  # (monotonic, machine busy s, {(group, pid): s})
+        self.last = 0.0
+
+    def sample(self, groups: dict[str, list[psutil.Process]], every: float = 0.5) -> None:
+        now = time.monotonic()
+        if now - self.last < every:
+            return
+        self.last = now
+        ct = psutil.cpu_times()
+        busy = sum(ct) - ct.idle - getattr(ct, "iowait", 0.0)
+        vals = {}
+        for g, procs in groups.items():
+            for pr in procs:
+                try:
+                    t = pr.cpu_times()
+                except (psutil.NoSuchProcess, psutil.AccessDenied):
+                    continue
+                vals[(g, pr.pid)] = t.user + t.system
+        self.samples.append((now, busy, vals))
+
+    def result(self, drop_last: bool = False) -> dict | None:
+        """Cores used per group and by the machine between the first and the last (kept) sample."""
+        smp = self.samples[:-1] if drop_last and len(self.samples) >= 3 else self.samples
+        if len(smp) < 2:
+            return None
+        (t0, b0, v0), (t1, b1, v1) = smp[0], smp[-1]
+        dt = t1 - t0
+        cpu: dict[str, float] = defaultdict(float)
+        for k, v in v1.items():
+            if k in v0:
+                cpu[k[0]] += v - v0[k]
+        ours = sum(cpu.values())
+        return {"window_s": dt, "cpu_s": dict(cpu), "machine_busy_cores": (b1 - b0) / dt,
+                "ours_cores": ours / dt, "others_cores": max(0.0, (b1 - b0) - ours) / dt}
+
+
+def cpu_so_far(procs: list[psutil.Process]) -> list[float]:
+    """CPU seconds (user + system) each process used since it started."""
+    out = []
+    for pr in procs:
+        try:
+            t = pr.cpu_times()
+        except (psutil.NoSuchProcess, psutil.AccessDenied):
+            continue
+        out.append(t.user + t.system)
+    return out
+
+
+def startup_cpu(agents: list[psutil.Process], others: dict[str, psutil.Process | None]) -> dict:
+    a = cpu_so_far(agents)
+    res = {"agents_n": len(a), "agents_mean_s": statistics.fmean(a) if a else None, "agents_sum_s": sum(a)}
+    for name, pr in others.items():
+        c = cpu_so_far([pr]) if pr is not None else []
+        res[f"{name}_s"] = c[0] if c else None
+    return res
+
+
 def is_agent(pr: psutil.Process) -> bool:
     try:
         return "agents.process" in pr.cmdline()
@@ -206,31 +269,54 @@ def is_world(pr: psutil.Process) -> bool:
     return "swarm" in c and "world" in c
 
 
+def wait_quiet(threshold: float, max_wait: float) -> dict:
+    """Wait (at most max_wait s) until the machine's busy cores over 1 s drop below threshold."""
+    t0 = time.monotonic()
+    busy = None
+    while True:
+        c0 = psutil.cpu_times()
+        time.sleep(1.0)
+        c1 = psutil.cpu_times()
+        b = [sum(c) - c.idle - getattr(c, "iowait", 0.0) for c in (c0, c1)]
+        busy = b[1] - b[0]
+        if busy < threshold or time.monotonic() - t0 >= max_wait:
+            return {"waited_s": time.monotonic() - t0, "busy_cores": busy}
+
+
 # -- 1. bare baseline ------------------------------------------------------------------------------
 def run_baseline(n: int, ticks: int, warmup: int, work: Path, env: dict, tag: str) -> dict:
     d = work / f"bare-{tag}"
     d.mkdir()
     endpoint = f"unixsock-stream/{env['SWARM_RUNTIME_DIR']}/b{tag}.sock"
     result = d / "result.json"
+    ready = d / "ready"
     run = f"b{tag}"
     tr = Tracked()
     mem = MemSampler()
+    cpu = CpuMeter()
     load = os.getloadavg()[0]
     try:
         hub = tr.spawn([PY, str(BENCH / "bare_hub.py"), "--listen", endpoint, "--run", run, "--n", str(n),
                         "--ticks", str(ticks), "--warmup", str(warmup), "--result", str(result),
-                        "--join-timeout", "90"], d / "hub.log", env)
+                        "--join-timeout", "90", "--linger", "2", "--ready", str(ready)],
+                       d / "hub.log", env)
         clients = [tr.spawn([PY, str(BENCH / "bare_client.py"), str(i), endpoint, run, "--timeout", "240"],
                             d / f"client-{i}.log", env, own_group=False) for i in range(n)]
         cps = [tr.seen[c.pid] for c in clients if c.pid in tr.seen]
-        t0 = time.monotonic()
         state = {"uss": False}
+        hub_p = tr.seen.get(hub.pid)
 
         def sample():
             mem.sample_rss(cps)
-            # USS once, when the clients have been up for a while (the hub is ticking or about to).
-            if not state["uss"] and time.monotonic() - t0 > 3.0 + 0.15 * n:
+            done = result.exists()
+            if ready.exists() and "startup_cpu" not in state:
+                state["startup_cpu"] = startup_cpu(cps, {"hub": hub_p})
+            if ready.exists() and not state["uss"]:
+                cpu.sample({"hub": [hub_p] if hub_p else [], "clients": cps}, every=0.0 if done else 0.25)
+            # USS once the hub has written its result and lingers: no ticking is disturbed.
+            if not state["uss"] and done:
                 state["uss"] = True
+                mem.sample_rss(cps, every=0.0)
                 mem.sample_uss(cps)
 
         wait_all([hub], time.monotonic() + 120 + ticks / 20, sample)
@@ -240,7 +326,7 @@ def run_baseline(n: int, ticks: int, warmup: int, work: Path, env: dict, tag: st
     if not result.exists():
         return {"n": n, "ok": False, "error": f"hub wrote no result; see {d / 'hub.log'}", "load1": load}
     r = json.loads(result.read_text())
-    r.update(load1=load, memory=mem.stats())
+    r.update(load1=load, memory=mem.stats(), cpu=cpu.result(), startup_cpu=state.get("startup_cpu"))
     return r
 
 
@@ -295,65 +381,91 @@ def run_swarm(n: int, ticks: int, work: Path, env: dict, tag: str, profile: floa
     out = d / "out"
     tr = Tracked()
     mem, wmem = MemSampler(), MemSampler()
+    cpu = CpuMeter()
     load = os.getloadavg()[0]
     spies: list[tuple[str, int, subprocess.Popen, Path]] = []
-    state = {"started": None, "uss": False, "agents": [], "world": None, "last_discover": 0.0}
+    state: dict = {"started": None, "uss": False, "agents": [], "world": None, "last_discover": 0.0}
     try:
         t_popen = time.time()
         up = tr.spawn([PY, "-m", "swarm", "up", str(toml), "--out", str(out), "--duration", f"{ticks * DT:.6f}",
                        "--no-plots"], d / "up.log", env)
 
+        def discover():
+            kids = tr.discover(up)
+            state["agents"] = [k for k in kids if is_agent(k)]
+            ws = [k for k in kids if is_world(k)]
+            state["world"] = ws[0] if ws else None
+
         def sample():
             now = time.monotonic()
-            if now - state["last_discover"] > 1.0 and (state["started"] is None or not state["agents"]):
-                state["last_discover"] = now
-                kids = tr.discover(up)
-                state["agents"] = [k for k in kids if is_agent(k)]
-                ws = [k for k in kids if is_world(k)]
-                state["world"] = ws[0] if ws else None
             if state["started"] is None:
+                if now - state["last_discover"] > 1.0:
+                    state["last_discover"] = now
+                    discover()
                 if world_started(out):
                     state["started"] = now
-                    state["last_discover"] = 0.0
+                    discover()  # every agent has joined: all are there now
+                    state["startup_cpu"] = startup_cpu(state["agents"], {"world": state["world"],
+                                                                          "launcher": tr.seen.get(up.pid)})
                 return
             mem.sample_rss(state["agents"])
-            if state["world"] is not None:
-                wmem.sample_rss([state["world"]])
+            world = [state["world"]] if state["world"] is not None else []
+            wmem.sample_rss(world)
+            if not spies:  # py-spy itself costs CPU: no accounting once it runs
+                cpu.sample({"world": world, "agents": state["agents"], "launcher": [tr.seen[up.pid]]})
             if not state["uss"] and now - state["started"] > 1.0:
                 state["uss"] = True
                 mem.sample_uss(state["agents"])
-                if state["world"] is not None:
-                    wmem.sample_uss([state["world"]])
+                wmem.sample_uss(world)
                 if profile > 0:
-                    start_spies()
+                    state["targets"] = profile_targets()
+                    state["threads0"] = {name: thread_cpu(pr) for name, pr in state["targets"]}
+                    state["t_threads0"] = now
+            if profile > 0 and "targets" in state and not spies and now - state["t_threads0"] >= 2.0:
+                dt = now - state["t_threads0"]
+                state["thread_cores"] = {name: thread_cores(state["threads0"][name], thread_cpu(pr), dt)
+                                         for name, pr in state["targets"]}
+                start_spies()
+
+        def profile_targets() -> list[tuple[str, psutil.Process]]:
+            by_id = {}
+            for a in state["agents"]:
+                try:
+                    by_id[int(a.cmdline()[-3])] = a
+                except (psutil.NoSuchProcess, ValueError, IndexError):
+                    pass
+            leader_ids = {1, n // 2 + 1}
+            followers = sorted(i for i in by_id if i not in leader_ids)
+            t = [("world", state["world"]), ("launcher", tr.seen.get(up.pid)),
+                 ("follower agent", by_id.get(followers[len(followers) // 2]) if followers else None),
+                 ("leader agent", by_id.get(1))]
+            return [(name, pr) for name, pr in t if pr is not None]
 
         def start_spies():
             pyspy = shutil.which("py-spy", path=str(Path(PY).parent)) or shutil.which("py-spy")
             if pyspy is None:
                 log("py-spy not found: pip install py-spy into the venv for --profile")
+                spies.append(("none", 0, None, None))
                 return
-            followers = [a for a in state["agents"] if a.cmdline()[-3] != "1" and a.cmdline()[-3] != str(n // 2 + 1)]
-            leaders = [a for a in state["agents"] if a.cmdline()[-3] == "1"]
-            targets = [("world", state["world"]), ("launcher", tr.seen.get(up.pid)),
-                       ("follower agent", followers[len(followers) // 2] if followers else None),
-                       ("leader agent", leaders[0] if leaders else None)]
-            for name, pr in targets:
-                if pr is None:
-                    continue
+            for name, pr in state["targets"]:
                 raw = d / f"pyspy-{name.replace(' ', '-')}.txt"
+                # --idle: every sample of every Python thread; which ones wait is decided from the
+                # innermost Python frame (see summarize_pyspy), since py-spy's own idle detection
+                # counts threads parked in SimpleQueue.get or zenoh's channels as busy.
                 p = tr.spawn([pyspy, "record", "-p", str(pr.pid), "-d", f"{profile:g}", "-r", "100", "-f", "raw",
-                              "--nolineno", "--threads", "--nonblocking", "-o", str(raw)],
+                              "--nolineno", "--threads", "--idle", "-o", str(raw)],
                              d / f"pyspy-{name.replace(' ', '-')}.log", env)
                 spies.append((name, pr.pid, p, raw))
 
         finished = wait_all([up], time.monotonic() + 120 + ticks / 20, sample)
         if not finished:
             log(f"swarm up ({n} agents) passed its deadline; stopping it")
-        wait_all([s[2] for s in spies], time.monotonic() + profile + 15)
+        wait_all([s[2] for s in spies if s[2] is not None], time.monotonic() + profile + 15)
     finally:
         tr.stop()
     res: dict = {"n": n, "ticks_requested": ticks, "load1": load, "ok": False,
-                 "memory_agents": mem.stats(), "memory_world": wmem.stats()}
+                 "memory_agents": mem.stats(), "memory_world": wmem.stats(),
+                 "cpu": cpu.result(drop_last=True)}  # the last sample may hold the world's final writing
     try:
         summary = json.loads((out / "summary.json").read_text())
     except (OSError, ValueError) as e:
@@ -370,20 +482,54 @@ def run_swarm(n: int, ticks: int, work: Path, env: dict, tag: str, profile: floa
         missed_ticks=sum(int(a.get("missed_ticks", 0)) for a in agents.values()),
         drops=sum(int(a.get("drops", 0)) for a in agents.values()),
         agent_pids=sorted(int(a["pid"]) for a in agents.values() if a.get("pid")),
+        startup_cpu=state.get("startup_cpu"),
     )
     if spies:
-        res["profile"] = {name: summarize_pyspy(raw, profile) for name, _pid, _p, raw in spies}
+        res["profile"] = {name: summarize_pyspy(raw, profile) for name, _pid, p, raw in spies if p is not None}
+        res["thread_cores"] = state.get("thread_cores")
     return res
 
 
-# -- py-spy -----------------------------------------------------------------------------------
+# -- profiling -----------------------------------------------------------------------------------
+def thread_cpu(pr: psutil.Process) -> dict[int, tuple[str, float]]:
+    """tid -> (thread name from /proc, CPU s). Python threads are all called "python"; zenoh's
+    Rust threads have their own names (rx-*, tx-*, acc-*, net-*, app-*)."""
+    out = {}
+    try:
+        for t in pr.threads():
+            try:
+                name = Path(f"/proc/{pr.pid}/task/{t.id}/comm").read_text().strip()
+            except OSError:
+                name = "?"
+            out[t.id] = ("python main" if t.id == pr.pid else name, t.user_time + t.system_time)
+    except (psutil.NoSuchProcess, psutil.AccessDenied):
+        pass
+    return out
+
+
+def thread_cores(a: dict, b: dict, dt: float) -> dict[str, float]:
+    """Cores used per thread kind between two thread_cpu snapshots (main thread = "python main")."""
+    kinds: dict[str, float] = defaultdict(float)
+    for tid, (name, t1) in b.items():
+        if tid in a:
+            kind = name if name.startswith("python") else (name.rstrip("0123456789").rstrip("-") or name)
+            kinds[kind] += (t1 - a[tid][1]) / dt
+    return dict(sorted(kinds.items(), key=lambda kv: -kv[1]))
+
+
+# Innermost Python frames that mean "waiting": SimpleQueue.get in the main loops, time.sleep in
+# the launcher, and a zenoh callback thread parked in its channel (Thread.run calls into Rust).
+WAITING = {"World.drain", "AgentNode.loop", "Thread.run", "Launcher.run", "Launcher._wait", "Launcher.connect"}
+
+
 def summarize_pyspy(raw: Path, seconds: float, rate: int = 100, top: int = 10) -> dict:
-    """Per Python thread: busy share, hottest functions by self and by inclusive samples."""
+    """Per Python thread: share of samples not waiting, hottest functions among those samples."""
     try:
         text = raw.read_text()
     except OSError:
         return {"error": f"no py-spy output {raw}"}
-    threads: dict[str, dict] = defaultdict(lambda: {"samples": 0, "self": Counter(), "incl": Counter()})
+    threads: dict[str, dict] = defaultdict(lambda: {"samples": 0, "busy": 0, "self": Counter(),
+                                                    "incl": Counter()})
     for line in text.splitlines():
         stack, _, count = line.rpartition(" ")
         if not stack or not count.isdigit():
@@ -396,16 +542,21 @@ def summarize_pyspy(raw: Path, seconds: float, rate: int = 100, top: int = 10) -
             continue
         t = threads[th]
         t["samples"] += c
+        if frames[-1].split(" (")[0] in WAITING:
+            continue
+        t["busy"] += c
         t["self"][frames[-1]] += c
         for f in set(frames):
             t["incl"][f] += c
-    expected = seconds * rate
     out = {}
-    for th, t in sorted(threads.items(), key=lambda kv: -kv[1]["samples"]):
-        n = t["samples"]
-        out[th] = {"busy_share": n / expected, "samples": n,
-                   "self": [(f, c / n) for f, c in t["self"].most_common(top)],
-                   "inclusive": [(f, c / n) for f, c in t["incl"].most_common(top)]}
+    for th, t in sorted(threads.items(), key=lambda kv: -kv[1]["busy"]):
+        n, b = t["samples"], t["busy"]
+        if b == 0:
+            continue
+        out[th] = {"busy_share": b / n, "samples": n, "busy_samples": b,
+                   "self": [(f, c / b) for f, c in t["self"].most_common(top)],
+                   # frames on (nearly) every busy stack are the entry points: leave them out
+                   "inclusive": [(f, c / b) for f, c in t["incl"].most_common() if c < 0.98 * b][:top]}
     return out
 
 
@@ -426,7 +577,7 @@ def report(results: dict) -> str:
                  f"repeat {results['repeat']} (best run shown)")
     lines.append("")
     lines.append(f"{'N':>3} | {'baseline ticks/s':>16} | {'swarm ticks/s':>13} | {'ratio':>5} | "
-                 f"target (>= {TARGET_RATIO}x) met? | runs baseline / swarm (load1)")
+                 f"target (>= {TARGET_RATIO}x) met? | all runs: baseline / swarm (ticks/s@cores busy elsewhere)")
     lines.append("-" * 110)
     for n in results["sizes"]:
         r = results["by_n"][str(n)]
@@ -434,8 +585,9 @@ def report(results: dict) -> str:
         ratio = (s["ticks_per_second"] / b["ticks_per_second"]) if (b and s) else None
         r["ratio"] = ratio
         met = None if ratio is None else ratio >= TARGET_RATIO
-        runs = (", ".join(f"{fmt(x.get('ticks_per_second'))}({x['load1']:.1f})" for x in r["baseline"]) + " / "
-                + ", ".join(f"{fmt(x.get('ticks_per_second'))}({x['load1']:.1f})" for x in r["swarm"]))
+        def one(x):
+            return f"{fmt(x.get('ticks_per_second'))}@{fmt((x.get('cpu') or {}).get('others_cores'), '.1f')}"
+        runs = ", ".join(map(one, r["baseline"])) + " / " + ", ".join(map(one, r["swarm"]))
         lines.append(f"{n:>3} | {fmt(b and b['ticks_per_second']):>16} | {fmt(s and s['ticks_per_second']):>13} | "
                      f"{fmt(ratio, '.2f'):>5} | {('yes' if met else 'NO') if met is not None else '-':>24} | {runs}")
     lines.append("")
@@ -447,6 +599,17 @@ def report(results: dict) -> str:
         lines.append(f"first tick, {big} agents: {ft:.2f} s from Popen of `swarm up` (world startup_s {su:.2f} s; "
                      f"runs: {', '.join(format(x['first_tick_s'], '.2f') for x in sw)}) vs target "
                      f"{TARGET_FIRST_TICK_S:.0f} s: {'met' if ft <= TARGET_FIRST_TICK_S else 'NOT met'}")
+        sc = [x["startup_cpu"] for x in sw if x.get("startup_cpu")]
+        bb = [x["startup_cpu"] for x in results["by_n"][big]["baseline"] if x.get("startup_cpu")]
+        if sc:
+            c = sc[-1]
+            lines.append(f"  CPU used until the first tick: {fmt(c['agents_mean_s'], '.2f')} s per agent process "
+                         f"({fmt(c['agents_sum_s'], '.1f')} s for {c['agents_n']}), world {fmt(c.get('world_s'), '.2f')} s, "
+                         f"launcher {fmt(c.get('launcher_s'), '.2f')} s, on {results['env']['cpus']} cores")
+        if bb:
+            c, b0 = bb[-1], results["by_n"][big]["baseline"][-1]
+            lines.append(f"  bare baseline: all {big} clients joined {fmt(b0.get('join_s'), '.2f')} s after the hub "
+                         f"opened; {fmt(c['agents_mean_s'], '.2f')} s CPU per client process until then")
     else:
         lines.append(f"first tick, {big} agents: no successful run")
     lines.append("")
@@ -472,20 +635,52 @@ def report(results: dict) -> str:
         lines.append(f"{n:>3} | {rss['n']:>6} | {rss['mean_mb']:8.1f} | {rss['max_mb']:7.1f} | "
                      f"{fmt(uss.get('mean_mb'), '8.1f'):>8} | {fmt(uss.get('max_mb'), '7.1f'):>7} | {met:>24} | "
                      f"{bare:>31} | {world}")
+    lines.append("")
+    lines.append("CPU while ticking (psutil cpu_times of each process; ms of CPU per tick = cores used / ticks per s; "
+                 "machine = all cores busy, others = processes not started here)")
+    lines.append(f"{'N':>3} | {'bare: hub':>9} {'clients':>8} {'machine':>8} {'others':>7} | "
+                 f"{'swarm: world':>12} {'agents':>7} {'launcher':>8} {'machine':>8} {'others':>7}")
+    lines.append("-" * 100)
+    for n in results["sizes"]:
+        r = results["by_n"][str(n)]
+        b, s = best(r["baseline"]), best(r["swarm"])
+
+        def per_tick(run, group):
+            c = run and run.get("cpu")
+            if not c or not run.get("ticks_per_second") or group not in c["cpu_s"]:
+                return None
+            return 1e3 * c["cpu_s"][group] / c["window_s"] / run["ticks_per_second"]
+
+        def cores(run, key):
+            c = run and run.get("cpu")
+            return c[key] if c else None
+
+        lines.append(f"{n:>3} | {fmt(per_tick(b, 'hub'), '.3f'):>9} {fmt(per_tick(b, 'clients'), '.3f'):>8} "
+                     f"{fmt(cores(b, 'machine_busy_cores'), '.2f'):>8} {fmt(cores(b, 'others_cores'), '.2f'):>7} | "
+                     f"{fmt(per_tick(s, 'world'), '.3f'):>12} {fmt(per_tick(s, 'agents'), '.3f'):>7} "
+                     f"{fmt(per_tick(s, 'launcher'), '.3f'):>8} {fmt(cores(s, 'machine_busy_cores'), '.2f'):>8} "
+                     f"{fmt(cores(s, 'others_cores'), '.2f'):>7}")
+    lines.append("    (ms of CPU per tick; machine/others in cores out of "
+                 f"{results['env']['cpus']}; bare windows are approximate to ~0.25 s)")
     prof = results.get("profile")
     if prof:
         lines.append("")
-        lines.append(f"py-spy, {prof['n']} agents, {prof['seconds']:g} s while ticking "
-                     f"(run at {fmt(prof.get('ticks_per_second'))} ticks/s; share of samples; "
-                     "busy = share of wall time the thread ran Python)")
+        lines.append(f"where time goes, {prof['n']} agents (separate run at {fmt(prof.get('ticks_per_second'))} ticks/s "
+                     "with py-spy attached)")
+        lines.append("  CPU by thread over 2 s of ticking (cores; \"python main\" = the main thread, \"python\" = "
+                     "zenoh callback threads, the rest are zenoh's Rust threads):")
+        for proc, kinds in (prof.get("thread_cores") or {}).items():
+            lines.append(f"    {proc:<15} " + ", ".join(f"{k} {v:.3f}" for k, v in kinds.items() if v >= 0.0005))
+        lines.append(f"  py-spy, {prof['seconds']:g} s at 100 Hz: busy = share of a thread's samples not waiting; "
+                     "functions as shares of the busy samples")
         for proc, threads in (prof.get("profile") or {}).items():
             if "error" in threads:
-                lines.append(f"  {proc}: {threads['error']}")
+                lines.append(f"    {proc}: {threads['error']}")
                 continue
-            for th, t in list(threads.items())[:3]:
-                lines.append(f"  {proc} [{th}] busy {100 * t['busy_share']:.0f}%")
-                lines.append("    self:      " + "; ".join(f"{f} {100 * c:.0f}%" for f, c in t["self"][:6]))
-                lines.append("    inclusive: " + "; ".join(f"{f} {100 * c:.0f}%" for f, c in t["inclusive"][:8]))
+            for th, t in list(threads.items())[:2]:
+                lines.append(f"    {proc} [{th}] busy {100 * t['busy_share']:.0f}% of {t['samples']} samples")
+                lines.append("      self:      " + "; ".join(f"{f} {100 * c:.0f}%" for f, c in t["self"][:7]))
+                lines.append("      inclusive: " + "; ".join(f"{f} {100 * c:.0f}%" for f, c in t["inclusive"][:7]))
     return "\n".join(lines)
 
 
@@ -496,13 +691,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=None, help="runs of each pair (default 2, quick 1)")
     ap.add_argument("--swarm-seconds", type=float, default=None,
                     help="aim for this many s of ticking per swarm run (default 4, quick 1.5)")
+    ap.add_argument("--quiet-wait", type=float, default=None,
+                    help="before each run wait up to this many s for the machine to be quiet "
+                         "(< 0.5 busy cores; default 20, quick 3)")
     ap.add_argument("--profile", action="store_true", help="also profile a 20-agent run with py-spy")
+    ap.add_argument("--profile-n", type=int, default=20, help="agents in the --profile run (default 20)")
     ap.add_argument("--json", type=Path, help="write all results to this JSON file")
     ap.add_argument("--keep", action="store_true", help="keep the work directory (logs, runs)")
     a = ap.parse_args(argv)
     sizes = [int(x) for x in a.sizes.split(",") if x.strip()]
     repeat = a.repeat or (1 if a.quick else 2)
     secs = a.swarm_seconds or (1.5 if a.quick else 4.0)
+    qwait = a.quiet_wait if a.quiet_wait is not None else (3.0 if a.quick else 20.0)
+
+    def quiet() -> dict:
+        return wait_quiet(0.5, qwait) if qwait > 0 else {}
 
     import zenoh
 
@@ -524,26 +727,33 @@ def main(argv: list[str] | None = None) -> int:
             r = results["by_n"][str(n)] = {"baseline": [], "swarm": []}
             for k in range(repeat):
                 log(f"[N={n} run {k + 1}/{repeat}] bare baseline: {ticks} ticks after {warmup} warm-up")
+                q = quiet()
                 b = run_baseline(n, ticks, warmup, work, env, f"{n}-{k}")
+                b["quiet"] = q
                 r["baseline"].append(b)
-                log(f"  -> {fmt(b.get('ticks_per_second'))} ticks/s {b.get('error', '')}")
+                log(f"  -> {fmt(b.get('ticks_per_second'))} ticks/s (others busy before: "
+                    f"{fmt(q.get('busy_cores'), '.2f')} cores) {b.get('error', '')}")
                 tps = b.get("ticks_per_second") or {6: 3500, 20: 990, 50: 350}.get(n, 20000 / n)
                 sticks = int(min(40000, max(300, 0.8 * tps * secs)))
                 log(f"[N={n} run {k + 1}/{repeat}] swarm up: {sticks} ticks")
+                q = quiet()
                 s = run_swarm(n, sticks, work, env, f"{n}-{k}")
+                s["quiet"] = q
                 r["swarm"].append(s)
                 log(f"  -> {fmt(s.get('ticks_per_second'))} ticks/s, first tick {fmt(s.get('first_tick_s'), '.2f')} s"
-                    f" {s.get('error', '')}")
+                    f" (others busy before: {fmt(q.get('busy_cores'), '.2f')} cores) {s.get('error', '')}")
         if a.profile:
-            n = 20
-            b = best(results["by_n"].get(str(n), {}).get("baseline", [])) if str(n) in results["by_n"] else None
-            tps = (b or {}).get("ticks_per_second") or 990
+            n = a.profile_n
+            b = best(results["by_n"][str(n)]["baseline"]) if str(n) in results["by_n"] else None
+            tps = (b or {}).get("ticks_per_second") or {6: 3500, 20: 990, 50: 350}.get(n, 20000 / n)
             seconds = 4.0
             sticks = int(0.8 * tps * (seconds + 4.0))
             log(f"[profile] swarm up, {n} agents, {sticks} ticks, py-spy for {seconds:g} s")
+            quiet()
             p = run_swarm(n, sticks, work, env, f"profile-{n}", profile=seconds)
             results["profile"] = {"n": n, "seconds": seconds, "ticks_per_second": p.get("ticks_per_second"),
-                                  "profile": p.get("profile")}
+                                  "thread_cores": p.get("thread_cores"), "profile": p.get("profile"),
+                                  "error": p.get("error")}
     finally:
         if a.keep:
             log(f"kept {work}")
