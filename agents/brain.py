@@ -14,7 +14,6 @@ from dataclasses import dataclass
 
 from agents.laws import make_follower_law
 from agents.selection import select
-from swarm.scenario import AgentSpec, GainsSpec, SensingSpec
 from world.frames import SensorFrame
 
 
@@ -27,6 +26,7 @@ class Decision:
     out: int | None  # chosen out-neighbour (None for leaders and lost followers)
     phase: str  # leaders: "arc1" | "arc2" | "orbit"; followers: "track" | "lost"
     fallback: bool = False  # pinned out-neighbour not sensed, nearest used instead
+    hops: int | None = None  # hops to a leader it advertises (leaders 0; None: no path known)
 
 
 def _overlap(a: float, b: float, lo: float, hi: float) -> float:
@@ -42,7 +42,11 @@ def saturate(u: float, limit: float | None) -> float:
 class AgentBrain:
     """Decision logic of one agent; call `decide` once per tick with its frame."""
 
-    def __init__(self, spec: AgentSpec, gains: GainsSpec, sensing: SensingSpec, dt: float):
+    def __init__(self, spec, gains, sensing, dt: float, max_hops: int = 10_000):
+        """spec/gains/sensing: the scenario's AgentSpec/GainsSpec/SensingSpec or the
+        agents.config equivalents; dt (s); max_hops caps advertised hop counts (count to
+        infinity after a leader dies stops there)."""
+        self.max_hops = max_hops
         self.spec = spec
         self.sensing = sensing
         self.dt = dt
@@ -79,7 +83,7 @@ class AgentBrain:
             u = (p.u1 * _overlap(a, b, 0.0, p.t1) + p.u2 * _overlap(a, b, p.t1, t12)
                  + u_orbit * _overlap(a, b, t12, math.inf)) / self.dt
             phase = "arc1" if a < p.t1 else "arc2"
-        return Decision(frame.tick, saturate(u, s.max_turn_rate), None, phase)
+        return Decision(frame.tick, saturate(u, s.max_turn_rate), None, phase, False, 0)
 
     # -- followers -----------------------------------------------------------------
     def _follower(self, frame: SensorFrame) -> Decision:
@@ -93,7 +97,8 @@ class AgentBrain:
         u = saturate(self.law(frame.heading, c.heading, c.bearing), self.spec.max_turn_rate)
         if not math.isfinite(u):
             u = self.last_u
-        return Decision(frame.tick, u, c.id, "track", choice.fallback)
+        hops = c.hops + 1 if 0 <= c.hops < self.max_hops else None
+        return Decision(frame.tick, u, c.id, "track", choice.fallback, hops)
 
     def decide(self, frame: SensorFrame) -> Decision:
         d = self._leader(frame) if self.is_leader else self._follower(frame)

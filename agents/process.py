@@ -1,7 +1,7 @@
 """One agent process: one unicycle's brain on the bus.
 
 Connects to the run's endpoint as a client, claims its id with the world's join query
-(which also hands it the scenario: only the id is needed), declares its liveliness
+(which also hands it its configuration: only the id is needed), declares its liveliness
 token, and then answers each of its own sensor frames with a command. It never reads
 ground truth. It publishes its status (role, out-neighbour, path to a leader and hops,
 leader phase, counters) on change and a few times per second.
@@ -72,22 +72,24 @@ class AgentNode:
     def __init__(self, session, run: str, agent_id: int, reply: dict, wait_world: bool):
         import zenoh
 
-        from agents.brain import AgentBrain
-        from swarm.scenario import parse_scenario
+        from agents.config import BrainConf
 
         self.zenoh = zenoh
         self.session = session
         self.run = run
         self.id = agent_id
         self.wait_world = wait_world
-        self.scenario = parse_scenario(reply["scenario"], "join reply")
-        self.spec = self.scenario.agent(agent_id)
-        s = self.scenario
-        self.brain = AgentBrain(self.spec, s.gains, s.sensing, s.run.dt)
+        try:
+            self.conf = BrainConf.from_json(reply.get("brain"))
+            if self.conf.agent.id != agent_id:
+                raise ValueError(f"agent.id: {self.conf.agent.id}, asked for {agent_id}")
+            self.brain = self.new_brain()
+        except (ValueError, AttributeError, TypeError) as e:
+            raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: unusable join reply: {e}") from None
+        self.spec = self.conf.agent
         if self.brain.is_leader:
             import agents.leader  # noqa: F401  (load numpy and the planner before the first frame)
         self.inbox: queue.SimpleQueue = queue.SimpleQueue()
-        self.hops_of: dict[int, int | None] = {}
         self.commands = 0
         self.garbage = 0
         self.last_tick = -1
@@ -96,6 +98,12 @@ class AgentNode:
         self.status_sent = 0.0
         self.last_status: tuple | None = None
         self.stalled = 0.0  # s this process was not running before the current batch
+
+    def new_brain(self):
+        from agents.brain import AgentBrain
+
+        c = self.conf
+        return AgentBrain(c.agent, c.gains, c.sensing, c.dt, c.n_agents)
 
     def open(self) -> None:
         ses, run, put = self.session, self.run, self.inbox.put
@@ -106,8 +114,6 @@ class AgentNode:
                                    lambda s: put(("sense", s.payload.to_bytes()))),
             ses.declare_subscriber(wire.world_control_key(run),
                                    lambda s: put(("control", s.payload.to_bytes()))),
-            ses.declare_subscriber(wire.agent_key(run, "*", "status"),
-                                   lambda s: put(("status", str(s.key_expr), s.payload.to_bytes()))),
             ses.liveliness().declare_subscriber(wire.world_alive_key(run),
                                                 lambda s: put(("world", s.kind)), history=True),
         ]
@@ -115,12 +121,10 @@ class AgentNode:
 
     # -- status ----------------------------------------------------------------------------------
     def hops(self) -> int | None:
+        """Hops to a leader: 0 for leaders, else 1 + what the out-neighbour advertised."""
         if self.brain.is_leader:
             return 0
-        if self.last is None or self.last.out is None:
-            return None
-        h = self.hops_of.get(self.last.out)
-        return None if h is None or h + 1 > len(self.scenario.agents) else h + 1
+        return None if self.last is None else self.last.hops
 
     def status(self) -> dict:
         d = self.last
@@ -160,7 +164,7 @@ class AgentNode:
         if frame.tick <= self.last_tick:
             return  # duplicate or old frame
         d = self.brain.decide(frame)
-        self.cmd_pub.put(wire.encode_cmd(wire.Command(self.id, frame.tick, d.u, d.out, d.phase)))
+        self.cmd_pub.put(wire.encode_cmd(wire.Command(self.id, frame.tick, d.u, d.out, d.phase, d.hops)))
         self.commands += 1
         self.last_tick = frame.tick
         if self.last is None or d.out != self.last.out or d.phase != self.last.phase:
@@ -169,26 +173,11 @@ class AgentNode:
                 _log(f"[agent {self.id}] tick {frame.tick}: out-neighbour {self.last.out} -> {d.out} ({why})")
         self.last = d
 
-    def on_status(self, key: str, payload: bytes) -> None:
-        try:
-            aid = wire.agent_of_key(key)
-            st = wire.decode_status(payload)
-            if st["id"] != aid:
-                raise wire.WireError("status id does not match its key")
-        except wire.WireError:
-            self.garbage += 1
-            return
-        if aid != self.id:
-            self.hops_of[aid] = st.get("hops")
-
     def on_world(self, kind) -> None:
         if kind == self.zenoh.SampleKind.PUT:
             if not self.world_alive:
                 # A world came back (--wait-world): its ticks start afresh, and so does the brain.
-                from agents.brain import AgentBrain
-
-                s = self.scenario
-                self.brain = AgentBrain(self.spec, s.gains, s.sensing, s.run.dt)
+                self.brain = self.new_brain()
                 self.last_tick, self.last = -1, None
                 _log(f"[agent {self.id}] the world is back; rejoining")
             self.world_alive = True
@@ -236,8 +225,6 @@ class AgentNode:
                 kind = item[0]
                 if kind == "sense":
                     newest = item[1]
-                elif kind == "status":
-                    self.on_status(item[1], item[2])
                 elif kind == "world":
                     self.on_world(item[1])
                 elif kind == "control":

@@ -24,7 +24,8 @@ def run_sim(scenario: Scenario, duration: float | None = None,
     dt = scenario.run.dt
     ticks = int(round((duration if duration is not None else scenario.run.duration) / dt))
     world = WorldCore(scenario)
-    brains = {a.id: AgentBrain(a, scenario.gains, scenario.sensing, dt) for a in scenario.agents}
+    n = len(scenario.agents)
+    brains = {a.id: AgentBrain(a, scenario.gains, scenario.sensing, dt, n) for a in scenario.agents}
     rec = Recorder(scenario, ticks)
     events: list[dict] = []
     out = np.full(len(scenario.agents), -1, dtype=np.int64)
@@ -32,7 +33,7 @@ def run_sim(scenario: Scenario, duration: float | None = None,
     for k in range(ticks):
         for aid, frame in world.frames().items():
             d = brains[aid].decide(frame)
-            world.set_command(aid, d.u)
+            world.set_command(aid, d.u, d.hops)
             col = world.index[aid]
             new = -1 if d.out is None else d.out
             if new != out[col] and not brains[aid].is_leader:

@@ -33,6 +33,8 @@ def hub_config(listen: str):
         "scouting/multicast/enabled": False,
         "scouting/delay": 0,
         "transport/link/tx/lease": LEASE_MS,
+        # Small messages over loopback: the 16 MB shared-memory pool would only add RSS.
+        "transport/shared_memory/enabled": False,
     })
 
 
@@ -43,6 +45,8 @@ def client_config(connect: str, timeout_ms: int = CONNECT_TIMEOUT_MS):
         "connect/timeout_ms": timeout_ms,
         "scouting/multicast/enabled": False,
         "transport/link/tx/lease": LEASE_MS,
+        # Small messages over loopback: the 16 MB shared-memory pool would only add RSS.
+        "transport/shared_memory/enabled": False,
     })
 
 

@@ -108,9 +108,10 @@ def agent_of_key(key: str) -> int:
 # sense: kind, version, has_target, reserved, agent, tick, time (s), heading (rad),
 #        target dx, dy (m; NaN when absent), n contacts; then n contact records.
 SENSE_HEAD = struct.Struct("<BBBBiqddddI")
-CONTACT = struct.Struct("<iddd")  # id, bearing (rad), heading (rad), range (m)
-# cmd: kind, version, reserved x2, agent, tick, u (rad/s), out-neighbour (-1 none), phase code
-CMD = struct.Struct("<BBBBiqdiB")
+CONTACT = struct.Struct("<idddh")  # id, bearing (rad), heading (rad), range (m), advertised hops (-1 none)
+# cmd: kind, version, phase code, reserved, agent, tick, u (rad/s), out-neighbour (-1 none),
+#      advertised hops to a leader (-1 none)
+CMD = struct.Struct("<BBBBiqdih")
 # truth: kind, version, reserved x2, n agents, tick, time (s); then n agent records.
 TRUTH_HEAD = struct.Struct("<BBBBIqd")
 TRUTH_FIELDS = [("id", "<i4"), ("x", "<f8"), ("y", "<f8"), ("heading", "<f8"),
@@ -136,19 +137,21 @@ def encode_sense(frame: SensorFrame) -> bytes:
     tx, ty = frame.target if has_t else (math.nan, math.nan)
     head = SENSE_HEAD.pack(KIND_SENSE, VERSION, int(has_t), 0, frame.agent, frame.tick, frame.time,
                            frame.heading, tx, ty, len(frame.contacts))
-    return head + b"".join(CONTACT.pack(c.id, c.bearing, c.heading, c.range) for c in frame.contacts)
+    return head + b"".join(CONTACT.pack(c.id, c.bearing, c.heading, c.range, c.hops) for c in frame.contacts)
 
 
-CONTACT_FIELDS = [("id", "<i4"), ("bearing", "<f8"), ("heading", "<f8"), ("range", "<f8")]  # == CONTACT
+CONTACT_FIELDS = [("id", "<i4"), ("bearing", "<f8"), ("heading", "<f8"), ("range", "<f8"),
+                  ("hops", "<i2")]  # == CONTACT
 
 
 def encode_sense_arrays(tick: int, time: float, agent: int, heading: float,
-                        target: tuple[float, float] | None, ids, bearing, headings, ranges) -> bytes:
+                        target: tuple[float, float] | None, ids, bearing, headings, ranges, hops) -> bytes:
     """encode_sense for a frame given as numpy columns (the world's fast path); same bytes."""
     import numpy as np
 
     recs = np.empty(len(ids), dtype=np.dtype(CONTACT_FIELDS))
     recs["id"], recs["bearing"], recs["heading"], recs["range"] = ids, bearing, headings, ranges
+    recs["hops"] = hops
     tx, ty = target if target is not None else (math.nan, math.nan)
     return SENSE_HEAD.pack(KIND_SENSE, VERSION, int(target is not None), 0, agent, tick, time, heading,
                            tx, ty, len(ids)) + recs.tobytes()
@@ -179,24 +182,25 @@ class Command:
     u: float  # rad/s
     out: int | None
     phase: str
+    hops: int | None = None  # advertised hops to a leader
 
 
 def encode_cmd(c: Command) -> bytes:
-    return CMD.pack(KIND_CMD, VERSION, 0, 0, c.agent, c.tick, c.u, -1 if c.out is None else c.out,
-                    PHASES.index(c.phase))
+    return CMD.pack(KIND_CMD, VERSION, PHASES.index(c.phase), 0, c.agent, c.tick, c.u,
+                    -1 if c.out is None else c.out, -1 if c.hops is None else c.hops)
 
 
 def decode_cmd(buf: bytes) -> Command:
     if len(buf) != CMD.size:
         raise WireError(f"command: {len(buf)} bytes, expected {CMD.size}")
-    _, _, _, _, agent, tick, u, out, phase = _check_head(buf, CMD, KIND_CMD, "command")
+    _, _, phase, _, agent, tick, u, out, hops = _check_head(buf, CMD, KIND_CMD, "command")
     if not math.isfinite(u):
         raise WireError("command: non-finite turn rate")
     if phase >= len(PHASES):
         raise WireError(f"command: unknown phase code {phase}")
     if tick < 0:
         raise WireError(f"command: negative tick {tick}")
-    return Command(agent, tick, u, None if out < 0 else out, PHASES[phase])
+    return Command(agent, tick, u, None if out < 0 else out, PHASES[phase], None if hops < 0 else hops)
 
 
 def encode_truth(tick: int, time: float, ids, x, y, heading, u, out, states: list[str]) -> bytes:

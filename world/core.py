@@ -40,6 +40,7 @@ class WorldCore:
         self.limit = np.array([a.max_turn_rate or math.inf for a in agents], dtype=float)
         self.is_leader = np.array([a.role == "leader" for a in agents], dtype=bool)
         self.u = np.zeros(len(agents))  # last applied turn rate (rad/s)
+        self.hops = np.full(len(agents), -1, dtype=np.int64)  # advertised hops to a leader (-1 none)
         self.state = [ACTIVE if joined else GONE for _ in agents]
         self.target = (scenario.target.x, scenario.target.y)
         self.dt = scenario.run.dt
@@ -67,20 +68,22 @@ class WorldCore:
         sens = self.scenario.sensing
         return build_frames(self.tick, self.time, self.ids, self.x, self.y, self.heading,
                             self.present_mask(), receivers, self.is_leader, self.target,
-                            sens.range, sens.fov)
+                            sens.range, sens.fov, self.hops)
 
     def sensing(self):
         """(S, bearing, range) matrices of the current tick: S[i, j] when i senses j."""
         sens = self.scenario.sensing
         return sensing_matrix(self.x, self.y, self.heading, self.present_mask(), sens.range, sens.fov)
 
-    def set_command(self, agent_id: int, u: float) -> bool:
-        """Latch agent_id's turn rate for the next step; False if it was refused."""
+    def set_command(self, agent_id: int, u: float, hops: int | None = None) -> bool:
+        """Latch agent_id's turn rate for the next step, and the hop count it advertises
+        (None or out of range: not rooted); False if the command was refused."""
         k = self.index[agent_id]
         if not math.isfinite(u):
             self.rejected += 1
             return False
         self.u[k] = max(-self.limit[k], min(self.limit[k], u))
+        self.hops[k] = hops if hops is not None and 0 <= hops <= len(self.ids) else -1
         return True
 
     def applied(self) -> np.ndarray:
@@ -107,6 +110,7 @@ class WorldCore:
         """An agent's process died: it leaves the world or coasts (scenario on_dropout)."""
         k = self.index[agent_id]
         self.state[k] = COASTING if self.scenario.run.on_dropout == "coast" else GONE
+        self.hops[k] = -1  # nobody relays for a dead agent
         return self.state[k]
 
     def join(self, agent_id: int) -> None:

@@ -14,6 +14,7 @@ class Contact:
     bearing: float  # line-of-sight angle lambda_ij from i to j, world frame (rad)
     heading: float  # heading g_j of the sensed agent (rad)
     range: float  # distance r_ij (m); only for ranking candidates
+    hops: int = -1  # hops to a leader that agent last advertised (-1: none / not rooted)
 
 
 @dataclass(frozen=True, slots=True)

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.config import BrainConf
 from swarm import wire
 from swarm.recording import Recorder, RunResult, write_run
 from swarm.scenario import Scenario
@@ -168,7 +169,7 @@ class World:
         if cmd.tick <= b.last_cmd_tick:
             self.ignored += 1  # duplicate or late
             return
-        if not self.core.set_command(aid, cmd.u):
+        if not self.core.set_command(aid, cmd.u, cmd.hops):
             b.garbage += 1
             return
         b.commands += 1
@@ -231,7 +232,7 @@ class World:
             x, y, h = self.core.pose(aid)
             reply = {"ok": True, "run": self.cfg.run, "agent": aid, "tick": self.core.tick,
                      "clock": self.cfg.clock, "pose": [x, y, h],
-                     "scenario": self.cfg.scenario.model_dump(mode="json")}
+                     "brain": BrainConf.from_scenario(self.cfg.scenario, aid).to_json()}
         except wire.WireError as e:
             reply = {"ok": False, "error": str(e)}
         query.reply(wire.world_join_key(self.cfg.run), wire.encode_json(reply))
@@ -290,7 +291,7 @@ class World:
             target = (float(tx - c.x[k]), float(ty - c.y[k])) if c.is_leader[k] else None
             self.sense_pub[aid].put(wire.encode_sense_arrays(
                 c.tick, c.time, aid, float(c.heading[k]), target, c.ids[js], bearing[k, js],
-                c.heading[js], rng[k, js]))
+                c.heading[js], rng[k, js], c.hops[js]))
             sent.add(aid)
         return sent
 

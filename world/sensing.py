@@ -37,13 +37,19 @@ def sensing_matrix(x, y, heading, present, sense_range: float | None, fov: float
 
 
 def build_frames(tick, time, ids, x, y, heading, present, receivers, is_leader, target,
-                 sense_range=None, fov=None) -> dict[int, SensorFrame]:
-    """One SensorFrame per receiver index (agents that need a frame this tick)."""
+                 sense_range=None, fov=None, hops=None) -> dict[int, SensorFrame]:
+    """One SensorFrame per receiver index (agents that need a frame this tick).
+
+    hops: (N,) hop counts the agents last advertised (-1 none); the world relays them
+    like a local broadcast that reaches exactly the agents that sense the sender.
+    """
     s, bearing, rng = sensing_matrix(x, y, heading, present, sense_range, fov)
+    if hops is None:
+        hops = np.full(len(ids), -1)
     frames: dict[int, SensorFrame] = {}
     for i in receivers:
         contacts = tuple(
-            Contact(int(ids[j]), float(bearing[i, j]), float(heading[j]), float(rng[i, j]))
+            Contact(int(ids[j]), float(bearing[i, j]), float(heading[j]), float(rng[i, j]), int(hops[j]))
             for j in np.flatnonzero(s[i])
         )
         tgt = (float(target[0] - x[i]), float(target[1] - y[i])) if is_leader[i] else None

@@ -1,0 +1,104 @@
+"""What one agent process needs to know about its run: its own spec, the gains, the
+selection rule, dt. Plain dataclasses (no pydantic: agent processes stay small and start
+fast), built from the scenario by the world and sent in the join reply as JSON, and
+checked again on arrival, since it comes off the network.
+
+`AgentBrain` takes these or the scenario's pydantic models alike (same attribute names).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+
+@dataclass(frozen=True, slots=True)
+class AgentConf:
+    id: int
+    role: str  # "leader" | "follower"
+    speed: float  # m/s
+    orbit_radius: float | None  # m (leaders)
+    direction: str  # "ccw" | "cw" (leaders)
+    follow: int | None  # pinned out-neighbour (followers)
+    max_turn_rate: float | None  # rad/s
+
+    @property
+    def direction_sign(self) -> int:
+        return 1 if self.direction == "ccw" else -1
+
+
+@dataclass(frozen=True, slots=True)
+class GainsConf:
+    c1: float
+    c2: float
+    law: str
+
+
+@dataclass(frozen=True, slots=True)
+class SensingConf:
+    selection: str  # "nearest" | "fixed"
+    hysteresis: float
+
+
+@dataclass(frozen=True, slots=True)
+class BrainConf:
+    agent: AgentConf
+    gains: GainsConf
+    sensing: SensingConf
+    dt: float  # s
+    n_agents: int  # agents in the scenario: caps hop counts
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_scenario(cls, scenario, agent_id: int) -> "BrainConf":
+        a = scenario.agent(agent_id)
+        g, s = scenario.gains, scenario.sensing
+        return cls(AgentConf(a.id, a.role, a.speed, a.orbit_radius, a.direction, a.follow, a.max_turn_rate),
+                   GainsConf(g.c1, g.c2, g.law), SensingConf(s.selection, s.hysteresis),
+                   scenario.run.dt, len(scenario.agents))
+
+    @classmethod
+    def from_json(cls, d: dict) -> "BrainConf":
+        """Rebuild and check a BrainConf received over the network; ValueError names the field."""
+
+        def num(obj, key, where, positive=False, optional=False):
+            v = obj.get(key) if isinstance(obj, dict) else None
+            if v is None and optional:
+                return None
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
+                    or (positive and v <= 0):
+                raise ValueError(f"{where}.{key}: expected a {'positive ' if positive else ''}finite number")
+            return float(v)
+
+        def integer(obj, key, where, optional=False):
+            v = obj.get(key) if isinstance(obj, dict) else None
+            if v is None and optional:
+                return None
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise ValueError(f"{where}.{key}: expected an integer")
+            return v
+
+        def choice(obj, key, where, options):
+            v = obj.get(key) if isinstance(obj, dict) else None
+            if v not in options:
+                raise ValueError(f"{where}.{key}: expected one of {options}")
+            return v
+
+        a, g, s = d.get("agent"), d.get("gains"), d.get("sensing")
+        law = g.get("law") if isinstance(g, dict) else None
+        if not isinstance(law, str):
+            raise ValueError("gains.law: expected a string")
+        agent = AgentConf(integer(a, "id", "agent"), choice(a, "role", "agent", ("leader", "follower")),
+                          num(a, "speed", "agent", positive=True),
+                          num(a, "orbit_radius", "agent", positive=True, optional=True),
+                          choice(a, "direction", "agent", ("ccw", "cw")),
+                          integer(a, "follow", "agent", optional=True),
+                          num(a, "max_turn_rate", "agent", positive=True, optional=True))
+        if agent.role == "leader" and agent.orbit_radius is None:
+            raise ValueError("agent.orbit_radius: a leader needs one")
+        return cls(agent, GainsConf(num(g, "c1", "gains"), num(g, "c2", "gains"), law),
+                   SensingConf(choice(s, "selection", "sensing", ("nearest", "fixed")),
+                               num(s, "hysteresis", "sensing")),
+                   num(d, "dt", "brain", positive=True), integer(d, "n_agents", "brain"))
