@@ -165,10 +165,11 @@ def decode_sense(buf: bytes) -> SensorFrame:
     expected = SENSE_HEAD.size + n * CONTACT.size
     if len(buf) != expected:
         raise WireError(f"sense frame: {len(buf)} bytes, expected {expected} for {n} contacts")
-    contacts = tuple(Contact(*rec) for rec in CONTACT.iter_unpack(memoryview(buf)[SENSE_HEAD.size:]))
-    isfinite = math.isfinite
-    if not (isfinite(time) and isfinite(heading) and (not has_t or (isfinite(tx) and isfinite(ty)))
-            and all(isfinite(c.bearing) and isfinite(c.heading) and isfinite(c.range) for c in contacts)):
+    contacts = tuple(map(Contact._make, CONTACT.iter_unpack(memoryview(buf)[SENSE_HEAD.size:])))
+    # One finiteness test for all numbers: a NaN or inf anywhere makes the sum non-finite
+    # (so would finite values near 1e308, which are garbage here anyway).
+    total = time + heading + (tx + ty if has_t else 0.0) + sum(c.bearing + c.heading + c.range for c in contacts)
+    if not math.isfinite(total):
         raise WireError("sense frame: non-finite number")
     if tick < 0:
         raise WireError(f"sense frame: negative tick {tick}")
