@@ -32,6 +32,7 @@ from swarm.transport import open_hub, socket_path
 from world.core import ACTIVE, GONE, WorldCore
 
 CLAIM_TTL = 10.0  # s: an accepted join claim waits this long for the agent's token
+TRUTH_PERIOD = 0.02  # s of wall time between ground-truth messages (observers, not the recording)
 
 
 class Stop(BaseException):
@@ -93,6 +94,7 @@ class World:
         self.ignored = 0
         self.deadline = self.cfg.deadline or s.run.lockstep_deadline
         self.stopped_by: int | None = None
+        self.truth_sent = 0.0
         self.t_start = 0.0
 
     # -- zenoh plumbing (callbacks: enqueue only) -----------------------------------------
@@ -299,12 +301,22 @@ class World:
         c = self.core
         u = c.applied()
         self.rec.record(c.tick, c.time, c.x, c.y, c.heading, u, self.out, c.alive_mask())
+        self.publish_truth(u)
+        c.step()
+
+    def publish_truth(self, u, force: bool = False) -> None:
+        """Ground truth for observers, at most every TRUTH_PERIOD s (the world itself
+        records every tick; observers only draw and report)."""
+        now = time.monotonic()
+        if not force and now - self.truth_sent < TRUTH_PERIOD:
+            return
+        c = self.core
+        self.truth_sent = now
         try:
             self.truth_pub.put(wire.encode_truth(c.tick, c.time, c.ids, c.x, c.y, c.heading,
                                                  u, self.out, c.state))
-        except Exception:
+        except Exception:  # an observer's problem never stops the world
             pass
-        c.step()
 
     def lockstep_tick(self) -> None:
         pending = self.publish_frames()
@@ -365,6 +377,7 @@ class World:
         if c.tick <= self.ticks and self.rec.rows <= c.tick:
             self.rec.record(c.tick, c.time, c.x, c.y, c.heading, np.full(len(c.ids), np.nan),
                             self.out, c.alive_mask())
+            self.publish_truth(np.full(len(c.ids), np.nan), force=True)
         if self.cfg.out is None:
             return None
         agent_extra = {}
