@@ -248,7 +248,7 @@ def up(
         if p is None or (p["tick"] == state["tick"] and state["wall"] > 0):
             return
         now = time.monotonic()
-        if not tty and now - state["last"] < 2.0 and p["tick"] < total - 1:
+        if not tty and now - state["last"] < 1.0 and p["tick"] < total - 1:
             return
         rate = (p["tick"] - state["tick"]) / max(wall - state["wall"], 1e-9)
         state.update(last=now, tick=p["tick"], wall=wall)

@@ -270,7 +270,8 @@ def test_agents_exit_when_the_world_vanishes(rt, tmp_path):
 
 # --- 9. a frozen agent ----------------------------------------------------------------------------
 def test_frozen_agent_is_dropped(rt, tmp_path):
-    up = start_up(rt.tracker, SCENARIOS / "case2.toml", tmp_path / "run", "--duration", "30",
+    # Long enough (15000 ticks, ~10 s) that the freeze surely lands mid-run.
+    up = start_up(rt.tracker, SCENARIOS / "case2.toml", tmp_path / "run", "--duration", "150",
                   "--clock", "lockstep")
     up.wait_started(60)
     pids = rt.tracker.wait_agent_pids(up.launcher, 6)
