@@ -49,9 +49,10 @@ def find_run(session, timeout: float = 2.0) -> str:
     return runs[0]
 
 
-def claim(session, run: str, agent_id: int, timeout: float = 5.0) -> dict:
-    """Ask the world for agent_id; returns its reply or raises AgentExit."""
-    req = wire.encode_json({"id": agent_id, "pid": os.getpid(), "host": socket.gethostname()})
+def claim(session, run: str, agent_id: int, timeout: float = 5.0, spec: dict | None = None) -> dict:
+    """Ask the world for agent_id (a new agent brings its spec); returns the reply or raises AgentExit."""
+    req = wire.encode_json({"id": agent_id, "pid": os.getpid(), "host": socket.gethostname(),
+                            **({"spec": spec} if spec is not None else {})})
     replies = list(session.get(wire.world_join_key(run), payload=req, timeout=timeout))
     for r in replies:
         if r.ok is None:
@@ -114,6 +115,9 @@ class AgentNode:
                                    lambda s: put(("sense", s.payload.to_bytes()))),
             ses.declare_subscriber(wire.world_control_key(run),
                                    lambda s: put(("control", s.payload.to_bytes()))),
+            ses.declare_subscriber(wire.agent_key(run, self.id, "ctl"),
+                                   lambda s: put(("ctl", s.payload.to_bytes()))),
+            ses.declare_queryable(wire.agent_key(run, self.id, "status"), lambda q: put(("query", q))),
             ses.liveliness().declare_subscriber(wire.world_alive_key(run),
                                                 lambda s: put(("world", s.kind)), history=True),
         ]
@@ -203,6 +207,19 @@ class AgentNode:
             time.sleep(0.05)
         return False
 
+    def on_ctl(self, payload: bytes) -> None:
+        """`swarm kill` from a machine that cannot signal this process: end abruptly."""
+        try:
+            msg = wire.decode_json(payload, "ctl")
+            sig = {"KILL": signal.SIGKILL, "TERM": signal.SIGTERM, "STOP": signal.SIGSTOP}[msg["signal"]]
+            if msg.get("kind") != "signal":
+                raise KeyError
+        except (wire.WireError, KeyError, TypeError):
+            self.garbage += 1
+            return
+        _log(f"[agent {self.id}] asked over zenoh to take SIG{msg['signal']}")
+        os.kill(os.getpid(), sig)
+
     def loop(self) -> int:
         self.maybe_publish_status(force=True)
         woke = time.monotonic()
@@ -227,6 +244,10 @@ class AgentNode:
                     newest = item[1]
                 elif kind == "world":
                     self.on_world(item[1])
+                elif kind == "query":
+                    item[1].reply(wire.agent_key(self.run, self.id, "status"), wire.encode_json(self.status()))
+                elif kind == "ctl":
+                    self.on_ctl(item[1])
                 elif kind == "control":
                     try:
                         msg = wire.decode_json(item[1], "control")
@@ -244,7 +265,8 @@ def _raise_exit(signum, _frame):
     raise AgentExit(128 + signum, "")
 
 
-def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: bool = False) -> int:
+def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: bool = False,
+              spec: dict | None = None) -> int:
     """Entry point of an agent process; returns its exit code."""
     signal.signal(signal.SIGTERM, _raise_exit)
     signal.signal(signal.SIGINT, _raise_exit)
@@ -255,7 +277,7 @@ def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: b
         return EXIT_REFUSED
     try:
         run = run or find_run(session)
-        reply = claim(session, run, agent_id)
+        reply = claim(session, run, agent_id, spec=spec)
         node = AgentNode(session, run, agent_id, reply, wait_world)
         node.open()
         return node.loop()
@@ -270,9 +292,12 @@ def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: b
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Lean entry for launchers: `python -m agents.process ID ENDPOINT [RUN]` (no typer/rich)."""
+    """Lean entry for launchers: `python -m agents.process ID ENDPOINT [RUN [SPEC_JSON]]` (no typer/rich)."""
+    import json
+
     args = sys.argv[1:] if argv is None else argv
-    sys.exit(run_agent(int(args[0]), args[1], args[2] if len(args) > 2 else None))
+    spec = json.loads(args[3]) if len(args) > 3 else None
+    sys.exit(run_agent(int(args[0]), args[1], args[2] if len(args) > 2 and args[2] else None, spec=spec))
 
 
 if __name__ == "__main__":

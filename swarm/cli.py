@@ -297,6 +297,11 @@ def agent(
     raise typer.Exit(run_agent(id, connect, run, wait_world))
 
 
+from swarm.inspect import register as _register_live  # noqa: E402
+
+_register_live(app)
+
+
 def main() -> None:
     app()
 

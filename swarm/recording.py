@@ -31,6 +31,15 @@ class Recorder:
         self.out = np.full((ticks + 1, n), -1, dtype=np.int64)
         self.alive = np.zeros((ticks + 1, n), dtype=bool)
 
+    def add_agent(self, scenario: Scenario) -> None:
+        """One more column (an agent added at run time); earlier rows say it was absent."""
+        self.scenario = scenario
+        rows = self.t.shape[0]
+        grow = lambda a, fill: np.concatenate([a, np.full((rows, 1), fill, dtype=a.dtype)], axis=1)  # noqa: E731
+        self.x, self.y, self.heading, self.u = (grow(a, np.nan) for a in (self.x, self.y, self.heading, self.u))
+        self.out = grow(self.out, -1)
+        self.alive = grow(self.alive, False)
+
     def record(self, tick: int, time: float, x, y, heading, u, out, alive) -> None:
         """Store tick `tick`: pose at t_k and the turn rate applied over [t_k, t_k+1)."""
         self.t[tick] = time

@@ -6,13 +6,15 @@ Keys (every key of a run starts with `swarm/<run>`, so runs never hear each othe
     swarm/<run>/world/alive          liveliness token of the world process
     swarm/<run>/world/join           queryable: an agent claims its id, gets the scenario
     swarm/<run>/world/info           queryable: run info (scenario, clock, tick, agents)
+    swarm/<run>/world/admin          queryable: pause / resume the world clock
     swarm/<run>/world/control        world -> all: run-wide notices (JSON), e.g. the end
     swarm/<run>/truth                world -> observers: ground truth of one tick (binary)
     swarm/<run>/events               world -> observers: one event (JSON)
     swarm/<run>/agent/<id>/alive     liveliness token of agent <id>'s process
     swarm/<run>/agent/<id>/sense     world -> agent <id>: its sensor frame (binary)
     swarm/<run>/agent/<id>/cmd       agent <id> -> world: its command (binary)
-    swarm/<run>/agent/<id>/status    agent <id> -> all: its status (JSON)
+    swarm/<run>/agent/<id>/status    agent <id> -> all: its status (JSON); also its queryable
+    swarm/<run>/agent/<id>/ctl       anyone -> agent <id>: {"kind": "signal", "signal": "KILL"}
 
 Hot-path payloads (sense, cmd, truth) are little-endian binary records led by a kind
 byte and a version byte; cold-path payloads are UTF-8 JSON objects with "v": 1.
@@ -66,6 +68,10 @@ def world_join_key(run: str) -> str:
 
 def world_info_key(run: str) -> str:
     return f"{run_prefix(run)}/world/info"
+
+
+def world_admin_key(run: str) -> str:
+    return f"{run_prefix(run)}/world/admin"
 
 
 def world_control_key(run: str) -> str:
@@ -287,4 +293,5 @@ def decode_join_request(buf: bytes) -> dict:
     _field(obj, "id", int, "join request")
     _field(obj, "pid", int, "join request")
     _field(obj, "host", str, "join request")
+    _field(obj, "spec", dict, "join request", optional=True)
     return obj

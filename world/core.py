@@ -120,6 +120,23 @@ class WorldCore:
             self.u[k] = 0.0
         self.state[k] = ACTIVE
 
+    def add_agent(self, spec) -> None:
+        """A new agent (not in the scenario file) enters the run, not yet joined ("gone")."""
+        if spec.id in self.index:
+            raise ValueError(f"agent {spec.id} already exists")
+        self.scenario = self.scenario.model_copy(update={"agents": [*self.scenario.agents, spec]})
+        self.index[spec.id] = len(self.ids)
+        self.ids = np.append(self.ids, spec.id)
+        self.x = np.append(self.x, spec.x)
+        self.y = np.append(self.y, spec.y)
+        self.heading = np.append(self.heading, spec.heading)
+        self.speed = np.append(self.speed, spec.speed)
+        self.limit = np.append(self.limit, spec.max_turn_rate or math.inf)
+        self.is_leader = np.append(self.is_leader, spec.role == "leader")
+        self.u = np.append(self.u, 0.0)
+        self.hops = np.append(self.hops, -1)
+        self.state.append(GONE)
+
     def pose(self, agent_id: int) -> tuple[float, float, float]:
         k = self.index[agent_id]
         return float(self.x[k]), float(self.y[k]), float(self.heading[k])

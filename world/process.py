@@ -30,6 +30,7 @@ from swarm.recording import Recorder, RunResult, write_run
 from swarm.scenario import Scenario
 from swarm.transport import open_hub, socket_path
 from world.core import ACTIVE, GONE, WorldCore
+from world.metrics import root_of
 
 CLAIM_TTL = 10.0  # s: an accepted join claim waits this long for the agent's token
 TRUTH_PERIOD = 0.02  # s of wall time between ground-truth messages (observers, not the recording)
@@ -95,6 +96,9 @@ class World:
         self.deadline = self.cfg.deadline or s.run.lockstep_deadline
         self.stopped_by: int | None = None
         self.truth_sent = 0.0
+        self.paused = False
+        self.ticking = False  # between the first frame of a tick and its step
+        self.pause_waiters: list = []
         self.t_start = 0.0
 
     # -- zenoh plumbing (callbacks: enqueue only) -----------------------------------------
@@ -111,6 +115,7 @@ class World:
                                                 history=True),
             ses.declare_queryable(wire.world_join_key(run), lambda q: put(("join", q))),
             ses.declare_queryable(wire.world_info_key(run), lambda q: put(("info", q))),
+            ses.declare_queryable(wire.world_admin_key(run), lambda q: put(("admin", q))),
         ]
         self.sense_pub = {i: ses.declare_publisher(wire.agent_key(run, i, "sense"), express=True)
                           for i in self.cfg.scenario.ids}
@@ -150,6 +155,8 @@ class World:
             self._on_join(item[1])
         elif kind == "info":
             self._on_info(item[1])
+        elif kind == "admin":
+            self._on_admin(item[1])
 
     def _on_cmd(self, key: str, payload: bytes, pending: set[int] | None) -> None:
         try:
@@ -223,8 +230,11 @@ class World:
             req = wire.decode_join_request(query.payload.to_bytes() if query.payload else b"")
             aid = req["id"]
             if aid not in self.core.index:
-                raise wire.WireError(f"agent {aid} is not in scenario {self.cfg.scenario.name!r} "
-                                     f"(ids: {', '.join(map(str, self.cfg.scenario.ids))})")
+                if req.get("spec") is None:
+                    raise wire.WireError(f"agent {aid} is not in scenario {self.cfg.scenario.name!r} "
+                                         f"(ids: {', '.join(map(str, self.core.scenario.ids))}); "
+                                         "a new agent needs a spec (swarm spawn --role --x --y ...)")
+                self.add_agent(aid, req["spec"])
             k = self.core.index[aid]
             b = self.book[aid]
             now = time.monotonic()
@@ -234,24 +244,99 @@ class World:
             x, y, h = self.core.pose(aid)
             reply = {"ok": True, "run": self.cfg.run, "agent": aid, "tick": self.core.tick,
                      "clock": self.cfg.clock, "pose": [x, y, h],
-                     "brain": BrainConf.from_scenario(self.cfg.scenario, aid).to_json()}
+                     "brain": BrainConf.from_scenario(self.core.scenario, aid).to_json()}
         except wire.WireError as e:
             reply = {"ok": False, "error": str(e)}
         query.reply(wire.world_join_key(self.cfg.run), wire.encode_json(reply))
 
-    def info(self) -> dict:
-        return {
-            "run": self.cfg.run, "scenario": self.cfg.scenario.name, "clock": self.cfg.clock,
+    def add_agent(self, aid: int, spec: dict) -> None:
+        """A new agent joins the run with its own spec (`swarm spawn`); raises WireError."""
+        from pydantic import ValidationError
+
+        from swarm.scenario import AgentSpec, format_validation_error
+
+        if not isinstance(spec, dict):
+            raise wire.WireError("spec: expected a JSON object")
+        try:
+            a = AgentSpec.model_validate({**spec, "id": aid})
+        except ValidationError as e:
+            raise wire.WireError(format_validation_error(f"agent {aid} spec", e).replace("\n", ";")) from None
+        if a.follow is not None and a.follow not in self.core.index:
+            raise wire.WireError(f"agent {aid} spec: follow: no agent has id {a.follow}")
+        self.core.add_agent(a)
+        self.rec.add_agent(self.core.scenario)
+        self.book[aid] = AgentBook()
+        self.out = np.append(self.out, -1)
+        self.sense_pub[aid] = self.session.declare_publisher(wire.agent_key(self.cfg.run, aid, "sense"),
+                                                             express=True)
+        self.event("add", aid, f"new {a.role} at ({a.x:g}, {a.y:g}) m, {a.speed:g} m/s")
+
+    def info(self, sensing: bool = False) -> dict:
+        """The world's view of the run, for the CLI (`swarm agents`, `graph`, `watch`)."""
+        c = self.core
+        s = c.scenario
+        leaders = {a.id for a in s.agents if a.role == "leader"}
+        live = {i for i in c.active_ids()}
+        out = {int(i): (int(o) if o >= 0 else None) for i, o in zip(c.ids, self.out)}
+        now = time.monotonic()
+        agents = {}
+        for a in s.agents:
+            k = c.index[a.id]
+            b = self.book[a.id]
+            root, hops = root_of(a.id, out, leaders & live) if a.id in live else (None, None)
+            dist = math.hypot(c.x[k] - c.target[0], c.y[k] - c.target[1])
+            if root is not None:
+                L = s.agent(root)
+                expected = a.speed * L.orbit_radius / L.speed
+                err = abs(dist - expected)
+            else:
+                expected = err = None
+            agents[str(a.id)] = {
+                "id": a.id, "role": a.role, "state": c.state[k], "alive": c.state[k] == ACTIVE,
+                "pid": b.pid, "host": b.host, "x": float(c.x[k]), "y": float(c.y[k]),
+                "heading": float(c.heading[k]), "speed": a.speed, "u": float(c.u[k]),
+                "out": out[a.id], "root": root, "hops": hops, "distance": dist,
+                "expected_radius": expected, "radial_error": err,
+                "relative_error": None if err is None else err / expected,
+                "orbit_radius": a.orbit_radius,
+                "last_command_age": (now - b.last_cmd_wall) if b.last_cmd_wall else None,
+                "missed": b.missed, "commands": b.commands, "joins": b.joins, "drops": b.drops,
+                "garbage": b.garbage,
+            }
+        info = {
+            "run": self.cfg.run, "scenario": s.name, "clock": self.cfg.clock, "paused": self.paused,
             "endpoint": self.cfg.listen, "pid": os.getpid(), "host": socket.gethostname(),
-            "tick": self.core.tick, "time": self.core.time, "ticks": self.ticks, "dt": self.core.dt,
-            "agents": {str(i): {"state": self.core.state[self.core.index[i]], "pid": b.pid,
-                                "host": b.host, "missed": b.missed, "commands": b.commands}
-                       for i, b in self.book.items()},
-            "garbage": self.garbage,
+            "tick": c.tick, "time": c.time, "ticks": self.ticks, "dt": c.dt,
+            "target": [c.target[0], c.target[1]], "agents": agents,
+            "garbage": self.garbage, "ignored": self.ignored,
         }
+        if sensing:
+            sensed, _, _ = c.sensing()
+            info["sensing"] = [[int(c.ids[i]), int(c.ids[j])] for i, j in zip(*np.nonzero(sensed))]
+        return info
 
     def _on_info(self, query) -> None:
-        query.reply(wire.world_info_key(self.cfg.run), wire.encode_json(self.info()))
+        params = str(query.parameters) if query.parameters is not None else ""
+        query.reply(wire.world_info_key(self.cfg.run), wire.encode_json(self.info("sensing" in params)))
+
+    def _on_admin(self, query) -> None:
+        """pause / resume the world clock."""
+        try:
+            req = wire.decode_json(query.payload.to_bytes() if query.payload else b"", "admin request")
+            cmd = req.get("cmd")
+            if cmd not in ("pause", "resume"):
+                raise wire.WireError(f"admin request: unknown cmd {cmd!r} (pause, resume)")
+            if (cmd == "pause") != self.paused:
+                self.paused = cmd == "pause"
+                self.event(cmd, None, "asked by " + str(req.get("by", "a client")))
+            if self.paused and self.ticking:
+                self.pause_waiters.append(query)  # answered once the tick in progress is done
+                return
+            reply = {"ok": True, "paused": self.paused, "tick": self.core.tick}
+        except wire.WireError as e:
+            self.garbage += 1
+            reply = {"ok": False, "error": str(e)}
+        query.reply(wire.world_admin_key(self.cfg.run), wire.encode_json(reply))
 
     def drain(self, pending: set[int] | None, timeout: float | None) -> bool:
         """Handle one inbox item, waiting up to `timeout` s; False when none came."""
@@ -356,12 +441,24 @@ class World:
         t_next = time.monotonic() + period
         t0_ticks = time.monotonic()
         while self.core.tick < self.ticks:
+            if self.paused:
+                t_pause = time.monotonic()
+                for q in self.pause_waiters:
+                    q.reply(wire.world_admin_key(self.cfg.run),
+                            wire.encode_json({"ok": True, "paused": True, "tick": self.core.tick}))
+                self.pause_waiters.clear()
+                while self.paused:
+                    self.drain(None, 0.1)
+                t_next += time.monotonic() - t_pause
+                t0_ticks += time.monotonic() - t_pause
+            self.ticking = True
             if self.cfg.clock == "lockstep":
                 self.lockstep_tick()
             else:
                 self.realtime_tick(t_next)
                 t_next += period
             self.record_and_step()
+            self.ticking = False
             now = time.monotonic()
             if self.cfg.progress and now - last_note > 2.0:
                 last_note = now
@@ -390,7 +487,7 @@ class World:
                    if self.cfg.clock == "realtime" else {}),
             }
         wall = getattr(self, "wall_ticks", None)
-        result = RunResult(self.cfg.scenario, self.rec, self.events, {
+        result = RunResult(self.core.scenario, self.rec, self.events, {
             "engine": "up", "run": self.cfg.run, "endpoint": self.cfg.listen, "clock": self.cfg.clock,
             "speed": self.cfg.speed, "completed": self.stopped_by is None and c.tick >= self.ticks,
             "stopped_by_signal": self.stopped_by, "garbage_messages": self.garbage,

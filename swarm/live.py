@@ -1,0 +1,149 @@
+"""Talking to a live run from any terminal: find it, query it, poke it. Everything goes
+over zenoh (liveliness, queries, puts), never through files of the running processes,
+so it works the same when the swarm runs on other machines.
+
+Finding a run: with --connect EP, that endpoint; otherwise every Unix socket of local
+runs in the runtime dir ($SWARM_RUNTIME_DIR or /tmp/swarm-<uid>). With --run ID, that
+run; otherwise the only one found.
+"""
+
+from __future__ import annotations
+
+import socket as so
+from dataclasses import dataclass
+
+from swarm import wire
+from swarm.transport import open_client, runtime_dir, socket_path
+
+QUERY_TIMEOUT = 1.0  # s
+
+
+class NoRun(Exception):
+    """No (single) run matches; the message says what was looked at."""
+
+
+@dataclass(frozen=True)
+class RunRef:
+    run: str
+    endpoint: str
+
+
+def _socket_answers(path) -> bool:
+    s = so.socket(so.AF_UNIX, so.SOCK_STREAM)
+    s.settimeout(0.2)
+    try:
+        s.connect(str(path))
+        return True
+    except OSError:
+        return False
+    finally:
+        s.close()
+
+
+def local_endpoints() -> list[str]:
+    """Endpoints of local runs whose sockets accept connections (stale ones are skipped)."""
+    d = runtime_dir()
+    return [f"unixsock-stream/{p}" for p in sorted(d.glob("*.sock")) if _socket_answers(p)]
+
+
+def runs_on(endpoint: str, timeout: float = 0.5) -> list[str]:
+    """Run ids whose world is alive on `endpoint` ([] if it does not answer)."""
+    path = socket_path(endpoint)
+    if path is not None and not _socket_answers(path):
+        return []
+    try:
+        ses = open_client(endpoint, timeout_ms=int(timeout * 1000))
+    except Exception:
+        return []
+    try:
+        replies = ses.liveliness().get(wire.ANY_WORLD_ALIVE, timeout=timeout)
+        return sorted({wire.run_of_key(str(r.ok.key_expr)) for r in replies if r.ok is not None})
+    finally:
+        ses.close()
+
+
+def find_runs(connect: str | None = None) -> list[RunRef]:
+    endpoints = [connect] if connect else local_endpoints()
+    return [RunRef(run, ep) for ep in endpoints for run in runs_on(ep)]
+
+
+def resolve(connect: str | None = None, run: str | None = None) -> RunRef:
+    """The run a command should talk to, or NoRun with a one-line reason."""
+    where = connect or f"local runs in {runtime_dir()}"
+    if run is not None and connect is not None:
+        try:
+            wire.check_run_id(run)
+        except wire.WireError as e:
+            raise NoRun(str(e)) from None
+    found = find_runs(connect)
+    if run is not None:
+        found = [r for r in found if r.run == run]
+    if not found:
+        what = f"run {run!r}" if run else "no swarm is running"
+        raise NoRun(f"{what} not found: looked at {where}" if run else f"{what}: looked at {where} "
+                    "(start one with `swarm up SCENARIO`, or pass --connect ENDPOINT)")
+    if len(found) > 1:
+        raise NoRun(f"{len(found)} runs found ({', '.join(f'{r.run} on {r.endpoint}' for r in found)}); "
+                    "pick one with --run")
+    return found[0]
+
+
+class LiveRun:
+    """An open session to one run: `with LiveRun(ref) as live: live.info()`."""
+
+    def __init__(self, ref: RunRef):
+        self.ref = ref
+        self.session = None
+
+    def __enter__(self) -> "LiveRun":
+        try:
+            self.session = open_client(self.ref.endpoint, timeout_ms=1000)
+        except Exception as e:
+            raise NoRun(f"cannot connect to {self.ref.endpoint}: {e}") from None
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.session is not None:
+            self.session.close()
+
+    def _get_one(self, selector: str, payload: bytes | None = None, what: str = "reply") -> dict:
+        for r in self.session.get(selector, payload=payload, timeout=QUERY_TIMEOUT):
+            if r.ok is not None:
+                return wire.decode_json(r.ok.payload.to_bytes(), what)
+        raise NoRun(f"the world of run {self.ref.run} did not answer (it may have ended)")
+
+    def world_alive(self) -> bool:
+        replies = self.session.liveliness().get(wire.world_alive_key(self.ref.run), timeout=0.5)
+        return any(r.ok is not None for r in replies)
+
+    def info(self, sensing: bool = False) -> dict:
+        """The world's view: tick, clock, paused, and per agent pose, state, out, errors..."""
+        sel = wire.world_info_key(self.ref.run) + ("?sensing=1" if sensing else "")
+        return self._get_one(sel, what="world info")
+
+    def statuses(self) -> dict[int, dict]:
+        """Each live agent's own status (its chosen out-neighbour, hops, phase, pid...)."""
+        out: dict[int, dict] = {}
+        for r in self.session.get(wire.agent_key(self.ref.run, "*", "status"), timeout=QUERY_TIMEOUT):
+            if r.ok is None:
+                continue
+            try:
+                aid = wire.agent_of_key(str(r.ok.key_expr))
+                st = wire.decode_status(r.ok.payload.to_bytes())
+            except wire.WireError:
+                continue
+            if st["id"] == aid:
+                out[aid] = st
+        return out
+
+    def admin(self, cmd: str, by: str = "swarm cli") -> dict:
+        rep = self._get_one(wire.world_admin_key(self.ref.run),
+                            wire.encode_json({"cmd": cmd, "by": by}), "admin reply")
+        if not rep.get("ok"):
+            raise NoRun(str(rep.get("error")))
+        return rep
+
+    def signal_agent(self, agent_id: int, signal_name: str) -> None:
+        """Ask agent `agent_id` over zenoh to take a signal (KILL, TERM or STOP)."""
+        self.session.put(wire.agent_key(self.ref.run, agent_id, "ctl"),
+                         wire.encode_json({"kind": "signal", "signal": signal_name}))
