@@ -49,6 +49,7 @@ class AgentBrain:
         self.max_hops = max_hops
         self.spec = spec
         self.sensing = sensing
+        self.gains = gains
         self.dt = dt
         self.is_leader = spec.role == "leader"
         self.law = None if self.is_leader else make_follower_law(gains.law, gains.c1, gains.c2)
@@ -56,6 +57,9 @@ class AgentBrain:
         self.plan_tick = 0
         self.out: int | None = None
         self.last_u = 0.0
+        self.hops: int | None = None  # hops advertised last tick (rooted rule)
+        self.feasible: int | None = None  # rooted rule: accept only agents with fewer hops
+        self.unrooted_ticks = 0
 
     # -- leaders -------------------------------------------------------------------
     def _leader(self, frame: SensorFrame) -> Decision:
@@ -88,11 +92,13 @@ class AgentBrain:
     # -- followers -----------------------------------------------------------------
     def _follower(self, frame: SensorFrame) -> Decision:
         choice = select(frame.contacts, mode=self.sensing.selection, pinned=self.spec.follow,
-                        current=self.out, hysteresis=self.sensing.hysteresis)
+                        current=self.out, hysteresis=self.sensing.hysteresis, below=self._below())
         self.out = choice.out
         if choice.contact is None:
-            # Nobody in sight: loiter on the last turn rate instead of spinning or bolting.
-            return Decision(frame.tick, self.last_u, None, "lost", choice.fallback)
+            # Nobody (rooted) in sight: loiter on a circle of radius v / C2, turning the way it
+            # last turned, until somebody shows up: neither a spin nor bolting off in a line.
+            u = saturate(math.copysign(self.gains.c2, self.last_u or 1.0), self.spec.max_turn_rate)
+            return Decision(frame.tick, u, None, "lost", choice.fallback)
         c = choice.contact
         u = saturate(self.law(frame.heading, c.heading, c.bearing), self.spec.max_turn_rate)
         if not math.isfinite(u):
@@ -100,7 +106,23 @@ class AgentBrain:
         hops = c.hops + 1 if 0 <= c.hops < self.max_hops else None
         return Decision(frame.tick, u, c.id, "track", choice.fallback, hops)
 
+    def _below(self) -> int | None:
+        """Rooted rule: the hop count a new out-neighbour must beat (None: anyone rooted).
+
+        While rooted: its own hops. After losing its path: the hops it had, until stale
+        advertisements of its former descendants have drained (max_hops ticks)."""
+        if self.sensing.selection != "rooted":
+            return None
+        if self.hops is not None:
+            return self.hops
+        return self.feasible if self.unrooted_ticks < self.max_hops else None
+
     def decide(self, frame: SensorFrame) -> Decision:
         d = self._leader(frame) if self.is_leader else self._follower(frame)
         self.last_u = d.u
+        if d.hops is not None:
+            self.feasible, self.unrooted_ticks = d.hops, 0
+        else:
+            self.unrooted_ticks += 1
+        self.hops = d.hops
         return d

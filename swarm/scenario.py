@@ -94,8 +94,10 @@ class SensingSpec(_Strict):
     fov: Annotated[float, Field(gt=0, le=2 * math.pi)] | None = Field(
         None, description="full field of view (rad) centred on the heading; 2*pi or absent = all round"
     )
-    selection: Literal["nearest", "fixed"] = Field(
-        "nearest", description="nearest sensed agent, or the agent named by each follower's `follow`"
+    selection: Literal["nearest", "fixed", "rooted"] = Field(
+        "nearest",
+        description="nearest sensed agent; the agent named by each follower's `follow`; or "
+                    "rooted: the nearest sensed agent that advertises a path to a leader",
     )
     hysteresis: Annotated[float, Field(ge=0, lt=1)] = Field(
         0.0,

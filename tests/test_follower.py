@@ -117,12 +117,14 @@ def test_follower_falls_back_and_reports_it(base):
     assert d.u == bearing_law(0.0, 1.0, 0.5, s.gains.c1, s.gains.c2)
 
 
-def test_follower_lost_holds_last_command(base):
-    brain, _ = _brain(base)
+def test_follower_lost_loiters_at_c2_in_its_last_direction(base):
+    brain, s = _brain(base)
     d0 = brain.decide(_frame(0, 0.0, Contact(1, 1.0, 1.0, 3.0)))
     d1 = brain.decide(_frame(1, 0.0))
     assert d1.phase == "lost" and d1.out is None
-    assert d1.u == d0.u != 0.0
+    assert d0.u != 0.0 and d1.u == math.copysign(s.gains.c2, d0.u)
+    d2 = brain.decide(_frame(2, 0.0))
+    assert d2.u == d1.u  # a steady loiter circle of radius v / C2, not a spin
 
 
 def test_follower_saturates_at_max_turn_rate(base):

@@ -40,7 +40,8 @@ class WorldCore:
         self.limit = np.array([a.max_turn_rate or math.inf for a in agents], dtype=float)
         self.is_leader = np.array([a.role == "leader" for a in agents], dtype=bool)
         self.u = np.zeros(len(agents))  # last applied turn rate (rad/s)
-        self.hops = np.full(len(agents), -1, dtype=np.int64)  # advertised hops to a leader (-1 none)
+        # advertised hops to a leader (-1 none); leaders advertise 0 from the start
+        self.hops = np.where(self.is_leader, 0, -1).astype(np.int64)
         self.state = [ACTIVE if joined else GONE for _ in agents]
         self.target = (scenario.target.x, scenario.target.y)
         self.dt = scenario.run.dt
@@ -118,6 +119,7 @@ class WorldCore:
         k = self.index[agent_id]
         if self.state[k] != ACTIVE:
             self.u[k] = 0.0
+            self.hops[k] = 0 if self.is_leader[k] else -1
         self.state[k] = ACTIVE
 
     def add_agent(self, spec) -> None:
@@ -134,7 +136,7 @@ class WorldCore:
         self.limit = np.append(self.limit, spec.max_turn_rate or math.inf)
         self.is_leader = np.append(self.is_leader, spec.role == "leader")
         self.u = np.append(self.u, 0.0)
-        self.hops = np.append(self.hops, -1)
+        self.hops = np.append(self.hops, 0 if spec.role == "leader" else -1)
         self.state.append(GONE)
 
     def pose(self, agent_id: int) -> tuple[float, float, float]:
