@@ -88,6 +88,9 @@ class AgentNode:
         except (ValueError, AttributeError, TypeError) as e:
             raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: unusable join reply: {e}") from None
         self.spec = self.conf.agent
+        self.key = reply.get("key")
+        if isinstance(self.key, bool) or not isinstance(self.key, int) or not 0 <= self.key < 2**64:
+            raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: join reply without a valid claim key")
         if self.brain.is_leader:
             import agents.leader  # noqa: F401  (load numpy and the planner before the first frame)
         self.inbox: queue.SimpleQueue = queue.SimpleQueue()
@@ -168,7 +171,8 @@ class AgentNode:
         if frame.tick <= self.last_tick:
             return  # duplicate or old frame
         d = self.brain.decide(frame)
-        self.cmd_pub.put(wire.encode_cmd(wire.Command(self.id, frame.tick, d.u, d.out, d.phase, d.hops)))
+        self.cmd_pub.put(wire.encode_cmd(wire.Command(self.id, frame.tick, d.u, d.out, d.phase, d.hops,
+                                                      self.key)))
         self.commands += 1
         self.last_tick = frame.tick
         if self.last is None or d.out != self.last.out or d.phase != self.last.phase:
@@ -184,11 +188,14 @@ class AgentNode:
                 self.brain = self.new_brain()
                 self.last_tick, self.last = -1, None
                 _log(f"[agent {self.id}] the world is back; rejoining")
+                self.key = claim(self.session, self.run, self.id).get("key", 0)
             self.world_alive = True
             return
-        if self.stalled and self._world_still_there():
-            _log(f"[agent {self.id}] this process was stalled ({self.stalled:.1f} s) and lost its link; "
-                 "the world is still there: rejoining")
+        # A DELETE also comes when only our own link dropped (after a stall: SIGSTOP, a
+        # starved CPU): ask again before concluding; a dead world is still noticed within ~0.6 s.
+        if self._world_still_there(3.0 if self.stalled else 0.6):
+            _log(f"[agent {self.id}] lost the world's token but the world is still there "
+                 f"(stalled {self.stalled:.1f} s before): carrying on")
             return
         self.world_alive = False
         if not self.wait_world:
@@ -196,14 +203,15 @@ class AgentNode:
                                              "(use --wait-world to wait for it)")
         _log(f"[agent {self.id}] the world vanished; waiting for it to come back")
 
-    def _world_still_there(self, timeout: float = 3.0) -> bool:
-        """After a stall (SIGSTOP, starvation) our own link may have expired, which looks
-        like the world vanishing: wait for the link to come back and ask again."""
+    def _world_still_there(self, timeout: float) -> bool:
+        """Wait up to `timeout` s for a link to the hub and the world's token on it."""
         t_end = time.monotonic() + timeout
         while time.monotonic() < t_end:
             if list(self.session.info.routers_zid()):
-                replies = self.session.liveliness().get(wire.world_alive_key(self.run), timeout=1.0)
-                return any(r.ok is not None for r in replies)
+                left = max(0.1, t_end - time.monotonic())
+                replies = self.session.liveliness().get(wire.world_alive_key(self.run), timeout=min(left, 0.5))
+                if any(r.ok is not None for r in replies):
+                    return True
             time.sleep(0.05)
         return False
 

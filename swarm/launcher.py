@@ -56,6 +56,7 @@ class Launcher:
         self.events: list[dict] = []
         self.logs = cfg.out / "logs"
         self.failed = False
+        self.notices: list[bytes] = []  # world/control notices (faults to carry out)
 
     # -- processes --------------------------------------------------------------------------
     def _spawn(self, args: list[str], log_name: str) -> subprocess.Popen:
@@ -221,7 +222,9 @@ class Launcher:
             session = self.connect()  # agents start once the world listens
             if session is not None:
                 self._subs = [session.declare_subscriber(wire.truth_key(self.cfg.run), self._on_truth),
-                              session.declare_subscriber(wire.events_key(self.cfg.run), self._on_event)]
+                              session.declare_subscriber(wire.events_key(self.cfg.run), self._on_event),
+                              session.declare_subscriber(wire.world_control_key(self.cfg.run),
+                                                         lambda s: self.notices.append(s.payload.to_bytes()))]
                 for a in self.cfg.scenario.agents:
                     self.start_agent(a.id)
             elif self.stop_signal is None and self.world_exit_code() is None:
@@ -233,8 +236,10 @@ class Launcher:
                 code = self.world_exit_code()
                 if code is not None:
                     break
+                for _ in range(5 if self.cfg.scenario.faults else 1):
+                    self.carry_out_faults(session)
+                    time.sleep(0.05 if self.cfg.scenario.faults else 0.25)
                 show(self.progress(), time.monotonic() - t0)
-                time.sleep(0.25)
         finally:
             if session is not None:
                 session.close()
@@ -244,6 +249,32 @@ class Launcher:
         if self.failed or self.world is None:
             return EXIT_WORLD_FAILED
         return self.world.returncode
+
+    def carry_out_faults(self, session) -> None:
+        """Scripted process faults the world asks for (it holds its clock meanwhile)."""
+        while self.notices:
+            try:
+                msg = wire.decode_json(self.notices.pop(0), "control")
+            except wire.WireError:
+                continue
+            if msg.get("kind") != "fault" or not isinstance(msg.get("fault"), dict):
+                continue
+            f, index = msg["fault"], msg.get("index")
+            aid, kind = f.get("agent"), f.get("kind")
+            p = self.agents.get(aid)
+            running = p is not None and p.poll() is None
+            if kind == "restart":
+                if not running:
+                    self.start_agent(aid)
+            elif running and kind in ("kill", "freeze", "thaw"):
+                sig = {"kill": signal.SIGKILL, "freeze": signal.SIGSTOP, "thaw": signal.SIGCONT}[kind]
+                try:
+                    os.kill(p.pid, sig)
+                except ProcessLookupError:
+                    pass
+            if session is not None:
+                list(session.get(wire.world_admin_key(self.cfg.run), timeout=2.0,
+                                 payload=wire.encode_json({"cmd": "fault_done", "index": index})))
 
     def _on_signal(self, signum, _frame) -> None:
         self.stop_signal = signum

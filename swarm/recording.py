@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from swarm.scenario import Scenario
-from world.metrics import agent_metrics, converged
+from world.metrics import agent_metrics, converged, recovery, relative_errors
 
 
 class Recorder:
@@ -30,6 +30,7 @@ class Recorder:
         self.u = np.full((ticks + 1, n), np.nan)
         self.out = np.full((ticks + 1, n), -1, dtype=np.int64)
         self.alive = np.zeros((ticks + 1, n), dtype=bool)
+        self.missed = np.zeros(ticks + 1, dtype=np.int64)  # live agents whose command was held
 
     def add_agent(self, scenario: Scenario) -> None:
         """One more column (an agent added at run time); earlier rows say it was absent."""
@@ -40,7 +41,7 @@ class Recorder:
         self.out = grow(self.out, -1)
         self.alive = grow(self.alive, False)
 
-    def record(self, tick: int, time: float, x, y, heading, u, out, alive) -> None:
+    def record(self, tick: int, time: float, x, y, heading, u, out, alive, missed: int = 0) -> None:
         """Store tick `tick`: pose at t_k and the turn rate applied over [t_k, t_k+1)."""
         self.t[tick] = time
         self.x[tick] = x
@@ -49,6 +50,7 @@ class Recorder:
         self.u[tick] = u
         self.out[tick] = out
         self.alive[tick] = alive
+        self.missed[tick] = missed
         self.rows = max(self.rows, tick + 1)
 
     def arrays(self) -> dict[str, np.ndarray]:
@@ -62,7 +64,7 @@ class Recorder:
             "target": np.array([s.target.x, s.target.y], dtype=float),
             "dt": np.array(s.run.dt),
             "t": self.t[:n], "x": self.x[:n], "y": self.y[:n], "heading": self.heading[:n],
-            "u": self.u[:n], "out": self.out[:n], "alive": self.alive[:n],
+            "u": self.u[:n], "out": self.out[:n], "alive": self.alive[:n], "missed": self.missed[:n],
         }
 
 
@@ -86,6 +88,14 @@ class RunResult:
             if aid in agents:
                 agents[aid].update(more)
         ticks = max(len(a["t"]) - 1, 0)
+        faults = []
+        if self.scenario.faults and len(a["t"]) > 1:
+            err = relative_errors(ids=a["ids"], roles=a["role"], speeds=a["speed"],
+                                  orbit_radius=a["orbit_radius"], x=a["x"], y=a["y"], alive=a["alive"],
+                                  out=a["out"], target=a["target"])
+            specs = [{"index": i, **{k: v for k, v in f.model_dump().items() if v is not None}}
+                     for i, f in enumerate(self.scenario.faults)]
+            faults = recovery(specs, a["t"], err, a["missed"], self.events)
         return {
             "scenario": self.scenario.name,
             "converged": converged(agents),
@@ -94,6 +104,7 @@ class RunResult:
             "dt": self.scenario.run.dt,
             "agents": agents,
             "events": self.events,
+            "faults": faults,
             **self.extra,
         }
 

@@ -142,6 +142,36 @@ class AgentSpec(_Strict):
         return 1 if self.direction == "ccw" else -1
 
 
+FAULT_KINDS = ("kill", "restart", "freeze", "thaw", "partition", "loss", "delay", "noise")
+PROCESS_FAULTS = ("kill", "restart", "freeze", "thaw")
+
+
+class FaultSpec(_Strict):
+    """[[faults]]: one scripted fault, at a simulated time."""
+
+    at: Annotated[float, Field(ge=0, allow_inf_nan=False)] = Field(description="simulated time (s)")
+    kind: Literal["kill", "restart", "freeze", "thaw", "partition", "loss", "delay", "noise"]
+    agent: int | None = Field(None, description="agent id; loss/delay/noise without it hit every agent")
+    duration: PositiveFloat | None = Field(None, description="partition/loss/delay/noise: how long (s)")
+    probability: Annotated[float, Field(ge=0, le=1)] | None = Field(None, description="loss: per message")
+    what: Literal["sense", "cmd", "both"] = Field("both", description="loss: which messages")
+    delay: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = Field(
+        None, description="delay: added latency of sensor frames (s of simulated time)")
+    std: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = Field(
+        None, description="noise: standard deviation on sensed bearings and headings (rad)")
+
+    @model_validator(mode="after")
+    def _fields(self) -> "FaultSpec":
+        if self.kind in PROCESS_FAULTS + ("partition",) and self.agent is None:
+            raise ValueError(f"agent: a {self.kind} fault needs an agent id")
+        if self.kind in ("partition", "loss", "delay", "noise") and self.duration is None:
+            raise ValueError(f"duration: a {self.kind} fault needs a duration (s)")
+        needs = {"loss": "probability", "delay": "delay", "noise": "std"}.get(self.kind)
+        if needs and getattr(self, needs) is None:
+            raise ValueError(f"{needs}: a {self.kind} fault needs it")
+        return self
+
+
 class Scenario(_Strict):
     """A whole scenario file."""
 
@@ -152,6 +182,7 @@ class Scenario(_Strict):
     gains: GainsSpec
     sensing: SensingSpec = SensingSpec()
     agents: list[AgentSpec] = Field(min_length=1)
+    faults: list[FaultSpec] = Field(default_factory=list, description="scripted faults, by time")
 
     @field_validator("agents")
     @classmethod
@@ -174,6 +205,9 @@ class Scenario(_Strict):
                     raise ValueError(f"agents[{k}].follow: no agent has id {a.follow}")
                 if a.follow == a.id:
                     raise ValueError(f"agents[{k}].follow: an agent cannot follow itself")
+        for k, f in enumerate(self.faults):
+            if f.agent is not None and f.agent not in ids:
+                raise ValueError(f"faults[{k}].agent: no agent has id {f.agent}")
         if self.sensing.selection == "fixed":
             by_id = {a.id: a for a in self.agents}
             for k, a in enumerate(self.agents):

@@ -116,8 +116,8 @@ def agent_of_key(key: str) -> int:
 SENSE_HEAD = struct.Struct("<BBBBiqddddI")
 CONTACT = struct.Struct("<idddh")  # id, bearing (rad), heading (rad), range (m), advertised hops (-1 none)
 # cmd: kind, version, phase code, reserved, agent, tick, u (rad/s), out-neighbour (-1 none),
-#      advertised hops to a leader (-1 none)
-CMD = struct.Struct("<BBBBiqdih")
+#      advertised hops to a leader (-1 none), key (the claim key from the join reply)
+CMD = struct.Struct("<BBBBiqdihQ")
 # truth: kind, version, reserved x2, n agents, tick, time (s); then n agent records.
 TRUTH_HEAD = struct.Struct("<BBBBIqd")
 TRUTH_FIELDS = [("id", "<i4"), ("x", "<f8"), ("y", "<f8"), ("heading", "<f8"),
@@ -190,24 +190,25 @@ class Command:
     out: int | None
     phase: str
     hops: int | None = None  # advertised hops to a leader
+    key: int = 0  # the claim key the world gave this agent's process (proves who sends)
 
 
 def encode_cmd(c: Command) -> bytes:
     return CMD.pack(KIND_CMD, VERSION, PHASES.index(c.phase), 0, c.agent, c.tick, c.u,
-                    -1 if c.out is None else c.out, -1 if c.hops is None else c.hops)
+                    -1 if c.out is None else c.out, -1 if c.hops is None else c.hops, c.key)
 
 
 def decode_cmd(buf: bytes) -> Command:
     if len(buf) != CMD.size:
         raise WireError(f"command: {len(buf)} bytes, expected {CMD.size}")
-    _, _, phase, _, agent, tick, u, out, hops = _check_head(buf, CMD, KIND_CMD, "command")
+    _, _, phase, _, agent, tick, u, out, hops, key = _check_head(buf, CMD, KIND_CMD, "command")
     if not math.isfinite(u):
         raise WireError("command: non-finite turn rate")
     if phase >= len(PHASES):
         raise WireError(f"command: unknown phase code {phase}")
     if tick < 0:
         raise WireError(f"command: negative tick {tick}")
-    return Command(agent, tick, u, None if out < 0 else out, PHASES[phase], None if hops < 0 else hops)
+    return Command(agent, tick, u, None if out < 0 else out, PHASES[phase], None if hops < 0 else hops, key)
 
 
 def encode_truth(tick: int, time: float, ids, x, y, heading, u, out, states: list[str]) -> bytes:

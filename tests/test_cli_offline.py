@@ -14,7 +14,7 @@ from swarm.scenario import load_scenario
 
 SCENARIOS = sorted((Path(__file__).resolve().parent.parent / "scenarios").glob("*.toml"))
 KEYS = {"ids", "role", "speed", "orbit_radius", "target", "dt", "t", "x", "y", "heading", "u",
-        "out", "alive"}
+        "out", "alive", "missed"}
 COMMANDS = ["check", "schema", "sim", "plot"]
 
 

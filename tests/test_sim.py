@@ -18,7 +18,7 @@ from world.metrics import agent_metrics, angular_rate, converged, root_of, settl
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 KEYS = {"ids", "role", "speed", "orbit_radius", "target", "dt", "t", "x", "y", "heading", "u",
-        "out", "alive"}
+        "out", "alive", "missed"}
 
 
 # -- engine ---------------------------------------------------------------------------------

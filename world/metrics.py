@@ -100,3 +100,63 @@ def converged(agents: dict[str, dict], tol: float = CONVERGED_TOL) -> bool:
     return bool(live) and all(
         a["relative_error"] is not None and a["relative_error"] < tol for a in live
     )
+
+
+def relative_errors(*, ids, roles, speeds, orbit_radius, x, y, alive, out, target) -> np.ndarray:
+    """(T, N) relative radial error |r - R_i| / R_i per tick, with R_i from that tick's graph
+    (NaN where the agent is not alive or has no path to a live leader)."""
+    T, N = x.shape
+    col = {int(i): k for k, i in enumerate(ids)}
+    leaders = {int(i) for i, r in zip(ids, roles) if r == "leader"}
+    r = np.hypot(x - target[0], y - target[1])
+    err = np.full((T, N), np.nan)
+    cache: dict[tuple, np.ndarray] = {}
+    for k in range(T):
+        key = (out[k].tobytes(), alive[k].tobytes())
+        R = cache.get(key)
+        if R is None:
+            live = {int(i) for i, a in zip(ids, alive[k]) if a}
+            o = {int(i): (int(j) if j >= 0 else None) for i, j in zip(ids, out[k])}
+            R = np.full(N, np.nan)
+            for i in live:
+                root, _ = root_of(i, o, leaders & live)
+                if root is not None:
+                    c = col[root]
+                    R[col[i]] = speeds[col[i]] * orbit_radius[c] / speeds[c]
+            cache[key] = R
+        err[k] = np.abs(r[k] - R) / R
+    return err
+
+
+def recovery(faults: list[dict], t: np.ndarray, err: np.ndarray, missed: np.ndarray, events: list[dict],
+             band: float = SETTLING_BAND) -> list[dict]:
+    """Per scripted fault (dicts with at, kind, agent...): the time from the fault until every
+    live agent's radial error is back inside the band for good (up to the next fault, or the
+    end), the worst relative error meanwhile, commands missed and neighbour switches."""
+    dt = float(t[1] - t[0]) if len(t) > 1 else 1.0
+    starts = sorted(int(round(f["at"] / dt)) for f in faults)
+    out = []
+    for f in faults:
+        k0 = int(round(f["at"] / dt))
+        later = [s for s in starts if s > k0]
+        k1 = min(later[0] if later else len(t), len(t))
+        window = err[k0:k1]
+        with np.errstate(invalid="ignore"):
+            worst_row = np.nanmax(np.where(np.isnan(window), -np.inf, window), axis=1) if len(window) else np.array([])
+        bad = np.flatnonzero(~(worst_row <= band) & np.isfinite(worst_row)) if len(window) else np.array([])
+        no_live = np.all(np.isnan(window), axis=1) if len(window) else np.array([])
+        if len(window) == 0 or (len(bad) and bad[-1] == len(window) - 1) or (len(no_live) and no_live[-1]):
+            rec_time = None  # still outside the band when the window closed
+        else:
+            rec_time = float((bad[-1] + 1) * dt) if len(bad) else 0.0
+        finite = worst_row[np.isfinite(worst_row)] if len(window) else np.array([])
+        out.append({
+            **f,
+            "tick": k0,
+            "window_end_time": float(t[k1 - 1]) if k1 > k0 else None,
+            "recovery_time": rec_time,
+            "worst_relative_error": float(finite.max()) if finite.size else None,
+            "commands_missed": int(missed[k0:k1].sum()),
+            "switches": sum(1 for e in events if e.get("kind") == "switch" and k0 <= e.get("tick", -1) < k1),
+        })
+    return out

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import os
 import queue
+import secrets
 import signal
 import socket
 import sys
@@ -30,6 +31,7 @@ from swarm.recording import Recorder, RunResult, write_run
 from swarm.scenario import Scenario
 from swarm.transport import open_hub, socket_path
 from world.core import ACTIVE, GONE, WorldCore
+from world.faults import FaultPlan, fault_event
 from world.metrics import root_of
 
 CLAIM_TTL = 10.0  # s: an accepted join claim waits this long for the agent's token
@@ -61,6 +63,9 @@ class AgentBook:
     joins: int = 0
     drops: int = 0
     garbage: int = 0
+    key: int | None = None  # claim key of the process that owns the id; commands must carry it
+    rogue: int = 0  # commands on this agent's key without its owner's claim key
+    rogue_noted: float = 0.0
 
 
 @dataclass
@@ -96,6 +101,11 @@ class World:
         self.deadline = self.cfg.deadline or s.run.lockstep_deadline
         self.stopped_by: int | None = None
         self.truth_sent = 0.0
+        self.plan = FaultPlan(s.faults, s.run.dt, s.run.seed)
+        self.network_faults = self.plan.affects_network()
+        self.tick_missed = 0  # commands held at this tick (deadline, lost frame/command)
+        self.faults_done: set[int] = set()
+        self.held = 0.0  # wall s the clock held for process faults
         self.paused = False
         self.ticking = False  # between the first frame of a tick and its step
         self.pause_waiters: list = []
@@ -175,6 +185,20 @@ class World:
             self.ignored += 1
             return
         b = self.book[aid]
+        if b.key is None or cmd.key != b.key:
+            # Not from the process that claimed this id (a rogue session, or a stale process).
+            b.rogue += 1
+            if time.monotonic() - b.rogue_noted > 1.0:
+                b.rogue_noted = time.monotonic()
+                self.event("rogue", aid, f"command without the owner's claim key ignored ({b.rogue} so far)")
+            return
+        if self.network_faults and cmd.tick == self.core.tick and self.plan.command_lost(cmd.tick, aid):
+            b.last_cmd_tick = cmd.tick
+            b.missed += 1
+            self.tick_missed += 1
+            if pending is not None:
+                pending.discard(aid)
+            return
         if cmd.tick <= b.last_cmd_tick:
             self.ignored += 1  # duplicate or late
             return
@@ -211,7 +235,7 @@ class World:
             rejoin = b.joins > 0
             self.core.join(aid)
             b.joins += 1
-            b.claim_until = 0.0
+            b.claim_until = 0.0  # the key stays: a thawed process rejoins with the claim it had
             b.last_cmd_tick = self.core.tick - 1
             self.event("rejoin" if rejoin else "join", aid,
                        f"liveliness token appeared (pid {b.pid} on {b.host})", pid=b.pid, host=b.host)
@@ -238,11 +262,12 @@ class World:
             k = self.core.index[aid]
             b = self.book[aid]
             now = time.monotonic()
-            if self.core.state[k] == ACTIVE or b.claim_until > now:
+            if (self.core.state[k] == ACTIVE and b.key is not None) or b.claim_until > now:
                 raise wire.WireError(f"agent {aid} is already live (pid {b.pid} on {b.host})")
             b.pid, b.host, b.claim_until = req["pid"], req["host"], now + CLAIM_TTL
+            b.key = secrets.randbits(64)
             x, y, h = self.core.pose(aid)
-            reply = {"ok": True, "run": self.cfg.run, "agent": aid, "tick": self.core.tick,
+            reply = {"ok": True, "run": self.cfg.run, "agent": aid, "tick": self.core.tick, "key": b.key,
                      "clock": self.cfg.clock, "pose": [x, y, h],
                      "brain": BrainConf.from_scenario(self.core.scenario, aid).to_json()}
         except wire.WireError as e:
@@ -301,7 +326,7 @@ class World:
                 "orbit_radius": a.orbit_radius,
                 "last_command_age": (now - b.last_cmd_wall) if b.last_cmd_wall else None,
                 "missed": b.missed, "commands": b.commands, "joins": b.joins, "drops": b.drops,
-                "garbage": b.garbage,
+                "garbage": b.garbage, "rogue_commands": b.rogue,
             }
         info = {
             "run": self.cfg.run, "scenario": s.name, "clock": self.cfg.clock, "paused": self.paused,
@@ -324,8 +349,15 @@ class World:
         try:
             req = wire.decode_json(query.payload.to_bytes() if query.payload else b"", "admin request")
             cmd = req.get("cmd")
+            if cmd == "fault_done":
+                idx = req.get("index")
+                if isinstance(idx, bool) or not isinstance(idx, int):
+                    raise wire.WireError("admin request: fault_done needs an integer index")
+                self.faults_done.add(idx)
+                query.reply(wire.world_admin_key(self.cfg.run), wire.encode_json({"ok": True}))
+                return
             if cmd not in ("pause", "resume"):
-                raise wire.WireError(f"admin request: unknown cmd {cmd!r} (pause, resume)")
+                raise wire.WireError(f"admin request: unknown cmd {cmd!r} (pause, resume, fault_done)")
             if (cmd == "pause") != self.paused:
                 self.paused = cmd == "pause"
                 self.event(cmd, None, "asked by " + str(req.get("by", "a client")))
@@ -369,6 +401,17 @@ class World:
     def publish_frames(self) -> set[int]:
         """Send every active agent its frame of this tick (the same numbers as WorldCore.frames)."""
         c = self.core
+        if self.network_faults:  # through the fault plan: partition, loss, delay, noise
+            sent = set()
+            for aid, frame in c.frames().items():
+                frame = self.plan.sense(frame)
+                if frame is None:
+                    self.tick_missed += 1
+                    self.book[aid].missed += 1
+                    continue
+                self.sense_pub[aid].put(wire.encode_sense(frame))
+                sent.add(aid)
+            return sent
         sensed, bearing, rng = c.sensing()
         sent = set()
         tx, ty = c.target
@@ -385,7 +428,8 @@ class World:
     def record_and_step(self) -> None:
         c = self.core
         u = c.applied()
-        self.rec.record(c.tick, c.time, c.x, c.y, c.heading, u, self.out, c.alive_mask())
+        self.rec.record(c.tick, c.time, c.x, c.y, c.heading, u, self.out, c.alive_mask(), self.tick_missed)
+        self.tick_missed = 0
         self.publish_truth(u)
         c.step()
 
@@ -403,6 +447,36 @@ class World:
         except Exception:  # an observer's problem never stops the world
             pass
 
+    def _wait(self, cond, timeout: float) -> bool:
+        t_end = time.monotonic() + timeout
+        while not cond():
+            left = t_end - time.monotonic()
+            if left <= 0:
+                return False
+            self.drain(None, min(left, 0.05))
+        return True
+
+    def carry_out(self, index: int, f) -> None:
+        """A scripted fault is due at this tick. Network faults are the fault plan's job;
+        process faults are asked of the launcher (it owns the processes) while the clock
+        holds, and then, for kill and restart, the world waits to see the drop or the join."""
+        self.event("fault", f.agent, f"scripted {f.kind}", fault=fault_event(index, f))
+        if f.kind not in ("kill", "restart", "freeze", "thaw"):
+            return
+        t_hold = time.monotonic()
+        self.control_pub.put(wire.encode_json({"kind": "fault", "index": index, "tick": self.core.tick,
+                                               "fault": fault_event(index, f)}))
+        if not self._wait(lambda: index in self.faults_done, 5.0):
+            self.event("fault_skipped", f.agent, f"nobody carried out the {f.kind} (no launcher?)")
+            return
+        k = self.core.index[f.agent]
+        if f.kind == "kill":
+            self._wait(lambda: self.core.state[k] != ACTIVE, 3.0)
+        elif f.kind == "restart":
+            if not self._wait(lambda: self.core.state[k] == ACTIVE, 20.0):
+                self.event("fault_late", f.agent, "the restarted agent did not rejoin within 20 s")
+        self.held += time.monotonic() - t_hold
+
     def lockstep_tick(self) -> None:
         pending = self.publish_frames()
         t_end = time.monotonic() + self.deadline
@@ -411,6 +485,7 @@ class World:
             if left <= 0:
                 for aid in pending:
                     self.book[aid].missed += 1
+                self.tick_missed += len(pending)
                 break
             self.drain(pending, left)
         while self.drain(None, 0):  # joins/drops that arrived meanwhile take effect now
@@ -451,6 +526,13 @@ class World:
                     self.drain(None, 0.1)
                 t_next += time.monotonic() - t_pause
                 t0_ticks += time.monotonic() - t_pause
+            due = self.plan.due(self.core.tick)
+            if due:
+                held = self.held
+                for i, f in due:
+                    self.carry_out(i, f)
+                t_next += self.held - held  # realtime: the hold is not lateness
+                t0_ticks += self.held - held
             self.ticking = True
             if self.cfg.clock == "lockstep":
                 self.lockstep_tick()
@@ -482,7 +564,7 @@ class World:
             n_rt = max(self.core.tick, 1)
             agent_extra[str(aid)] = {
                 "pid": b.pid, "host": b.host, "commands": b.commands, "missed_ticks": b.missed,
-                "joins": b.joins, "drops": b.drops, "garbage": b.garbage,
+                "joins": b.joins, "drops": b.drops, "garbage": b.garbage, "rogue_commands": b.rogue,
                 **({"staleness_mean_ticks": b.stale_sum / n_rt, "staleness_max_ticks": b.stale_max}
                    if self.cfg.clock == "realtime" else {}),
             }
@@ -535,6 +617,13 @@ def run_world(cfg: WorldConfig) -> int:
         except TimeoutError as e:
             print(f"swarm world: {e}", file=sys.stderr)
             code = 3
+        except Exception:  # a bug: say so, but still write what was recorded and close cleanly
+            import traceback
+
+            traceback.print_exc()
+            print("swarm world: internal error; results so far are written", file=sys.stderr)
+            world.stopped_by = -1
+            code = 1
         # Results are written even when stopped: nothing recorded is lost.
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
