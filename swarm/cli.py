@@ -62,6 +62,11 @@ def check(scenario: ScenarioArg) -> None:
         lim = "" if a.max_turn_rate is None else f", |u|<={a.max_turn_rate} rad/s"
         typer.echo(f"  agent {a.id:>3} {a.role:<8} at ({a.x:g}, {a.y:g}) heading {a.heading:g} rad, "
                    f"{a.speed:g} m/s, {extra}{lim}")
+    for f in s.faults:
+        who = "every agent" if f.agent is None else f"agent {f.agent}"
+        more = ", ".join(f"{k}={v}" for k, v in (("duration", f.duration), ("probability", f.probability),
+                                                  ("delay", f.delay), ("std", f.std)) if v is not None)
+        typer.echo(f"  fault at {f.at:g} s: {f.kind} {who}" + (f" ({more})" if more else ""))
 
 
 @app.command()
