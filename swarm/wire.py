@@ -254,8 +254,8 @@ def decode_json(buf: bytes, what: str = "message") -> dict:
     try:
         obj = json.loads(bytes(buf).decode("utf-8"), parse_constant=_reject_constant,
                          parse_float=_finite_float)
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
-        raise WireError(f"{what}: not JSON: {e}") from None
+    except (ValueError, RecursionError) as e:  # incl. JSONDecodeError, bad UTF-8, 4300+ digit ints
+        raise WireError(f"{what}: not JSON: {str(e)[:200]}") from None
     if not isinstance(obj, dict):
         raise WireError(f"{what}: expected a JSON object")
     if type(obj.get("v")) is not int or obj["v"] != VERSION:

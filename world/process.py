@@ -342,7 +342,9 @@ class World:
 
     def _on_info(self, query) -> None:
         params = str(query.parameters) if query.parameters is not None else ""
-        query.reply(wire.world_info_key(self.cfg.run), wire.encode_json(self.info("sensing" in params)))
+        sensing = any(p.split("=", 1)[0] == "sensing" and p.split("=", 1)[-1] not in ("0", "false")
+                      for p in params.split(";") if p)
+        query.reply(wire.world_info_key(self.cfg.run), wire.encode_json(self.info(sensing)))
 
     def _on_admin(self, query) -> None:
         """pause / resume the world clock."""
