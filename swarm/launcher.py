@@ -194,6 +194,8 @@ class Launcher:
         except wire.WireError:
             return None
         s = self.cfg.scenario
+        known = set(s.ids)  # agents added at run time (swarm spawn) have no spec here: skipped
+        recs = [r for r in recs if int(r["id"]) in known]
         leaders = {a.id for a in s.agents if a.role == "leader"}
         alive = {int(r["id"]) for r in recs if r["state"] == 0}
         out = {int(r["id"]): (int(r["out"]) if r["out"] >= 0 else None) for r in recs}
