@@ -82,7 +82,7 @@ def _dumps(obj) -> str:
 AGENT_FIELDS = ("id", "role", "state", "alive", "answered", "pid", "host", "out", "hops", "root",
                 "phase", "fallback", "pinned", "x", "y", "heading", "speed", "u", "distance",
                 "expected_radius", "radial_error", "relative_error", "orbit_radius",
-                "last_command_age", "missed", "commands", "joins", "drops")
+                "last_command_age", "missed", "commands", "joins", "drops", "garbage", "rogue_commands")
 
 
 def merge_agents(info: dict, statuses: dict[int, dict]) -> list[dict]:
@@ -99,7 +99,10 @@ def merge_agents(info: dict, statuses: dict[int, dict]) -> list[dict]:
         st = statuses.get(aid)
         own = st if (st is not None and a.get("alive")) else None
         row = {f: a.get(f) for f in AGENT_FIELDS}
-        row.update(id=aid, answered=st is not None, phase=None, fallback=None, pinned=None)
+        row.update(id=aid, answered=st is not None, phase=None, fallback=None, pinned=None,
+                   # bad messages: dropped by the world for this agent, plus those the agent dropped
+                   garbage=(a.get("garbage") or 0) + ((st or {}).get("garbage") or 0),
+                   rogue_commands=a.get("rogue_commands") or 0)
         if own is not None:
             row.update(pid=own.get("pid", row["pid"]), host=own.get("host", row["host"]),
                        out=own.get("out"), hops=own.get("hops"), phase=own.get("phase"),
@@ -228,6 +231,8 @@ def agents_table(rows: list[dict], compact: bool = False):
         cols += [("phase", "left")]
     cols += [("dist m", "right"), ("err m", "right"), ("u rad/s", "right"), ("age s", "right"),
              ("missed", "right")]
+    if not compact:
+        cols += [("bad", "right")]
     for name, just in cols:
         t.add_column(name, justify=just, no_wrap=True)
     for r in rows:
@@ -241,6 +246,8 @@ def agents_table(rows: list[dict], compact: bool = False):
             cells += [r["phase"] or "-"]
         cells += [_fmt(r["distance"], ".1f"), _fmt(r["radial_error"], ".2f"), _fmt(r["u"], "+.3f"),
                   _fmt(r["last_command_age"], ".2f"), _fmt(r["missed"], "d")]
+        if not compact:
+            cells += [str((r.get("garbage") or 0) + (r.get("rogue_commands") or 0))]
         t.add_row(*cells, style=style)
     return t
 
