@@ -192,15 +192,15 @@ class World:
                 b.rogue_noted = time.monotonic()
                 self.event("rogue", aid, f"command without the owner's claim key ignored ({b.rogue} so far)")
             return
+        if cmd.tick <= b.last_cmd_tick:
+            self.ignored += 1  # duplicate or late
+            return
         if self.network_faults and cmd.tick == self.core.tick and self.plan.command_lost(cmd.tick, aid):
             b.last_cmd_tick = cmd.tick
             b.missed += 1
             self.tick_missed += 1
             if pending is not None:
                 pending.discard(aid)
-            return
-        if cmd.tick <= b.last_cmd_tick:
-            self.ignored += 1  # duplicate or late
             return
         if not self.core.set_command(aid, cmd.u, cmd.hops):
             b.garbage += 1
