@@ -158,7 +158,8 @@ class AgentNode:
             self.last_status = key
 
     # -- main loop -------------------------------------------------------------------------------
-    def on_sense(self, payload: bytes) -> None:
+    def decode_frame(self, payload: bytes):
+        """The frame in `payload`, or None (counted as garbage) when it is not a valid one for us."""
         try:
             frame = wire.decode_sense(payload)
             if frame.agent != self.id:
@@ -167,7 +168,10 @@ class AgentNode:
                 raise wire.WireError("leader frame without target")
         except wire.WireError:
             self.garbage += 1
-            return
+            return None
+        return frame
+
+    def on_sense(self, frame) -> None:
         if frame.tick <= self.last_tick:
             return  # duplicate or old frame
         d = self.brain.decide(frame)
@@ -249,7 +253,9 @@ class AgentNode:
             for item in batch:
                 kind = item[0]
                 if kind == "sense":
-                    newest = item[1]
+                    frame = self.decode_frame(item[1])  # garbage after a frame must not hide it
+                    if frame is not None and (newest is None or frame.tick >= newest.tick):
+                        newest = frame
                 elif kind == "world":
                     self.on_world(item[1])
                 elif kind == "query":

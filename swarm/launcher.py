@@ -263,6 +263,9 @@ class Launcher:
                 continue
             f, index = msg["fault"], msg.get("index")
             aid, kind = f.get("agent"), f.get("kind")
+            if (type(aid) is not int or aid not in self.cfg.scenario.ids or type(index) is not int
+                    or kind not in ("kill", "restart", "freeze", "thaw")):
+                continue  # malformed (or forged) notice: dropped, as docs/protocol.md says
             p = self.agents.get(aid)
             running = p is not None and p.poll() is None
             if kind == "restart":

@@ -552,6 +552,25 @@ class World:
         self.wall_ticks = time.monotonic() - t0_ticks
         return 0
 
+    def agent_garbage(self, timeout: float = 1.0) -> dict[int, int]:
+        """Malformed messages each live agent dropped (from its status), for the summary."""
+        counts: dict[int, int] = {}
+        try:
+            for r in self.session.get(wire.agent_key(self.cfg.run, "*", "status"), timeout=timeout):
+                if r.ok is None:
+                    continue
+                try:
+                    aid = wire.agent_of_key(str(r.ok.key_expr))
+                    st = wire.decode_status(r.ok.payload.to_bytes())
+                except wire.WireError:
+                    continue
+                g = st.get("garbage")
+                if aid in self.book and type(g) is int and g >= 0:
+                    counts[aid] = g
+        except Exception:  # the summary is written whatever the agents do
+            pass
+        return counts
+
     def finish(self) -> dict | None:
         """Record the final state row and write the results; returns the summary."""
         c = self.core
@@ -561,12 +580,14 @@ class World:
             self.publish_truth(np.full(len(c.ids), np.nan), force=True)
         if self.cfg.out is None:
             return None
+        own = self.agent_garbage()
         agent_extra = {}
         for aid, b in self.book.items():
             n_rt = max(self.core.tick, 1)
             agent_extra[str(aid)] = {
                 "pid": b.pid, "host": b.host, "commands": b.commands, "missed_ticks": b.missed,
-                "joins": b.joins, "drops": b.drops, "garbage": b.garbage, "rogue_commands": b.rogue,
+                "joins": b.joins, "drops": b.drops, "garbage": b.garbage + own.get(aid, 0),
+                "rogue_commands": b.rogue,
                 **({"staleness_mean_ticks": b.stale_sum / n_rt, "staleness_max_ticks": b.stale_max}
                    if self.cfg.clock == "realtime" else {}),
             }

@@ -1,0 +1,771 @@
+"""Resilience (issue "Resilience"): scripted faults, a kill/restart soak, rooted selection
+against follower-only cycles, hostile input on every key, rogue commands.
+
+Real processes over real zenoh (see tests/runtime_helpers.py: every process is tracked,
+every wait has a deadline, each test kills only what it started and asserts that nothing
+is left). The hostile-input tests open their own zenoh client session in this test
+process, as a stranger on the run's bus would, always after the processes of the test
+are started and closed in a `finally`; processes are only ever started with
+subprocess (fork + exec).
+
+Runtime bugs found while writing these tests are kept as regression tests at the end of
+the file (a malformed fault notice, garbage after a frame, truth of an unknown agent).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import random
+import re
+import signal
+import time
+from pathlib import Path
+
+import numpy as np
+import psutil
+import pytest
+
+from runtime_helpers import (
+    SCENARIOS,
+    Runtime,
+    check_time_column,
+    events_of,
+    replay_events,
+    run_sim,
+    start_up,
+    swarm_cmd,
+    wait_for,
+)
+from swarm import wire
+from swarm.graph import analyse
+
+pytestmark = pytest.mark.slow
+
+CASE2_IDS = [1, 2, 3, 4, 5, 6]
+CASE2_LEADERS = [1, 6]
+BAND = 0.02  # the 2% settling band of the recovery figures
+
+
+@pytest.fixture
+def rt(tmp_path):
+    r = Runtime(tmp_path)
+    yield r
+    left = r.close()
+    assert not left, "processes left alive after the test (now killed):\n  " + "\n  ".join(left)
+
+
+# --- small helpers ------------------------------------------------------------------------------
+def _open_session(endpoint: str, timeout: float = 15.0):
+    """A zenoh client session of this test process on the run's endpoint (retried until it listens)."""
+    from swarm.transport import open_client
+
+    def attempt():
+        try:
+            return open_client(endpoint, timeout_ms=500)
+        except Exception:
+            return None
+
+    return wait_for(attempt, timeout, f"a zenoh session on {endpoint}", interval=0.05)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return False
+
+
+def _fault_event(summ: dict, index: int) -> dict:
+    evs = [e for e in summ["events"] if e["kind"] == "fault" and e.get("fault", {}).get("index") == index]
+    assert len(evs) == 1, f"fault {index}: fault events {evs}"
+    return evs[0]
+
+
+def _first_event(summ: dict, kind: str, agent: int, lo: int, hi: int) -> dict | None:
+    """The first `kind` event of `agent` with lo <= tick < hi."""
+    for e in events_of(summ, kind, agent):
+        if lo <= e["tick"] < hi:
+            return e
+    return None
+
+
+def _stop(up, sig=signal.SIGINT, timeout=60.0) -> int:
+    os.kill(up.launcher.pid, sig)
+    return up.launcher.wait(timeout)
+
+
+# --- 1. scenarios/faults.toml: one fault of each kind -------------------------------------------
+def test_faults_toml_through_up(rt, tmp_path):
+    up = start_up(rt.tracker, SCENARIOS / "faults.toml", tmp_path / "run", "--clock", "lockstep")
+    t0 = time.monotonic()
+    rc = up.launcher.wait(240)
+    wall = time.monotonic() - t0
+    assert rc == 0, up.launcher.text()[-3000:] + up.world_text()[-3000:]
+    rt.tracker.assert_none_left(timeout=10)
+    summ, traj = up.summary(), up.trajectory()
+    assert summ["completed"] is True and summ["ticks"] == 20000
+    check_time_column(traj, 20000, 0.01)
+
+    faults = summ["faults"]
+    kinds = ["kill", "restart", "freeze", "thaw", "partition", "loss", "delay", "noise"]
+    assert [f["kind"] for f in faults] == kinds
+    print(f"\n[faults.toml] swarm up lockstep: {wall:.1f} s wall; per fault:")
+    for f in faults:
+        print(f"  {f['kind']:<9} agent {str(f.get('agent')):<4} tick {f['tick']:>5}: recovery_time "
+              f"{f['recovery_time']} s (window to {f['window_end_time']} s), worst relative error "
+              f"{f['worst_relative_error']:.3f}, commands missed {f['commands_missed']}, switches {f['switches']}")
+    for i, f in enumerate(faults):
+        assert f["index"] == i and f["tick"] == round(f["at"] / 0.01)
+        ev = _fault_event(summ, i)
+        assert ev["tick"] == f["tick"] and ev["agent"] == f.get("agent"), ev
+    assert not [e for e in summ["events"] if e["kind"] in ("fault_skipped", "fault_late")], summ["events"]
+
+    by_kind = {f["kind"]: f for f in faults}
+    # kill -> drop, restart -> rejoin (the world holds its clock until it has seen them)
+    k_kill, k_restart = by_kind["kill"]["tick"], by_kind["restart"]["tick"]
+    drop4 = _first_event(summ, "drop", 4, k_kill, k_restart)
+    rejoin4 = _first_event(summ, "rejoin", 4, k_restart, by_kind["freeze"]["tick"])
+    assert drop4 is not None and rejoin4 is not None, summ["events"]
+    assert drop4["tick"] == k_kill and rejoin4["tick"] == k_restart, (drop4, rejoin4)
+    # freeze -> drop (after the ~1 s link lease), thaw -> rejoin
+    k_freeze, k_thaw = by_kind["freeze"]["tick"], by_kind["thaw"]["tick"]
+    drop2 = _first_event(summ, "drop", 2, k_freeze, k_thaw)
+    rejoin2 = _first_event(summ, "rejoin", 2, k_thaw, summ["ticks"] + 1)
+    assert drop2 is not None, f"the frozen agent 2 was not dropped before the thaw: {events_of(summ, 'drop', 2)}"
+    assert rejoin2 is not None, f"the thawed agent 2 did not rejoin: {events_of(summ, 'rejoin', 2)}"
+    assert len(events_of(summ, "drop")) == 2 and len(events_of(summ, "rejoin")) == 2, summ["events"]
+    # The recording agrees with the events (alive and out columns).
+    rep_out, rep_alive = replay_events(summ["events"], traj["ids"], summ["ticks"] + 1)
+    np.testing.assert_array_equal(traj["alive"], rep_alive)
+    np.testing.assert_array_equal(traj["out"], rep_out)
+    col = {int(a): k for k, a in enumerate(traj["ids"])}
+    assert not traj["alive"][drop4["tick"]:rejoin4["tick"], col[4]].any()
+
+    # Network faults: the partition loses agent 1's frames for its 2 s (200 ticks), the
+    # loss draws 30% of every frame and command.
+    part = by_kind["partition"]
+    n_part = round(part["duration"] / 0.01)
+    assert part["commands_missed"] >= n_part, part
+    assert (traj["missed"][part["tick"]:part["tick"] + n_part] >= 1).all()
+    assert by_kind["loss"]["commands_missed"] > 0, by_kind["loss"]
+
+    # Re-converged after the last fault, and at the end every agent is in the band.
+    last = max(faults, key=lambda f: f["tick"])
+    assert last["recovery_time"] is not None, last
+    assert summ["converged"] is True
+    for aid, a in summ["agents"].items():
+        assert a["alive"] and a["root"] is not None, (aid, a)
+        assert a["relative_error"] < BAND, (aid, a)
+
+
+# --- 2. soak: 10 kill/restart pairs at random ticks ----------------------------------------------
+SOAK_SEED = 4  # both leaders are down at once between t = 75.79 s and 78.34 s with this seed
+SOAK_DURATION = 250.0
+
+
+def soak_faults(seed: int, ids=CASE2_IDS, leaders=CASE2_LEADERS, pairs=10, lo=10.0, hi=100.0,
+                dt=0.01) -> list[tuple[int, int, int]]:
+    """(agent, kill tick, restart tick) x pairs: kills between lo and hi s, restart 1-4 s later,
+    never two faults on one tick, never two kill/restart windows of one agent overlapping,
+    at least one leader among the victims."""
+    rng = random.Random(seed)
+    while True:
+        used: set[int] = set()
+        busy: dict[int, list] = {i: [] for i in ids}
+        out = []
+        for _ in range(100_000):
+            if len(out) == pairs:
+                break
+            a = rng.choice(ids)
+            k = rng.randint(round(lo / dt), round(hi / dt))
+            r = k + rng.randint(round(1.0 / dt), round(4.0 / dt))
+            if k in used or r in used or any(k <= r0 and k0 <= r for k0, r0 in busy[a]):
+                continue
+            used |= {k, r}
+            busy[a].append((k, r))
+            out.append((a, k, r))
+        if len(out) == pairs and any(a in leaders for a, _, _ in out):
+            return sorted(out, key=lambda p: p[1])
+
+
+def write_soak_scenario(path: Path, pairs, duration: float = SOAK_DURATION) -> Path:
+    text = (SCENARIOS / "case2.toml").read_text()
+    text, n = re.subn(r"(?m)^duration = [0-9.]+$", f"duration = {duration}", text)
+    assert n == 1
+    text = text.replace('name = "case2"', 'name = "soak"')
+    for a, k, r in pairs:
+        text += (f'\n[[faults]]\nat = {k / 100:.2f}\nkind = "kill"\nagent = {a}\n'
+                 f'\n[[faults]]\nat = {r / 100:.2f}\nkind = "restart"\nagent = {a}\n')
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.timeout(420)
+def test_soak_kills_and_restarts(rt, tmp_path):
+    pairs = soak_faults(SOAK_SEED)
+    scen = write_soak_scenario(tmp_path / "soak.toml", pairs)
+    ticks = round(SOAK_DURATION / 0.01)
+    assert len({t for _, k, r in pairs for t in (k, r)}) == 20
+    assert {a for a, _, _ in pairs} & set(CASE2_LEADERS)
+    up = start_up(rt.tracker, scen, tmp_path / "run", "--clock", "lockstep")
+    t0 = time.monotonic()
+    rc = up.launcher.wait(360)
+    wall = time.monotonic() - t0
+    assert rc == 0, up.launcher.text()[-3000:] + up.world_text()[-3000:]
+    rt.tracker.assert_none_left(timeout=10)
+    summ, traj = up.summary(), up.trajectory()
+    print(f"\n[soak] seed {SOAK_SEED}: 10 kill/restart pairs {pairs}\n[soak] swarm up: {wall:.1f} s wall "
+          f"for {SOAK_DURATION:g} s simulated ({summ['wall_time']:.1f} s ticking, world clock held "
+          f"for restarts meanwhile)")
+    assert summ["completed"] is True and summ["ticks"] == ticks
+    check_time_column(traj, ticks, 0.01)
+    assert len(summ["faults"]) == 20
+    assert not [e for e in summ["events"] if e["kind"] in ("fault_skipped", "fault_late")], summ["events"]
+
+    # Every kill has its drop (before the restart), every restart its rejoin (before the next kill).
+    for a, k, r in pairs:
+        nxt = min([k2 for a2, k2, _ in pairs if a2 == a and k2 > r], default=ticks + 1)
+        drop = _first_event(summ, "drop", a, k, r)
+        rejoin = _first_event(summ, "rejoin", a, r, nxt)
+        assert drop is not None, f"agent {a} killed at tick {k}: no drop before tick {r}: {events_of(summ, 'drop', a)}"
+        assert rejoin is not None, \
+            f"agent {a} restarted at tick {r}: no rejoin before tick {nxt}: {events_of(summ, 'rejoin', a)}"
+        print(f"  agent {a}: kill tick {k} -> drop tick {drop['tick']}; restart tick {r} -> rejoin tick "
+              f"{rejoin['tick']} (pid {rejoin.get('pid')})")
+    assert len(events_of(summ, "drop")) == 10 and len(events_of(summ, "rejoin")) == 10
+    for aid in CASE2_IDS:
+        n = sum(1 for a, _, _ in pairs if a == aid)
+        a = summ["agents"][str(aid)]
+        assert (a["joins"], a["drops"]) == (1 + n, n), (aid, a)
+    rep_out, rep_alive = replay_events(summ["events"], traj["ids"], ticks + 1)
+    np.testing.assert_array_equal(traj["alive"], rep_alive)
+
+    last = max(summ["faults"], key=lambda f: f["tick"])
+    print(f"[soak] last fault: {last['kind']} agent {last['agent']} at {last['at']} s, recovery_time "
+          f"{last['recovery_time']} s, worst relative error {last['worst_relative_error']:.3f}")
+    assert last["recovery_time"] is not None, last
+    assert summ["converged"] is True, {k: v["relative_error"] for k, v in summ["agents"].items()}
+
+
+# --- 3. follower-only cycles: nearest flags them live, rooted never forms them ------------------
+def test_nearest_selection_cycle_is_flagged_live(rt, tmp_path):
+    text = (SCENARIOS / "rooted.toml").read_text()
+    text, n = re.subn(r'(?m)^selection = "rooted"$', 'selection = "nearest"', text)
+    assert n == 1
+    scen = tmp_path / "nearest.toml"
+    scen.write_text(text)
+    up = start_up(rt.tracker, scen, tmp_path / "run", "--clock", "realtime", "--duration", "600")
+    run_id, endpoint = up.banner()
+    up.wait_started(60)
+    seen: list[dict] = []
+    calls = iter(range(10_000))
+
+    def cycle_flagged():
+        p = rt.tracker.spawn(swarm_cmd("graph", "--json", "--connect", endpoint, "--run", run_id),
+                             f"graph-{next(calls)}")
+        rc = p.wait(30)
+        assert up.launcher.poll() is None, up.launcher.text()[-2000:]
+        if rc != 0:
+            return None
+        g = json.loads(p.text())
+        seen.append(g)
+        return g if ([2, 5] in g["cycles"] and {2, 5} <= set(g["unrooted"])) else None
+
+    t0 = time.monotonic()
+    g = wait_for(cycle_flagged, 45, "swarm graph --json to flag the cycle [2, 5]", interval=0.2)
+    print(f"\n[nearest] cycle {g['cycles']} flagged at tick {g['tick']} after {time.monotonic() - t0:.2f} s; "
+          f"unrooted {g['unrooted']}, edges {g['edges']}")
+    assert g["roots"]["2"]["root"] is None and g["roots"]["5"]["root"] is None
+    assert set(g["leaders"]) == {1} and set(g["nodes"]) == {1, 2, 3, 4, 5}
+    assert [2, 5] in g["edges"] and [5, 2] in g["edges"]
+    assert _stop(up) == 130, up.launcher.text()[-3000:]
+    rt.tracker.assert_none_left(timeout=10)
+    assert up.summary()["completed"] is False
+
+
+def test_rooted_selection_keeps_every_follower_rooted(rt, tmp_path):
+    up = start_up(rt.tracker, SCENARIOS / "rooted.toml", tmp_path / "run", "--clock", "lockstep")
+    rc = up.launcher.wait(240)
+    assert rc == 0, up.launcher.text()[-3000:]
+    rt.tracker.assert_none_left(timeout=10)
+    summ, traj = up.summary(), up.trajectory()
+    assert summ["completed"] is True and summ["ticks"] == 30000
+    check_time_column(traj, 30000, 0.01)
+    ids = [int(i) for i in traj["ids"]]
+    leaders = {i for i, r in zip(ids, traj["role"]) if r == "leader"}
+    final = analyse({i: (int(o) if o >= 0 else None) for i, o in zip(ids, traj["out"][-1])}, leaders)
+    print(f"\n[rooted] final graph {final['edges']}, roots "
+          f"{ {k: v['root'] for k, v in final['roots'].items()} }")
+    assert final["cycles"] == [] and final["unrooted"] == [], final
+    for aid, a in summ["agents"].items():
+        assert a["root"] in leaders, (aid, a)
+        assert a["relative_error"] < 0.01, (aid, a)
+    assert summ["converged"] is True
+    # Loop-free at every tick of the run, not only at the end.
+    rows = np.unique(traj["out"], axis=0)
+    for row in rows:
+        g = analyse({i: (int(o) if o >= 0 else None) for i, o in zip(ids, row)}, leaders)
+        assert g["cycles"] == [], f"follower-only cycle {g['cycles']} in recorded graph {g['edges']}"
+
+
+# --- 4. 10,000 malformed messages on every key -------------------------------------------------
+NON_IDS = ["abc", "007", "-1", "99", "3x", "0x3", "+3", "3.0", "99999999999", "4294967296"]
+MIB = 1 << 20
+
+
+def _j(obj) -> bytes:
+    return json.dumps(obj).encode()
+
+
+BAD_JSON = [
+    b"", b"{", b"}", b"null", b"[]", b"[1, 2, 3]", b'"text"', b"42", b"true", b"{}", b"\xff\xfe\xfd",
+    b'{"v": "1"}', b'{"v": 1.0}', b'{"v": true}', b'{"v": 2}', b'{"v": null}', b'{"v": -1}',
+    b'{"v": 1, "x": NaN}', b'{"v": 1, "x": Infinity}', b'{"v": 1, "x": -1e999}',
+    b'{"v": 1, "x": ' + b"9" * 5000 + b"}", b"[" * 100_000 + b"]" * 100_000, b'{"v": 1, "v": "1"}',
+]
+CTL_BAD = BAD_JSON + [
+    _j({"v": 1, "kind": "signal", "signal": "HUP"}), _j({"v": 1, "kind": "signal", "signal": 9}),
+    _j({"v": 1, "kind": "signal", "signal": ["KILL"]}), _j({"v": 1, "kind": "signal", "signal": None}),
+    _j({"v": 1, "kind": "signal", "signal": {"KILL": 1}}), _j({"v": 1, "kind": "signal"}),
+    _j({"v": 1, "kind": "signal", "signal": "kill"}), _j({"v": 1, "kind": "sig", "signal": "KILL"}),
+    _j({"v": 1, "kind": ["signal"], "signal": "TERM"}), _j({"v": 1, "signal": "STOP"}),
+    _j({"v": 2, "kind": "signal", "signal": "KILL"}), _j({"kind": "signal", "signal": "KILL"}),
+    _j({"v": True, "kind": "signal", "signal": "KILL"}), _j({"v": "1", "kind": "signal", "signal": "TERM"}),
+    b'{"v": 1.0, "kind": "signal", "signal": "KILL"}', b'{"v": 1, "kind": "signal", "signal": "KILL", "x": NaN}',
+]
+CONTROL_BAD = BAD_JSON + [
+    _j({"kind": "end"}), _j({"v": 2, "kind": "end"}), _j({"v": "1", "kind": "end"}), _j({"v": True, "kind": "end"}),
+    b'{"v": 1.0, "kind": "end"}', b'{"v": 1, "kind": "end", "x": NaN}', b'{"v": 1, "kind": "end", "x": 1e999}',
+    _j({"v": 1, "kind": "End"}), _j({"v": 1, "kind": ["end"]}), _j({"v": 1, "kind": 5}), _j({"v": 1, "kind": None}),
+    _j({"v": 1, "kind": "fault"}), _j({"v": 1, "kind": "fault", "fault": "kill"}),
+    _j({"v": 1, "kind": "fault", "fault": [4, "kill"]}), _j({"v": 1, "kind": "fault", "fault": None}),
+    _j({"v": 1, "kind": "fault", "index": "0", "fault": {"agent": "4", "kind": "kill"}}),
+    _j({"v": 1, "kind": "fault", "index": None, "fault": {"agent": None, "kind": "freeze"}}),
+    _j({"v": 1, "kind": "fault", "index": [], "fault": {"agent": 4, "kind": "KILL"}}),
+    _j({"v": 1, "kind": "fault", "index": {}, "fault": {"agent": 4, "kind": ["kill"]}}),
+    _j({"v": 1, "kind": "fault", "fault": {"agent": 4}}), _j({"v": 1, "kind": "fault", "fault": {"kind": "kill"}}),
+    _j({"v": 2, "kind": "fault", "index": 0, "fault": {"agent": 4, "kind": "kill"}}),
+]
+EVENTS_BAD = BAD_JSON + [_j({"v": 1, "event": 5}), _j({"v": 1, "event": None}), _j({"v": 1}),
+                         _j({"v": 1, "event": {"kind": 7}}), _j({"v": 2, "event": {}})]
+ADMIN_BAD = BAD_JSON + [
+    _j({"v": 1, "cmd": "Pause"}), _j({"v": 1, "cmd": ["pause"]}), _j({"v": 1, "cmd": {"pause": True}}),
+    _j({"v": 1, "cmd": None}), _j({"v": 1}), _j({"v": 2, "cmd": "pause"}), _j({"cmd": "pause"}),
+    _j({"v": True, "cmd": "pause"}), b'{"v": 1.0, "cmd": "pause"}', b'{"v": 1, "cmd": "pause", "by": NaN}',
+    b'{"v": 1, "cmd": "pause", "by": -Infinity}', _j({"v": 1, "cmd": "fault_done"}),
+    _j({"v": 1, "cmd": "fault_done", "index": "0"}), _j({"v": 1, "cmd": "fault_done", "index": True}),
+    b'{"v": 1, "cmd": "fault_done", "index": 0.0}', _j({"v": 1, "cmd": "fault_done", "index": [0]}),
+    _j({"v": 1, "cmd": "fault_done", "index": None}),
+]
+_SPEC = {"role": "follower", "x": 0.0, "y": 0.0, "heading": 0.0, "speed": 1.0}
+JOIN_BAD = BAD_JSON + [
+    _j({"v": 1, "id": "3", "pid": 1, "host": "h"}), _j({"v": 1, "id": 3.5, "pid": 1, "host": "h"}),
+    b'{"v": 1, "id": 3.0, "pid": 1, "host": "h"}', _j({"v": 1, "id": True, "pid": 1, "host": "h"}),
+    _j({"v": 1, "id": None, "pid": 1, "host": "h"}), _j({"v": 1, "id": 3, "pid": "1", "host": "h"}),
+    _j({"v": 1, "id": 3, "pid": 1, "host": 5}), _j({"v": 1, "id": 3, "pid": 1}), _j({"v": 1, "pid": 1, "host": "h"}),
+    _j({"v": 2, "id": 3, "pid": 1, "host": "h"}), _j({"v": 1, "id": 42, "pid": 1, "host": "h"}),
+    _j({"v": 1, "id": 42, "pid": 1, "host": "h", "spec": "follower"}),
+    _j({"v": 1, "id": 42, "pid": 1, "host": "h", "spec": [1]}), _j({"v": 1, "id": 42, "pid": 1, "host": "h", "spec": {}}),
+    _j({"v": 1, "id": 42, "pid": 1, "host": "h", "spec": {**_SPEC, "speed": -1.0}}),
+    _j({"v": 1, "id": 42, "pid": 1, "host": "h", "spec": {**_SPEC, "follow": 999}}),
+    _j({"v": 1, "id": 42, "pid": 1, "host": "h", "spec": {**_SPEC, "role": "leader"}}),
+    _j({"v": 1, "id": 42, "pid": 1, "host": "h", "spec": {**_SPEC, "colour": "red"}}),
+    _j({"v": 1, "id": -5, "pid": 1, "host": "h", "spec": _SPEC}),
+    _j({"v": 1, "id": 2**40, "pid": 1, "host": "h", "spec": _SPEC}),
+    b'{"v": 1, "id": 42, "pid": 1, "host": "h", "spec": {"role": "follower", "x": NaN, "y": 0, '
+    b'"heading": 0, "speed": 1}}',
+    b'{"v": 1, "id": 42, "pid": 1, "host": "h", "spec": {"role": "follower", "x": 1e999, "y": 0, '
+    b'"heading": 0, "speed": 1}}',
+]
+
+
+def _cmd(agent, tick=0, u=0.1, out=-1, hops=-1, key=12345, phase=0, kind=wire.KIND_CMD, version=wire.VERSION):
+    return wire.CMD.pack(kind, version, phase, 0, agent, tick, u, out, hops, key)
+
+
+def _sense(agent, tick=0, t=0.0, heading=0.1, target=(5.0, 5.0), contacts=((2, 0.1, 0.2, 5.0, 1),),
+           n=None, kind=wire.KIND_SENSE, version=wire.VERSION):
+    tx, ty = target if target is not None else (math.nan, math.nan)
+    head = wire.SENSE_HEAD.pack(kind, version, int(target is not None), 0, agent, tick, t, heading, tx, ty,
+                                len(contacts) if n is None else n)
+    return head + b"".join(wire.CONTACT.pack(*c) for c in contacts)
+
+
+def _truth(ids=CASE2_IDS, x=None, kind=wire.KIND_TRUTH, version=wire.VERSION, n=None, state=0, out=None):
+    k = len(ids)
+    x = np.arange(k, dtype=float) if x is None else x
+    buf = wire.encode_truth(7, 0.07, np.array(ids), x, np.zeros(k), np.zeros(k), np.zeros(k),
+                            np.full(k, -1) if out is None else np.array(out), ["active"] * k)
+    head = wire.TRUTH_HEAD.pack(kind, version, 0, 0, k if n is None else n, 7, 0.07)
+    recs = bytearray(buf[wire.TRUTH_HEAD.size:])
+    if state:
+        recs[-1] = state
+    return head + bytes(recs)
+
+
+def _trunc(rng, buf: bytes) -> bytes:
+    return buf[:rng.randrange(len(buf))]
+
+
+def _cmd_bad(rng, key_id) -> bytes:
+    a = key_id if isinstance(key_id, int) else rng.choice(CASE2_IDS + [99])
+    other = rng.choice([i for i in CASE2_IDS if i != a] or [1])
+    return rng.choice([
+        lambda: rng.randbytes(rng.randint(0, 80)),
+        lambda: _trunc(rng, _cmd(a)),
+        lambda: _cmd(a) + b"\0" * rng.randint(1, 16),
+        lambda: _cmd(a, kind=wire.KIND_SENSE), lambda: _cmd(a, kind=0), lambda: _cmd(a, kind=255),
+        lambda: _cmd(a, version=2), lambda: _cmd(a, version=0),
+        lambda: _cmd(a, u=math.nan), lambda: _cmd(a, u=math.inf), lambda: _cmd(a, u=-math.inf),
+        lambda: _cmd(a, u=math.nan, out=other), lambda: _cmd(a, phase=rng.randint(5, 255)),
+        lambda: _cmd(a, tick=-rng.randint(1, 2**40)),
+        lambda: _cmd(other),  # a command for another agent on this agent's key
+        lambda: _cmd(a, out=a), lambda: _cmd(a, out=99), lambda: _cmd(a, out=2**31 - 1),
+    ])()
+
+
+def _sense_bad(rng, aid) -> bytes:
+    other = rng.choice([i for i in CASE2_IDS if i != aid] or [1])
+    leader = aid in CASE2_LEADERS if isinstance(aid, int) else False
+    a = aid if isinstance(aid, int) else 3
+    choices = [
+        lambda: rng.randbytes(rng.randint(0, 200)),
+        lambda: _trunc(rng, _sense(a)),
+        lambda: _sense(a) + b"\0" * rng.randint(1, 7),
+        lambda: _sense(a, kind=wire.KIND_CMD), lambda: _sense(a, kind=9), lambda: _sense(a, version=2),
+        lambda: _sense(a, version=0),
+        lambda: _sense(a, contacts=((2, math.nan, 0.2, 5.0, 1),)),  # NaN bearing
+        lambda: _sense(a, contacts=((2, 0.1, math.inf, 5.0, 1),)),
+        lambda: _sense(a, contacts=((2, 0.1, 0.2, -math.inf, 1),)),
+        lambda: _sense(a, heading=math.nan), lambda: _sense(a, t=math.inf), lambda: _sense(a, target=(math.nan, 0.0)),
+        lambda: _sense(a, n=3), lambda: _sense(a, n=wire.MAX_AGENTS + 1), lambda: _sense(a, n=2**32 - 1),
+        lambda: _sense(a, tick=-5),
+        lambda: _sense(other),  # a frame for another agent
+    ]
+    if leader:
+        choices.append(lambda: _sense(a, target=None))  # a leader frame without the target
+    return rng.choice(choices)()
+
+
+def _truth_bad(rng) -> bytes:
+    return rng.choice([
+        lambda: rng.randbytes(rng.randint(0, 300)),
+        lambda: _trunc(rng, _truth()),
+        lambda: _truth(kind=wire.KIND_SENSE), lambda: _truth(version=7),
+        lambda: _truth(n=10), lambda: _truth(n=wire.MAX_AGENTS + 1),
+        lambda: _truth(x=np.full(6, math.nan)), lambda: _truth(x=np.full(6, math.inf)),
+        lambda: _truth(state=9),
+        lambda: _truth(ids=[1, 99, 2, 2**31 - 1], out=[-1, 1, 99, 2]),  # agents the scenario does not have
+        lambda: _truth(out=[-1, 2, 2, 3, 4, 7]),  # a self-loop and an unknown out-neighbour
+    ])()
+
+
+def _oversized(rng, json_like: bytes | None = None) -> bytes:
+    """> 1 MiB: random bytes, or an otherwise well-formed JSON object padded past the limit."""
+    if json_like is None:
+        return rng.randbytes(MIB + rng.randint(1, 4096))
+    obj = json.loads(json_like)
+    obj["pad"] = "x" * (MIB + rng.randint(1, 4096))
+    return _j(obj)
+
+
+def garbage_plan(run: str, rng: random.Random) -> list[tuple[str, str, bytes]]:
+    """10,000 (op, key or selector, payload): op put | get | token, over every key the runtime
+    listens to. Nothing in it is a valid message that could change the run."""
+    P = wire.run_prefix(run)
+    some = CASE2_IDS + NON_IDS
+    plan: list[tuple[str, str, bytes]] = []
+
+    def add(n, make):
+        for _ in range(n):
+            plan.append(make())
+
+    # Oversized payloads (> 1 MiB) on each kind of key, including well-formed requests that
+    # are only invalid by their size (a pause, a KILL signal, an end notice).
+    big = [("put", wire.agent_key(run, a, "cmd"), _oversized(rng)) for a in (1, 3, "abc")]
+    big += [("put", wire.agent_key(run, a, "sense"), _oversized(rng)) for a in CASE2_IDS]
+    big += [("put", wire.agent_key(run, 2, "ctl"), _oversized(rng, b'{"v": 1, "kind": "signal", "signal": "KILL"}')),
+            ("put", wire.agent_key(run, 5, "ctl"), _oversized(rng)),
+            ("put", wire.world_control_key(run), _oversized(rng, b'{"v": 1, "kind": "end"}')),
+            ("put", wire.world_control_key(run), _oversized(rng)),
+            ("put", wire.events_key(run), _oversized(rng)),
+            ("put", wire.truth_key(run), _oversized(rng)),
+            ("get", wire.world_admin_key(run), _oversized(rng, b'{"v": 1, "cmd": "pause"}')),
+            ("get", wire.world_admin_key(run), _oversized(rng)),
+            ("get", wire.world_join_key(run), _oversized(rng)),
+            ("get", wire.world_info_key(run), _oversized(rng)),
+            ("get", wire.agent_key(run, 4, "status"), _oversized(rng))]
+    plan += big
+    n_small = 10_000 - len(big)
+    counts = {"cmd": 3000, "sense": 2000, "ctl": 1000, "control": 700, "events": 400, "truth": 500,
+              "admin": 800, "join": 500, "info": 300, "status": 400, "token": 400}
+    counts["cmd"] -= sum(counts.values()) - n_small  # the oversized ones are part of the 10,000
+    add(counts["cmd"], lambda: (lambda k: ("put", wire.agent_key(run, k, "cmd"), _cmd_bad(rng, k)))(
+        rng.choice(some)))
+    add(counts["sense"], lambda: (lambda k: ("put", wire.agent_key(run, k, "sense"), _sense_bad(rng, k)))(
+        rng.choice(CASE2_IDS * 4 + NON_IDS)))
+    add(counts["ctl"], lambda: ("put", wire.agent_key(run, rng.choice(CASE2_IDS * 3 + NON_IDS), "ctl"),
+                                rng.choice(CTL_BAD)))
+    add(counts["control"], lambda: ("put", wire.world_control_key(run), rng.choice(CONTROL_BAD)))
+    add(counts["events"], lambda: ("put", wire.events_key(run), rng.choice(EVENTS_BAD)))
+    add(counts["truth"], lambda: ("put", wire.truth_key(run), _truth_bad(rng)))
+    add(counts["admin"], lambda: ("get", wire.world_admin_key(run), rng.choice(ADMIN_BAD)))
+    add(counts["join"], lambda: ("get", wire.world_join_key(run), rng.choice(JOIN_BAD)))
+    add(counts["info"], lambda: ("get", wire.world_info_key(run) + rng.choice(
+        ["", "?sensing=maybe", "?x=1;y", "?;;;", "?sensing=0;sensing=1"]), rng.choice(BAD_JSON)))
+    add(counts["status"], lambda: ("get", wire.agent_key(run, rng.choice(some), "status"), rng.choice(BAD_JSON)))
+    add(counts["token"], lambda: ("token", f"{P}/agent/{rng.choice([n for n in NON_IDS if n != '99'])}/alive", b""))
+    rng.shuffle(plan)
+    assert len(plan) == 10_000
+    return plan
+
+
+def send_garbage(ses, plan) -> dict:
+    """Publish / query / declare everything in `plan`; returns counts."""
+    stats = {"put": 0, "get": 0, "token": 0, "replies_ok": 0, "replies_err": 0, "bytes": 0}
+    pending, tokens = [], []
+
+    def drain():
+        for h in pending:
+            for r in h:
+                stats["replies_ok" if r.ok is not None else "replies_err"] += 1
+        pending.clear()
+
+    for n, (op, key, payload) in enumerate(plan):
+        stats[op] += 1
+        stats["bytes"] += len(payload)
+        if op == "put":
+            ses.put(key, payload)
+        elif op == "get":
+            pending.append(ses.get(key, payload=payload, timeout=2.0))
+            if len(pending) >= 32:
+                drain()
+        else:
+            tokens.append(ses.liveliness().declare_token(key))
+            if len(tokens) > 16:
+                tokens.pop(0).undeclare()
+        if n % 100 == 99:
+            time.sleep(0.003)  # a stranger in a hurry, not one that drops its own messages
+    drain()
+    for t in tokens:
+        t.undeclare()
+    return stats
+
+
+def test_malformed_messages_on_every_key(rt, tmp_path):
+    from swarm.live import LiveRun, resolve
+
+    up = start_up(rt.tracker, SCENARIOS / "case2.toml", tmp_path / "run", "--clock", "realtime",
+                  "--duration", "600")
+    run_id, endpoint = up.banner()
+    up.wait_started(60)
+    agents = rt.tracker.wait_agent_pids(up.launcher, 6)
+    world = rt.tracker.world_pid(up.launcher)
+    assert world is not None
+    plan = garbage_plan(run_id, random.Random(20240601))
+    ses = _open_session(endpoint)
+    t0 = time.monotonic()
+    try:
+        stats = send_garbage(ses, plan)
+    finally:
+        ses.close()
+    send_s = time.monotonic() - t0
+    print(f"\n[garbage] sent {sum(stats[k] for k in ('put', 'get', 'token'))} malformed messages "
+          f"({stats['put']} puts, {stats['get']} queries, {stats['token']} liveliness tokens, "
+          f"{stats['bytes'] / MIB:.1f} MiB) in {send_s:.1f} s; replies {stats['replies_ok']} ok, "
+          f"{stats['replies_err']} errors")
+    assert stats["put"] + stats["get"] + stats["token"] == 10_000
+
+    # Every process of the run is still alive (no agent restarted or added), the run still ticks.
+    time.sleep(0.5)
+    assert up.launcher.poll() is None, up.launcher.text()[-3000:]
+    rt.tracker.poll_once()
+    dead = [f"agent {i} (pid {p})" for i, p in agents.items() if not _alive(p)]
+    dead += [] if _alive(world) else [f"world (pid {world})"]
+    assert not dead, f"processes died under garbage: {dead}\n{up.world_text()[-3000:]}"
+    assert rt.tracker.agent_pids(up.launcher) == agents, "the launcher started agent processes"
+    with LiveRun(resolve(endpoint, run_id)) as live:
+        info1, st1 = live.info(), live.statuses()
+        time.sleep(1.0)
+        info2, st2 = live.info(), live.statuses()
+    assert info2["tick"] - info1["tick"] > 30, (info1["tick"], info2["tick"])
+    assert info2["paused"] is False
+    assert all(a["alive"] for a in info2["agents"].values()), info2["agents"]
+    assert info2["garbage"] > 0
+    assert set(st1) == set(st2) == set(CASE2_IDS), (sorted(st1), sorted(st2))
+    garbage = {i: st2[i]["garbage"] for i in CASE2_IDS}
+    print(f"[garbage] world info: garbage {info2['garbage']}, ignored {info2['ignored']}; "
+          f"agents' own garbage counts {garbage}; world per-agent garbage "
+          f"{ {k: a['garbage'] for k, a in info2['agents'].items()} }")
+    for i in CASE2_IDS:
+        assert st2[i]["garbage"] > 0, (i, st2[i])
+        assert st2[i]["last_tick"] > st1[i]["last_tick"], f"agent {i} stopped answering its frames"
+    assert not up.has_event("drop") and not up.has_event("pause") and not up.has_event("add"), \
+        up.world_events()
+
+    assert _stop(up) == 130, up.launcher.text()[-3000:]
+    rt.tracker.assert_none_left(timeout=10)
+    summ = up.summary()
+    print(f"[garbage] summary: garbage_messages {summ['garbage_messages']}, ignored_messages "
+          f"{summ['ignored_messages']}, per agent {({k: a['garbage'] for k, a in summ['agents'].items()})}")
+    assert summ["garbage_messages"] > 0
+    assert summ["garbage_messages"] >= info2["garbage"]
+    assert set(summ["agents"]) == {str(i) for i in CASE2_IDS}
+    for aid, a in summ["agents"].items():
+        assert isinstance(a["garbage"], int) and a["garbage"] >= 0, (aid, a)
+        assert a["alive"] and a["joins"] == 1 and a["drops"] == 0, (aid, a)
+    assert {e["kind"] for e in summ["events"]} <= {"join", "start", "switch"}, \
+        sorted({e["kind"] for e in summ["events"]})
+
+
+# --- 5. a rogue session's commands change nothing -----------------------------------------------
+def test_rogue_commands_change_nothing(rt, tmp_path):
+    scen = SCENARIOS / "case2.toml"
+    sim, _ = run_sim(rt.tracker, scen, tmp_path / "sim", "--duration", "30")
+    up = start_up(rt.tracker, scen, tmp_path / "run", "--clock", "lockstep", "--duration", "30")
+    run_id, endpoint = up.banner()
+    ses = _open_session(endpoint)
+    rng = random.Random(7)
+    latest = [0]
+    sent = 0
+
+    def on_sense(sample):  # the rogue reads agent 3's frames to know the current tick
+        try:
+            latest[0] = wire.decode_sense(sample.payload.to_bytes()).tick
+        except wire.WireError:
+            pass
+
+    t_end = time.monotonic() + 180
+    try:
+        sub = ses.declare_subscriber(wire.agent_key(run_id, 3, "sense"), on_sense)
+        pub = ses.declare_publisher(wire.agent_key(run_id, 3, "cmd"), express=True)
+        while up.launcher.poll() is None and time.monotonic() < t_end:
+            c = wire.Command(3, max(0, latest[0] - rng.randint(0, 2)), rng.uniform(-5.0, 5.0),
+                             rng.choice([None, 1, 2, 4, 5, 6]), rng.choice(wire.PHASES),
+                             rng.choice([None, 0, 1, 2, 7]), rng.getrandbits(64))
+            pub.put(wire.encode_cmd(c))
+            sent += 1
+        sub.undeclare()
+    finally:
+        ses.close()
+    rc = up.launcher.wait(60)
+    assert rc == 0, up.launcher.text()[-3000:]
+    rt.tracker.assert_none_left(timeout=10)
+    summ, traj = up.summary(), up.trajectory()
+    dx = np.max(np.abs(traj["x"] - sim["x"]))
+    dy = np.max(np.abs(traj["y"] - sim["y"]))
+    rogue = summ["agents"]["3"]["rogue_commands"]
+    print(f"\n[rogue] {sent} forged commands for agent 3 published; the world counted {rogue} rogue "
+          f"commands; max |dx| {dx:.3g} m, |dy| {dy:.3g} m against swarm sim; missed ticks "
+          f"{[a['missed_ticks'] for a in summ['agents'].values()]}")
+    assert summ["completed"] is True and summ["ticks"] == 3000
+    assert traj["x"].shape == sim["x"].shape
+    assert dx < 1e-9 and dy < 1e-9, f"the rogue changed the trajectory: {max(dx, dy)} m"
+    np.testing.assert_array_equal(traj["out"], sim["out"])
+    assert rogue > 0
+    rogue_events = events_of(summ, "rogue", 3)
+    assert rogue_events and "claim key" in rogue_events[0]["reason"], rogue_events
+    assert {e["agent"] for e in events_of(summ, "rogue")} == {3}
+
+
+# --- regression tests for runtime bugs these tests found -------------------------------------------
+def _realtime_case2(rt, tmp_path):
+    up = start_up(rt.tracker, SCENARIOS / "case2.toml", tmp_path / "run", "--clock", "realtime",
+                  "--duration", "600")
+    run_id, endpoint = up.banner()
+    up.wait_started(60)
+    agents = rt.tracker.wait_agent_pids(up.launcher, 6)
+    return up, run_id, endpoint, agents
+
+
+@pytest.mark.parametrize("fault", [{"agent": [4], "kind": "kill"}, {"agent": "a/b", "kind": "restart"}],
+                         ids=["list-agent", "path-agent"])
+def test_launcher_survives_malformed_fault_notice(rt, tmp_path, fault):
+    up, run_id, endpoint, agents = _realtime_case2(rt, tmp_path)
+    ses = _open_session(endpoint)
+    try:
+        ses.put(wire.world_control_key(run_id), _j({"v": 1, "kind": "fault", "index": "x", "fault": fault}))
+        time.sleep(2.0)  # the launcher reads its notices every 0.25 s
+    finally:
+        ses.close()
+    rc = up.launcher.poll()
+    killed = [i for i, p in agents.items() if not _alive(p)]
+    if rc is None:
+        assert _stop(up) == 130
+    else:
+        up.launcher.wait(30)
+    rt.tracker.assert_none_left(timeout=15)
+    assert rc is None, f"swarm up exited {rc} on the notice {fault}:\n{up.launcher.text()[-600:]}"
+    assert not killed, f"agents {killed} died"
+
+
+def test_launcher_survives_truth_of_unknown_agent(rt, tmp_path):
+    """Well-formed ground truth with an agent the scenario file does not have (what the world
+    itself sends once `swarm spawn` adds one, or a stranger on the truth key): the launcher's
+    progress line skips it. (It used to raise KeyError in Launcher.progress and end the run.)"""
+    up, run_id, endpoint, agents = _realtime_case2(rt, tmp_path)
+    ids = np.array([1, 99])
+    buf = wire.encode_truth(5, 0.05, ids, np.array([28.0, 10.0]), np.zeros(2), np.zeros(2), np.zeros(2),
+                            np.array([-1, 1]), ["active", "active"])
+    ses = _open_session(endpoint)
+    sent = 0
+    try:
+        t_end = time.monotonic() + 3.0  # the launcher reads the latest truth 4 times a second
+        while time.monotonic() < t_end and up.launcher.poll() is None:
+            ses.put(wire.truth_key(run_id), buf)
+            sent += 1
+            time.sleep(0.001)
+    finally:
+        ses.close()
+    tick = up.progress_tick()
+    alive = up.launcher.poll() is None
+    if alive:
+        wait_for(lambda: up.progress_tick() > tick, 10, "the launcher's progress after the forged truth")
+        assert all(_alive(p) for p in agents.values())
+        assert _stop(up) == 130
+    else:
+        up.launcher.wait(30)
+    rt.tracker.assert_none_left(timeout=15)
+    assert alive, f"swarm up exited {up.launcher.poll()} after {sent} forged truth messages:\n" \
+                  f"{up.launcher.text()[-1500:]}"
+
+
+def test_garbage_on_sense_key_costs_no_frame(rt, tmp_path):
+    scen = SCENARIOS / "case2.toml"
+    sim, _ = run_sim(rt.tracker, scen, tmp_path / "sim", "--duration", "30")
+    up = start_up(rt.tracker, scen, tmp_path / "run", "--clock", "lockstep", "--duration", "30")
+    run_id, endpoint = up.banner()
+    ses = _open_session(endpoint)
+    rng = random.Random(3)
+
+    def missed_now() -> int:
+        for r in ses.get(wire.world_info_key(run_id), timeout=1.0):
+            if r.ok is not None:
+                return wire.decode_json(r.ok.payload.to_bytes())["agents"]["3"]["missed"]
+        return 0
+
+    try:
+        key = wire.agent_key(run_id, 3, "sense")
+        up.wait_started(60)
+        # Flood until the world reports a missed tick of agent 3 (each costs a 0.5 s deadline),
+        # for at most 10 s: once fixed, the whole flood passes without a miss.
+        t_end = time.monotonic() + 10.0
+        n = 0
+        while up.launcher.poll() is None and time.monotonic() < t_end:
+            ses.put(key, rng.randbytes(16))
+            n += 1
+            if n % 500 == 0 and missed_now() > 0:
+                break
+            time.sleep(0.0003)
+    finally:
+        ses.close()
+    rc = up.launcher.wait(60)
+    assert rc == 0, up.launcher.text()[-3000:]
+    rt.tracker.assert_none_left(timeout=10)
+    summ, traj = up.summary(), up.trajectory()
+    missed = summ["agents"]["3"]["missed_ticks"]
+    diff = max(np.max(np.abs(traj["x"] - sim["x"])), np.max(np.abs(traj["y"] - sim["y"])))
+    print(f"\n[sense garbage] agent 3 missed {missed} ticks; max position difference to sim {diff:.3g} m")
+    assert missed == 0 and diff < 1e-9
