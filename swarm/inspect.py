@@ -697,6 +697,16 @@ def watch(
     with attached(connect, run) as live:
         snap = snapshot(live)
         ended_at: float | None = None
+
+        def refresh() -> None:
+            """A new snapshot, or note when the world ended (the last picture stays)."""
+            nonlocal snap, ended_at
+            if ended_at is None:
+                try:
+                    snap = snapshot(live)
+                except NoRun:
+                    ended_at = time.monotonic()
+
         try:
             if tty:
                 from rich.live import Live
@@ -708,11 +718,7 @@ def watch(
                 with Live(frame(), console=con, auto_refresh=False, redirect_stderr=False) as view:
                     while True:
                         time.sleep(period)
-                        if ended_at is None:
-                            try:
-                                snap = snapshot(live)
-                            except NoRun:
-                                ended_at = time.monotonic()
+                        refresh()
                         view.update(frame(), refresh=True)
             shown = None
             while True:
@@ -724,11 +730,7 @@ def watch(
                 if ended_at is not None and time.monotonic() - ended_at > WORLD_GONE_EXIT:
                     return
                 time.sleep(period)
-                if ended_at is None:
-                    try:
-                        snap = snapshot(live)
-                    except NoRun:
-                        ended_at = time.monotonic()
+                refresh()
         except KeyboardInterrupt:
             raise typer.Exit(0) from None
 

@@ -18,6 +18,22 @@ from swarm.transport import open_client, runtime_dir, socket_path
 QUERY_TIMEOUT = 1.0  # s
 
 
+def query_statuses(session, run: str, timeout: float = QUERY_TIMEOUT) -> dict[int, dict]:
+    """Each live agent's own status, from its status queryable (malformed replies skipped)."""
+    out: dict[int, dict] = {}
+    for r in session.get(wire.agent_key(run, "*", "status"), timeout=timeout):
+        if r.ok is None:
+            continue
+        try:
+            aid = wire.agent_of_key(str(r.ok.key_expr))
+            st = wire.decode_status(r.ok.payload.to_bytes())
+        except wire.WireError:
+            continue
+        if st["id"] == aid:
+            out[aid] = st
+    return out
+
+
 class NoRun(Exception):
     """No (single) run matches; the message says what was looked at."""
 
@@ -123,18 +139,7 @@ class LiveRun:
 
     def statuses(self) -> dict[int, dict]:
         """Each live agent's own status (its chosen out-neighbour, hops, phase, pid...)."""
-        out: dict[int, dict] = {}
-        for r in self.session.get(wire.agent_key(self.ref.run, "*", "status"), timeout=QUERY_TIMEOUT):
-            if r.ok is None:
-                continue
-            try:
-                aid = wire.agent_of_key(str(r.ok.key_expr))
-                st = wire.decode_status(r.ok.payload.to_bytes())
-            except wire.WireError:
-                continue
-            if st["id"] == aid:
-                out[aid] = st
-        return out
+        return query_statuses(self.session, self.ref.run)
 
     def admin(self, cmd: str, by: str = "swarm cli") -> dict:
         rep = self._get_one(wire.world_admin_key(self.ref.run),

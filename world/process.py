@@ -554,16 +554,11 @@ class World:
 
     def agent_garbage(self, timeout: float = 1.0) -> dict[int, int]:
         """Malformed messages each live agent dropped (from its status), for the summary."""
+        from swarm.live import query_statuses
+
         counts: dict[int, int] = {}
         try:
-            for r in self.session.get(wire.agent_key(self.cfg.run, "*", "status"), timeout=timeout):
-                if r.ok is None:
-                    continue
-                try:
-                    aid = wire.agent_of_key(str(r.ok.key_expr))
-                    st = wire.decode_status(r.ok.payload.to_bytes())
-                except wire.WireError:
-                    continue
+            for aid, st in query_statuses(self.session, self.cfg.run, timeout).items():
                 g = st.get("garbage")
                 if aid in self.book and type(g) is int and g >= 0:
                     counts[aid] = g
