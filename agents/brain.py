@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass
 
 from agents.laws import make_follower_law
-from agents.selection import select
+from agents.selection import Sticky, select
 from world.frames import SensorFrame
 
 
@@ -60,6 +60,8 @@ class AgentBrain:
         self.hops: int | None = None  # hops advertised last tick (rooted rule)
         self.feasible: int | None = None  # rooted rule: accept only agents with fewer hops
         self.unrooted_ticks = 0
+        # selection = "sticky": wait and drain for max_hops ticks (the deepest a path can be)
+        self.sticky = Sticky(max_hops, max_hops) if sensing.selection == "sticky" else None
 
     # -- leaders -------------------------------------------------------------------
     def _leader(self, frame: SensorFrame) -> Decision:
@@ -91,8 +93,11 @@ class AgentBrain:
 
     # -- followers -----------------------------------------------------------------
     def _follower(self, frame: SensorFrame) -> Decision:
-        choice = select(frame.contacts, mode=self.sensing.selection, pinned=self.spec.follow,
-                        current=self.out, hysteresis=self.sensing.hysteresis, below=self._below())
+        if self.sticky is not None:
+            choice = self.sticky.choose(frame.contacts)
+        else:
+            choice = select(frame.contacts, mode=self.sensing.selection, pinned=self.spec.follow,
+                            current=self.out, hysteresis=self.sensing.hysteresis, below=self._below())
         self.out = choice.out
         if choice.contact is None:
             # Nobody (rooted) in sight: loiter on a circle of radius v / C2, turning the way it
@@ -103,7 +108,7 @@ class AgentBrain:
         u = saturate(self.law(frame.heading, c.heading, c.bearing), self.spec.max_turn_rate)
         if not math.isfinite(u):
             u = self.last_u
-        hops = c.hops + 1 if 0 <= c.hops < self.max_hops else None
+        hops = c.hops + 1 if choice.rooted and 0 <= c.hops < self.max_hops else None
         return Decision(frame.tick, u, c.id, "track", choice.fallback, hops)
 
     def _below(self) -> int | None:

@@ -36,7 +36,7 @@ class GainsConf:
 
 @dataclass(frozen=True, slots=True)
 class SensingConf:
-    selection: str  # "nearest" | "fixed"
+    selection: str  # "sticky" | "nearest" | "fixed" | "rooted"
     hysteresis: float
 
 
@@ -99,6 +99,6 @@ class BrainConf:
         if agent.role == "leader" and agent.orbit_radius is None:
             raise ValueError("agent.orbit_radius: a leader needs one")
         return cls(agent, GainsConf(num(g, "c1", "gains"), num(g, "c2", "gains"), law),
-                   SensingConf(choice(s, "selection", "sensing", ("nearest", "fixed", "rooted")),
+                   SensingConf(choice(s, "selection", "sensing", ("sticky", "nearest", "fixed", "rooted")),
                                num(s, "hysteresis", "sensing")),
                    num(d, "dt", "brain", positive=True), integer(d, "n_agents", "brain"))

@@ -94,14 +94,18 @@ class SensingSpec(_Strict):
     fov: Annotated[float, Field(gt=0, le=2 * math.pi)] | None = Field(
         None, description="full field of view (rad) centred on the heading; 2*pi or absent = all round"
     )
-    selection: Literal["nearest", "fixed", "rooted"] = Field(
-        "nearest",
-        description="nearest sensed agent; the agent named by each follower's `follow`; or "
-                    "rooted: the nearest sensed agent that advertises a path to a leader",
+    selection: Literal["sticky", "nearest", "fixed", "rooted"] = Field(
+        "sticky",
+        description="sticky (default): the nearest sensed agent once it has a path to a leader, "
+                    "kept until it is lost (finitely many switches, loop-free); nearest: the "
+                    "paper's rule, re-chosen every tick (can form follower-only cycles); fixed: "
+                    "the agent named by each follower's `follow`; rooted: the nearest sensed "
+                    "agent that advertises a path to a leader, re-chosen every tick",
     )
     hysteresis: Annotated[float, Field(ge=0, lt=1)] = Field(
         0.0,
-        description="switch to a new nearest agent only if it is this fraction closer than the current one",
+        description="nearest, fixed, rooted: switch to a new nearest agent only if it is this "
+                    "fraction closer than the current one (sticky ignores it)",
     )
 
 

@@ -1,0 +1,203 @@
+"""The sticky selection rule (issue 8): its state machine, and its guarantees as properties.
+
+Pure tier: `Sticky` fed scripted contacts, and a whole swarm of `Sticky` selectors on
+random, changing sensing graphs with agents dropping out (hypothesis), with no physics:
+no follower-only cycle is ever formed, and without losses nobody switches once committed.
+In-process tier: random swarms through `swarm sim`'s engine stay under the switch bound.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from agents.brain import AgentBrain
+from agents.selection import Sticky
+from swarm.graph import analyse
+from swarm.sim import run_sim
+from swarm.study import SwarmSetting, random_swarm
+from world.frames import Contact, SensorFrame
+from world.metrics import switch_ticks
+
+
+def C(i, r, hops):
+    return Contact(i, 0.0, 0.0, r, hops)
+
+
+# -- the state machine ---------------------------------------------------------------------
+
+
+def test_commits_at_once_to_a_nearest_agent_that_is_rooted():
+    s = Sticky(5, 5)
+    ch = s.choose((C(1, 10.0, 0), C(3, 20.0, -1)))
+    assert (ch.out, ch.rooted) == (1, True)
+
+
+def test_waits_for_the_nearest_agent_to_root_tracking_a_rooted_one_meanwhile():
+    s = Sticky(5, 5)
+    ch = s.choose((C(1, 50.0, 0), C(3, 10.0, -1)))  # 3 is nearest but not rooted yet
+    assert (ch.out, ch.rooted) == (1, False)  # tracks the leader, advertises no path
+    ch = s.choose((C(1, 50.0, 0), C(3, 10.0, 1)))  # 3 rooted now
+    assert (ch.out, ch.rooted) == (3, True)
+
+
+def test_commits_to_nearest_rooted_when_the_wait_is_over():
+    s = Sticky(3, 3)
+    for _ in range(3):
+        ch = s.choose((C(1, 50.0, 0), C(3, 10.0, -1)))
+        assert not ch.rooted
+    ch = s.choose((C(1, 50.0, 0), C(3, 10.0, -1)))
+    assert (ch.out, ch.rooted) == (1, True)
+
+
+def test_keeps_its_out_neighbour_when_nearer_agents_pass_by():
+    s = Sticky(3, 3)
+    s.choose((C(1, 50.0, 0),))
+    for r in (40.0, 5.0, 0.1):
+        ch = s.choose((C(1, 50.0, 0), C(6, r, 0), C(7, r / 2, 1)))
+        assert (ch.out, ch.rooted) == (1, True)
+
+
+def test_switches_on_the_tick_its_out_neighbour_is_lost():
+    s = Sticky(3, 3)
+    s.choose((C(1, 50.0, 0), C(6, 60.0, 0)))
+    ch = s.choose((C(6, 60.0, 0), C(7, 5.0, 2)))  # 1 gone; 7 (2 hops) is not below our 1
+    assert (ch.out, ch.rooted) == (6, True)
+
+
+def test_switches_when_its_out_neighbour_loses_its_path():
+    s = Sticky(3, 3)
+    s.choose((C(4, 10.0, 1), C(6, 60.0, 0)))
+    assert s.feasible == 2
+    ch = s.choose((C(4, 10.0, -1), C(6, 60.0, 0)))
+    assert ch.out == 6 and s.feasible == 1
+
+
+def test_after_a_loss_ignores_its_former_descendants_then_loiters_then_resets():
+    s = Sticky(4, 4)
+    s.choose((C(1, 50.0, 0),))  # hops 1
+    # leader gone; 5 still advertises 2 hops (it followed us): not feasible
+    ch = s.choose((C(5, 5.0, 2),))
+    assert ch.out is None and not ch.rooted
+    for _ in range(3):
+        assert s.choose((C(5, 5.0, 3),)).out is None
+    ch = s.choose((C(5, 5.0, 3),))  # drained: any rooted agent now
+    assert (ch.out, ch.rooted) == (5, True) and s.feasible == 4
+
+
+def test_feasible_follows_the_fewest_hops_advertised():
+    s = Sticky(2, 2)
+    s.choose((C(4, 10.0, 3),))
+    assert s.feasible == 4
+    s.choose((C(4, 10.0, 1),))  # upstream got shallower
+    assert s.feasible == 2
+    s.choose((C(4, 10.0, 5),))  # and deeper again: feasible stays at the minimum
+    assert s.feasible == 2
+
+
+def test_nobody_rooted_in_sight_loiters_and_brain_turns_at_c2():
+    from swarm.scenario import parse_scenario
+
+    sc = parse_scenario({"gains": {"c1": 1.0, "c2": 0.5}, "agents": [
+        {"id": 1, "role": "leader", "x": 0, "y": 0, "heading": 0, "speed": 1, "orbit_radius": 1},
+        {"id": 2, "role": "follower", "x": 5, "y": 0, "heading": 0, "speed": 1}]})
+    assert sc.sensing.selection == "sticky"  # the default
+    b = AgentBrain(sc.agent(2), sc.gains, sc.sensing, 0.01, 2)
+    d = b.decide(SensorFrame(0, 0.0, 2, 0.0, (C(3, 1.0, -1),), None))
+    assert d.out is None and d.phase == "lost" and d.hops is None and abs(d.u) == 0.5
+    d = b.decide(SensorFrame(1, 0.01, 2, 0.0, (C(3, 1.0, -1), C(1, 9.0, 0)), None))
+    assert d.out == 1 and d.hops is None  # waiting for 3, tracking 1
+    d = b.decide(SensorFrame(2, 0.02, 2, 0.0, (C(3, 1.0, 1), C(1, 9.0, 0)), None))
+    assert d.out == 3 and d.hops == 2
+
+
+# -- properties on abstract swarms ---------------------------------------------------------
+
+
+def _abstract_run(seed: int, n: int, leaders: int, ticks: int, p_sense: float, p_drop: float):
+    """n Sticky selectors (ids 0..n-1, the first `leaders` are leaders) on random sensing
+    graphs that change every tick, with agents dropping out and coming back; hop counts
+    relayed with one tick of delay, as the world does. Yields (tick, out, alive)."""
+    rng = np.random.default_rng(seed)
+    sel = {i: Sticky(n, n) for i in range(leaders, n)}
+    hops = np.array([0] * leaders + [-1] * (n - leaders))
+    alive = np.ones(n, dtype=bool)
+    pos = rng.uniform(0, 100, size=(n, 2))
+    for k in range(ticks):
+        pos += rng.normal(0, 3.0, size=(n, 2))
+        if p_drop:
+            flip = rng.random(n) < p_drop
+            for i in np.flatnonzero(flip):
+                alive[i] = not alive[i]
+                if alive[i] and i >= leaders:
+                    sel[i] = Sticky(n, n)  # a restarted process: a fresh brain
+                hops[i] = (0 if i < leaders else -1) if alive[i] else -1
+        sensed = (rng.random((n, n)) < p_sense) & alive[None, :] & alive[:, None]
+        np.fill_diagonal(sensed, False)
+        dist = np.hypot(*(pos[:, None, :] - pos[None, :, :]).transpose(2, 0, 1))
+        new_hops = hops.copy()
+        out: dict[int, int | None] = {i: None for i in range(n) if alive[i]}
+        for i in range(leaders, n):
+            if not alive[i]:
+                continue
+            contacts = tuple(Contact(int(j), 0.0, 0.0, float(dist[i, j]), int(hops[j]))
+                             for j in np.flatnonzero(sensed[i]))
+            ch = sel[i].choose(contacts)
+            out[i] = ch.out
+            new_hops[i] = ch.contact.hops + 1 if ch.rooted else -1
+        hops = new_hops
+        yield k, out, alive.copy()
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 14), leaders=st.integers(1, 3),
+       p_sense=st.floats(0.1, 1.0), p_drop=st.sampled_from([0.0, 0.01, 0.05]))
+def test_no_follower_only_cycle_is_ever_formed(seed, n, leaders, p_sense, p_drop):
+    leaders = min(leaders, n - 1)
+    for k, out, alive in _abstract_run(seed, n, leaders, 60, p_sense, p_drop):
+        g = analyse(out, set(range(leaders)))
+        assert g["cycles"] == [], (k, out)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 14), leaders=st.integers(1, 3))
+def test_without_losses_the_graph_stops_changing(seed, n, leaders):
+    """Everyone senses everyone (the distances still change every tick): every follower
+    commits within n + depth ticks and never switches after that; at most 1 + n changes."""
+    leaders = min(leaders, n - 1)
+    history = [out for _, out, _ in _abstract_run(seed, n, leaders, 4 * n + 10, 1.0, 0.0)]
+    settled = history[2 * n + 1]
+    assert all(out == settled for out in history[2 * n + 1:])
+    assert analyse(settled, set(range(leaders)))["unrooted"] == []
+    for i in range(leaders, n):
+        changes = sum(1 for a, b in zip(history, history[1:]) if a[i] != b[i])
+        assert changes <= 1 + n
+
+
+# -- random swarms through the in-process engine ---------------------------------------------
+
+
+@pytest.mark.parametrize("seed", [3, 17, 101])
+def test_random_swarm_switches_stay_under_the_bound(seed):
+    setting = SwarmSetting(n=8, leaders=2, duration=30.0, dt=0.05)
+    res = run_sim(random_swarm(setting, seed))
+    a = res.recorder.arrays()
+    n = len(a["ids"])
+    for j, ks in enumerate(switch_ticks(a["out"], a["alive"])):
+        assert len(ks) <= 1 + n, (j, ks)
+        assert all(k <= 2 * n for k in ks), (j, ks)  # nothing after the acquisition phase
+    final = {int(i): (int(o) if o >= 0 else None) for i, o in zip(a["ids"], a["out"][-1])}
+    g = analyse(final, {1, 2})
+    assert g["cycles"] == [] and g["unrooted"] == []
+
+
+def test_random_swarm_is_the_same_for_every_rule_and_range():
+    a = random_swarm(SwarmSetting(selection="sticky"), 5)
+    b = random_swarm(SwarmSetting(selection="nearest", range=30.0), 5)
+    assert [(x.x, x.y, x.heading, x.speed) for x in a.agents] == [(x.x, x.y, x.heading, x.speed) for x in b.agents]
+    assert a.agents[0].orbit_radius == pytest.approx(a.agents[0].speed)  # omega = 1
+    assert math.isinf(SwarmSetting().range)
