@@ -8,6 +8,10 @@ directory and writes, next to them:
 - ``distance.png``     (c) distance from the target vs time, dashed expected radii
 - ``control.png``      (d) turn-rate inputs u vs time
 - ``overview.png``     the four panels in one 2x2 figure (paper layout)
+- ``neighbours.png``   each follower's out-neighbour over time (the dynamic graph)
+
+Out-neighbour switches are marked on the distance plot (small ticks on the lines) and
+counted in the final-graph panel's title.
 
 Leaders are drawn in blues, followers in yellows/oranges (the paper's colours),
 dead agents in grey. Every agent is labelled by its id. Long runs are decimated to
@@ -37,6 +41,8 @@ from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Circle, FancyArrowPatch  # noqa: E402
 
+from world.metrics import switch_ticks  # noqa: E402
+
 __all__ = ["PlotError", "RunData", "load_run", "render_plots", "MAX_POINTS", "PLOT_FILES"]
 
 TRAJECTORY_FILE = "trajectory.npz"
@@ -46,7 +52,7 @@ SUMMARY_FILE = "summary.json"
 MAX_POINTS = 4000
 
 #: Files written by `render_plots`, in the order they are returned.
-PLOT_FILES = ("trajectories.png", "distance.png", "control.png", "graph.png", "overview.png")
+PLOT_FILES = ("trajectories.png", "distance.png", "control.png", "graph.png", "overview.png", "neighbours.png")
 
 # Array keys of trajectory.npz that the plots need (heading/speed/dt are optional).
 _REQUIRED_KEYS = ("ids", "role", "target", "t", "x", "y", "u", "out", "alive")
@@ -58,6 +64,7 @@ _EVENT_COLOURS = {"drop": "tab:red", "rejoin": "tab:green", "fault": "tab:purple
 _EVENT_KINDS = ("drop", "rejoin", "fault")
 _MAX_EVENT_LABELS = 30
 _MAX_LISTED = 12  # ids listed in the graph's 'no path to a leader' note
+_MAX_SWITCH_MARKS = 2000  # switch markers drawn on the distance plot
 _DPI = 120
 
 
@@ -463,6 +470,9 @@ def _panel_distance(
             last_vals[0, j] = live[fin[-1]]
     for r in _expected_radii(run):
         ax.axhline(r, color="0.35", ls="--", lw=0.9, zorder=1)
+    marks = _switch_marks(run, dist)
+    if marks[0].size:
+        ax.scatter(marks[0], marks[1], marker="|", s=40, c="k", lw=0.8, zorder=3)
     _draw_events(ax, events)
     _label_line_ends(ax, float(run.t[-1]), last_vals, run, colours)
     ax.set_xlim(float(run.t[0]), float(run.t[-1]) if run.n_rows > 1 else float(run.t[0]) + 1.0)
@@ -478,8 +488,76 @@ def _panel_distance(
     ]
     if not run.alive[-1].all():
         handles.append(Line2D([], [], ls=":", color=_DEAD_COLOUR, label="dead / coasting"))
+    if marks[0].size:
+        handles.append(Line2D([], [], ls="", marker="|", color="k", label="out-neighbour switch"))
     _role_filter(run, handles)
     ax.legend(handles=handles, fontsize=7, loc="upper right", framealpha=0.8)
+
+
+def _switch_marks(run: RunData, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(t, value) of every out-neighbour switch (at most _MAX_SWITCH_MARKS, evenly thinned)."""
+    ts, vs = [], []
+    for j, ks in enumerate(switch_ticks(run.out, run.alive)):
+        ts.append(run.t[ks])
+        vs.append(values[ks, j])
+    t = np.concatenate(ts) if ts else np.zeros(0)
+    v = np.concatenate(vs) if vs else np.zeros(0)
+    if t.size > _MAX_SWITCH_MARKS:
+        keep = np.linspace(0, t.size - 1, _MAX_SWITCH_MARKS).round().astype(np.int64)
+        t, v = t[keep], v[keep]
+    return t, v
+
+
+def switch_count(run: RunData) -> int:
+    """Out-neighbour changes of all agents while alive (summary.json's `switches`)."""
+    return int(sum(len(k) for k in switch_ticks(run.out, run.alive)))
+
+
+def _panel_neighbours(ax: Axes, run: RunData, colours: list[Any]) -> None:
+    """One row per follower: bars coloured by the out-neighbour it followed over time,
+    labelled with that id where the bar is wide enough; hatched red: none (loitering);
+    grey: not alive."""
+    followers = [j for j in range(run.n_agents) if not run.is_leader(j)]
+    index = {int(a): j for j, a in enumerate(run.ids)}
+    t = run.t
+    t_end = float(t[-1]) + (float(t[1] - t[0]) if run.n_rows > 1 else 1.0)
+    span = max(t_end - float(t[0]), 1e-9)
+    fs = _size_for(run.n_agents, 7, 5)
+    for row, j in enumerate(followers):
+        state = np.where(run.alive[:, j], run.out[:, j], -2)  # -2: not alive, -1: none
+        starts = np.concatenate([[0], np.flatnonzero(state[1:] != state[:-1]) + 1])
+        ends = np.concatenate([starts[1:], [run.n_rows]])
+        for a, b in zip(starts, ends):
+            x0 = float(t[a])
+            x1 = float(t[b]) if b < run.n_rows else t_end
+            o = int(state[a])
+            if o == -2:
+                kw: dict[str, Any] = dict(color=_DEAD_COLOUR, alpha=0.35)
+            elif o == -1:
+                kw = dict(facecolor="white", edgecolor=_FLAG_COLOUR, hatch="////", lw=0.0)
+            else:
+                kw = dict(color=colours[index[o]] if o in index else "0.3", ec="k", lw=0.3)
+            ax.barh(row, x1 - x0, left=x0, height=0.7, **kw)
+            if o >= 0 and (x1 - x0) > 0.04 * span:
+                ax.text(0.5 * (x0 + x1), row, str(o), ha="center", va="center", fontsize=fs)
+    ax.set_yticks(range(len(followers)), [str(int(run.ids[j])) for j in followers], fontsize=fs)
+    ax.set_ylim(len(followers) - 0.5, -0.5)
+    ax.set_xlim(float(t[0]), t_end)
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("follower")
+    counts = [len(k) for k in switch_ticks(run.out, run.alive)]
+    ax.set_title(f"out-neighbour of each follower over time ({sum(counts)} switches)")
+    ax.grid(True, axis="x", lw=0.3, alpha=0.5)
+    handles = [Line2D([], [], ls="", marker="s", ms=8, mfc=_agent_colours_role(run, True), mec="k",
+                      label="a leader (bar text: its id)"),
+               Line2D([], [], ls="", marker="s", ms=8, mfc=_agent_colours_role(run, False), mec="k",
+                      label="a follower"),
+               Line2D([], [], ls="", marker="s", ms=8, mfc="white", mec=_FLAG_COLOUR, label="none (loitering)"),
+               Line2D([], [], ls="", marker="s", ms=8, mfc=_DEAD_COLOUR, mec="none", label="not alive")]
+    ax.legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0), framealpha=0.8)
+    for k, j in enumerate(followers):
+        ax.annotate(f"{counts[j]}", (1.0, k), xycoords=("axes fraction", "data"), xytext=(3, 0),
+                    textcoords="offset points", va="center", fontsize=fs, color="0.3")
 
 
 def _panel_control(ax: Axes, run: RunData, colours: list[Any], events: list[_Event], max_points: int) -> None:
@@ -593,7 +671,8 @@ def _panel_graph(ax: Axes, run: RunData, colours: list[Any]) -> None:
     ax.set_yticks([])
     for s in ax.spines.values():
         s.set_visible(False)
-    ax.set_title("(a) communication graph (final)")
+    n_sw = switch_count(run)
+    ax.set_title(f"(a) final communication graph, after {n_sw} switch{'es' if n_sw != 1 else ''}")
     roles = {str(r) for r in run.role}
     handles = []
     if "leader" in roles:
@@ -645,7 +724,7 @@ def render_plots(run_dir: Path, max_points: int = MAX_POINTS) -> list[Path]:
     events = _events(run)
     suffix = _title_suffix(run)
     paths = [run_dir / name for name in PLOT_FILES]
-    p_traj, p_dist, p_ctrl, p_graph, p_over = paths
+    p_traj, p_dist, p_ctrl, p_graph, p_over, p_nb = paths
 
     fig, ax = plt.subplots(figsize=(7.5, 7), layout="constrained")
     _panel_trajectories(ax, run, rows, colours)
@@ -674,5 +753,11 @@ def render_plots(run_dir: Path, max_points: int = MAX_POINTS) -> list[Path]:
     _panel_control(axs[1, 1], run, colours, events, max_points)
     fig.suptitle("Run overview" + suffix)
     _save(fig, p_over)
+
+    n_f = sum(1 for j in range(run.n_agents) if not run.is_leader(j))
+    fig, ax = plt.subplots(figsize=(10, 1.4 + 0.35 * max(n_f, 1)), layout="constrained")
+    _panel_neighbours(ax, run, colours)
+    ax.set_title(ax.get_title() + suffix)
+    _save(fig, p_nb)
 
     return paths

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from swarm.scenario import Scenario
-from world.metrics import agent_metrics, converged, recovery, relative_errors
+from world.metrics import agent_metrics, converged, recovery, relative_errors, switch_ticks
 
 
 class Recorder:
@@ -80,10 +80,14 @@ class RunResult:
         a = self.recorder.arrays()
         if len(a["t"]) == 0:
             agents: dict = {}
+            switches = 0
         else:
+            counts = [len(k) for k in switch_ticks(a["out"], a["alive"])]
+            switches = sum(counts)
             agents = agent_metrics(ids=a["ids"], roles=a["role"], speeds=a["speed"],
                                    orbit_radius=a["orbit_radius"], t=a["t"], x=a["x"], y=a["y"],
-                                   alive=a["alive"], out_final=a["out"][-1], target=a["target"])
+                                   alive=a["alive"], out_final=a["out"][-1], target=a["target"],
+                                   switches=counts)
         for aid, more in self.agent_extra.items():
             if aid in agents:
                 agents[aid].update(more)
@@ -100,6 +104,8 @@ class RunResult:
             "scenario": self.scenario.name,
             "converged": converged(agents),
             "ticks": ticks,
+            "selection": self.scenario.sensing.selection,
+            "switches": switches,
             "sim_time": float(a["t"][-1]) if len(a["t"]) else 0.0,
             "dt": self.scenario.run.dt,
             "agents": agents,

@@ -65,6 +65,7 @@ def run_sim(scenario: Scenario, duration: float | None = None,
             elif f.kind == "thaw":
                 frozen.discard(f.agent)
         missed = 0
+        hops_sent = world.hops.copy()
         for aid, frame in world.frames().items():
             if aid in frozen:
                 missed += 1
@@ -81,8 +82,9 @@ def run_sim(scenario: Scenario, duration: float | None = None,
             col = world.index[aid]
             new = -1 if d.out is None else d.out
             if new != out[col] and not brains[aid].is_leader:
-                event("switch", aid, "pinned out-neighbour not sensed" if d.fallback else "nearest sensed agent",
-                      **{"from": None if out[col] < 0 else int(out[col]), "to": d.out})
+                old = None if out[col] < 0 else int(out[col])
+                event("switch", aid, world.switch_reason(aid, old, d.out, hops_sent),
+                      **{"from": old, "to": d.out})
             out[col] = new
         rec.record(k, world.time, world.x, world.y, world.heading, world.applied(), out,
                    world.alive_mask(), missed)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from swarm.plots import PLOT_FILES, PlotError, final_graph, load_run, render_plots
+from swarm.plots import PLOT_FILES, PlotError, final_graph, load_run, render_plots, switch_count
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -122,11 +122,27 @@ def assert_pngs(run_dir: Path, paths: list[Path]) -> None:
         assert data[:8] == PNG_MAGIC, name
 
 
-def test_render_writes_five_pngs(tmp_path: Path) -> None:
+def test_render_writes_every_png(tmp_path: Path) -> None:
     run_dir = make_run(tmp_path / "run")
     paths = render_plots(run_dir)
     assert_pngs(run_dir, paths)
-    assert set(PLOT_FILES) == {"trajectories.png", "distance.png", "control.png", "graph.png", "overview.png"}
+    assert "neighbours.png" in PLOT_FILES
+
+
+def test_switches_are_counted_while_alive_only(tmp_path: Path) -> None:
+    """The graph panel's count and the timeline come from switch_ticks: changes of `out`
+    between two ticks at which the agent was alive (its first choice is not a switch)."""
+    run_dir = make_run(tmp_path / "run", drop=None)
+    with np.load(run_dir / "trajectory.npz") as z:
+        arrays = {k: z[k] for k in z.files}
+    out, alive = arrays["out"], arrays["alive"]
+    before = switch_count(load_run(run_dir))
+    out[100:200, 2] = 1  # follower 3: 2 -> 1 at tick 100, back at tick 200: two switches
+    alive[:50, 1] = False  # follower 2 joins at tick 50: its first choice is no switch
+    out[:50, 1] = -1
+    alive[400:, 2] = False  # follower 3 drops at 400: no switch either
+    np.savez(run_dir / "trajectory.npz", **arrays)
+    assert switch_count(load_run(run_dir)) == before + 2
 
 
 def test_render_without_summary_and_single_row(tmp_path: Path) -> None:

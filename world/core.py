@@ -139,6 +139,23 @@ class WorldCore:
         self.hops = np.append(self.hops, 0 if spec.role == "leader" else -1)
         self.state.append(GONE)
 
+    def switch_reason(self, agent_id: int, old: int | None, new: int | None, hops_sent) -> str:
+        """Why `agent_id` changed its out-neighbour from `old` to `new` this tick, in the
+        words both engines write into "switch" events: what ground truth and the hop
+        counts sent in this tick's frames (`hops_sent`, (N,)) say about the old one."""
+        if new is None:
+            return "no out-neighbour: loitering"
+        if old is None:
+            return "out-neighbour chosen"
+        j = self.index.get(old)
+        if j is None or self.state[j] == GONE:
+            return "out-neighbour left the world"
+        if not self.sensing()[0][self.index[agent_id], j]:
+            return "out-neighbour out of sight"
+        if j < len(hops_sent) and hops_sent[j] < 0:
+            return "out-neighbour has no path to a leader"
+        return "another agent chosen"
+
     def pose(self, agent_id: int) -> tuple[float, float, float]:
         k = self.index[agent_id]
         return float(self.x[k]), float(self.y[k]), float(self.heading[k])

@@ -4,7 +4,9 @@
   the end of agent i's path in the final communication graph (paper, Theorem 1);
 - radial error |r_i(T) - R_i| (m) at the end of the run;
 - angular rate about the target (rad/s, ccw positive) over the last part of the run;
-- settling time: the earliest time after which |r_i - R_i| <= band * R_i for good.
+- settling time: the earliest time after which |r_i - R_i| <= band * R_i for good;
+- switches: how often a follower changed its out-neighbour while alive (its first choice
+  after joining is not a switch; a change to or from "none", loitering, is).
 """
 
 from __future__ import annotations
@@ -30,6 +32,15 @@ def root_of(agent: int, out: dict[int, int | None], leaders: set[int]) -> tuple[
     return cur, hops
 
 
+def switch_ticks(out: np.ndarray, alive: np.ndarray) -> list[np.ndarray]:
+    """Per column of the (T, N) `out` / `alive` arrays: the ticks k at which the agent's
+    out-neighbour differs from tick k - 1 while it was alive at both ticks."""
+    if len(out) < 2:
+        return [np.zeros(0, dtype=np.int64) for _ in range(out.shape[1] if out.ndim == 2 else 0)]
+    changed = (out[1:] != out[:-1]) & alive[1:] & alive[:-1]
+    return [np.flatnonzero(changed[:, j]) + 1 for j in range(out.shape[1])]
+
+
 def settling_time(t: np.ndarray, r: np.ndarray, R: float, band: float = SETTLING_BAND) -> float | None:
     """Earliest t after which |r - R| stays within band * R; None if it ends outside."""
     outside = np.abs(r - R) > band * R
@@ -50,8 +61,10 @@ def angular_rate(t: np.ndarray, x: np.ndarray, y: np.ndarray, target, window: fl
 
 
 def agent_metrics(*, ids, roles, speeds, orbit_radius, t, x, y, alive, out_final, target,
-                  window: float | None = None) -> dict[str, dict]:
-    """Per-agent metrics keyed by str(id), as written to summary.json."""
+                  window: float | None = None, switches=None) -> dict[str, dict]:
+    """Per-agent metrics keyed by str(id), as written to summary.json.
+
+    switches: (N,) switch counts (see `switch_ticks`), or None to leave them out."""
     leaders = {int(i) for i, r in zip(ids, roles) if r == "leader"}
     alive_final = {int(i): bool(alive[-1, k]) for k, i in enumerate(ids)}
     out = {int(i): (None if not alive_final[int(i)] or out_final[k] < 0 else int(out_final[k]))
@@ -87,6 +100,8 @@ def agent_metrics(*, ids, roles, speeds, orbit_radius, t, x, y, alive, out_final
             "settling_time": settle,
             "alive": alive_final[i],
         }
+        if switches is not None:
+            result[str(i)]["switches"] = int(switches[k])
     return result
 
 

@@ -94,6 +94,7 @@ class World:
         self.ticks = int(round((self.cfg.duration or s.run.duration) / s.run.dt))
         self.book = {i: AgentBook() for i in s.ids}
         self.out = np.full(len(s.ids), -1, dtype=np.int64)
+        self.hops_sent = self.core.hops.copy()  # hop counts in this tick's frames
         self.events: list[dict] = []
         self.rec = Recorder(s, self.ticks)
         self.garbage = 0  # malformed or foreign messages on keys the world listens to
@@ -210,8 +211,9 @@ class World:
         b.last_cmd_wall = time.monotonic()
         new = -1 if cmd.out is None else cmd.out
         if new != self.out[k] and self.core.scenario.agents[k].role == "follower":
-            self.event("switch", aid, "out-neighbour chosen", **{"from": None if self.out[k] < 0
-                                                               else int(self.out[k]), "to": cmd.out})
+            old = None if self.out[k] < 0 else int(self.out[k])
+            self.event("switch", aid, self.core.switch_reason(aid, old, cmd.out, self.hops_sent),
+                       **{"from": old, "to": cmd.out})
         self.out[k] = new
         if pending is not None and cmd.tick == self.core.tick:
             pending.discard(aid)
@@ -403,6 +405,7 @@ class World:
     def publish_frames(self) -> set[int]:
         """Send every active agent its frame of this tick (the same numbers as WorldCore.frames)."""
         c = self.core
+        self.hops_sent = c.hops.copy()  # what this tick's frames advertise (switch reasons)
         if self.network_faults:  # through the fault plan: partition, loss, delay, noise
             sent = set()
             for aid, frame in c.frames().items():
