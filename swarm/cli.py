@@ -58,7 +58,7 @@ def check(scenario: ScenarioArg) -> None:
                f"selection={sens.selection}, hysteresis={sens.hysteresis}")
     for a in s.agents:
         extra = (f"R={a.orbit_radius} m {a.direction}" if a.role == "leader"
-                 else f"follow={a.follow}" if a.follow is not None else "follow=nearest")
+                 else f"follow={a.follow}" if a.follow is not None else f"out-neighbour: {sens.selection}")
         lim = "" if a.max_turn_rate is None else f", |u|<={a.max_turn_rate} rad/s"
         typer.echo(f"  agent {a.id:>3} {a.role:<8} at ({a.x:g}, {a.y:g}) heading {a.heading:g} rad, "
                    f"{a.speed:g} m/s, {extra}{lim}")
@@ -67,6 +67,33 @@ def check(scenario: ScenarioArg) -> None:
         more = ", ".join(f"{k}={v}" for k, v in (("duration", f.duration), ("probability", f.probability),
                                                   ("delay", f.delay), ("std", f.std)) if v is not None)
         typer.echo(f"  fault at {f.at:g} s: {f.kind} {who}" + (f" ({more})" if more else ""))
+    _warn_nearest_graph(s)
+
+
+def _warn_nearest_graph(s: Scenario) -> None:
+    """Warn (exit 0) when the paper's nearest choice at t = 0 breaks Assumption 1."""
+    from agents.selection import nearest
+    from swarm.graph import analyse
+    from world.core import WorldCore
+
+    leaders = {a.id for a in s.agents if a.role == "leader"}
+    out = {aid: (None if aid in leaders else (c.id if (c := nearest(f.contacts)) else None))
+           for aid, f in WorldCore(s).frames().items()}
+    g = analyse(out, leaders)
+    problems = [f"follower-only cycle {' -> '.join(map(str, c + c[:1]))}" for c in g["cycles"]]
+    lone = [i for i in g["unrooted"] if not any(i in c for c in g["cycles"])]
+    if lone:
+        problems.append(f"no path to a leader from {', '.join(map(str, lone))}")
+    if not problems:
+        return
+    edges = ", ".join(f"{i}->{j}" for i, j in g["edges"])
+    cure = {"nearest": "this run keeps re-choosing the nearest agent and may never converge; "
+                       "selection = \"sticky\" (the default) keeps every follower rooted",
+            "sticky": "selection = \"sticky\" roots these followers on the nearest agent that has a path",
+            "rooted": "selection = \"rooted\" roots these followers on the nearest agent that has a path",
+            "fixed": "this scenario pins its graph with `follow`"}[s.sensing.selection]
+    typer.secho(f"  warning: nearest choice at t = 0 ({edges}) breaks the paper's Assumption 1: "
+                f"{'; '.join(problems)}. {cure}.", fg=typer.colors.YELLOW)
 
 
 @app.command()
@@ -88,16 +115,18 @@ def _progress_bar(total: int, label: str):
 
 def _print_summary(summary: dict, out: Path) -> None:
     typer.echo(f"converged: {summary['converged']}  ticks: {summary['ticks']}  "
-               f"sim time: {summary['sim_time']:.2f} s")
+               f"sim time: {summary['sim_time']:.2f} s  selection: {summary.get('selection', '-')}  "
+               f"switches: {summary.get('switches', '-')}")
     typer.echo(f"  {'id':>3} {'role':<8} {'out':>4} {'root':>4} {'radius':>9} {'expected':>9} "
-               f"{'error %':>8} {'rate':>8} {'settle s':>8}")
+               f"{'error %':>8} {'rate':>8} {'settle s':>8} {'switches':>8}")
     for aid, a in summary["agents"].items():
         def f(v, fmt):
             return "-" if v is None else format(v, fmt)
         typer.echo(f"  {aid:>3} {a['role']:<8} {f(a['out_neighbour'], 'd'):>4} {f(a['root'], 'd'):>4} "
                    f"{a['final_radius']:9.3f} {f(a['expected_radius'], '9.3f'):>9} "
                    f"{f(None if a['relative_error'] is None else 100 * a['relative_error'], '8.3f'):>8} "
-                   f"{f(a['angular_rate'], '8.4f'):>8} {f(a['settling_time'], '8.2f'):>8}"
+                   f"{f(a['angular_rate'], '8.4f'):>8} {f(a['settling_time'], '8.2f'):>8} "
+                   f"{f(a.get('switches'), 'd'):>8}"
                    + ("" if a["alive"] else "  (dropped)"))
     typer.echo(f"results: {out}")
 
@@ -305,6 +334,10 @@ def agent(
 from swarm.inspect import register as _register_live  # noqa: E402
 
 _register_live(app)
+
+from swarm.study_cli import study_app  # noqa: E402
+
+app.add_typer(study_app, name="study")
 
 
 def main() -> None:

@@ -1,0 +1,308 @@
+"""`swarm study`: does the law converge for my kind of swarm? Batch runs of the in-process
+engine, one process per run, rows streamed to CSV as they finish.
+
+Two studies:
+
+- **swarms**: random swarms drawn from a few options (agents, leaders, area, speeds,
+  sensing range and field of view, selection rule, gains), one run per (setting, seed).
+  A swarm depends only on (seed, n, leaders, area, speeds, omega), so every selection
+  rule and sensing range of one study meets the same swarms.
+- **gains**: one follower behind a leader that is already on its orbit (omega = 1 rad/s,
+  R_L = v_L), for a grid of (C1, C2) and follower/out-neighbour speed ratios, a few random
+  starts each: where does the law settle, and how fast?
+
+Everything here is pure apart from `run_rows`, which runs the jobs on a process pool.
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import math
+import multiprocessing
+import signal
+import statistics
+import time
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Callable, Iterable
+
+import numpy as np
+
+from swarm.scenario import Scenario, parse_scenario
+from world.metrics import SETTLING_BAND, settling_time, switch_ticks
+
+# -- swarms ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SwarmSetting:
+    """One setting of the swarms study (every field a CSV column)."""
+
+    n: int = 10  # agents
+    leaders: int = 2
+    selection: str = "sticky"
+    range: float = math.inf  # sensing range (m); inf: unlimited
+    fov: float = 2 * math.pi  # field of view (rad)
+    area: float = 120.0  # side of the square the agents start in (m), centred on the target
+    speed_min: float = 15.0  # m/s
+    speed_max: float = 40.0
+    omega: float = 1.0  # every leader's angular rate on its orbit (rad/s): R_L = v_L / omega
+    c1: float = 1.0
+    c2: float = 0.5
+    duration: float = 500.0  # s
+    dt: float = 0.05  # s
+
+    def label(self) -> str:
+        rng = "unlimited" if math.isinf(self.range) else f"{self.range:g} m"
+        fov = "" if self.fov >= 2 * math.pi else f", fov {self.fov:.2f}"
+        return f"N={self.n} L={self.leaders} {self.selection} range {rng}{fov}"
+
+
+def random_swarm(setting: SwarmSetting, seed: int) -> Scenario:
+    """The random swarm `seed` of a setting: ids 1..n, leaders first, uniform positions in
+    the area, uniform headings and speeds, leaders orbiting ccw at R_L = v_L / omega."""
+    rng = np.random.default_rng([seed, setting.n, setting.leaders])
+    half = setting.area / 2
+    xy = rng.uniform(-half, half, size=(setting.n, 2))
+    heading = rng.uniform(-math.pi, math.pi, size=setting.n)
+    speed = rng.uniform(setting.speed_min, setting.speed_max, size=setting.n)
+    agents = []
+    for k in range(setting.n):
+        a = {"id": k + 1, "role": "leader" if k < setting.leaders else "follower",
+             "x": float(xy[k, 0]), "y": float(xy[k, 1]), "heading": float(heading[k]), "speed": float(speed[k])}
+        if k < setting.leaders:
+            a["orbit_radius"] = float(speed[k]) / setting.omega
+        agents.append(a)
+    sensing: dict = {"selection": setting.selection}
+    if math.isfinite(setting.range):
+        sensing["range"] = setting.range
+    if setting.fov < 2 * math.pi:
+        sensing["fov"] = setting.fov
+    return parse_scenario({
+        "name": f"study-{seed}",
+        "run": {"dt": setting.dt, "duration": setting.duration, "seed": seed},
+        "gains": {"c1": setting.c1, "c2": setting.c2},
+        "sensing": sensing,
+        "agents": agents,
+    }, f"random swarm (seed {seed})")
+
+
+def cut_off_at_start(s: Scenario) -> bool:
+    """Some follower has no path to a leader in the sensing graph at t = 0: it cannot be
+    rooted before it moves (only possible with a range or field of view)."""
+    from world.core import WorldCore
+
+    sensed = WorldCore(s).sensing()[0]
+    reach = {k for k, a in enumerate(s.agents) if a.role == "leader"}
+    grew = True
+    while grew:
+        new = {i for i in range(len(s.agents)) if i not in reach and any(sensed[i, j] for j in reach)}
+        reach |= new
+        grew = bool(new)
+    return len(reach) < len(s.agents)
+
+
+@dataclass(frozen=True)
+class SwarmRow:
+    """The outcome of one run (a CSV row, after the setting's columns)."""
+
+    seed: int
+    converged: bool  # every live agent within 1% of its expected radius at the end
+    cut_off: bool  # see cut_off_at_start: reported apart, not as a failure of the policy
+    settling_time: float  # s, the last agent into the 2% band for good; nan if not settled
+    switches: int  # all followers' out-neighbour changes
+    switches_max: int  # the most any one follower made
+    switch_counts: str  # per follower, ';'-separated (for medians over agents)
+    unrooted: int  # followers with no path to a live leader at the end
+    wall_s: float
+
+
+def run_swarm(job: tuple[SwarmSetting, int]) -> dict:
+    """Worker: one random swarm through `swarm sim`'s engine; a flat dict for the CSV."""
+    from swarm.sim import run_sim
+
+    setting, seed = job
+    t0 = time.perf_counter()
+    s = random_swarm(setting, seed)
+    cut = cut_off_at_start(s)
+    res = run_sim(s)
+    summary = res.summary()
+    a = res.recorder.arrays()
+    counts = [len(k) for k, r in zip(switch_ticks(a["out"], a["alive"]), a["role"]) if r == "follower"]
+    agents = summary["agents"].values()
+    settle = [v["settling_time"] for v in agents]
+    row = SwarmRow(seed, bool(summary["converged"]), cut,
+                   max(settle) if settle and None not in settle else math.nan,
+                   sum(counts), max(counts, default=0), ";".join(map(str, counts)),
+                   sum(1 for v in agents if v["role"] == "follower" and v["root"] is None),
+                   time.perf_counter() - t0)
+    return {**asdict(setting), **asdict(row)}
+
+
+def swarm_jobs(settings: Iterable[SwarmSetting], seeds: Iterable[int]) -> list[tuple[SwarmSetting, int]]:
+    seeds = list(seeds)
+    return [(st, sd) for st in settings for sd in seeds]
+
+
+def swarm_columns() -> list[str]:
+    return [f.name for f in fields(SwarmSetting)] + [f.name for f in fields(SwarmRow)]
+
+
+def _setting_of(row: dict) -> tuple:
+    return tuple(row[f.name] for f in fields(SwarmSetting))
+
+
+def summarise_swarms(rows: list[dict]) -> list[dict]:
+    """One line per setting: runs, converged fraction (cut-off swarms apart), settling
+    times and switches per follower."""
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        groups.setdefault(_setting_of(r), []).append(r)
+    out = []
+    for key, rs in groups.items():
+        setting = SwarmSetting(*key)
+        fair = [r for r in rs if not _true(r["cut_off"])]
+        cut = [r for r in rs if _true(r["cut_off"])]
+        conv = [r for r in fair if _true(r["converged"])]
+        settle = sorted(float(r["settling_time"]) for r in conv if math.isfinite(float(r["settling_time"])))
+        per_agent = [int(c) for r in rs for c in str(r["switch_counts"]).split(";") if c != ""]
+        out.append({
+            "setting": setting.label(),
+            "runs": len(rs),
+            "cut_off": len(cut),
+            "cut_off_converged": sum(1 for r in cut if _true(r["converged"])),
+            "converged": len(conv),
+            "converged_fraction": len(conv) / len(fair) if fair else math.nan,
+            "settling_median_s": statistics.median(settle) if settle else math.nan,
+            "settling_p90_s": settle[min(len(settle) - 1, int(0.9 * len(settle)))] if settle else math.nan,
+            "switches_median": statistics.median(per_agent) if per_agent else math.nan,
+            "switches_p90": sorted(per_agent)[int(0.9 * (len(per_agent) - 1))] if per_agent else math.nan,
+            "switches_max": max(per_agent, default=0),
+            **{k: getattr(setting, k) for k in ("n", "leaders", "selection", "range", "fov")},
+        })
+    return out
+
+
+def _true(v) -> bool:
+    return v is True or str(v) == "True"
+
+
+# -- gains ---------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class GainJob:
+    c1: float
+    c2: float
+    ratio: float  # follower speed / leader speed
+    start: int  # which random start (seeded)
+    duration: float = 300.0
+    dt: float = 0.05
+
+
+def pair_scenario(job: GainJob) -> Scenario:
+    """A leader on its orbit (R = v_L = 20 m, omega = 1 rad/s, ccw, starting on it) and one
+    follower at a random pose within 3 R of the target."""
+    rng = np.random.default_rng([job.start, 7919])
+    v_l = 20.0
+    r = rng.uniform(0.2, 3.0) * v_l
+    phi = rng.uniform(-math.pi, math.pi)
+    return parse_scenario({
+        "name": "pair",
+        "run": {"dt": job.dt, "duration": job.duration},
+        "gains": {"c1": job.c1, "c2": job.c2},
+        "sensing": {"selection": "fixed"},
+        "agents": [
+            {"id": 1, "role": "leader", "x": v_l, "y": 0.0, "heading": math.pi / 2, "speed": v_l,
+             "orbit_radius": v_l},
+            {"id": 2, "role": "follower", "x": r * math.cos(phi), "y": r * math.sin(phi),
+             "heading": float(rng.uniform(-math.pi, math.pi)), "speed": job.ratio * v_l, "follow": 1},
+        ],
+    }, "gain pair")
+
+
+def run_gain(job: GainJob) -> dict:
+    """Worker: the pair's follower settling time (s; nan if it never settles)."""
+    from swarm.sim import run_sim
+
+    res = run_sim(pair_scenario(job))
+    a = res.recorder.arrays()
+    r = np.hypot(a["x"][:, 1], a["y"][:, 1])
+    settle = settling_time(a["t"], r, job.ratio * 20.0, SETTLING_BAND)
+    return {**asdict(job), "settling_time": math.nan if settle is None else settle}
+
+
+def gain_jobs(c1s, c2s, ratios, starts: int, duration: float, dt: float) -> list[GainJob]:
+    return [GainJob(a, b, q, k, duration, dt) for a, b, q, k in itertools.product(c1s, c2s, ratios, range(starts))]
+
+
+def gain_columns() -> list[str]:
+    return [f.name for f in fields(GainJob)] + ["settling_time"]
+
+
+def summarise_gains(rows: list[dict]) -> list[dict]:
+    """Worst settling time over the starts, per (c1, c2, ratio); nan: some start never settled."""
+    groups: dict[tuple, list[float]] = {}
+    for r in rows:
+        groups.setdefault((float(r["c1"]), float(r["c2"]), float(r["ratio"])), []).append(float(r["settling_time"]))
+    return [{"c1": k[0], "c2": k[1], "ratio": k[2], "starts": len(v),
+             "worst_settling_s": max(v) if all(math.isfinite(x) for x in v) else math.nan}
+            for k, v in sorted(groups.items())]
+
+
+# -- running -------------------------------------------------------------------------------
+
+
+def _quiet_worker() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and ends the pool
+
+
+def run_rows(worker: Callable[[object], dict], jobs: list, jobs_n: int,
+             on_row: Callable[[dict], None]) -> None:
+    """Run `worker` over `jobs` on `jobs_n` spawned processes (1: in this process), calling
+    `on_row` with each row as it finishes. Ctrl-C ends the workers and re-raises
+    KeyboardInterrupt; every row finished before it has been handed to `on_row`."""
+    if jobs_n <= 1:
+        for j in jobs:
+            on_row(worker(j))
+        return
+    ctx = multiprocessing.get_context("spawn")  # never fork a process that may hold threads
+    pool = ctx.Pool(jobs_n, initializer=_quiet_worker)
+    try:
+        for row in pool.imap_unordered(worker, jobs):
+            on_row(row)
+        pool.close()
+    except BaseException:
+        pool.terminate()
+        raise
+    finally:
+        pool.join()
+
+
+class CsvSink:
+    """Rows appended to a CSV file as they arrive (flushed: a stop loses no finished row)."""
+
+    def __init__(self, path: Path, columns: list[str]):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.f = path.open("w", newline="")
+        self.w = csv.DictWriter(self.f, fieldnames=columns, extrasaction="ignore")
+        self.w.writeheader()
+        self.f.flush()
+
+    def __call__(self, row: dict) -> None:
+        self.w.writerow(row)
+        self.f.flush()
+
+    def close(self) -> None:
+        self.f.close()
+
+
+def write_csv(path: Path, rows: list[dict]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as f:
+        if not rows:
+            return
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
