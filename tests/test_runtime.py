@@ -76,7 +76,7 @@ def lockstep_runs(tmp_path_factory):
 
 
 def switches(events: list[dict]) -> list[tuple]:
-    return [(e["tick"], e["agent"], e["from"], e["to"]) for e in events if e["kind"] == "switch"]
+    return [(e["tick"], e["agent"], e["from"], e["to"], e["reason"]) for e in events if e["kind"] == "switch"]
 
 
 # --- 1. equivalence ---------------------------------------------------------------------------
@@ -108,6 +108,41 @@ def test_lockstep_up_equals_sim(lockstep_runs, name):
     assert rep_alive.all()
     summ = res["summary"]
     assert summ["completed"] is True and summ["ticks"] == ticks and summ["clock"] == "lockstep"
+
+
+def test_case2_chooses_at_runtime_through_up(lockstep_runs):
+    """The shipped case 2 pins nothing: the agents choose the paper's nearest graph at t = 0
+    (2 -> 4 once 4 is rooted, everyone else -> 1) and keep it."""
+    res = lockstep_runs("case2")
+    assert res["scenario"].sensing.selection == "sticky"
+    assert all(a.follow is None for a in res["scenario"].agents)
+    summ = res["summary"]
+    assert {int(i): a["out_neighbour"] for i, a in summ["agents"].items()} == \
+        {1: None, 2: 4, 3: 1, 4: 1, 5: 1, 6: None}
+    assert summ["switches"] == 1 and summ["agents"]["2"]["switches"] == 1
+    (sw,) = [e for e in events_of(summ, "switch") if e["from"] is not None]
+    assert (sw["tick"], sw["agent"], sw["from"], sw["to"]) == (1, 2, 1, 4)
+
+
+def test_leader_loss_through_up_re_roots_on_the_other_tree(lockstep_runs):
+    """Leader 1 SIGKILLed at t = 60 s: its followers switch to leader 6 on the drop tick,
+    with the same events and trajectory as `swarm sim`, and the swarm converges again."""
+    res = lockstep_runs("case2-leader-loss")
+    assert res["rc"] == 0, res["run"].launcher.text()[-3000:]
+    up, sim, summ = res["traj"], res["sim"], res["summary"]
+    assert max(np.max(np.abs(up["x"] - sim["x"])), np.max(np.abs(up["y"] - sim["y"]))) < 1e-9
+    np.testing.assert_array_equal(up["out"], sim["out"])
+    np.testing.assert_array_equal(up["alive"], sim["alive"])
+    kill = 6000
+    assert sorted(switches(summ["events"])) == sorted(switches(res["sim_summary"]["events"]))
+    at_kill = sorted((e["agent"], e["from"], e["to"], e["reason"]) for e in events_of(summ, "switch")
+                     if e["tick"] >= kill)
+    assert at_kill == [(a, 1, 6, "out-neighbour left the world") for a in (3, 4, 5)]
+    assert all(e["tick"] == kill for e in events_of(summ, "switch") if e["tick"] >= kill)
+    assert summ["converged"] is True and summ["switches"] == 4
+    assert {int(i): a["root"] for i, a in summ["agents"].items() if a["alive"]} == {2: 6, 3: 6, 4: 6, 5: 6, 6: 6}
+    (fault,) = summ["faults"]
+    assert fault["switches"] == 3 and fault["recovery_time"] is not None
 
 
 # --- 2. convergence ---------------------------------------------------------------------------

@@ -46,13 +46,13 @@ FAULT_DURATION = 150.0
 
 @pytest.fixture(scope="module")
 def fault_run(tmp_path_factory):
-    """case2 through `swarm up`: SIGKILL follower 4 (5 pins it), then leader 1 (2 and 3 pin it),
+    """case2-fixed (the pinned graph) through `swarm up`: SIGKILL follower 4 (5 pins it), then leader 1 (2 and 3 pin it),
     then start agent 4 again by hand; the run goes on to its end."""
     base = tmp_path_factory.mktemp("faults")
     r = Runtime(base)
     tr = r.tracker
     try:
-        up = start_up(tr, SCENARIOS / "case2.toml", base / "run", "--duration", FAULT_DURATION,
+        up = start_up(tr, SCENARIOS / "case2-fixed.toml", base / "run", "--duration", FAULT_DURATION,
                       "--clock", "lockstep")
         run_id, endpoint = up.banner()
         up.wait_started(60)
