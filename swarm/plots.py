@@ -554,7 +554,10 @@ def _panel_neighbours(ax: Axes, run: RunData, colours: list[Any]) -> None:
                       label="a follower"),
                Line2D([], [], ls="", marker="s", ms=8, mfc="white", mec=_FLAG_COLOUR, label="none (loitering)"),
                Line2D([], [], ls="", marker="s", ms=8, mfc=_DEAD_COLOUR, mec="none", label="not alive")]
-    ax.legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0), framealpha=0.8)
+    ax.legend(handles=handles, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.18 - 0.5 / max(len(followers), 1)),
+              ncol=4, framealpha=0.8)
+    ax.annotate("switches", (1.0, 1.0), xycoords="axes fraction", xytext=(3, 2), textcoords="offset points",
+                va="bottom", fontsize=fs, color="0.3")
     for k, j in enumerate(followers):
         ax.annotate(f"{counts[j]}", (1.0, k), xycoords=("axes fraction", "data"), xytext=(3, 0),
                     textcoords="offset points", va="center", fontsize=fs, color="0.3")
@@ -755,7 +758,7 @@ def render_plots(run_dir: Path, max_points: int = MAX_POINTS) -> list[Path]:
     _save(fig, p_over)
 
     n_f = sum(1 for j in range(run.n_agents) if not run.is_leader(j))
-    fig, ax = plt.subplots(figsize=(10, 1.4 + 0.35 * max(n_f, 1)), layout="constrained")
+    fig, ax = plt.subplots(figsize=(10, 1.9 + 0.35 * max(n_f, 1)), layout="constrained")
     _panel_neighbours(ax, run, colours)
     ax.set_title(ax.get_title() + suffix)
     _save(fig, p_nb)

@@ -86,7 +86,7 @@ def test_switch_events_with_nearest_selection(base):
     first = [e for e in res.events if e["tick"] == 0]
     assert {e["agent"] for e in first} == {2, 3}  # every follower picks at tick 0
     assert all(e["kind"] == "switch" and e["from"] is None for e in first)
-    assert all(e["reason"] == "nearest sensed agent" for e in first)
+    assert all(e["reason"] == "out-neighbour chosen" for e in first)
     # agent 3 at (-3, 1): nearest is 2 at (0, -3)? |(3, -4)| = 5; leader at (2, 0): |(5, -1)| = 5.10
     assert {e["agent"]: e["to"] for e in first} == {2: 1, 3: 2}
 

@@ -145,6 +145,9 @@ class WorldCore:
         counts sent in this tick's frames (`hops_sent`, (N,)) say about the old one."""
         if new is None:
             return "no out-neighbour: loitering"
+        spec = self.scenario.agents[self.index[agent_id]]
+        if self.scenario.sensing.selection == "fixed" and spec.follow is not None and new != spec.follow:
+            return "pinned out-neighbour not sensed"
         if old is None:
             return "out-neighbour chosen"
         j = self.index.get(old)
