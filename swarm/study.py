@@ -11,7 +11,8 @@ Two studies:
   R_L = v_L), for a grid of (C1, C2) and follower/out-neighbour speed ratios, a few random
   starts each: where does the law settle, and how fast?
 
-Everything here is pure apart from `run_rows`, which runs the jobs on a process pool.
+Generation, the workers and the summaries are pure functions of their arguments;
+`run_rows` runs jobs on a process pool, `CsvSink` and `write_csv` write the tables.
 """
 
 from __future__ import annotations
@@ -149,7 +150,7 @@ def swarm_columns() -> list[str]:
     return [f.name for f in fields(SwarmSetting)] + [f.name for f in fields(SwarmRow)]
 
 
-def _setting_of(row: dict) -> tuple:
+def setting_of(row: dict) -> tuple:
     return tuple(row[f.name] for f in fields(SwarmSetting))
 
 
@@ -158,20 +159,20 @@ def summarise_swarms(rows: list[dict]) -> list[dict]:
     times and switches per follower."""
     groups: dict[tuple, list[dict]] = {}
     for r in rows:
-        groups.setdefault(_setting_of(r), []).append(r)
+        groups.setdefault(setting_of(r), []).append(r)
     out = []
     for key, rs in groups.items():
         setting = SwarmSetting(*key)
-        fair = [r for r in rs if not _true(r["cut_off"])]
-        cut = [r for r in rs if _true(r["cut_off"])]
-        conv = [r for r in fair if _true(r["converged"])]
+        fair = [r for r in rs if not is_true(r["cut_off"])]
+        cut = [r for r in rs if is_true(r["cut_off"])]
+        conv = [r for r in fair if is_true(r["converged"])]
         settle = sorted(float(r["settling_time"]) for r in conv if math.isfinite(float(r["settling_time"])))
         per_agent = [int(c) for r in rs for c in str(r["switch_counts"]).split(";") if c != ""]
         out.append({
             "setting": setting.label(),
             "runs": len(rs),
             "cut_off": len(cut),
-            "cut_off_converged": sum(1 for r in cut if _true(r["converged"])),
+            "cut_off_converged": sum(1 for r in cut if is_true(r["converged"])),
             "converged": len(conv),
             "converged_fraction": len(conv) / len(fair) if fair else math.nan,
             "settling_median_s": statistics.median(settle) if settle else math.nan,
@@ -184,7 +185,7 @@ def summarise_swarms(rows: list[dict]) -> list[dict]:
     return out
 
 
-def _true(v) -> bool:
+def is_true(v) -> bool:
     return v is True or str(v) == "True"
 
 

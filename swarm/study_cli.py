@@ -209,7 +209,7 @@ def gains(
     if plot and summary:
         from swarm.study_plots import plot_gains
 
-        typer.echo(f"plot: {plot_gains(summary, out / 'gains.png')}")
+        typer.echo(f"plot: {plot_gains(summary, out / 'gains.png', duration)}")
     typer.echo(f"results: {out}")
     if stopped:
         raise typer.Exit(130)

@@ -13,7 +13,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from swarm.study import SwarmSetting, _setting_of, _true  # noqa: E402
+from swarm.study import SwarmSetting, is_true, setting_of  # noqa: E402
 
 
 def plot_swarms(summary: list[dict], rows: list[dict], path: Path) -> Path:
@@ -22,7 +22,7 @@ def plot_swarms(summary: list[dict], rows: list[dict], path: Path) -> Path:
     labels = [s["setting"] for s in summary]
     by_label: dict[str, list[dict]] = {}
     for r in rows:
-        by_label.setdefault(SwarmSetting(*_setting_of(r)).label(), []).append(r)
+        by_label.setdefault(SwarmSetting(*setting_of(r)).label(), []).append(r)
     fig, axs = plt.subplots(1, 3, figsize=(15, 1.6 + 0.45 * len(labels) + 2), layout="constrained")
     y = np.arange(len(labels))
     ax = axs[0]
@@ -40,7 +40,7 @@ def plot_swarms(summary: list[dict], rows: list[dict], path: Path) -> Path:
     ax.set_title("converged within the run")
     ax = axs[1]
     data = [[float(r["settling_time"]) for r in by_label.get(lab, [])
-             if _true(r["converged"]) and math.isfinite(float(r["settling_time"]))] or [math.nan] for lab in labels]
+             if is_true(r["converged"]) and math.isfinite(float(r["settling_time"]))] or [math.nan] for lab in labels]
     ax.boxplot(data, orientation="horizontal", positions=y, widths=0.6, showfliers=True)
     ax.set_yticks(y, [""] * len(labels))
     ax.invert_yaxis()
@@ -63,9 +63,9 @@ def plot_swarms(summary: list[dict], rows: list[dict], path: Path) -> Path:
     return path
 
 
-def plot_gains(summary: list[dict], path: Path) -> Path:
+def plot_gains(summary: list[dict], path: Path, duration: float) -> Path:
     """One panel per C1: C2 against speed ratio, coloured by the worst settling time;
-    hatched grey where some start never settled."""
+    grey ("never") where some start had not settled by the end of its run (`duration` s)."""
     c1s = sorted({r["c1"] for r in summary})
     c2s = sorted({r["c2"] for r in summary})
     ratios = sorted({r["ratio"] for r in summary})
@@ -84,7 +84,7 @@ def plot_gains(summary: list[dict], path: Path) -> Path:
         for i in range(len(c2s)):
             for j in range(len(ratios)):
                 ax.text(j, i, "never" if never[i, j] else f"{grid[i, j]:.0f}", ha="center", va="center",
-                        fontsize=6, color="k" if never[i, j] or grid[i, j] > 0.5 * vmax else "w")
+                        fontsize=6, color="w" if not never[i, j] and grid[i, j] > 0.5 * vmax else "k")
         ax.set_xticks(range(len(ratios)), [f"{q:g}" for q in ratios], fontsize=7)
         ax.set_yticks(range(len(c2s)), [f"{b:g}" for b in c2s], fontsize=7)
         ax.set_xlabel("speed ratio v_i / v_j")
@@ -92,7 +92,8 @@ def plot_gains(summary: list[dict], path: Path) -> Path:
         ax.set_title(f"C1 / omega = {a:g}")
     if im is not None:
         fig.colorbar(im, ax=axs[0].tolist(), label="worst time into the 2% band (1/omega)")
-    fig.suptitle("single follower behind a leader on its orbit: where the law settles")
+    fig.suptitle(f"single follower behind a leader on its orbit (omega = 1 rad/s): where the law settles "
+                 f"within {duration:g} s (worst of the starts)")
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
