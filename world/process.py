@@ -27,11 +27,12 @@ import numpy as np
 
 from agents.config import BrainConf
 from swarm import wire
-from swarm.recording import Recorder, RunResult, write_run
+from swarm.recording import write_run
 from swarm.scenario import Scenario
 from swarm.transport import open_hub, socket_path
-from world.core import ACTIVE, GONE, WorldCore
-from world.faults import FaultPlan, fault_event
+from world.core import ACTIVE
+from world.engine import LOST, REFUSED, Engine
+from world.faults import fault_event
 from world.metrics import root_of
 
 CLAIM_TTL = 10.0  # s: an accepted join claim waits this long for the agent's token
@@ -85,26 +86,21 @@ class WorldConfig:
 @dataclass
 class World:
     cfg: WorldConfig
-    core: WorldCore = field(init=False)
     inbox: queue.SimpleQueue = field(default_factory=queue.SimpleQueue)
 
     def __post_init__(self):
         s = self.cfg.scenario
-        self.core = WorldCore(s, joined=False)
         self.ticks = int(round((self.cfg.duration or s.run.duration) / s.run.dt))
+        # The tick itself (faults, frames, commands, events, record, step) is the engine's,
+        # the same one `swarm sim` drives; this class is its zenoh shell.
+        self.engine = Engine(s, self.ticks, joined=False, wall_clock=time.time, on_event=self._announce)
+        self.core = self.engine.core
         self.book = {i: AgentBook() for i in s.ids}
-        self.out = np.full(len(s.ids), -1, dtype=np.int64)
-        self.hops_sent = self.core.hops.copy()  # hop counts in this tick's frames
-        self.events: list[dict] = []
-        self.rec = Recorder(s, self.ticks)
         self.garbage = 0  # malformed or foreign messages on keys the world listens to
         self.ignored = 0
         self.deadline = self.cfg.deadline or s.run.lockstep_deadline
         self.stopped_by: int | None = None
         self.truth_sent = 0.0
-        self.plan = FaultPlan(s.faults, s.run.dt, s.run.seed)
-        self.network_faults = self.plan.affects_network()
-        self.tick_missed = 0  # commands held at this tick (deadline, lost frame/command)
         self.faults_done: set[int] = set()
         self.held = 0.0  # wall s the clock held for process faults
         self.paused = False
@@ -144,9 +140,11 @@ class World:
 
     # -- events -----------------------------------------------------------------------------
     def event(self, kind: str, agent: int | None, reason: str, **more) -> None:
-        ev = {"tick": self.core.tick, "time": self.core.time, "wall_time": time.time(),
-              "agent": agent, "kind": kind, "reason": reason, **more}
-        self.events.append(ev)
+        self.engine.event(kind, agent, reason, **more)
+
+    def _announce(self, ev: dict) -> None:
+        """Every event, as it happens: to observers over zenoh, and to the log."""
+        kind, agent, reason = ev["kind"], ev["agent"], ev["reason"]
         try:
             self.events_pub.put(wire.encode_json({"event": ev}))
         except Exception:
@@ -196,25 +194,19 @@ class World:
         if cmd.tick <= b.last_cmd_tick:
             self.ignored += 1  # duplicate or late
             return
-        if self.network_faults and cmd.tick == self.core.tick and self.plan.command_lost(cmd.tick, aid):
+        done = self.engine.command(aid, cmd.tick, cmd.u, cmd.out, cmd.hops)
+        if done == LOST:  # a network fault lost it: its last command is held
             b.last_cmd_tick = cmd.tick
             b.missed += 1
-            self.tick_missed += 1
             if pending is not None:
                 pending.discard(aid)
             return
-        if not self.core.set_command(aid, cmd.u, cmd.hops):
+        if done == REFUSED:
             b.garbage += 1
             return
         b.commands += 1
         b.last_cmd_tick = cmd.tick
         b.last_cmd_wall = time.monotonic()
-        new = -1 if cmd.out is None else cmd.out
-        if new != self.out[k] and self.core.scenario.agents[k].role == "follower":
-            old = None if self.out[k] < 0 else int(self.out[k])
-            self.event("switch", aid, self.core.switch_reason(aid, old, cmd.out, self.hops_sent),
-                       **{"from": old, "to": cmd.out})
-        self.out[k] = new
         if pending is not None and cmd.tick == self.core.tick:
             pending.discard(aid)
 
@@ -234,22 +226,15 @@ class World:
         if kind == zenoh.SampleKind.PUT:
             if self.core.state[k] == ACTIVE:
                 return
-            rejoin = b.joins > 0
-            self.core.join(aid)
-            b.joins += 1
             b.claim_until = 0.0  # the key stays: a thawed process rejoins with the claim it had
             b.last_cmd_tick = self.core.tick - 1
-            self.event("rejoin" if rejoin else "join", aid,
-                       f"liveliness token appeared (pid {b.pid} on {b.host})", pid=b.pid, host=b.host)
-        else:
-            if self.core.state[k] != ACTIVE:
-                return
-            state = self.core.drop(aid)
+            self.engine.join(aid, f"liveliness token appeared (pid {b.pid} on {b.host})", b.joins > 0,
+                             pid=b.pid, host=b.host)
+            b.joins += 1
+        elif self.engine.drop(aid, "liveliness token lost") is not None:
             b.drops += 1
-            self.out[k] = -1
             if pending is not None:
                 pending.discard(aid)
-            self.event("drop", aid, "liveliness token lost", now=state)
 
     def _on_join(self, query) -> None:
         try:
@@ -290,10 +275,8 @@ class World:
             raise wire.WireError(format_validation_error(f"agent {aid} spec", e).replace("\n", ";")) from None
         if a.follow is not None and a.follow not in self.core.index:
             raise wire.WireError(f"agent {aid} spec: follow: no agent has id {a.follow}")
-        self.core.add_agent(a)
-        self.rec.add_agent(self.core.scenario)
+        self.engine.add_agent(a)
         self.book[aid] = AgentBook()
-        self.out = np.append(self.out, -1)
         self.sense_pub[aid] = self.session.declare_publisher(wire.agent_key(self.cfg.run, aid, "sense"),
                                                              express=True)
         self.event("add", aid, f"new {a.role} at ({a.x:g}, {a.y:g}) m, {a.speed:g} m/s")
@@ -304,7 +287,7 @@ class World:
         s = c.scenario
         leaders = {a.id for a in s.agents if a.role == "leader"}
         live = {i for i in c.active_ids()}
-        out = {int(i): (int(o) if o >= 0 else None) for i, o in zip(c.ids, self.out)}
+        out = {int(i): (int(o) if o >= 0 else None) for i, o in zip(c.ids, self.engine.out)}
         now = time.monotonic()
         agents = {}
         for a in s.agents:
@@ -405,18 +388,15 @@ class World:
     def publish_frames(self) -> set[int]:
         """Send every active agent its frame of this tick (the same numbers as WorldCore.frames)."""
         c = self.core
-        self.hops_sent = c.hops.copy()  # what this tick's frames advertise (switch reasons)
-        if self.network_faults:  # through the fault plan: partition, loss, delay, noise
-            sent = set()
-            for aid, frame in c.frames().items():
-                frame = self.plan.sense(frame)
-                if frame is None:
-                    self.tick_missed += 1
-                    self.book[aid].missed += 1
-                    continue
+        if not self.engine.frames_exact():  # through the fault plan: partition, loss, delay, noise
+            frames = self.engine.frames()
+            for aid in c.active_ids():
+                if aid not in frames:
+                    self.book[aid].missed += 1  # its frame was lost
+            for aid, frame in frames.items():
                 self.sense_pub[aid].put(wire.encode_sense(frame))
-                sent.add(aid)
-            return sent
+            return set(frames)
+        self.engine.mark_frames()  # the same numbers, encoded straight from the arrays
         sensed, bearing, rng = c.sensing()
         sent = set()
         tx, ty = c.target
@@ -431,12 +411,7 @@ class World:
         return sent
 
     def record_and_step(self) -> None:
-        c = self.core
-        u = c.applied()
-        self.rec.record(c.tick, c.time, c.x, c.y, c.heading, u, self.out, c.alive_mask(), self.tick_missed)
-        self.tick_missed = 0
-        self.publish_truth(u)
-        c.step()
+        self.engine.end_tick(observe=self.publish_truth)
 
     def publish_truth(self, u, force: bool = False) -> None:
         """Ground truth for observers, at most every TRUTH_PERIOD s (the world itself
@@ -448,7 +423,7 @@ class World:
         self.truth_sent = now
         try:
             self.truth_pub.put(wire.encode_truth(c.tick, c.time, c.ids, c.x, c.y, c.heading,
-                                                 u, self.out, c.state))
+                                                 u, self.engine.out, c.state))
         except Exception:  # an observer's problem never stops the world
             pass
 
@@ -465,7 +440,6 @@ class World:
         """A scripted fault is due at this tick. Network faults are the fault plan's job;
         process faults are asked of the launcher (it owns the processes) while the clock
         holds, and then, for kill and restart, the world waits to see the drop or the join."""
-        self.event("fault", f.agent, f"scripted {f.kind}", fault=fault_event(index, f))
         if f.kind not in ("kill", "restart", "freeze", "thaw"):
             return
         t_hold = time.monotonic()
@@ -475,11 +449,14 @@ class World:
             self.event("fault_skipped", f.agent, f"nobody carried out the {f.kind} (no launcher?)")
             return
         k = self.core.index[f.agent]
-        if f.kind == "kill":
-            self._wait(lambda: self.core.state[k] != ACTIVE, 3.0)
-        elif f.kind == "restart":
-            if not self._wait(lambda: self.core.state[k] == ACTIVE, 20.0):
-                self.event("fault_late", f.agent, "the restarted agent did not rejoin within 20 s")
+        # Hold the clock until the fault has taken effect, so that it lands on this tick as
+        # in `swarm sim`: a killed process is dropped when its socket closes, a frozen one
+        # when its link lease runs out; a restarted or thawed one rejoins.
+        if f.kind in ("kill", "freeze"):
+            if not self._wait(lambda: self.core.state[k] != ACTIVE, 3.0 if f.kind == "kill" else 6.0):
+                self.event("fault_late", f.agent, f"the {f.kind} did not drop the agent in time")
+        elif not self._wait(lambda: self.core.state[k] == ACTIVE, 20.0):
+            self.event("fault_late", f.agent, f"the {f.kind} agent did not rejoin within 20 s")
         self.held += time.monotonic() - t_hold
 
     def lockstep_tick(self) -> None:
@@ -490,7 +467,7 @@ class World:
             if left <= 0:
                 for aid in pending:
                     self.book[aid].missed += 1
-                self.tick_missed += len(pending)
+                self.engine.miss(len(pending))
                 break
             self.drain(pending, left)
         while self.drain(None, 0):  # joins/drops that arrived meanwhile take effect now
@@ -531,7 +508,7 @@ class World:
                     self.drain(None, 0.1)
                 t_next += time.monotonic() - t_pause
                 t0_ticks += time.monotonic() - t_pause
-            due = self.plan.due(self.core.tick)
+            due = self.engine.due()
             if due:
                 held = self.held
                 for i, f in due:
@@ -572,9 +549,8 @@ class World:
     def finish(self) -> dict | None:
         """Record the final state row and write the results; returns the summary."""
         c = self.core
-        if c.tick <= self.ticks and self.rec.rows <= c.tick:
-            self.rec.record(c.tick, c.time, c.x, c.y, c.heading, np.full(len(c.ids), np.nan),
-                            self.out, c.alive_mask())
+        if c.tick <= self.ticks and self.engine.rec.rows <= c.tick:
+            self.engine.close()
             self.publish_truth(np.full(len(c.ids), np.nan), force=True)
         if self.cfg.out is None:
             return None
@@ -590,7 +566,7 @@ class World:
                    if self.cfg.clock == "realtime" else {}),
             }
         wall = getattr(self, "wall_ticks", None)
-        result = RunResult(self.core.scenario, self.rec, self.events, {
+        result = self.engine.result({
             "engine": "up", "run": self.cfg.run, "endpoint": self.cfg.listen, "clock": self.cfg.clock,
             "speed": self.cfg.speed, "completed": self.stopped_by is None and c.tick >= self.ticks,
             "stopped_by_signal": self.stopped_by, "garbage_messages": self.garbage,

@@ -1,0 +1,181 @@
+"""One tick of a run, the same for both shells: faults due -> frames -> commands ->
+events -> record -> integrate.
+
+`Engine` owns everything a tick changes: ground truth (`WorldCore`), the scripted fault
+plan, each agent's chosen out-neighbour, the events and the recording. A shell decides
+only how frames reach the agents and how their commands come back:
+
+- `swarm sim` (swarm/sim.py): in-process `AgentBrain`s, called in scenario order;
+- the world process (world/process.py): agent processes over zenoh, with a lockstep
+  deadline or the wall clock.
+
+Both call the same methods in the same order, so `swarm up --clock lockstep` equals
+`swarm sim` by construction, faults included. Process faults (kill, restart, freeze,
+thaw) are due here; carrying them out is the shell's job, and both end in `drop` /
+`join`: a kill or a freeze drops the agent at the fault's tick (a frozen process is
+dropped when its link lease runs out, and the lockstep clock holds until it is), a
+restart or a thaw brings it back (a restart with a fresh brain, a thaw with the one it had).
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from swarm.recording import Recorder, RunResult
+from swarm.scenario import Scenario
+from world.core import ACTIVE, WorldCore
+from world.faults import FaultPlan, fault_event
+from world.frames import SensorFrame
+
+# What became of a command (`Engine.command`).
+LATCHED, LOST, REFUSED = "latched", "lost", "refused"
+
+
+class Engine:
+    def __init__(self, scenario: Scenario, ticks: int, *, joined: bool = True,
+                 wall_clock: Callable[[], float] | None = None,
+                 on_event: Callable[[dict], None] | None = None):
+        """ticks: steps to record; joined: agents start in the world (sim) or join later
+        (the world process); wall_clock: stamps events with `wall_time`; on_event: told of
+        every event as it happens (the world publishes and prints them)."""
+        self.core = WorldCore(scenario, joined=joined)
+        self.plan = FaultPlan(scenario.faults, scenario.run.dt, scenario.run.seed)
+        self.network = self.plan.affects_network()  # frames and commands go through the plan
+        self.ticks = ticks
+        self.rec = Recorder(scenario, ticks)
+        self.events: list[dict] = []
+        self.out = np.full(len(scenario.agents), -1, dtype=np.int64)  # chosen out-neighbour ids
+        self.hops_sent = self.core.hops.copy()  # hop counts this tick's frames advertise
+        self.missed_now = 0  # live agents whose command is held at this tick
+        self.wall_clock = wall_clock
+        self.on_event = on_event
+
+    @property
+    def tick(self) -> int:
+        return self.core.tick
+
+    @property
+    def time(self) -> float:
+        return self.core.time
+
+    @property
+    def scenario(self) -> Scenario:
+        return self.core.scenario
+
+    def event(self, kind: str, agent: int | None, reason: str, **more) -> dict:
+        ev = {"tick": self.core.tick, "time": self.core.time}
+        if self.wall_clock is not None:
+            ev["wall_time"] = self.wall_clock()
+        ev.update(agent=agent, kind=kind, reason=reason, **more)
+        self.events.append(ev)
+        if self.on_event is not None:
+            self.on_event(ev)
+        return ev
+
+    # -- 1. faults due -------------------------------------------------------------------------
+    def due(self) -> list:
+        """Scripted faults that start at this tick, each logged as a "fault" event; the
+        shell carries out the process faults among them."""
+        due = self.plan.due(self.core.tick)
+        for i, f in due:
+            self.event("fault", f.agent, f"scripted {f.kind}", fault=fault_event(i, f))
+        return due
+
+    def drop(self, agent: int, reason: str) -> str | None:
+        """The agent's process is gone (killed, frozen past its lease): it leaves the world
+        or coasts. None if it was not active."""
+        k = self.core.index[agent]
+        if self.core.state[k] != ACTIVE:
+            return None
+        state = self.core.drop(agent)
+        self.out[k] = -1
+        self.event("drop", agent, reason, now=state)
+        return state
+
+    def join(self, agent: int, reason: str, rejoin: bool, **more) -> bool:
+        """The agent's process is (back) in the world, controlled from its current pose."""
+        if self.core.state[self.core.index[agent]] == ACTIVE:
+            return False
+        self.core.join(agent)
+        self.event("rejoin" if rejoin else "join", agent, reason, **more)
+        return True
+
+    def add_agent(self, spec) -> None:
+        """A new agent (not in the scenario file) enters the run, not joined yet."""
+        self.core.add_agent(spec)
+        self.rec.add_agent(self.core.scenario)
+        self.out = np.append(self.out, -1)
+
+    # -- 2. frames -------------------------------------------------------------------------------
+    def frames(self) -> dict[int, SensorFrame]:
+        """This tick's frames as the active agents receive them: through the fault plan
+        (delay, noise), lost ones left out and counted as missed."""
+        self.hops_sent = self.core.hops.copy()
+        frames = self.core.frames()
+        if not self.network:
+            return frames
+        delivered = {}
+        for aid, frame in frames.items():
+            got = self.plan.sense(frame)
+            if got is None:
+                self.missed_now += 1
+            else:
+                delivered[aid] = got
+        return delivered
+
+    def frames_exact(self) -> bool:
+        """True when this tick's frames are exactly what the core builds (no network fault
+        in the scenario), so a shell may encode them straight from the core's arrays; it
+        then calls `mark_frames` instead of `frames`."""
+        return not self.network
+
+    def mark_frames(self) -> None:
+        self.hops_sent = self.core.hops.copy()
+
+    # -- 3. commands and 4. events ---------------------------------------------------------------
+    def command(self, agent: int, tick: int, u: float, out: int | None, hops: int | None) -> str:
+        """Agent `agent`'s answer to its frame of `tick` (this tick): lost on the way by the
+        fault plan (its last command is held), refused when not finite, or latched; a new
+        out-neighbour is a "switch" event."""
+        if self.network and tick == self.core.tick and self.plan.command_lost(tick, agent):
+            self.missed_now += 1
+            return LOST
+        if not self.core.set_command(agent, u, hops):
+            return REFUSED
+        k = self.core.index[agent]
+        new = -1 if out is None else out
+        if new != self.out[k] and not self.core.is_leader[k]:
+            old = None if self.out[k] < 0 else int(self.out[k])
+            self.event("switch", agent, self.core.switch_reason(agent, old, out, self.hops_sent),
+                       **{"from": old, "to": out})
+        self.out[k] = new
+        return LATCHED
+
+    def miss(self, n: int = 1) -> None:
+        """`n` live agents' commands are held at this tick for the shell's own reasons
+        (a lockstep deadline passed)."""
+        self.missed_now += n
+
+    # -- 5. record and 6. integrate --------------------------------------------------------------
+    def end_tick(self, observe: Callable[[np.ndarray], None] | None = None) -> None:
+        """Record this tick and step the world; `observe(u)` sees the recorded state with
+        the turn rates about to be integrated (the world publishes it as ground truth)."""
+        c = self.core
+        u = c.applied()
+        self.rec.record(c.tick, c.time, c.x, c.y, c.heading, u, self.out, c.alive_mask(), self.missed_now)
+        self.missed_now = 0
+        if observe is not None:
+            observe(u)
+        c.step()
+
+    def close(self) -> None:
+        """Record the final state (no command: u is NaN), once."""
+        c = self.core
+        if c.tick <= self.ticks and self.rec.rows <= c.tick:
+            self.rec.record(c.tick, c.time, c.x, c.y, c.heading, np.full(len(c.ids), np.nan),
+                            self.out, c.alive_mask())
+
+    def result(self, extra: dict, agent_extra: dict | None = None) -> RunResult:
+        return RunResult(self.core.scenario, self.rec, self.events, extra, agent_extra or {})
