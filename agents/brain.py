@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 from agents.laws import make_follower_law
 from agents.selection import Sticky, select
-from world.frames import SensorFrame
+from swarm.contracts.frames import SensorFrame
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,7 +44,7 @@ class AgentBrain:
 
     def __init__(self, spec, gains, sensing, dt: float, max_hops: int = 10_000):
         """spec/gains/sensing: the scenario's AgentSpec/GainsSpec/SensingSpec or the
-        agents.config equivalents; dt (s); max_hops caps advertised hop counts (count to
+        swarm.contracts.brain_config equivalents; dt (s); max_hops caps advertised hop counts (count to
         infinity after a leader dies stops there)."""
         self.max_hops = max_hops
         self.spec = spec

@@ -20,8 +20,8 @@ import socket
 import sys
 import time
 
-from swarm import wire
-from swarm.transport import open_client
+from swarm.contracts import wire
+from swarm.contracts.transport import open_client
 
 STATUS_PERIOD = 0.2  # s of wall time between periodic status messages
 EXIT_OK, EXIT_REFUSED, EXIT_WORLD_GONE = 0, 3, 4
@@ -73,7 +73,7 @@ class AgentNode:
     def __init__(self, session, run: str, agent_id: int, reply: dict, wait_world: bool):
         import zenoh
 
-        from agents.config import BrainConf
+        from swarm.contracts.brain_config import BrainConf
 
         self.zenoh = zenoh
         self.session = session

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from world.frames import Contact
+from swarm.contracts.frames import Contact
 
 
 @dataclass(frozen=True, slots=True)

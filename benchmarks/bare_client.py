@@ -2,7 +2,7 @@
 
     python benchmarks/bare_client.py INDEX ENDPOINT RUN [--timeout S]
 
-Connects to the hub as a zenoh client (swarm.transport.client_config, like an agent),
+Connects to the hub as a zenoh client (swarm.contracts.transport.client_config, like an agent),
 subscribes to its own tick key, declares a liveliness token (how the hub knows it is
 ready) and answers each tick with one small message on its own ack key. The callback
 only enqueues; the main thread publishes (the same structure as agents/process.py,
@@ -42,7 +42,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import zenoh
 
-    from swarm.transport import client_config
+    from swarm.contracts.transport import client_config
 
     deadline = time.monotonic() + a.timeout
     inbox: queue.SimpleQueue = queue.SimpleQueue()

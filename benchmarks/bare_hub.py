@@ -4,7 +4,7 @@
                                   [--warmup W] [--join-timeout S] [--tick-timeout S] --result FILE
                                   [--ready FILE] [--linger S] [--handler callback|channel]
 
-A router-mode session with swarm's own hub config (swarm.transport.hub_config). It
+A router-mode session with swarm's own hub config (swarm.contracts.transport.hub_config). It
 waits until N bare_client.py processes have declared their liveliness tokens, then per
 tick sends one 8-byte message to each client on that client's own key and waits until
 every client answered with one 12-byte message for that tick. The first W ticks warm
@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import zenoh
 
-    from swarm.transport import hub_config
+    from swarm.contracts.transport import hub_config
 
     t_start = time.monotonic()
     acks: queue.SimpleQueue = queue.SimpleQueue()

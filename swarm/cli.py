@@ -10,7 +10,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from swarm.scenario import Scenario, ScenarioError, load_scenario, scenario_json_schema
+from swarm.contracts.scenario import Scenario, ScenarioError, load_scenario, scenario_json_schema
 
 app = typer.Typer(
     help="swarm: an agent-per-process runtime for bearing-based circumnavigation over zenoh.",
@@ -156,7 +156,7 @@ def sim(
 
     Example: swarm sim scenarios/case2.toml --out runs/case2
     """
-    from swarm.recording import write_run
+    from world.recording import write_run
     from swarm.sim import run_sim
 
     s = read_scenario(scenario)
@@ -218,8 +218,8 @@ def world(
 
     Example: swarm world scenarios/case2.toml --listen tcp/0.0.0.0:7447 --out runs/case2
     """
-    from swarm.transport import default_endpoint
-    from swarm.wire import WireError, check_run_id
+    from swarm.contracts.transport import default_endpoint
+    from swarm.contracts.wire import WireError, check_run_id
     from world.process import WorldConfig, run_world
 
     s = read_scenario(scenario)

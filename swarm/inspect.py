@@ -54,7 +54,7 @@ def attached(connect: str | None, run: str | None) -> Iterator:
     """A LiveRun on the run picked by --connect/--run; any failure to reach it (or its world
     ending mid-command) becomes one line on stderr and exit 1."""
     from swarm.live import LiveRun, NoRun, resolve
-    from swarm.wire import WireError
+    from swarm.contracts.wire import WireError
 
     try:
         with LiveRun(resolve(connect, run)) as live:
@@ -266,7 +266,7 @@ def runs(
     Example: swarm runs --connect tcp/10.0.0.5:7447 --json
     """
     from swarm.live import LiveRun, find_runs
-    from swarm.transport import runtime_dir
+    from swarm.contracts.transport import runtime_dir
 
     found = [r for r in find_runs(connect) if run is None or r.run == run]
     docs = []
@@ -549,8 +549,8 @@ def spawn(
     """
     from pydantic import ValidationError
 
-    from swarm.scenario import AgentSpec, format_validation_error
-    from swarm.transport import runtime_dir
+    from swarm.contracts.scenario import AgentSpec, format_validation_error
+    from swarm.contracts.transport import runtime_dir
 
     given = {k: v for k, v in dict(x=x, y=y, heading=heading, speed=speed, role=role, orbit_radius=orbit_radius,
                                    direction=direction, follow=follow, max_turn_rate=max_turn_rate).items()

@@ -21,9 +21,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from swarm import wire
-from swarm.scenario import Scenario
-from swarm.transport import default_endpoint, open_client
+from swarm.contracts import wire
+from swarm.contracts.scenario import Scenario
+from swarm.contracts.transport import default_endpoint, open_client
 from world.metrics import root_of
 
 EXIT_WORLD_FAILED = 1

@@ -12,26 +12,8 @@ from __future__ import annotations
 import socket as so
 from dataclasses import dataclass
 
-from swarm import wire
-from swarm.transport import open_client, runtime_dir, socket_path
-
-QUERY_TIMEOUT = 1.0  # s
-
-
-def query_statuses(session, run: str, timeout: float = QUERY_TIMEOUT) -> dict[int, dict]:
-    """Each live agent's own status, from its status queryable (malformed replies skipped)."""
-    out: dict[int, dict] = {}
-    for r in session.get(wire.agent_key(run, "*", "status"), timeout=timeout):
-        if r.ok is None:
-            continue
-        try:
-            aid = wire.agent_of_key(str(r.ok.key_expr))
-            st = wire.decode_status(r.ok.payload.to_bytes())
-        except wire.WireError:
-            continue
-        if st["id"] == aid:
-            out[aid] = st
-    return out
+from swarm.contracts import wire
+from swarm.contracts.transport import QUERY_TIMEOUT, open_client, query_statuses, runtime_dir, socket_path
 
 
 class NoRun(Exception):

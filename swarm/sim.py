@@ -11,8 +11,8 @@ from __future__ import annotations
 from typing import Callable
 
 from agents.brain import AgentBrain
-from swarm.recording import RunResult
-from swarm.scenario import Scenario
+from world.recording import RunResult
+from swarm.contracts.scenario import Scenario
 from world.engine import Engine
 
 

@@ -30,7 +30,7 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from swarm.scenario import Scenario, parse_scenario
+from swarm.contracts.scenario import Scenario, parse_scenario
 from world.metrics import SETTLING_BAND, settling_time, switch_ticks
 
 # -- swarms ------------------------------------------------------------------------------

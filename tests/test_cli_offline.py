@@ -10,7 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from swarm.cli import app
-from swarm.scenario import load_scenario
+from swarm.contracts.scenario import load_scenario
 
 SCENARIOS = sorted((Path(__file__).resolve().parent.parent / "scenarios").glob("*.toml"))
 KEYS = {"ids", "role", "speed", "orbit_radius", "target", "dt", "t", "x", "y", "heading", "u",

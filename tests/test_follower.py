@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from agents.brain import AgentBrain, saturate
-from agents.laws import LAWS, LawError, bearing_law, make_follower_law, resolve_law
-from swarm.scenario import parse_scenario
+from agents.laws import bearing_law, make_follower_law
+from swarm.contracts.laws import LawError, resolve_law
+from swarm.contracts.scenario import parse_scenario
 from swarm.sim import run_sim
 from world.sensing import Contact, SensorFrame
 
@@ -52,7 +53,7 @@ def test_bearing_law_zero_on_aligned_pursuit():
 
 
 def test_registry_and_lookup():
-    assert LAWS["bearing"] is bearing_law
+    assert resolve_law("bearing") is bearing_law
     assert resolve_law("bearing") is bearing_law
     assert resolve_law("agents.laws:bearing_law") is bearing_law
 

@@ -38,7 +38,7 @@ from runtime_helpers import (
     swarm_cmd,
     wait_for,
 )
-from swarm import wire
+from swarm.contracts import wire
 from swarm.graph import analyse
 
 pytestmark = pytest.mark.slow
@@ -59,7 +59,7 @@ def rt(tmp_path):
 # --- small helpers ------------------------------------------------------------------------------
 def _open_session(endpoint: str, timeout: float = 15.0):
     """A zenoh client session of this test process on the run's endpoint (retried until it listens)."""
-    from swarm.transport import open_client
+    from swarm.contracts.transport import open_client
 
     def attempt():
         try:

@@ -6,9 +6,9 @@ import numpy as np
 
 from agents.brain import AgentBrain
 from swarm.graph import analyse
-from swarm.scenario import load_scenario
+from swarm.contracts.scenario import load_scenario
 from swarm.sim import run_sim
-from world.frames import Contact, SensorFrame
+from swarm.contracts.frames import Contact, SensorFrame
 
 ROOTED = Path(__file__).resolve().parent.parent / "scenarios" / "rooted.toml"
 

@@ -29,7 +29,7 @@ from runtime_helpers import (
     start_up,
     wait_for,
 )
-from swarm.scenario import load_scenario
+from swarm.contracts.scenario import load_scenario
 
 pytestmark = pytest.mark.slow
 
@@ -225,7 +225,7 @@ def test_sigterm_leaves_no_process(rt, tmp_path):
 # encodes ground truth (inside that try block); everything else is the real world process.
 SIGNAL_IN_TRUTH = """
 import os, signal, sys
-from swarm import wire
+from swarm.contracts import wire
 orig = wire.encode_truth
 def encode_truth(*a, **k):
     if not getattr(encode_truth, "fired", False):

@@ -1,4 +1,4 @@
-"""swarm.scenario: valid files load; every bad input is rejected naming the file and field,
+"""swarm.contracts.scenario: valid files load; every bad input is rejected naming the file and field,
 through load_scenario and through `swarm check` (exit 2, no traceback)."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 from swarm.cli import app
-from swarm.scenario import Scenario, ScenarioError, load_scenario, parse_scenario
+from swarm.contracts.scenario import Scenario, ScenarioError, load_scenario, parse_scenario
 
 SCENARIOS = sorted((Path(__file__).resolve().parent.parent / "scenarios").glob("*.toml"))
 

@@ -1,4 +1,4 @@
-"""The in-process engine (swarm.sim), its recording (swarm.recording), the world core
+"""The in-process engine (swarm.sim), its recording (world.recording), the world core
 (world.core) and the run metrics (world.metrics)."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from swarm.recording import write_run
-from swarm.scenario import load_scenario, parse_scenario
+from world.recording import write_run
+from swarm.contracts.scenario import load_scenario, parse_scenario
 from swarm.sim import run_sim
 from world.core import ACTIVE, COASTING, GONE, WorldCore
 from world.metrics import agent_metrics, angular_rate, converged, root_of, settling_time

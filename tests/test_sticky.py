@@ -20,7 +20,7 @@ from agents.selection import Sticky
 from swarm.graph import analyse
 from swarm.sim import run_sim
 from swarm.study import SwarmSetting, random_swarm
-from world.frames import Contact, SensorFrame
+from swarm.contracts.frames import Contact, SensorFrame
 from world.metrics import switch_ticks
 
 
@@ -100,7 +100,7 @@ def test_feasible_follows_the_fewest_hops_advertised():
 
 
 def test_nobody_rooted_in_sight_loiters_and_brain_turns_at_c2():
-    from swarm.scenario import parse_scenario
+    from swarm.contracts.scenario import parse_scenario
 
     sc = parse_scenario({"gains": {"c1": 1.0, "c2": 0.5}, "agents": [
         {"id": 1, "role": "leader", "x": 0, "y": 0, "heading": 0, "speed": 1, "orbit_radius": 1},

@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from swarm.scenario import Scenario
+from swarm.contracts.scenario import Scenario
 from world.kinematics import step
 from world.sensing import SensorFrame, build_frames, sensing_matrix
 

@@ -19,8 +19,8 @@ from collections import deque
 
 import numpy as np
 
-from swarm.scenario import PROCESS_FAULTS, FaultSpec
-from world.frames import SensorFrame
+from swarm.contracts.scenario import PROCESS_FAULTS, FaultSpec
+from swarm.contracts.frames import SensorFrame
 
 _SENSE, _CMD, _NOISE = 1, 2, 3
 

@@ -25,11 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.config import BrainConf
-from swarm import wire
-from swarm.recording import write_run
-from swarm.scenario import Scenario
-from swarm.transport import open_hub, socket_path
+from swarm.contracts.brain_config import BrainConf
+from swarm.contracts import wire
+from world.recording import write_run
+from swarm.contracts.scenario import Scenario
+from swarm.contracts.transport import open_hub, socket_path
 from world.core import ACTIVE
 from world.engine import LOST, REFUSED, Engine
 from world.faults import fault_event
@@ -265,7 +265,7 @@ class World:
         """A new agent joins the run with its own spec (`swarm spawn`); raises WireError."""
         from pydantic import ValidationError
 
-        from swarm.scenario import AgentSpec, format_validation_error
+        from swarm.contracts.scenario import AgentSpec, format_validation_error
 
         if not isinstance(spec, dict):
             raise wire.WireError("spec: expected a JSON object")
@@ -534,7 +534,7 @@ class World:
 
     def agent_garbage(self, timeout: float = 1.0) -> dict[int, int]:
         """Malformed messages each live agent dropped (from its status), for the summary."""
-        from swarm.live import query_statuses
+        from swarm.contracts.transport import query_statuses
 
         counts: dict[int, int] = {}
         try:

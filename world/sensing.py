@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from world.frames import Contact, SensorFrame
+from swarm.contracts.frames import Contact, SensorFrame
 from world.kinematics import wrap
 
 __all__ = ["Contact", "SensorFrame", "sensing_matrix", "build_frames"]

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from swarm.scenario import Scenario
+from swarm.contracts.scenario import Scenario
 from world.metrics import agent_metrics, converged, recovery, relative_errors, switch_ticks
 
 

@@ -71,14 +71,14 @@ class GainsSpec(_Strict):
     c2: PositiveFloat = Field(description="gain on sin(lambda_ij - g_i) (rad/s)")
     law: str = Field(
         "bearing",
-        description="follower law: a registered name, or 'module:function' (see agents/laws.py)",
+        description="follower law: a registered name, or 'module:function' (see swarm/contracts/laws.py)",
     )
 
 
     @field_validator("law")
     @classmethod
     def _law_resolves(cls, name: str) -> str:
-        from agents.laws import LawError, check_law
+        from swarm.contracts.laws import LawError, check_law
 
         try:
             check_law(name)

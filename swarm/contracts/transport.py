@@ -13,6 +13,8 @@ import os
 import tempfile
 from pathlib import Path
 
+from swarm.contracts import wire
+
 LEASE_MS = 1000  # a frozen (SIGSTOP) process is dropped after ~0.95 s
 CONNECT_TIMEOUT_MS = 10000
 
@@ -77,3 +79,22 @@ def default_endpoint(run: str) -> str:
 def socket_path(endpoint: str) -> Path | None:
     prefix = "unixsock-stream/"
     return Path(endpoint[len(prefix):].split("#")[0]) if endpoint.startswith(prefix) else None
+
+
+QUERY_TIMEOUT = 1.0  # s
+
+
+def query_statuses(session, run: str, timeout: float = QUERY_TIMEOUT) -> dict[int, dict]:
+    """Each live agent's own status, from its status queryable (malformed replies skipped)."""
+    out: dict[int, dict] = {}
+    for r in session.get(wire.agent_key(run, "*", "status"), timeout=timeout):
+        if r.ok is None:
+            continue
+        try:
+            aid = wire.agent_of_key(str(r.ok.key_expr))
+            st = wire.decode_status(r.ok.payload.to_bytes())
+        except wire.WireError:
+            continue
+        if st["id"] == aid:
+            out[aid] = st
+    return out

@@ -30,7 +30,7 @@ import re
 import struct
 from dataclasses import dataclass
 
-from world.frames import Contact, SensorFrame
+from swarm.contracts.frames import Contact, SensorFrame
 
 VERSION = 1
 PREFIX = "swarm"
