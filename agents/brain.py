@@ -53,8 +53,8 @@ class AgentBrain:
         self.dt = dt
         self.is_leader = spec.role == "leader"
         self.law = None if self.is_leader else make_follower_law(gains.law, gains.c1, gains.c2)
-        self.plan = None  # agents.leader.CCPath once planned
-        self.plan_tick = 0
+        self.cc_path = None  # agents.leader.CCPath once planned
+        self.path_tick = 0
         self.out: int | None = None
         self.last_u = 0.0
         self.hops: int | None = None  # hops advertised last tick (rooted rule)
@@ -73,11 +73,11 @@ class AgentBrain:
         # Imported here: the planner needs numpy, which follower processes never load.
         from agents.leader import on_orbit_command, plan_cc
 
-        if self.plan is None:
-            self.plan = plan_cc(px, py, frame.heading, s.speed, s.orbit_radius, sign, s.max_turn_rate)
-            self.plan_tick = frame.tick
-        p = self.plan
-        a = (frame.tick - self.plan_tick) * self.dt
+        if self.cc_path is None:
+            self.cc_path = plan_cc(px, py, frame.heading, s.speed, s.orbit_radius, sign, s.max_turn_rate)
+            self.path_tick = frame.tick
+        p = self.cc_path
+        a = (frame.tick - self.path_tick) * self.dt
         b = a + self.dt
         t12 = p.t1 + p.t2
         if a >= t12:

@@ -21,15 +21,12 @@ import math
 from typing import Callable
 
 from swarm.contracts.laws import LawError, resolve_law
-
-
-def _wrap(a: float) -> float:
-    return math.atan2(math.sin(a), math.cos(a))
+from swarm.contracts.orbits import wrap
 
 
 def bearing_law(g_i: float, g_j: float, lambda_ij: float, c1: float, c2: float) -> float:
     """The paper's law (Theorem 1): u_i = C1 wrap(g_j - g_i) + C2 sin(lambda_ij - g_i)."""
-    return c1 * _wrap(g_j - g_i) + c2 * math.sin(lambda_ij - g_i)
+    return c1 * wrap(g_j - g_i) + c2 * math.sin(lambda_ij - g_i)
 
 
 def make_follower_law(name: str, c1: float, c2: float) -> Callable[[float, float, float], float]:

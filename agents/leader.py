@@ -44,7 +44,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-TAU = 2.0 * math.pi
+from swarm.contracts.orbits import TAU, wrap
+
 
 #: Without a turn-rate limit the smallest admissible arc radius is this fraction of R,
 #: i.e. the planned turn rates stay below 10x the orbit's own turn rate v / R.
@@ -98,14 +99,6 @@ class CCPath:
         return self.t1 + self.t2
 
 
-def wrap(angle: float) -> float:
-    """Wrap an angle (rad) to (-pi, pi]."""
-    w = math.remainder(angle, TAU)
-    if w <= -math.pi:
-        w += TAU
-    return w
-
-
 def cc_coefficients(ax: float, ay: float, alpha: float, beta: float) -> tuple[float, float, float]:
     """Lemma 1 coefficients (p1, p2, p3) of r_B = p3 / (r_A - p1) + p2.
 
@@ -131,20 +124,6 @@ def cc_radius_b(r_a: float, p1: float, p2: float, p3: float) -> float:
     if abs(r_a - p1) <= 1e-15 * max(1.0, abs(p1)):
         raise ValueError("r_a == p1: arc 2 degenerates to a straight line")
     return p3 / (r_a - p1) + p2
-
-
-def arc_step(x: float, y: float, g: float, v: float, u: float,
-             t: float) -> tuple[float, float, float]:
-    """Exact unicycle motion for t seconds at speed v (m/s) and constant turn rate u (rad/s).
-
-    x, y (m), g (rad).  Returns (x, y, heading) with heading wrapped to (-pi, pi].
-    Uses the chord form v t sinc(u t / 2) along heading g + u t / 2, exact for u == 0.
-    """
-    half = 0.5 * u * t
-    sinc = 1.0 - half * half / 6.0 if abs(half) < 1e-4 else math.sin(half) / half
-    chord = v * t * sinc
-    mid = g + half
-    return x + chord * math.cos(mid), y + chord * math.sin(mid), wrap(g + 2.0 * half)
 
 
 def _min_radius(v: float, radius: float, max_turn_rate: float | None) -> float:

@@ -207,7 +207,8 @@ def world(
     out: Annotated[Optional[Path], typer.Option("--out", "-o", help="where to write the results")] = None,
     duration: Annotated[Optional[float], typer.Option(help="simulated seconds", min=0.0)] = None,
     clock: Annotated[Optional[str], typer.Option(help="lockstep | realtime (default: the scenario's)")] = None,
-    speed: Annotated[float, typer.Option(help="realtime: simulated seconds per wall second", min=1e-6)] = 1.0,
+    time_scale: Annotated[float, typer.Option("--time-scale", "--speed", help="realtime clock: simulated "
+                                              "seconds per wall second", min=1e-6)] = 1.0,
     join_timeout: Annotated[Optional[float], typer.Option(help="give up if not every agent joined "
                                                           "within this many s (default: wait)")] = None,
     plots: Annotated[bool, typer.Option(help="render PNG plots at the end")] = True,
@@ -234,7 +235,7 @@ def world(
     listen = listen or default_endpoint(run)
     out = out or default_out(scenario, "up")
     typer.echo(f"run {run} on {listen}; results in {out}", err=True)
-    code = run_world(WorldConfig(s, run, listen, out, clock, speed, duration, join_timeout))
+    code = run_world(WorldConfig(s, run, listen, out, clock, time_scale, duration, join_timeout))
     if plots and code in (0, 130, 143) and (out / "trajectory.npz").exists():
         _plots(out)
     raise typer.Exit(code)
@@ -248,7 +249,8 @@ def up(
     duration: Annotated[Optional[float], typer.Option(help="simulated seconds (default: the "
                                                       "scenario's run.duration)", min=0.0)] = None,
     clock: Annotated[Optional[str], typer.Option(help="lockstep | realtime (default: the scenario's)")] = None,
-    speed: Annotated[float, typer.Option(help="realtime: simulated seconds per wall second", min=1e-6)] = 1.0,
+    time_scale: Annotated[float, typer.Option("--time-scale", "--speed", help="realtime clock: simulated "
+                                              "seconds per wall second", min=1e-6)] = 1.0,
     listen: Annotated[Optional[str], typer.Option(help="endpoint of the run (default: a Unix socket in "
                                                   "$SWARM_RUNTIME_DIR or /tmp/swarm-<uid>)")] = None,
     plots: Annotated[bool, typer.Option(help="render PNG plots at the end")] = True,
@@ -270,7 +272,7 @@ def up(
         raise fail(f"--duration {duration} s is shorter than one step (dt = {s.run.dt} s)")
     out = out or default_out(scenario, "up")
     run_id = _new_run_id(scenario)
-    launcher = Launcher(UpConfig(scenario, s, out, run_id, listen, duration, clock, speed))
+    launcher = Launcher(UpConfig(scenario, s, out, run_id, listen, duration, clock, time_scale))
     typer.echo(f"run {run_id}  endpoint {launcher.endpoint}  agents {len(s.agents)}  "
                f"clock {clock or s.run.clock}")
     typer.echo(f"attach from another terminal: swarm agent --id N --connect {launcher.endpoint} --run {run_id}")
@@ -331,7 +333,7 @@ def agent(
     raise typer.Exit(run_agent(id, connect, run, wait_world))
 
 
-from swarm.inspect import register as _register_live  # noqa: E402
+from swarm.live_cli import register as _register_live  # noqa: E402
 
 _register_live(app)
 

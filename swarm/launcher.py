@@ -24,7 +24,7 @@ from typing import Callable
 from swarm.contracts import wire
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.transport import default_endpoint, open_client
-from world.metrics import root_of
+from swarm.contracts.orbits import expected_radius, root_of
 
 EXIT_WORLD_FAILED = 1
 
@@ -33,12 +33,12 @@ EXIT_WORLD_FAILED = 1
 class UpConfig:
     scenario_path: Path
     scenario: Scenario
-    out: Path
+    out_dir: Path  # where the results go
     run: str
     listen: str | None = None
     duration: float | None = None
     clock: str | None = None
-    speed: float = 1.0
+    time_scale: float = 1.0  # realtime clock: simulated s per wall s
     join_timeout: float = 60.0
 
 
@@ -54,7 +54,7 @@ class Launcher:
         self.lock = threading.Lock()
         self.latest_truth: bytes | None = None
         self.events: list[dict] = []
-        self.logs = cfg.out / "logs"
+        self.logs = cfg.out_dir / "logs"
         self.failed = False
         self.notices: list[bytes] = []  # world/control notices (faults to carry out)
 
@@ -70,7 +70,7 @@ class Launcher:
     def start_world(self) -> None:
         c = self.cfg
         args = [sys.executable, "-m", "swarm", "world", str(c.scenario_path), "--listen", self.endpoint,
-                "--run", c.run, "--out", str(c.out), "--speed", str(c.speed), "--no-plots",
+                "--run", c.run, "--out", str(c.out_dir), "--time-scale", str(c.time_scale), "--no-plots",
                 "--join-timeout", str(c.join_timeout)]
         if c.duration is not None:
             args += ["--duration", str(c.duration)]
@@ -209,7 +209,7 @@ class Launcher:
                 errs[aid] = None
                 continue
             L, me = s.agent(root), s.agent(aid)
-            R = me.speed * L.orbit_radius / L.speed
+            R = expected_radius(me.speed, L.speed, L.orbit_radius)
             errs[aid] = abs(math.hypot(r["x"] - s.target.x, r["y"] - s.target.y) - R) / R
         return {"tick": tick, "time": t, "errors": errs, "dropped": sorted(set(out) - alive)}
 

@@ -41,6 +41,7 @@ from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Circle, FancyArrowPatch  # noqa: E402
 
+from swarm.contracts.orbits import root_of  # noqa: E402
 from world.metrics import switch_ticks  # noqa: E402
 
 __all__ = ["PlotError", "RunData", "load_run", "render_plots", "MAX_POINTS", "PLOT_FILES"]
@@ -609,19 +610,8 @@ def final_graph(run: RunData) -> tuple[dict[int, int], set[int], set[int]]:
     alive_end = {int(a) for j, a in enumerate(run.ids) if run.alive[-1, j]}
     dead = {int(a) for a in run.ids} - alive_end
     leaders = {int(a) for j, a in enumerate(run.ids) if run.is_leader(j)}
-    orphans: set[int] = set()
-    for a in alive_end:
-        cur, seen, ok = a, set(), False
-        while cur in alive_end and cur not in seen:
-            if cur in leaders:
-                ok = True
-                break
-            seen.add(cur)
-            if cur not in edges:
-                break
-            cur = edges[cur]
-        if not ok:
-            orphans.add(a)
+    live_out = {a: edges.get(a) for a in alive_end}  # walks end at dead agents
+    orphans = {a for a in alive_end if root_of(a, live_out, leaders & alive_end)[0] is None}
     return edges, dead, orphans
 
 

@@ -9,13 +9,18 @@ import pytest
 
 from agents.leader import (
     CCPath,
-    arc_step,
     cc_coefficients,
     cc_radius_b,
     on_orbit_command,
     plan_cc,
-    wrap,
 )
+from swarm.contracts.orbits import wrap
+from world.kinematics import step
+
+
+def arc_step(x, y, g, v, u, t):
+    """One exact arc of the world's integrator, as Python floats."""
+    return tuple(float(a) for a in step(x, y, g, v, u, t))
 
 HALF_PI = 0.5 * math.pi
 
@@ -117,7 +122,7 @@ def test_cc_coefficients_parallel_headings_raise():
         cc_coefficients(3.0, -2.0, 0.7, 0.7 + 2 * math.pi)
 
 
-# --- arc_step and wrap ------------------------------------------------------------------
+# --- the integrator and wrap as the leader uses them ------------------------------------------------------------------
 
 
 def test_wrap_range():

@@ -14,7 +14,8 @@ from world.recording import write_run
 from swarm.contracts.scenario import load_scenario, parse_scenario
 from swarm.sim import run_sim
 from world.core import ACTIVE, COASTING, GONE, WorldCore
-from world.metrics import agent_metrics, angular_rate, converged, root_of, settling_time
+from swarm.contracts.orbits import root_of
+from world.metrics import agent_metrics, angular_rate, converged, settling_time
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 KEYS = {"ids", "role", "speed", "orbit_radius", "target", "dt", "t", "x", "y", "heading", "u",

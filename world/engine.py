@@ -41,8 +41,8 @@ class Engine:
         (the world process); wall_clock: stamps events with `wall_time`; on_event: told of
         every event as it happens (the world publishes and prints them)."""
         self.core = WorldCore(scenario, joined=joined)
-        self.plan = FaultPlan(scenario.faults, scenario.run.dt, scenario.run.seed)
-        self.network = self.plan.affects_network()  # frames and commands go through the plan
+        self.fault_plan = FaultPlan(scenario.faults, scenario.run.dt, scenario.run.seed)
+        self.network = self.fault_plan.affects_network()  # frames and commands go through the fault plan
         self.ticks = ticks
         self.rec = Recorder(scenario, ticks)
         self.events: list[dict] = []
@@ -78,7 +78,7 @@ class Engine:
     def due(self) -> list:
         """Scripted faults that start at this tick, each logged as a "fault" event; the
         shell carries out the process faults among them."""
-        due = self.plan.due(self.core.tick)
+        due = self.fault_plan.due(self.core.tick)
         for i, f in due:
             self.event("fault", f.agent, f"scripted {f.kind}", fault=fault_event(i, f))
         return due
@@ -118,7 +118,7 @@ class Engine:
             return frames
         delivered = {}
         for aid, frame in frames.items():
-            got = self.plan.sense(frame)
+            got = self.fault_plan.sense(frame)
             if got is None:
                 self.missed_now += 1
             else:
@@ -139,7 +139,7 @@ class Engine:
         """Agent `agent`'s answer to its frame of `tick` (this tick): lost on the way by the
         fault plan (its last command is held), refused when not finite, or latched; a new
         out-neighbour is a "switch" event."""
-        if self.network and tick == self.core.tick and self.plan.command_lost(tick, agent):
+        if self.network and tick == self.core.tick and self.fault_plan.command_lost(tick, agent):
             self.missed_now += 1
             return LOST
         if not self.core.set_command(agent, u, hops):

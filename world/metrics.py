@@ -15,21 +15,10 @@ import math
 
 import numpy as np
 
+from swarm.contracts.orbits import expected_radius, root_of
+
 SETTLING_BAND = 0.02  # 2% band
 CONVERGED_TOL = 0.01  # a run has converged when every live agent is within 1% of R_i
-
-
-def root_of(agent: int, out: dict[int, int | None], leaders: set[int]) -> tuple[int | None, int | None]:
-    """Follow out-neighbours from `agent` to a leader: (root id, hops), (None, None) if none."""
-    seen = set()
-    cur, hops = agent, 0
-    while cur not in leaders:
-        if cur in seen or out.get(cur) is None:
-            return None, None
-        seen.add(cur)
-        cur = out[cur]
-        hops += 1
-    return cur, hops
 
 
 def switch_ticks(out: np.ndarray, alive: np.ndarray) -> list[np.ndarray]:
@@ -80,9 +69,8 @@ def agent_metrics(*, ids, roles, speeds, orbit_radius, t, x, y, alive, out_final
         r = np.hypot(x[:, k] - target[0], y[:, k] - target[1])
         root, hops = root_of(i, out, live_leaders) if alive_final[i] else (None, None)
         if root is not None:
-            R_root = float(orbit_radius[col[root]])
-            omega_root = float(speeds[col[root]]) / R_root
-            expected = float(speeds[k]) / omega_root
+            c = col[root]
+            expected = expected_radius(float(speeds[k]), float(speeds[c]), float(orbit_radius[c]))
             err = float(abs(r[-1] - expected))
             settle = settling_time(t, r, expected)
         else:
@@ -137,7 +125,7 @@ def relative_errors(*, ids, roles, speeds, orbit_radius, x, y, alive, out, targe
                 root, _ = root_of(i, o, leaders & live)
                 if root is not None:
                     c = col[root]
-                    R[col[i]] = speeds[col[i]] * orbit_radius[c] / speeds[c]
+                    R[col[i]] = expected_radius(speeds[col[i]], speeds[c], orbit_radius[c])
             cache[key] = R
         err[k] = np.abs(r[k] - R) / R
     return err

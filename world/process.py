@@ -33,7 +33,7 @@ from swarm.contracts.transport import open_hub, socket_path
 from world.core import ACTIVE
 from world.engine import LOST, REFUSED, Engine
 from world.faults import fault_event
-from world.metrics import root_of
+from swarm.contracts.orbits import expected_radius, root_of
 
 CLAIM_TTL = 10.0  # s: an accepted join claim waits this long for the agent's token
 TRUTH_PERIOD = 0.02  # s of wall time between ground-truth messages (observers, not the recording)
@@ -74,9 +74,9 @@ class WorldConfig:
     scenario: Scenario
     run: str
     listen: str
-    out: Path | None
+    out_dir: Path | None  # where the results go (None: nowhere)
     clock: str = "lockstep"
-    speed: float = 1.0
+    time_scale: float = 1.0  # realtime clock: simulated s per wall s
     duration: float | None = None
     join_timeout: float | None = None  # s to wait for every agent before tick 0; None = forever
     deadline: float | None = None  # lockstep deadline override (s)
@@ -297,7 +297,7 @@ class World:
             dist = math.hypot(c.x[k] - c.target[0], c.y[k] - c.target[1])
             if root is not None:
                 L = s.agent(root)
-                expected = a.speed * L.orbit_radius / L.speed
+                expected = expected_radius(a.speed, L.speed, L.orbit_radius)
                 err = abs(dist - expected)
             else:
                 expected = err = None
@@ -489,7 +489,7 @@ class World:
 
     def run(self) -> int:
         self.t_start = time.monotonic()
-        period = self.core.dt / self.cfg.speed
+        period = self.core.dt / self.cfg.time_scale
         last_note = time.monotonic()
         t0_ticks = time.monotonic()
         self.wait_for_agents()
@@ -552,7 +552,7 @@ class World:
         if c.tick <= self.ticks and self.engine.rec.rows <= c.tick:
             self.engine.close()
             self.publish_truth(np.full(len(c.ids), np.nan), force=True)
-        if self.cfg.out is None:
+        if self.cfg.out_dir is None:
             return None
         own = self.agent_garbage()
         agent_extra = {}
@@ -568,12 +568,12 @@ class World:
         wall = getattr(self, "wall_ticks", None)
         result = self.engine.result({
             "engine": "up", "run": self.cfg.run, "endpoint": self.cfg.listen, "clock": self.cfg.clock,
-            "speed": self.cfg.speed, "completed": self.stopped_by is None and c.tick >= self.ticks,
+            "time_scale": self.cfg.time_scale, "completed": self.stopped_by is None and c.tick >= self.ticks,
             "stopped_by_signal": self.stopped_by, "garbage_messages": self.garbage,
             "ignored_messages": self.ignored, "rejected_commands": c.rejected,
             "wall_time": wall, "ticks_per_second": (c.tick / wall) if wall else None,
         }, agent_extra)
-        return write_run(result, self.cfg.out)
+        return write_run(result, self.cfg.out_dir)
 
 
 def _raise_stop(signum, _frame):

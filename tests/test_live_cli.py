@@ -1,7 +1,7 @@
 """Live inspection and control (`swarm runs/agents/graph/kill/spawn/pause/resume/watch`).
 
 The drawing maths of `swarm watch` (swarm/watch.py) and the pure parts of
-swarm/inspect.py are tested offline. Everything else runs against a live multi-process
+swarm/live_cli.py are tested offline. Everything else runs against a live multi-process
 swarm: one `swarm up` of case2 (real processes, real zenoh) shared by the module, in a
 private runtime dir so that commands without --connect/--run find exactly that run.
 
@@ -33,7 +33,7 @@ from typer.testing import CliRunner
 from runtime_helpers import SCENARIOS, Runtime, start_up, swarm_cmd, wait_for
 from swarm import watch as W
 from swarm.cli import app
-from swarm.inspect import graph_dot, graph_of, merge_agents
+from swarm.live_cli import graph_dot, graph_of, merge_agents
 
 LIVE_COMMANDS = [["runs"], ["runs", "--json"], ["agents"], ["agents", "--json"], ["graph", "--json"],
                  ["graph", "--dot"], ["graph", "--watch"], ["kill", "3"], ["spawn", "--id", "3"],
@@ -250,7 +250,7 @@ def test_draw_scene_picture():
     W.draw_scene((0.0, 0.0), [], 10, 4)
 
 
-# --- swarm/inspect.py: pure parts ---------------------------------------------------------------
+# --- swarm/live_cli.py: pure parts ---------------------------------------------------------------
 def _fake_info():
     def agent(i, role, alive, out, pid):
         return {"id": i, "role": role, "state": "active" if alive else "gone", "alive": alive, "pid": pid,
@@ -555,9 +555,9 @@ def test_kill_stopped_and_remote(live, monkeypatch):
     live["extra_pids"].append((pid4, psutil.Process(pid4).create_time()))
 
     # an agent on "another host": the signal goes over zenoh; SIGCONT cannot
-    import swarm.inspect
+    import swarm.live_cli
 
-    monkeypatch.setattr(swarm.inspect.socket, "gethostname", lambda: "elsewhere.invalid")
+    monkeypatch.setattr(swarm.live_cli.socket, "gethostname", lambda: "elsewhere.invalid")
     res = invoke("kill", "5", "--signal", "CONT")
     assert res.exit_code == 1 and "cannot be delivered over zenoh" in res.stderr, res.output
     pid5 = {r["id"]: r for r in _json("agents", "--json")["agents"]}[5]["pid"]

@@ -1,0 +1,41 @@
+"""The paper's definitions every layer reports with, in one place: angles wrapped to
+(-pi, pi], the path from an agent to its leader along the chosen out-neighbours, and
+the orbit radius that path promises (Theorem 1: R_i = v_i / omega_root, with
+omega_root = v_L / R_L of the leader at the end of the path). Pure Python, scalars.
+
+world/kinematics.py has the numpy `wrap` for whole arrays of headings.
+"""
+
+from __future__ import annotations
+
+import math
+
+TAU = 2.0 * math.pi
+
+
+def wrap(angle: float) -> float:
+    """Wrap an angle (rad) to (-pi, pi]."""
+    w = math.remainder(angle, TAU)
+    if w <= -math.pi:
+        w += TAU
+    return w
+
+
+def root_of(agent: int, out: dict[int, int | None], leaders: set[int]) -> tuple[int | None, int | None]:
+    """Follow out-neighbours from `agent` to a leader: (root id, hops), (None, None) if the
+    walk ends nowhere (no out-neighbour, an unknown agent) or runs round a follower-only cycle."""
+    seen = set()
+    cur, hops = agent, 0
+    while cur not in leaders:
+        if cur in seen or out.get(cur) is None:
+            return None, None
+        seen.add(cur)
+        cur = out[cur]
+        hops += 1
+    return cur, hops
+
+
+def expected_radius(speed: float, leader_speed: float, leader_radius: float) -> float:
+    """R_i (m) of an agent of `speed` (m/s) rooted at a leader of `leader_speed` (m/s) on
+    an orbit of `leader_radius` (m): it turns at the leader's omega = v_L / R_L."""
+    return speed * leader_radius / leader_speed
