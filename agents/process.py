@@ -51,18 +51,17 @@ def find_run(session, timeout: float = 2.0) -> str:
 
 def claim(session, run: str, agent_id: int, timeout: float = 5.0, spec: dict | None = None) -> dict:
     """Ask the world for agent_id (a new agent brings its spec); returns the reply or raises AgentExit."""
-    req = wire.encode_json({"id": agent_id, "pid": os.getpid(), "host": socket.gethostname(),
-                            **({"spec": spec} if spec is not None else {})})
+    req = wire.encode_join_request(agent_id, os.getpid(), socket.gethostname(), spec)
     replies = list(session.get(wire.world_join_key(run), payload=req, timeout=timeout))
     for r in replies:
         if r.ok is None:
             continue
         try:
-            rep = wire.decode_json(r.ok.payload.to_bytes(), "join reply")
+            rep = wire.decode_join_reply(r.ok.payload.to_bytes())
         except wire.WireError as e:
             raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: bad join reply: {e}") from None
-        if not rep.get("ok"):
-            raise AgentExit(EXIT_REFUSED, f"agent {agent_id} refused: {rep.get('error')}")
+        if not rep["ok"]:
+            raise AgentExit(EXIT_REFUSED, f"agent {agent_id} refused: {rep['error']}")
         return rep
     raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: no world answered on run {run!r}")
 
@@ -88,9 +87,7 @@ class AgentNode:
         except (ValueError, AttributeError, TypeError) as e:
             raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: unusable join reply: {e}") from None
         self.spec = self.conf.agent
-        self.key = reply.get("key")
-        if isinstance(self.key, bool) or not isinstance(self.key, int) or not 0 <= self.key < 2**64:
-            raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: join reply without a valid claim key")
+        self.key = reply["key"]  # checked by wire.decode_join_reply
         if self.brain.is_leader:
             import agents.leader  # noqa: F401  (load numpy and the planner before the first frame)
         self.inbox: queue.SimpleQueue = queue.SimpleQueue()
@@ -153,7 +150,7 @@ class AgentNode:
         key = (None, None, False) if d is None else (d.out, d.phase, d.fallback)
         key = (*key, self.hops())
         if force or key != self.last_status or now - self.status_sent >= STATUS_PERIOD:
-            self.status_pub.put(wire.encode_json(self.status()))
+            self.status_pub.put(wire.encode_status(self.status()))
             self.status_sent = now
             self.last_status = key
 
@@ -222,14 +219,12 @@ class AgentNode:
     def on_ctl(self, payload: bytes) -> None:
         """`swarm kill` from a machine that cannot signal this process: end abruptly."""
         try:
-            msg = wire.decode_json(payload, "ctl")
-            sig = {"KILL": signal.SIGKILL, "TERM": signal.SIGTERM, "STOP": signal.SIGSTOP}[msg["signal"]]
-            if msg.get("kind") != "signal":
-                raise KeyError
-        except (wire.WireError, KeyError, TypeError):
+            name = wire.decode_ctl(payload)
+        except wire.WireError:
             self.garbage += 1
             return
-        _log(f"[agent {self.id}] asked over zenoh to take SIG{msg['signal']}")
+        sig = {"KILL": signal.SIGKILL, "TERM": signal.SIGTERM, "STOP": signal.SIGSTOP}[name]
+        _log(f"[agent {self.id}] asked over zenoh to take SIG{name}")
         os.kill(os.getpid(), sig)
 
     def loop(self) -> int:
@@ -259,16 +254,16 @@ class AgentNode:
                 elif kind == "world":
                     self.on_world(item[1])
                 elif kind == "query":
-                    item[1].reply(wire.agent_key(self.run, self.id, "status"), wire.encode_json(self.status()))
+                    item[1].reply(wire.agent_key(self.run, self.id, "status"), wire.encode_status(self.status()))
                 elif kind == "ctl":
                     self.on_ctl(item[1])
                 elif kind == "control":
                     try:
-                        msg = wire.decode_json(item[1], "control")
+                        msg = wire.decode_control(item[1])
                     except wire.WireError:
                         self.garbage += 1
                         continue
-                    if msg.get("kind") == "end":
+                    if isinstance(msg, int):  # the end of the run (fault notices are the launcher's)
                         return EXIT_OK
             if newest is not None:
                 self.on_sense(newest)

@@ -43,7 +43,7 @@ class UpConfig:
 
 
 class Launcher:
-    def __init__(self, cfg: UpConfig, say: Callable[[str], None] = print):
+    def __init__(self, cfg: UpConfig, say: Callable[[str], None] = lambda m: print(m, flush=True)):
         self.cfg = cfg
         self.say = say
         self.endpoint = cfg.listen or default_endpoint(cfg.run)
@@ -57,6 +57,8 @@ class Launcher:
         self.logs = cfg.out_dir / "logs"
         self.failed = False
         self.notices: list[bytes] = []  # world/control notices (faults to carry out)
+        self.dropped_notices = 0  # malformed control notices ignored
+        self.dropped_noted = 0.0
 
     # -- processes --------------------------------------------------------------------------
     def _spawn(self, args: list[str], log_name: str) -> subprocess.Popen:
@@ -178,8 +180,8 @@ class Launcher:
 
     def _on_event(self, sample) -> None:
         try:
-            ev = wire.decode_json(sample.payload.to_bytes(), "event")["event"]
-        except (wire.WireError, KeyError):
+            ev = wire.decode_event(sample.payload.to_bytes())
+        except wire.WireError:
             return
         with self.lock:
             self.events.append(ev)
@@ -256,16 +258,18 @@ class Launcher:
         """Scripted process faults the world asks for (it holds its clock meanwhile)."""
         while self.notices:
             try:
-                msg = wire.decode_json(self.notices.pop(0), "control")
-            except wire.WireError:
+                msg = wire.decode_control(self.notices.pop(0))
+                if isinstance(msg, int):
+                    continue  # the end of the run: the world process exits by itself
+                if msg.agent not in self.cfg.scenario.ids:
+                    raise wire.WireError(f"control: fault for agent {msg.agent}, not in the scenario")
+            except wire.WireError as e:  # malformed (or forged) notice: dropped, as docs/protocol.md says
+                self.dropped_notices += 1
+                if time.monotonic() - self.dropped_noted > 1.0:  # at most one line a second
+                    self.dropped_noted = time.monotonic()
+                    self.say(f"swarm up: ignored a malformed fault notice ({e}; {self.dropped_notices} so far)")
                 continue
-            if msg.get("kind") != "fault" or not isinstance(msg.get("fault"), dict):
-                continue
-            f, index = msg["fault"], msg.get("index")
-            aid, kind = f.get("agent"), f.get("kind")
-            if (type(aid) is not int or aid not in self.cfg.scenario.ids or type(index) is not int
-                    or kind not in ("kill", "restart", "freeze", "thaw")):
-                continue  # malformed (or forged) notice: dropped, as docs/protocol.md says
+            index, kind, aid = msg.index, msg.kind, msg.agent
             p = self.agents.get(aid)
             running = p is not None and p.poll() is None
             if kind == "restart":
@@ -279,7 +283,7 @@ class Launcher:
                     pass
             if session is not None:
                 list(session.get(wire.world_admin_key(self.cfg.run), timeout=2.0,
-                                 payload=wire.encode_json({"cmd": "fault_done", "index": index})))
+                                 payload=wire.encode_admin("fault_done", index=index)))
 
     def _on_signal(self, signum, _frame) -> None:
         self.stop_signal = signum

@@ -104,10 +104,10 @@ class LiveRun:
         if self.session is not None:
             self.session.close()
 
-    def _get_one(self, selector: str, payload: bytes | None = None, what: str = "reply") -> dict:
+    def _get_one(self, selector: str, decode, payload: bytes | None = None) -> dict:
         for r in self.session.get(selector, payload=payload, timeout=QUERY_TIMEOUT):
             if r.ok is not None:
-                return wire.decode_json(r.ok.payload.to_bytes(), what)
+                return decode(r.ok.payload.to_bytes())
         raise NoRun(f"the world of run {self.ref.run} did not answer (it may have ended)")
 
     def world_alive(self) -> bool:
@@ -117,15 +117,15 @@ class LiveRun:
     def info(self, sensing: bool = False) -> dict:
         """The world's view: tick, clock, paused, and per agent pose, state, out, errors..."""
         sel = wire.world_info_key(self.ref.run) + ("?sensing=1" if sensing else "")
-        return self._get_one(sel, what="world info")
+        return self._get_one(sel, wire.decode_info)
 
     def statuses(self) -> dict[int, dict]:
         """Each live agent's own status (its chosen out-neighbour, hops, phase, pid...)."""
         return query_statuses(self.session, self.ref.run)
 
     def admin(self, cmd: str, by: str = "swarm cli") -> dict:
-        rep = self._get_one(wire.world_admin_key(self.ref.run),
-                            wire.encode_json({"cmd": cmd, "by": by}), "admin reply")
+        rep = self._get_one(wire.world_admin_key(self.ref.run), wire.decode_admin_reply,
+                            wire.encode_admin(cmd, by=by))
         if not rep.get("ok"):
             raise NoRun(str(rep.get("error")))
         return rep
@@ -133,4 +133,4 @@ class LiveRun:
     def signal_agent(self, agent_id: int, signal_name: str) -> None:
         """Ask agent `agent_id` over zenoh to take a signal (KILL, TERM or STOP)."""
         self.session.put(wire.agent_key(self.ref.run, agent_id, "ctl"),
-                         wire.encode_json({"kind": "signal", "signal": signal_name}))
+                         wire.encode_ctl(signal_name))

@@ -109,9 +109,11 @@ class World:
         self.t_start = 0.0
 
     # -- zenoh plumbing (callbacks: enqueue only) -----------------------------------------
-    def _open(self):
+    def _open(self, session=None):
+        """Declare the world's keys on `session` (default: a new hub on cfg.listen; tests
+        pass a fake one, tests/fakes.py)."""
         run = self.cfg.run
-        self.session = open_hub(self.cfg.listen)
+        self.session = session if session is not None else open_hub(self.cfg.listen)
         ses = self.session
         put = self.inbox.put
         self._subs = [
@@ -133,7 +135,7 @@ class World:
 
     def _close(self):
         try:
-            self.control_pub.put(wire.encode_json({"kind": "end", "tick": self.core.tick}))
+            self.control_pub.put(wire.encode_end(self.core.tick))
         except Exception:
             pass
         self.session.close()
@@ -146,7 +148,7 @@ class World:
         """Every event, as it happens: to observers over zenoh, and to the log."""
         kind, agent, reason = ev["kind"], ev["agent"], ev["reason"]
         try:
-            self.events_pub.put(wire.encode_json({"event": ev}))
+            self.events_pub.put(wire.encode_event(ev))
         except Exception:
             pass
         if self.cfg.progress:
@@ -254,12 +256,12 @@ class World:
             b.pid, b.host, b.claim_until = req["pid"], req["host"], now + CLAIM_TTL
             b.key = secrets.randbits(64)
             x, y, h = self.core.pose(aid)
-            reply = {"ok": True, "run": self.cfg.run, "agent": aid, "tick": self.core.tick, "key": b.key,
-                     "clock": self.cfg.clock, "pose": [x, y, h],
-                     "brain": BrainConf.from_scenario(self.core.scenario, aid).to_json()}
+            reply = wire.encode_join_reply(True, run=self.cfg.run, agent=aid, tick=self.core.tick, key=b.key,
+                                           clock=self.cfg.clock, pose=[x, y, h],
+                                           brain=BrainConf.from_scenario(self.core.scenario, aid).to_json())
         except wire.WireError as e:
-            reply = {"ok": False, "error": str(e)}
-        query.reply(wire.world_join_key(self.cfg.run), wire.encode_json(reply))
+            reply = wire.encode_join_reply(False, error=str(e))
+        query.reply(wire.world_join_key(self.cfg.run), reply)
 
     def add_agent(self, aid: int, spec: dict) -> None:
         """A new agent joins the run with its own spec (`swarm spawn`); raises WireError."""
@@ -329,33 +331,28 @@ class World:
         params = str(query.parameters) if query.parameters is not None else ""
         sensing = any(p.split("=", 1)[0] == "sensing" and p.split("=", 1)[-1] not in ("0", "false")
                       for p in params.split(";") if p)
-        query.reply(wire.world_info_key(self.cfg.run), wire.encode_json(self.info(sensing)))
+        query.reply(wire.world_info_key(self.cfg.run), wire.encode_info(self.info(sensing)))
 
     def _on_admin(self, query) -> None:
         """pause / resume the world clock."""
         try:
-            req = wire.decode_json(query.payload.to_bytes() if query.payload else b"", "admin request")
-            cmd = req.get("cmd")
+            req = wire.decode_admin(query.payload.to_bytes() if query.payload else b"")
+            cmd = req["cmd"]
             if cmd == "fault_done":
-                idx = req.get("index")
-                if isinstance(idx, bool) or not isinstance(idx, int):
-                    raise wire.WireError("admin request: fault_done needs an integer index")
-                self.faults_done.add(idx)
-                query.reply(wire.world_admin_key(self.cfg.run), wire.encode_json({"ok": True}))
+                self.faults_done.add(req["index"])
+                query.reply(wire.world_admin_key(self.cfg.run), wire.encode_admin_reply(True))
                 return
-            if cmd not in ("pause", "resume"):
-                raise wire.WireError(f"admin request: unknown cmd {cmd!r} (pause, resume, fault_done)")
             if (cmd == "pause") != self.paused:
                 self.paused = cmd == "pause"
                 self.event(cmd, None, "asked by " + str(req.get("by", "a client")))
             if self.paused and self.ticking:
                 self.pause_waiters.append(query)  # answered once the tick in progress is done
                 return
-            reply = {"ok": True, "paused": self.paused, "tick": self.core.tick}
+            reply = wire.encode_admin_reply(True, paused=self.paused, tick=self.core.tick)
         except wire.WireError as e:
             self.garbage += 1
-            reply = {"ok": False, "error": str(e)}
-        query.reply(wire.world_admin_key(self.cfg.run), wire.encode_json(reply))
+            reply = wire.encode_admin_reply(False, error=str(e))
+        query.reply(wire.world_admin_key(self.cfg.run), reply)
 
     def drain(self, pending: set[int] | None, timeout: float | None) -> bool:
         """Handle one inbox item, waiting up to `timeout` s; False when none came."""
@@ -443,8 +440,7 @@ class World:
         if f.kind not in ("kill", "restart", "freeze", "thaw"):
             return
         t_hold = time.monotonic()
-        self.control_pub.put(wire.encode_json({"kind": "fault", "index": index, "tick": self.core.tick,
-                                               "fault": fault_event(index, f)}))
+        self.control_pub.put(wire.encode_fault_notice(index, self.core.tick, fault_event(index, f)))
         if not self._wait(lambda: index in self.faults_done, 5.0):
             self.event("fault_skipped", f.agent, f"nobody carried out the {f.kind} (no launcher?)")
             return
@@ -502,7 +498,7 @@ class World:
                 t_pause = time.monotonic()
                 for q in self.pause_waiters:
                     q.reply(wire.world_admin_key(self.cfg.run),
-                            wire.encode_json({"ok": True, "paused": True, "tick": self.core.tick}))
+                            wire.encode_admin_reply(True, paused=True, tick=self.core.tick))
                 self.pause_waiters.clear()
                 while self.paused:
                     self.drain(None, 0.1)

@@ -291,8 +291,149 @@ def decode_status(buf: bytes) -> dict:
 
 def decode_join_request(buf: bytes) -> dict:
     obj = decode_json(buf, "join request")
-    _field(obj, "id", int, "join request")
+    if not 0 <= _field(obj, "id", int, "join request") <= MAX_AGENT_ID:
+        raise WireError(f"join request: agent id {obj['id']} out of 0..{MAX_AGENT_ID}")
     _field(obj, "pid", int, "join request")
     _field(obj, "host", str, "join request")
     _field(obj, "spec", dict, "join request", optional=True)
     return obj
+
+
+# --- every cold-path message: one encode/decode pair each ----------------------------------
+# Nothing outside this module builds or checks these payloads (docs/protocol.md, section 5).
+
+def encode_join_request(agent: int, pid: int, host: str, spec: dict | None = None) -> bytes:
+    """agent -> world/join: claim `agent` (a new agent brings its scenario spec)."""
+    return encode_json({"id": agent, "pid": pid, "host": host, **({"spec": spec} if spec is not None else {})})
+
+
+def encode_join_reply(ok: bool, *, error: str | None = None, **fields) -> bytes:
+    """world -> agent: ok with run, agent, tick, key, clock, pose, brain; or an error."""
+    return encode_json({"ok": True, **fields} if ok else {"ok": False, "error": error})
+
+
+def decode_join_reply(buf: bytes) -> dict:
+    """The world's answer to a claim; WireError unless it is a refusal with an error or an
+    acceptance with a valid claim key and a brain configuration (checked by BrainConf)."""
+    obj = decode_json(buf, "join reply")
+    if _field(obj, "ok", bool, "join reply") is False:
+        _field(obj, "error", str, "join reply")
+        return obj
+    key = _field(obj, "key", int, "join reply")
+    if not 0 <= key < 2**64:
+        raise WireError("join reply: claim key out of range")
+    _field(obj, "brain", dict, "join reply")
+    return obj
+
+
+def encode_status(status: dict) -> bytes:
+    """agent -> agent/<id>/status (published and answered to queries)."""
+    return encode_json(status)
+
+
+def encode_info(info: dict) -> bytes:
+    """world -> world/info query: the run and every agent (docs/cli.md)."""
+    return encode_json(info)
+
+
+def decode_info(buf: bytes) -> dict:
+    obj = decode_json(buf, "world info")
+    _field(obj, "run", str, "world info")
+    _field(obj, "tick", int, "world info")
+    _field(obj, "agents", dict, "world info")
+    return obj
+
+
+ADMIN_CMDS = ("pause", "resume", "fault_done")
+
+
+def encode_admin(cmd: str, **fields) -> bytes:
+    """operator -> world/admin query: pause, resume (with `by`), fault_done (with `index`)."""
+    return encode_json({"cmd": cmd, **fields})
+
+
+def decode_admin(buf: bytes) -> dict:
+    obj = decode_json(buf, "admin request")
+    cmd = obj.get("cmd")
+    if cmd not in ADMIN_CMDS:
+        raise WireError(f"admin request: unknown cmd {cmd!r} ({', '.join(ADMIN_CMDS)})")
+    if cmd == "fault_done":
+        _field(obj, "index", int, "admin request: fault_done")
+    return obj
+
+
+def encode_admin_reply(ok: bool, *, error: str | None = None, **fields) -> bytes:
+    return encode_json({"ok": True, **fields} if ok else {"ok": False, "error": error})
+
+
+def decode_admin_reply(buf: bytes) -> dict:
+    obj = decode_json(buf, "admin reply")
+    _field(obj, "ok", bool, "admin reply")
+    return obj
+
+
+CTL_SIGNALS = ("KILL", "TERM", "STOP")
+
+
+def encode_ctl(signal_name: str) -> bytes:
+    """anyone -> agent/<id>/ctl: take this signal (for agents on hosts one cannot signal)."""
+    return encode_json({"kind": "signal", "signal": signal_name})
+
+
+def decode_ctl(buf: bytes) -> str:
+    obj = decode_json(buf, "ctl")
+    if obj.get("kind") != "signal" or obj.get("signal") not in CTL_SIGNALS:
+        raise WireError(f"ctl: expected kind 'signal' and a signal in {CTL_SIGNALS}")
+    return obj["signal"]
+
+
+PROCESS_FAULT_KINDS = ("kill", "restart", "freeze", "thaw")
+
+
+@dataclass(frozen=True, slots=True)
+class FaultNotice:
+    """world -> world/control: carry out scripted process fault `index` at `tick`."""
+
+    index: int
+    tick: int
+    kind: str  # kill | restart | freeze | thaw
+    agent: int
+    fault: dict  # the whole fault, as in the summary
+
+
+def encode_end(tick: int) -> bytes:
+    """world -> world/control: the run is over."""
+    return encode_json({"kind": "end", "tick": tick})
+
+
+def encode_fault_notice(index: int, tick: int, fault: dict) -> bytes:
+    return encode_json({"kind": "fault", "index": index, "tick": tick, "fault": fault})
+
+
+def decode_control(buf: bytes) -> int | FaultNotice:
+    """A control notice: the end (its tick, an int) or a FaultNotice; WireError otherwise."""
+    obj = decode_json(buf, "control")
+    kind = obj.get("kind")
+    if kind == "end":
+        return _field(obj, "tick", int, "control: end")
+    if kind != "fault":
+        raise WireError(f"control: unknown kind {kind!r}")
+    index = _field(obj, "index", int, "control: fault")
+    tick = _field(obj, "tick", int, "control: fault", optional=True)
+    f = _field(obj, "fault", dict, "control: fault")
+    agent, fkind = f.get("agent"), f.get("kind")
+    if type(agent) is not int or fkind not in PROCESS_FAULT_KINDS:
+        raise WireError("control: fault: needs an integer agent and a kind in " + ", ".join(PROCESS_FAULT_KINDS))
+    return FaultNotice(index, -1 if tick is None else tick, fkind, agent, f)
+
+
+def encode_event(event: dict) -> bytes:
+    """world -> events: one event of the run (as in summary.json)."""
+    return encode_json({"event": event})
+
+
+def decode_event(buf: bytes) -> dict:
+    obj = decode_json(buf, "event")
+    ev = _field(obj, "event", dict, "event")
+    _field(ev, "kind", str, "event")
+    return ev

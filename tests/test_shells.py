@@ -1,0 +1,138 @@
+"""The process shells' logic against a fake session (tests/fakes.py): the world's admission,
+liveliness, commands, admin and frames; the agent's frames in and commands out. No
+network, no processes: the middle tier between the pure tests and the multi-process ones.
+"""
+
+from __future__ import annotations
+
+import zenoh
+
+from fakes import FakeQuery, FakeSession
+from swarm.contracts import wire
+from swarm.contracts.scenario import parse_scenario
+from world.engine import Engine
+from world.process import World, WorldConfig
+
+RUN = "shells"
+SCENARIO = {
+    "run": {"dt": 0.01, "duration": 1.0},
+    "gains": {"c1": 1.0, "c2": 0.5},
+    "agents": [
+        {"id": 1, "role": "leader", "x": 10.0, "y": 0.0, "heading": 1.57, "speed": 1.0, "orbit_radius": 10.0},
+        {"id": 2, "role": "follower", "x": 0.0, "y": -5.0, "heading": 0.0, "speed": 1.5},
+    ],
+}
+
+
+def open_world():
+    world = World(WorldConfig(parse_scenario(SCENARIO), RUN, "unixsock-stream//nonexistent", None, progress=False))
+    ses = FakeSession()
+    world._open(ses)
+    return world, ses
+
+
+def claim(world, aid: int) -> dict:
+    q = FakeQuery(wire.encode_join_request(aid, 100 + aid, "host"))
+    world._on_join(q)
+    ((key, payload),) = q.replies
+    assert key == wire.world_join_key(RUN)
+    return wire.decode_join_reply(payload)
+
+
+def join(world, aid: int) -> int:
+    rep = claim(world, aid)
+    world._on_alive(wire.agent_key(RUN, aid, "alive"), zenoh.SampleKind.PUT, None)
+    return rep["key"]
+
+
+# -- the world -------------------------------------------------------------------------------
+
+
+def test_world_admits_each_id_once_and_refuses_strangers():
+    world, _ = open_world()
+    rep = claim(world, 2)
+    assert rep["ok"] and rep["brain"]["agent"]["id"] == 2 and rep["brain"]["sensing"]["selection"] == "sticky"
+    again = claim(world, 2)  # the first claim is still waiting for its token
+    assert not again["ok"] and "already live" in again["error"]
+    stranger = claim(world, 9)
+    assert not stranger["ok"] and "not in scenario" in stranger["error"]
+
+
+def test_world_joins_on_the_token_and_drops_when_it_goes():
+    world, _ = open_world()
+    join(world, 1)
+    assert [e["kind"] for e in world.engine.events] == ["join"]
+    world._on_alive(wire.agent_key(RUN, 1, "alive"), zenoh.SampleKind.DELETE, None)
+    assert [e["kind"] for e in world.engine.events] == ["join", "drop"]
+    assert world.book[1].drops == 1 and world.core.active_ids() == []
+
+
+def test_world_latches_owned_commands_and_counts_the_rest():
+    world, ses = open_world()
+    key1, key2 = join(world, 1), join(world, 2)
+    pending = {1, 2}
+    world.publish_frames()
+    frames = {wire.decode_sense(p).agent: wire.decode_sense(p) for k, p in ses.sent if k.endswith("/sense")}
+    assert set(frames) == {1, 2} and frames[1].target is not None and frames[2].target is None
+    cmd_key = wire.agent_key(RUN, 2, "cmd")
+    world._on_cmd(cmd_key, wire.encode_cmd(wire.Command(2, 0, 0.3, 1, "track", 1, key2 ^ 1)), pending)
+    assert world.book[2].rogue == 1 and pending == {1, 2}  # not the owner's key: ignored
+    world._on_cmd(cmd_key, b"garbage", pending)
+    assert world.garbage == 1
+    world._on_cmd(cmd_key, wire.encode_cmd(wire.Command(2, 0, 0.3, 1, "track", 1, key2)), pending)
+    assert pending == {1} and world.core.u[1] == 0.3 and world.engine.out[1] == 1
+    (switch,) = [e for e in world.engine.events if e["kind"] == "switch"]
+    assert (switch["agent"], switch["from"], switch["to"], switch["reason"]) == (2, None, 1, "out-neighbour chosen")
+    world._on_cmd(wire.agent_key(RUN, 1, "cmd"), wire.encode_cmd(wire.Command(1, 0, 0.1, None, "orbit", 0, key1)),
+                  pending)
+    assert pending == set()
+    world.record_and_step()
+    assert world.core.tick == 1 and world.engine.rec.rows == 1
+
+
+def test_world_admin_pauses_and_refuses_unknown_commands():
+    world, _ = open_world()
+    q = FakeQuery(wire.encode_admin("pause", by="test"))
+    world._on_admin(q)
+    assert world.paused and wire.decode_admin_reply(q.replies[0][1])["paused"] is True
+    q = FakeQuery(wire.encode_json({"cmd": "explode"}))
+    world._on_admin(q)
+    rep = wire.decode_admin_reply(q.replies[0][1])
+    assert rep["ok"] is False and "unknown cmd" in rep["error"] and world.garbage == 1
+
+
+def test_world_info_reports_expected_radius_through_the_chosen_graph():
+    world, _ = open_world()
+    key2 = join(world, 2)
+    join(world, 1)
+    world._on_cmd(wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd(wire.Command(2, 0, 0.0, 1, "track", 1, key2)), None)
+    info = wire.decode_info(wire.encode_info(world.info()))
+    a2 = info["agents"]["2"]
+    assert (a2["root"], a2["hops"], a2["expected_radius"]) == (1, 1, 15.0)  # 1.5 m/s at omega 0.1
+
+
+# -- the agent -------------------------------------------------------------------------------
+
+
+def test_agent_answers_its_frames_with_commands_and_counts_garbage():
+    from agents.process import AgentNode
+
+    world, _ = open_world()
+    reply = claim(world, 2)
+    ses = FakeSession()
+    node = AgentNode(ses, RUN, 2, reply, wait_world=False)
+    node.open()
+    engine = Engine(parse_scenario(SCENARIO), 10)
+    frame = engine.frames()[2]
+    node.on_sense(frame)
+    (cmd,) = [wire.decode_cmd(p) for p in ses.on(wire.agent_key(RUN, 2, "cmd"))]
+    brain = node.new_brain()
+    d = brain.decide(frame)
+    assert (cmd.agent, cmd.tick, cmd.u, cmd.out, cmd.hops, cmd.key) == (2, 0, d.u, 1, 1, reply["key"])
+    node.on_sense(frame)  # the same tick again: no second command
+    assert len(ses.on(wire.agent_key(RUN, 2, "cmd"))) == 1
+    node.on_ctl(wire.encode_json({"kind": "signal", "signal": "HUP"}))
+    assert node.garbage == 1
+    node.maybe_publish_status(force=True)
+    st = wire.decode_status(ses.on(wire.agent_key(RUN, 2, "status"))[-1])
+    assert (st["out"], st["hops"], st["rooted"], st["commands"]) == (1, 1, True, 1)

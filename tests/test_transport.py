@@ -1,0 +1,92 @@
+"""Two real zenoh sessions in one process on a Unix socket in the test's tmp dir (the
+zenoh-python tests/test_session.py pattern): the hub and client settings of
+swarm/contracts/transport.py carry the protocol's puts, liveliness and queries."""
+
+from __future__ import annotations
+
+import queue
+import time
+
+import pytest
+
+from swarm.contracts import wire
+from swarm.contracts.transport import open_client, open_hub, query_statuses
+
+RUN = "two-sessions"
+
+
+@pytest.fixture
+def sessions(tmp_path):
+    ep = f"unixsock-stream/{tmp_path / 'hub.sock'}"
+    hub = open_hub(ep)
+    try:
+        client = open_client(ep, timeout_ms=3000)
+    except Exception:
+        hub.close()
+        raise
+    try:
+        yield hub, client
+    finally:
+        client.close()
+        hub.close()
+
+
+def _get(q: queue.Queue, timeout: float = 3.0):
+    return q.get(timeout=timeout)
+
+
+def test_a_command_put_by_the_client_reaches_the_hub(sessions):
+    hub, client = sessions
+    got: queue.Queue = queue.Queue()
+    sub = hub.declare_subscriber(wire.agent_key(RUN, "*", "cmd"), lambda s: got.put((str(s.key_expr),
+                                                                                     s.payload.to_bytes())))
+    try:
+        cmd = wire.Command(4, 17, -0.25, 2, "track", 3, 77)
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline:
+            client.put(wire.agent_key(RUN, 4, "cmd"), wire.encode_cmd(cmd))
+            try:
+                key, payload = _get(got, 0.2)
+                break
+            except queue.Empty:
+                continue
+        else:
+            pytest.fail("no command reached the hub within 5 s")
+        assert wire.agent_of_key(key) == 4 and wire.decode_cmd(payload) == cmd
+    finally:
+        sub.undeclare()
+
+
+def test_liveliness_token_appears_and_goes(sessions):
+    hub, client = sessions
+    seen: queue.Queue = queue.Queue()
+    import zenoh
+
+    sub = hub.liveliness().declare_subscriber(wire.agent_key(RUN, "*", "alive"),
+                                              lambda s: seen.put((wire.agent_of_key(str(s.key_expr)), s.kind)),
+                                              history=True)
+    try:
+        token = client.liveliness().declare_token(wire.agent_key(RUN, 5, "alive"))
+        assert _get(seen) == (5, zenoh.SampleKind.PUT)
+        token.undeclare()
+        assert _get(seen) == (5, zenoh.SampleKind.DELETE)
+    finally:
+        sub.undeclare()
+
+
+def test_status_query_returns_each_agents_own_status(sessions):
+    hub, client = sessions
+    st = {"id": 3, "role": "follower", "out": 1, "hops": 1, "rooted": True}
+    qa = client.declare_queryable(wire.agent_key(RUN, 3, "status"),
+                                  lambda q: q.reply(wire.agent_key(RUN, 3, "status"), wire.encode_status(st)))
+    liar = client.declare_queryable(wire.agent_key(RUN, 8, "status"),  # answers for another id: skipped
+                                    lambda q: q.reply(wire.agent_key(RUN, 8, "status"), wire.encode_status(st)))
+    try:
+        deadline = time.monotonic() + 5
+        got = {}
+        while time.monotonic() < deadline and 3 not in got:
+            got = query_statuses(hub, RUN, timeout=1.0)
+        assert set(got) == {3} and got[3]["out"] == 1
+    finally:
+        qa.undeclare()
+        liar.undeclare()
