@@ -40,6 +40,7 @@ def test_scenarios_found():
     assert {"case1", "case2", "turtlebot"} <= {p.stem for p in SCENARIOS}
 
 
+@pytest.mark.slow  # a whole run in-process: the long tier
 @pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
 def test_shipped_scenario_converges_under_sim(path, shipped_run):
     res, out = shipped_run(path)

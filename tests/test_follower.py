@@ -206,6 +206,7 @@ def _final_radius_and_rate(result, col, window):
     return math.hypot(x[-1], y[-1]), (theta[-1] - theta[0]) / (t[-1] - t[k0])
 
 
+@pytest.mark.slow  # a whole run in-process: the long tier
 @pytest.mark.parametrize("ratio", [1.5, 0.6], ids=["faster", "slower"])
 @pytest.mark.parametrize("start", [(0.0, -3.0, 0.0), (-5.0, 5.0, 2.0)], ids=["start-a", "start-b"])
 def test_follower_settles_at_speed_ratio_radius(ratio, start):

@@ -162,6 +162,7 @@ def test_arc_step_matches_fine_euler():
 # --- plan_cc on random poses ------------------------------------------------------------
 
 
+@pytest.mark.slow  # a whole run in-process: the long tier
 @pytest.mark.parametrize("limited", [False, True])
 def test_plan_cc_random_poses(limited):
     rng = np.random.default_rng(42 + limited)

@@ -151,12 +151,14 @@ def test_render_without_summary_and_single_row(tmp_path: Path) -> None:
     assert_pngs(run_dir, render_plots(run_dir))
 
 
+@pytest.mark.slow  # long renders: the long tier
 def test_render_decimates_long_run(tmp_path: Path) -> None:
     # more rows than MAX_POINTS: exercises the stride and min/max envelope paths
     run_dir = make_run(tmp_path / "run", ticks=9001, n_followers=5, drop=(2, 4000))
     assert_pngs(run_dir, render_plots(run_dir, max_points=500))
 
 
+@pytest.mark.slow  # many renders: the long tier
 def test_render_does_not_leak_figures(tmp_path: Path) -> None:
     import matplotlib.pyplot as plt
 

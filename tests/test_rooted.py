@@ -3,6 +3,7 @@
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from agents.brain import AgentBrain
 from swarm.graph import analyse
@@ -28,6 +29,7 @@ def test_nearest_selection_forms_a_follower_only_cycle_that_the_graph_flags():
     assert {2, 5} <= set(g["unrooted"])
 
 
+@pytest.mark.slow  # a whole run in-process: the long tier
 def test_rooted_selection_roots_every_follower_and_converges():
     res = run_sim(load_scenario(ROOTED))
     g = _final_graph(res)

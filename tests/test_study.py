@@ -45,6 +45,7 @@ def test_swarms_study_compares_rules_on_the_same_swarms(tmp_path):
     assert "N=6 L=2 sticky range unlimited" in res.stdout
 
 
+@pytest.mark.slow  # a whole run in-process: the long tier
 def test_on_a_known_swarm_sticky_settles_where_rooted_chatters_and_nearest_cycles():
     # seed 0 of the default setting (10 agents, 2 leaders, unlimited sensing), 120 s
     from swarm.study import run_swarm
