@@ -22,9 +22,9 @@ from pathlib import Path
 from typing import Callable
 
 from swarm.contracts import wire
+from swarm.contracts.orbits import expected_radius, root_of
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.transport import default_endpoint, open_client
-from swarm.contracts.orbits import expected_radius, root_of
 
 EXIT_WORLD_FAILED = 1
 

@@ -11,9 +11,9 @@ from __future__ import annotations
 from typing import Callable
 
 from agents.brain import AgentBrain
-from world.recording import RunResult
 from swarm.contracts.scenario import Scenario
 from world.engine import Engine
+from world.recording import RunResult
 
 
 def run_sim(scenario: Scenario, duration: float | None = None,

@@ -10,12 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from world.recording import write_run
+from swarm.contracts.orbits import root_of
 from swarm.contracts.scenario import load_scenario, parse_scenario
 from swarm.sim import run_sim
 from world.core import ACTIVE, COASTING, GONE, WorldCore
-from swarm.contracts.orbits import root_of
 from world.metrics import agent_metrics, angular_rate, converged, settling_time
+from world.recording import write_run
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 KEYS = {"ids", "role", "speed", "orbit_radius", "target", "dt", "t", "x", "y", "heading", "u",

@@ -17,10 +17,10 @@ from hypothesis import strategies as st
 
 from agents.brain import AgentBrain
 from agents.selection import Sticky
+from swarm.contracts.frames import Contact, SensorFrame
 from swarm.graph import analyse
 from swarm.sim import run_sim
 from swarm.study import SwarmSetting, random_swarm
-from swarm.contracts.frames import Contact, SensorFrame
 from world.metrics import switch_ticks
 
 

@@ -23,11 +23,11 @@ from typing import Callable
 
 import numpy as np
 
-from world.recording import Recorder, RunResult
+from swarm.contracts.frames import SensorFrame
 from swarm.contracts.scenario import Scenario
 from world.core import ACTIVE, WorldCore
 from world.faults import FaultPlan, fault_event
-from swarm.contracts.frames import SensorFrame
+from world.recording import Recorder, RunResult
 
 # What became of a command (`Engine.command`).
 LATCHED, LOST, REFUSED = "latched", "lost", "refused"

@@ -25,15 +25,15 @@ from pathlib import Path
 
 import numpy as np
 
-from swarm.contracts.brain_config import BrainConf
 from swarm.contracts import wire
-from world.recording import write_run
+from swarm.contracts.brain_config import BrainConf
+from swarm.contracts.orbits import expected_radius, root_of
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.transport import open_hub, socket_path
 from world.core import ACTIVE
 from world.engine import LOST, REFUSED, Engine
 from world.faults import fault_event
-from swarm.contracts.orbits import expected_radius, root_of
+from world.recording import write_run
 
 CLAIM_TTL = 10.0  # s: an accepted join claim waits this long for the agent's token
 TRUTH_PERIOD = 0.02  # s of wall time between ground-truth messages (observers, not the recording)
