@@ -12,10 +12,8 @@ happens on the main thread.
 
 from __future__ import annotations
 
-import math
 import os
 import queue
-import secrets
 import signal
 import socket
 import sys
@@ -27,15 +25,15 @@ import numpy as np
 
 from swarm.contracts import wire
 from swarm.contracts.brain_config import BrainConf
-from swarm.contracts.orbits import expected_radius, root_of
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.transport import open_hub, socket_path
 from world.core import ACTIVE
 from world.engine import LOST, REFUSED, Engine
 from world.faults import fault_event
 from world.recording import write_run
+from world.report import run_info
+from world.roster import AgentBook, admit, agent_figures, new_agent_spec
 
-CLAIM_TTL = 10.0  # s: an accepted join claim waits this long for the agent's token
 TRUTH_PERIOD = 0.02  # s of wall time between ground-truth messages (observers, not the recording)
 
 
@@ -46,27 +44,6 @@ class Stop(BaseException):
     def __init__(self, signum: int):
         super().__init__(signum)
         self.signum = signum
-
-
-@dataclass
-class AgentBook:
-    """What the world keeps about one agent's process (not its physics)."""
-
-    pid: int | None = None
-    host: str | None = None
-    claim_until: float = 0.0  # join accepted, waiting for the token until then (monotonic s)
-    commands: int = 0
-    missed: int = 0  # lockstep: ticks stepped on a held command after the deadline
-    stale_sum: int = 0  # realtime: sum over ticks of (tick - tick of the command used)
-    stale_max: int = 0
-    last_cmd_tick: int = -1
-    last_cmd_wall: float = 0.0
-    joins: int = 0
-    drops: int = 0
-    garbage: int = 0
-    key: int | None = None  # claim key of the process that owns the id; commands must carry it
-    rogue: int = 0  # commands on this agent's key without its owner's claim key
-    rogue_noted: float = 0.0
 
 
 @dataclass
@@ -248,15 +225,9 @@ class World:
                                          f"(ids: {', '.join(map(str, self.core.scenario.ids))}); "
                                          "a new agent needs a spec (swarm spawn --role --x --y ...)")
                 self.add_agent(aid, req["spec"])
-            k = self.core.index[aid]
-            b = self.book[aid]
-            now = time.monotonic()
-            if (self.core.state[k] == ACTIVE and b.key is not None) or b.claim_until > now:
-                raise wire.WireError(f"agent {aid} is already live (pid {b.pid} on {b.host})")
-            b.pid, b.host, b.claim_until = req["pid"], req["host"], now + CLAIM_TTL
-            b.key = secrets.randbits(64)
+            key = admit(self.core, self.book[aid], req, time.monotonic())
             x, y, h = self.core.pose(aid)
-            reply = wire.encode_join_reply(True, run=self.cfg.run, agent=aid, tick=self.core.tick, key=b.key,
+            reply = wire.encode_join_reply(True, run=self.cfg.run, agent=aid, tick=self.core.tick, key=key,
                                            clock=self.cfg.clock, pose=[x, y, h],
                                            brain=BrainConf.from_scenario(self.core.scenario, aid).to_json())
         except wire.WireError as e:
@@ -265,18 +236,7 @@ class World:
 
     def add_agent(self, aid: int, spec: dict) -> None:
         """A new agent joins the run with its own spec (`swarm spawn`); raises WireError."""
-        from pydantic import ValidationError
-
-        from swarm.contracts.scenario import AgentSpec, format_validation_error
-
-        if not isinstance(spec, dict):
-            raise wire.WireError("spec: expected a JSON object")
-        try:
-            a = AgentSpec.model_validate({**spec, "id": aid})
-        except ValidationError as e:
-            raise wire.WireError(format_validation_error(f"agent {aid} spec", e).replace("\n", ";")) from None
-        if a.follow is not None and a.follow not in self.core.index:
-            raise wire.WireError(f"agent {aid} spec: follow: no agent has id {a.follow}")
+        a = new_agent_spec(aid, spec, self.core)
         self.engine.add_agent(a)
         self.book[aid] = AgentBook()
         self.sense_pub[aid] = self.session.declare_publisher(wire.agent_key(self.cfg.run, aid, "sense"),
@@ -285,47 +245,10 @@ class World:
 
     def info(self, sensing: bool = False) -> dict:
         """The world's view of the run, for the CLI (`swarm agents`, `graph`, `watch`)."""
-        c = self.core
-        s = c.scenario
-        leaders = {a.id for a in s.agents if a.role == "leader"}
-        live = {i for i in c.active_ids()}
-        out = {int(i): (int(o) if o >= 0 else None) for i, o in zip(c.ids, self.engine.out)}
-        now = time.monotonic()
-        agents = {}
-        for a in s.agents:
-            k = c.index[a.id]
-            b = self.book[a.id]
-            root, hops = root_of(a.id, out, leaders & live) if a.id in live else (None, None)
-            dist = math.hypot(c.x[k] - c.target[0], c.y[k] - c.target[1])
-            if root is not None:
-                L = s.agent(root)
-                expected = expected_radius(a.speed, L.speed, L.orbit_radius)
-                err = abs(dist - expected)
-            else:
-                expected = err = None
-            agents[str(a.id)] = {
-                "id": a.id, "role": a.role, "state": c.state[k], "alive": c.state[k] == ACTIVE,
-                "pid": b.pid, "host": b.host, "x": float(c.x[k]), "y": float(c.y[k]),
-                "heading": float(c.heading[k]), "speed": a.speed, "u": float(c.u[k]),
-                "out": out[a.id], "root": root, "hops": hops, "distance": dist,
-                "expected_radius": expected, "radial_error": err,
-                "relative_error": None if err is None else err / expected,
-                "orbit_radius": a.orbit_radius,
-                "last_command_age": (now - b.last_cmd_wall) if b.last_cmd_wall else None,
-                "missed": b.missed, "commands": b.commands, "joins": b.joins, "drops": b.drops,
-                "garbage": b.garbage, "rogue_commands": b.rogue,
-            }
-        info = {
-            "run": self.cfg.run, "scenario": s.name, "clock": self.cfg.clock, "paused": self.paused,
-            "endpoint": self.cfg.listen, "pid": os.getpid(), "host": socket.gethostname(),
-            "tick": c.tick, "time": c.time, "ticks": self.ticks, "dt": c.dt,
-            "target": [c.target[0], c.target[1]], "agents": agents,
-            "garbage": self.garbage, "ignored": self.ignored,
-        }
-        if sensing:
-            sensed, _, _ = c.sensing()
-            info["sensing"] = [[int(c.ids[i]), int(c.ids[j])] for i, j in zip(*np.nonzero(sensed))]
-        return info
+        return run_info(self.engine, self.book, {
+            "run": self.cfg.run, "scenario": self.core.scenario.name, "clock": self.cfg.clock,
+            "paused": self.paused, "endpoint": self.cfg.listen, "pid": os.getpid(), "host": socket.gethostname(),
+            "ticks": self.ticks, "garbage": self.garbage, "ignored": self.ignored}, sensing)
 
     def _on_info(self, query) -> None:
         params = str(query.parameters) if query.parameters is not None else ""
@@ -551,16 +474,8 @@ class World:
         if self.cfg.out_dir is None:
             return None
         own = self.agent_garbage()
-        agent_extra = {}
-        for aid, b in self.book.items():
-            n_rt = max(self.core.tick, 1)
-            agent_extra[str(aid)] = {
-                "pid": b.pid, "host": b.host, "commands": b.commands, "missed_ticks": b.missed,
-                "joins": b.joins, "drops": b.drops, "garbage": b.garbage + own.get(aid, 0),
-                "rogue_commands": b.rogue,
-                **({"staleness_mean_ticks": b.stale_sum / n_rt, "staleness_max_ticks": b.stale_max}
-                   if self.cfg.clock == "realtime" else {}),
-            }
+        agent_extra = {str(aid): agent_figures(b, c.tick, self.cfg.clock == "realtime", own.get(aid, 0))
+                       for aid, b in self.book.items()}
         wall = getattr(self, "wall_ticks", None)
         result = self.engine.result({
             "engine": "up", "run": self.cfg.run, "endpoint": self.cfg.listen, "clock": self.cfg.clock,

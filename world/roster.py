@@ -1,0 +1,80 @@
+"""Who owns each agent id of a run: the world's book per agent process, and admission.
+
+An agent process claims its id with a join request; the world accepts at most one
+process per id (the claim waits CLAIM_TTL s for the process's liveliness token) and gives
+it a random 64-bit claim key that every command must carry. A new agent (not in the
+scenario) brings a spec, checked like a scenario's [[agents]] entry. No I/O here: the
+world process (world/process.py) decodes the request and sends the reply.
+"""
+
+from __future__ import annotations
+
+import secrets
+from dataclasses import dataclass
+
+from swarm.contracts import wire
+from world.core import ACTIVE, WorldCore
+
+CLAIM_TTL = 10.0  # s: an accepted join claim waits this long for the agent's token
+
+
+@dataclass
+class AgentBook:
+    """What the world keeps about one agent's process (not its physics)."""
+
+    pid: int | None = None
+    host: str | None = None
+    claim_until: float = 0.0  # join accepted, waiting for the token until then (monotonic s)
+    commands: int = 0
+    missed: int = 0  # lockstep: ticks stepped on a held command after the deadline
+    stale_sum: int = 0  # realtime: sum over ticks of (tick - tick of the command used)
+    stale_max: int = 0
+    last_cmd_tick: int = -1
+    last_cmd_wall: float = 0.0
+    joins: int = 0
+    drops: int = 0
+    garbage: int = 0
+    key: int | None = None  # claim key of the process that owns the id; commands must carry it
+    rogue: int = 0  # commands on this agent's key without its owner's claim key
+    rogue_noted: float = 0.0
+
+
+def new_agent_spec(aid: int, spec, core: WorldCore):
+    """The AgentSpec of an agent added at run time (`swarm spawn`); WireError names the field."""
+    from pydantic import ValidationError
+
+    from swarm.contracts.scenario import AgentSpec, format_validation_error
+
+    if aid in core.index:
+        raise wire.WireError(f"agent {aid} already exists")
+    if not isinstance(spec, dict):
+        raise wire.WireError("spec: expected a JSON object")
+    try:
+        a = AgentSpec.model_validate({**spec, "id": aid})
+    except ValidationError as e:
+        raise wire.WireError(format_validation_error(f"agent {aid} spec", e).replace("\n", ";")) from None
+    if a.follow is not None and a.follow not in core.index:
+        raise wire.WireError(f"agent {aid} spec: follow: no agent has id {a.follow}")
+    return a
+
+
+def admit(core: WorldCore, book: AgentBook, req: dict, now: float) -> int:
+    """Accept the claim `req` (a decoded join request) on an id the world knows: returns
+    the new claim key, or raises WireError when a process already owns the id."""
+    aid = req["id"]
+    if (core.state[core.index[aid]] == ACTIVE and book.key is not None) or book.claim_until > now:
+        raise wire.WireError(f"agent {aid} is already live (pid {book.pid} on {book.host})")
+    book.pid, book.host, book.claim_until = req["pid"], req["host"], now + CLAIM_TTL
+    book.key = secrets.randbits(64)
+    return book.key
+
+
+def agent_figures(book: AgentBook, ticks: int, realtime: bool, own_garbage: int = 0) -> dict:
+    """One agent's process figures for summary.json (see README, "Outputs of a run")."""
+    n = max(ticks, 1)
+    return {
+        "pid": book.pid, "host": book.host, "commands": book.commands, "missed_ticks": book.missed,
+        "joins": book.joins, "drops": book.drops, "garbage": book.garbage + own_garbage,
+        "rogue_commands": book.rogue,
+        **({"staleness_mean_ticks": book.stale_sum / n, "staleness_max_ticks": book.stale_max} if realtime else {}),
+    }
