@@ -519,8 +519,13 @@ def test_kill_and_spawn(live):
     assert r.exit_code == 2 and "only apply to a new id" in r.stderr
     r = invoke("spawn", "--id", "42", "--x", "1")
     assert r.exit_code == 2 and "--speed" in r.stderr
-    g = _json("graph", "--json")
-    assert g["nodes"] == [1, 2, 3, 4, 5, 6] and [3, 1] in g["edges"]
+    # the respawned 3 chooses at runtime (a fresh brain: the nearest agent with a path, now)
+    def chosen():
+        g = _json("graph", "--json")
+        return g if any(i == 3 for i, _ in g["edges"]) else None
+
+    g = wait_for(chosen, 5, "agent 3 to choose an out-neighbour again", 0.05)
+    assert g["nodes"] == [1, 2, 3, 4, 5, 6] and 3 not in g["unrooted"] and g["cycles"] == []
 
     # graph --watch saw 3 go and come back, then stops on SIGINT (Ctrl-C) with exit 0
     wait_for(lambda: any(d["dead"] == [3] for d in watched()) and watched()[-1]["dead"] == [], 5,
