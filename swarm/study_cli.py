@@ -126,8 +126,9 @@ def swarms(
     out: OutOpt = None,
     plot: Annotated[bool, typer.Option(help="write study.png")] = True,
 ) -> None:
-    """Random swarms through the in-process engine: converged fraction, settling time and
-    switches per follower, per setting (every combination of the list options).
+    """Random swarms through the in-process engine: converged fraction, settling, switches.
+
+    One setting per combination of the list options (--n, --leaders, --selection, --range).
 
     Swarms whose followers cannot all reach a leader in the sensing graph at t = 0 (a
     range or field of view cuts them off) are counted apart as `cut_off`, not as failures.
@@ -189,9 +190,11 @@ def gains(
     out: OutOpt = None,
     plot: Annotated[bool, typer.Option(help="write gains.png")] = True,
 ) -> None:
-    """Where does the follower law settle? One follower behind a leader already on its
-    orbit (omega = 1 rad/s), for every (C1, C2, speed ratio), from a few random starts:
-    the worst time into the 2% band, or never. Writes runs.csv, summary.csv, gains.png.
+    """Where does the follower law settle? A map of (C1, C2) against speed ratio.
+
+    One follower behind a leader already on its orbit (omega = 1 rad/s), for every
+    (C1, C2, speed ratio), from a few random starts: the worst time into the 2% band, or
+    never. Writes runs.csv, summary.csv, gains.png.
 
     Example: swarm study gains --c1 0.5,1,2 --c2 0.2,0.5,1 --starts 3
     """
