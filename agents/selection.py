@@ -102,11 +102,11 @@ class Sticky:
     rooted sits below it: they cannot close a cycle either.
 
     Bound: without losses a follower changes its out-neighbour at most 1 + wait_ticks
-    times (in practice 0 or 1: the provisional choice, then the nearest once rooted), and
-    never after it has committed. Each loss of the out-neighbour costs at most two more
-    changes (to loitering and back). With unlimited sensing and no faults nothing is ever
-    lost, so the graph is fixed after the first wait_ticks ticks and the paper's theorem
-    applies from there on. With a range or field of view, losses are forced by geometry
+    times (median 1-2 in the README's studies: provisional choices, then the nearest once
+    rooted), and never after it has committed. Each loss of the out-neighbour costs at
+    most two more changes (to loitering and back). With unlimited sensing and no faults
+    nothing is ever lost, so the graph is fixed within about 2 x wait_ticks ticks and the
+    paper's theorem applies from there on. With a range or field of view, losses are forced by geometry
     and are counted in every run's summary (`switches`).
     """
 
