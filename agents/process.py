@@ -178,7 +178,8 @@ class AgentNode:
         self.last_tick = frame.tick
         if self.last is None or d.out != self.last.out or d.phase != self.last.phase:
             if self.last is not None and d.out != self.last.out:
-                why = "pinned out-neighbour not sensed, nearest used" if d.fallback else "nearest sensed agent"
+                why = ("pinned out-neighbour not sensed, nearest used" if d.fallback
+                       else f"selection = {self.conf.sensing.selection}")
                 _log(f"[agent {self.id}] tick {frame.tick}: out-neighbour {self.last.out} -> {d.out} ({why})")
         self.last = d
 
