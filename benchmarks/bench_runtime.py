@@ -42,7 +42,6 @@ import os
 import platform
 import random
 import shutil
-import signal
 import statistics
 import subprocess
 import sys
@@ -50,10 +49,15 @@ import tempfile
 import time
 from collections import Counter, defaultdict
 from pathlib import Path
+from typing import Callable
 
 import psutil
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from swarm.procs import Group, stop_groups, wait_until  # noqa: E402  (the repository, not an installed copy)
+
 BENCH = Path(__file__).resolve().parent
 PY = sys.executable
 DT = 0.01
@@ -80,21 +84,24 @@ def log(msg: str) -> None:
 
 # -- processes -----------------------------------------------------------------------------------
 class Tracked:
-    """Everything one measurement started: its own Popens and the descendants seen of them."""
+    """Everything one measurement started: its process groups (swarm.procs) and the descendants
+    seen of them."""
 
     def __init__(self):
-        self.popens: list[subprocess.Popen] = []
+        self.groups: list[Group] = []
         self.seen: dict[int, psutil.Process] = {}  # pid -> Process (create_time pins identity)
-        self.pgid: int | None = None
+
+    @property
+    def popens(self) -> list[subprocess.Popen]:
+        return [p for g in self.groups for p in g.members]
 
     def spawn(self, args: list[str], logfile: Path, env: dict, own_group: bool = True) -> subprocess.Popen:
+        """Start `args` in a process group of its own, or (own_group=False) in the first one started."""
+        if own_group or not self.groups:
+            self.groups.append(Group())
+        group = self.groups[-1] if own_group else self.groups[0]
         with open(logfile, "ab") as out:
-            p = subprocess.Popen(args, cwd=REPO, env=env, stdin=subprocess.DEVNULL, stdout=out,
-                                 stderr=subprocess.STDOUT,
-                                 process_group=0 if (own_group or self.pgid is None) else self.pgid)
-        if self.pgid is None:
-            self.pgid = p.pid
-        self.popens.append(p)
+            p = group.start(args, cwd=REPO, env=env, stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT)
         try:
             self.seen[p.pid] = psutil.Process(p.pid)
         except psutil.NoSuchProcess:
@@ -122,19 +129,12 @@ class Tracked:
         return out
 
     def stop(self, grace: float = 15.0) -> None:
-        """SIGTERM our Popens (swarm up stops its own world and agents), then SIGKILL what is left."""
+        """SIGTERM our groups (swarm up stops its own world and agents), SIGKILL them if still
+        running `grace` s later, then SIGKILL every descendant seen that is left."""
         for p in self.popens:
             if p.poll() is None:
                 self.discover(p)
-                try:
-                    p.send_signal(signal.SIGTERM)
-                except ProcessLookupError:
-                    pass
-        t_end = time.monotonic() + grace
-        while time.monotonic() < t_end and any(p.poll() is None for p in self.popens):
-            time.sleep(0.05)
-        for p in self.popens:
-            self.discover(p)
+        stop_groups(self.groups, grace)
         for pr in self.alive():
             try:
                 pr.kill()
@@ -142,21 +142,19 @@ class Tracked:
                 pass
         psutil.wait_procs(self.alive(), timeout=5)
         for p in self.popens:
-            try:
-                p.wait(timeout=5)
-            except subprocess.TimeoutExpired:
+            if p.returncode is None:
                 log(f"warning: process {p.pid} did not exit after SIGKILL")
 
 
-def wait_all(procs: list[subprocess.Popen], deadline: float, tick=None) -> bool:
-    """Wait until every process exited or the monotonic deadline; `tick()` runs every 0.25 s."""
-    while time.monotonic() < deadline:
+def all_exited(procs: list[subprocess.Popen], tick=None) -> Callable[[], bool]:
+    """A condition for wait_until: every process exited; until then `tick()` runs at each look."""
+    def cond() -> bool:
         if all(p.poll() is not None for p in procs):
             return True
         if tick is not None:
             tick()
-        time.sleep(0.25)
-    return all(p.poll() is not None for p in procs)
+        return False
+    return cond
 
 
 class MemSampler:
@@ -319,8 +317,8 @@ def run_baseline(n: int, ticks: int, warmup: int, work: Path, env: dict, tag: st
                 mem.sample_rss(cps, every=0.0)
                 mem.sample_uss(cps)
 
-        wait_all([hub], time.monotonic() + 120 + ticks / 20, sample)
-        wait_all(clients, time.monotonic() + 10)
+        wait_until(all_exited([hub], sample), 120 + ticks / 20, 0.25)
+        wait_until(all_exited(clients), 10, 0.25)
     finally:
         tr.stop()
     if not result.exists():
@@ -457,10 +455,10 @@ def run_swarm(n: int, ticks: int, work: Path, env: dict, tag: str, profile: floa
                              d / f"pyspy-{name.replace(' ', '-')}.log", env)
                 spies.append((name, pr.pid, p, raw))
 
-        finished = wait_all([up], time.monotonic() + 120 + ticks / 20, sample)
+        finished = wait_until(all_exited([up], sample), 120 + ticks / 20, 0.25)
         if not finished:
             log(f"swarm up ({n} agents) passed its deadline; stopping it")
-        wait_all([s[2] for s in spies if s[2] is not None], time.monotonic() + profile + 15)
+        wait_until(all_exited([s[2] for s in spies if s[2] is not None]), profile + 15, 0.25)
     finally:
         tr.stop()
     res: dict = {"n": n, "ticks_requested": ticks, "load1": load, "ok": False,
@@ -519,7 +517,7 @@ def thread_cores(a: dict, b: dict, dt: float) -> dict[str, float]:
 
 # Innermost Python frames that mean "waiting": SimpleQueue.get in the main loops, time.sleep in
 # the launcher, and a zenoh callback thread parked in its channel (Thread.run calls into Rust).
-WAITING = {"World.drain", "AgentNode.loop", "Thread.run", "Launcher.run", "Launcher._wait", "Launcher.connect"}
+WAITING = {"World.drain", "AgentNode.loop", "Thread.run", "Launcher.run", "wait_until", "Launcher.connect"}
 
 
 def summarize_pyspy(raw: Path, seconds: float, rate: int = 100, top: int = 10) -> dict:
@@ -570,18 +568,27 @@ def fmt(v, spec=".0f", none="-"):
     return none if v is None else format(v, spec)
 
 
+def by_size(results: dict):
+    """(N, its results, best baseline run, best swarm run) for each size, in order."""
+    for n in results["sizes"]:
+        r = results["by_n"][str(n)]
+        yield n, r, best(r["baseline"]), best(r["swarm"])
+
+
+def head(lines: list[str], columns: str, width: int) -> None:
+    """A table's column line and the rule under it."""
+    lines += [columns, "-" * width]
+
+
 def report(results: dict) -> str:
     lines = []
     lines.append(f"machine: {results['env']['cpus']} CPUs, python {results['env']['python']}, "
                  f"zenoh {results['env']['zenoh']}; mode {'quick' if results['quick'] else 'full'}, "
                  f"repeat {results['repeat']} (best run shown)")
     lines.append("")
-    lines.append(f"{'N':>3} | {'baseline ticks/s':>16} | {'swarm ticks/s':>13} | {'ratio':>5} | "
-                 f"target (>= {TARGET_RATIO}x) met? | all runs: baseline / swarm (ticks/s@cores busy elsewhere)")
-    lines.append("-" * 110)
-    for n in results["sizes"]:
-        r = results["by_n"][str(n)]
-        b, s = best(r["baseline"]), best(r["swarm"])
+    head(lines, f"{'N':>3} | {'baseline ticks/s':>16} | {'swarm ticks/s':>13} | {'ratio':>5} | "
+                f"target (>= {TARGET_RATIO}x) met? | all runs: baseline / swarm (ticks/s@cores busy elsewhere)", 110)
+    for n, r, b, s in by_size(results):
         ratio = (s["ticks_per_second"] / b["ticks_per_second"]) if (b and s) else None
         r["ratio"] = ratio
         met = None if ratio is None else ratio >= TARGET_RATIO
@@ -615,11 +622,9 @@ def report(results: dict) -> str:
     lines.append("")
     lines.append(f"memory per agent process (target {TARGET_AGENT_MB:.0f} MB); RSS = peak of ~1 s samples while "
                  "ticking, USS = one sample while ticking")
-    lines.append(f"{'N':>3} | {'agents':>6} | {'RSS mean':>8} | {'RSS max':>7} | {'USS mean':>8} | {'USS max':>7} | "
-                 f"{'met (RSS max / USS max)':>24} | bare client RSS mean / USS mean | world RSS / USS")
-    lines.append("-" * 130)
-    for n in results["sizes"]:
-        r = results["by_n"][str(n)]
+    head(lines, f"{'N':>3} | {'agents':>6} | {'RSS mean':>8} | {'RSS max':>7} | {'USS mean':>8} | {'USS max':>7} | "
+                f"{'met (RSS max / USS max)':>24} | bare client RSS mean / USS mean | world RSS / USS", 130)
+    for n, r, _, _ in by_size(results):
         s = next((x for x in r["swarm"] if (x.get("memory_agents") or {}).get("rss")), None)
         b = next((x for x in r["baseline"] if (x.get("memory") or {}).get("rss")), None)
         if s is None:
@@ -638,12 +643,9 @@ def report(results: dict) -> str:
     lines.append("")
     lines.append("CPU while ticking (psutil cpu_times of each process; ms of CPU per tick = cores used / ticks per s; "
                  "machine = all cores busy, others = processes not started here)")
-    lines.append(f"{'N':>3} | {'bare: hub':>9} {'clients':>8} {'machine':>8} {'others':>7} | "
-                 f"{'swarm: world':>12} {'agents':>7} {'launcher':>8} {'machine':>8} {'others':>7}")
-    lines.append("-" * 100)
-    for n in results["sizes"]:
-        r = results["by_n"][str(n)]
-        b, s = best(r["baseline"]), best(r["swarm"])
+    head(lines, f"{'N':>3} | {'bare: hub':>9} {'clients':>8} {'machine':>8} {'others':>7} | "
+                f"{'swarm: world':>12} {'agents':>7} {'launcher':>8} {'machine':>8} {'others':>7}", 100)
+    for n, r, b, s in by_size(results):
 
         def per_tick(run, group):
             c = run and run.get("cpu")

@@ -1,10 +1,10 @@
 """`swarm up`: start a world and one OS process per agent, supervise, show progress.
 
-All children run in one process group that the launcher owns (led by the world, which
-is not reaped until the end, so the group outlives any agent). The world writes the
-results; the launcher watches the run over zenoh like any observer would (ground truth
-and events), prints progress, and on Ctrl-C/SIGTERM stops the world first (so the
-results are written), then the agents, then anything left in the group.
+All children run in one process group that the launcher owns (a `swarm.procs.Group`, led
+by the world, which is not reaped until the end, so the group outlives any agent). The
+world writes the results; the launcher watches the run over zenoh like any observer would
+(ground truth and events), prints progress, and on Ctrl-C/SIGTERM stops the world first
+(so the results are written), then the agents, then anything left in the group.
 Each child's output goes to `<out>/logs/`.
 """
 
@@ -25,6 +25,7 @@ from swarm.contracts import wire
 from swarm.contracts.orbits import expected_radius, root_of
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.transport import default_endpoint, open_client
+from swarm.procs import Group, wait_until
 
 EXIT_WORLD_FAILED = 1
 
@@ -49,7 +50,7 @@ class Launcher:
         self.endpoint = cfg.listen or default_endpoint(cfg.run)
         self.world: subprocess.Popen | None = None
         self.agents: dict[int, subprocess.Popen] = {}
-        self.pgid: int | None = None
+        self.group = Group()  # led by the world, which is reaped last
         self.stop_signal: int | None = None
         self.lock = threading.Lock()
         self.latest_truth: bytes | None = None
@@ -64,8 +65,7 @@ class Launcher:
     def _spawn(self, args: list[str], log_name: str) -> subprocess.Popen:
         log = open(self.logs / log_name, "ab")
         try:
-            return subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
-                                    process_group=0 if self.pgid is None else self.pgid)
+            return self.group.start(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT)
         finally:
             log.close()
 
@@ -79,7 +79,6 @@ class Launcher:
         if c.clock is not None:
             args += ["--clock", c.clock]
         self.world = self._spawn(args, "world.log")
-        self.pgid = self.world.pid
 
     def start_agent(self, agent_id: int) -> subprocess.Popen:
         p = self._spawn([sys.executable, "-m", "agents.process", str(agent_id), self.endpoint, self.cfg.run],
@@ -90,30 +89,7 @@ class Launcher:
     def world_exit_code(self) -> int | None:
         """The world's exit status without reaping it (it leads the process group)."""
         assert self.world is not None
-        if self.world.returncode is not None:
-            return self.world.returncode
-        try:
-            info = os.waitid(os.P_PID, self.world.pid, os.WEXITED | os.WNOHANG | os.WNOWAIT)
-        except ChildProcessError:
-            return self.world.poll()
-        if info is None:
-            return None
-        return info.si_status if info.si_code == os.CLD_EXITED else -info.si_status
-
-    def group_alive(self) -> bool:
-        if self.pgid is None:
-            return False
-        try:
-            os.killpg(self.pgid, 0)
-        except ProcessLookupError:
-            return False
-        except PermissionError:
-            return True
-        # Zombies count as members until reaped: reap what has exited, then look again.
-        for p in [self.world, *self.agents.values()]:
-            if p is not None and p is not self.world:
-                p.poll()
-        return any(p.poll() is None for p in self.agents.values()) or self.world_exit_code() is None
+        return self.group.exit_code(self.world)
 
     def stop_all(self, grace: float = 10.0) -> None:
         """World first (it writes the results), then agents, then the whole group."""
@@ -122,58 +98,33 @@ class Launcher:
                 os.kill(self.world.pid, signal.SIGTERM)
             except ProcessLookupError:
                 pass
-            self._wait(lambda: self.world_exit_code() is not None, grace)
-        if self.pgid is not None:
-            self._wait(lambda: all(p.poll() is not None for p in self.agents.values()), 3.0)
-            for sig in (signal.SIGTERM, signal.SIGKILL):
-                if not any(p.poll() is None for p in self.agents.values()) and self.world_exit_code() is not None:
-                    break
-                try:
-                    os.killpg(self.pgid, sig)
-                except ProcessLookupError:
-                    break
-                self._wait(lambda: all(p.poll() is not None for p in self.agents.values())
-                           and self.world_exit_code() is not None, 3.0)
-        for p in [*self.agents.values(), self.world]:
-            if p is not None:
-                try:
-                    p.wait(timeout=5)
-                except subprocess.TimeoutExpired:
-                    pass
-        # Anything else that joined the group (a grandchild) goes too.
-        if self.pgid is not None:
-            try:
-                os.killpg(self.pgid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-
-    @staticmethod
-    def _wait(cond: Callable[[], bool], timeout: float) -> bool:
-        t_end = time.monotonic() + timeout
-        while time.monotonic() < t_end:
-            if cond():
-                return True
-            time.sleep(0.02)
-        return cond()
+            wait_until(lambda: self.world_exit_code() is not None, grace, 0.02)
+        if self.group.pgid is not None:
+            wait_until(lambda: all(p.poll() is not None for p in self.agents.values()), 3.0, 0.02)
+        # SIGTERM to the group, SIGKILL if anything of ours still runs 3 s later; every child
+        # reaped, and anything else that joined the group (a grandchild) killed too.
+        self.group.stop(grace=3.0)
 
     # -- observing -------------------------------------------------------------------------------
     def connect(self, timeout: float = 15.0):
         """Open an observer session once the world listens; None if the world died first."""
-        t_end = time.monotonic() + timeout
-        while time.monotonic() < t_end and self.stop_signal is None:
-            if self.world_exit_code() is not None:
-                return None
+        opened = []
+
+        def ready() -> bool:  # True: connected, or no point in trying any more
+            if self.stop_signal is not None or self.world_exit_code() is not None:
+                return True
             try:
                 ses = open_client(self.endpoint, timeout_ms=500)
             except Exception:
-                time.sleep(0.05)
-                continue
-            alive = [r for r in ses.liveliness().get(wire.world_alive_key(self.cfg.run), timeout=1.0) if r.ok]
-            if alive:
-                return ses
+                return False
+            if any(r.ok for r in ses.liveliness().get(wire.world_alive_key(self.cfg.run), timeout=1.0)):
+                opened.append(ses)
+                return True
             ses.close()
-            time.sleep(0.05)
-        return None
+            return False
+
+        wait_until(ready, timeout, 0.05)
+        return opened[0] if opened else None
 
     def _on_truth(self, sample) -> None:
         self.latest_truth = sample.payload.to_bytes()

@@ -89,6 +89,27 @@ def _run(worker, jobs: list, jobs_n: int, csv_path: Path, columns: list[str], la
     return rows, interrupted
 
 
+def _study(kind: str, worker, job_list: list, columns: list[str], summarise: Callable, jobs: int,
+           out: Optional[Path], what: str) -> tuple[Path, list[dict], list[dict], bool]:
+    """Run a study's jobs into out/runs.csv and its summary into out/summary.csv;
+    (out, rows, summary, interrupted)."""
+    from swarm.study import write_csv
+
+    out = out or Path("runs") / f"study-{kind}-{time.strftime('%Y%m%d-%H%M%S')}"
+    typer.echo(f"{what} on {jobs or os.cpu_count()} process(es); rows -> {out / 'runs.csv'}")
+    rows, stopped = _run(worker, job_list, jobs or os.cpu_count() or 1, out / "runs.csv", columns, f"study {kind}")
+    summary = summarise(rows)
+    write_csv(out / "summary.csv", summary)
+    return out, rows, summary, stopped
+
+
+def _done(out: Path, stopped: bool) -> None:
+    """The last line; exit 130 when Ctrl-C cut the study short."""
+    typer.echo(f"results: {out}")
+    if stopped:
+        raise typer.Exit(130)
+
+
 def _table(rows: list[dict], columns: list[tuple[str, str, Callable]]) -> None:
     widths = [max(len(h), *(len(fmt(r[k])) for r in rows)) if rows else len(h) for h, k, fmt in columns]
     typer.echo("  ".join(h.rjust(w) for (h, _, _), w in zip(columns, widths)))
@@ -100,6 +121,7 @@ def _num(fmt: str) -> Callable:
     return lambda v: "-" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, fmt)
 
 
+DtOpt = Annotated[float, typer.Option(help="step (s)", min=1e-4)]
 JobsOpt = Annotated[int, typer.Option("--jobs", "-j", min=0, help="worker processes (0: one per core)")]
 OutOpt = Annotated[Optional[Path], typer.Option("--out", "-o", help="output directory "
                                                 "(default runs/study-<kind>-<time>)")]
@@ -121,7 +143,7 @@ def swarms(
     c1: Annotated[float, typer.Option(help="gain C1", min=1e-9)] = 1.0,
     c2: Annotated[float, typer.Option(help="gain C2", min=1e-9)] = 0.5,
     duration: Annotated[float, typer.Option(help="simulated s per run: converged means by then", min=0.1)] = 500.0,
-    dt: Annotated[float, typer.Option(help="step (s)", min=1e-4)] = 0.05,
+    dt: DtOpt = 0.05,
     jobs: JobsOpt = 0,
     out: OutOpt = None,
     plot: Annotated[bool, typer.Option(help="write study.png")] = True,
@@ -136,7 +158,7 @@ def swarms(
 
     Example: swarm study swarms --selection sticky,rooted,nearest --seeds 200
     """
-    from swarm.study import SwarmSetting, run_swarm, summarise_swarms, swarm_columns, swarm_jobs, write_csv
+    from swarm.study import SwarmSetting, run_swarm, summarise_swarms, swarm_columns, swarm_jobs
 
     rules = [r.strip() for r in selection.split(",")]
     for r in rules:
@@ -152,14 +174,10 @@ def swarms(
                 for rg in _floats("--range", sensing_range, allow_inf=True) if b < a]
     if not settings:
         raise _fail("--leaders: every setting has as many leaders as agents; a swarm needs a follower")
-    out = out or Path("runs") / f"study-swarms-{time.strftime('%Y%m%d-%H%M%S')}"
     job_list = swarm_jobs(settings, range(seeds))
-    typer.echo(f"{len(settings)} setting(s) x {seeds} seeds = {len(job_list)} runs of {duration:g} s "
-               f"(dt {dt:g} s) on {jobs or os.cpu_count()} process(es); rows -> {out / 'runs.csv'}")
-    rows, stopped = _run(run_swarm, job_list, jobs or os.cpu_count() or 1, out / "runs.csv", swarm_columns(),
-                         "study swarms")
-    summary = summarise_swarms(rows)
-    write_csv(out / "summary.csv", summary)
+    out, rows, summary, stopped = _study(
+        "swarms", run_swarm, job_list, swarm_columns(), summarise_swarms, jobs, out,
+        f"{len(settings)} setting(s) x {seeds} seeds = {len(job_list)} runs of {duration:g} s (dt {dt:g} s)")
     _table(summary, [("setting", "setting", str), ("runs", "runs", str), ("cut off", "cut_off", str),
                      ("converged", "converged_fraction", _num(".1%")),
                      ("settle med s", "settling_median_s", _num(".0f")),
@@ -172,9 +190,7 @@ def swarms(
         from swarm.study_plots import plot_swarms
 
         typer.echo(f"plot: {plot_swarms(summary, rows, out / 'study.png')}")
-    typer.echo(f"results: {out}")
-    if stopped:
-        raise typer.Exit(130)
+    _done(out, stopped)
 
 
 @study_app.command()
@@ -185,7 +201,7 @@ def gains(
     "0.4,0.6,0.8,1,1.25,1.5,2,2.5,3,4",
     starts: Annotated[int, typer.Option(help="random starts per cell (the worst counts)", min=1)] = 3,
     duration: Annotated[float, typer.Option(help="simulated s per run, in units of 1/omega", min=1.0)] = 300.0,
-    dt: Annotated[float, typer.Option(help="step (s)", min=1e-4)] = 0.05,
+    dt: DtOpt = 0.05,
     jobs: JobsOpt = 0,
     out: OutOpt = None,
     plot: Annotated[bool, typer.Option(help="write gains.png")] = True,
@@ -198,24 +214,17 @@ def gains(
 
     Example: swarm study gains --c1 0.5,1,2 --c2 0.2,0.5,1 --starts 3
     """
-    from swarm.study import gain_columns, gain_jobs, run_gain, summarise_gains, write_csv
+    from swarm.study import gain_columns, gain_jobs, run_gain, summarise_gains
 
     job_list = gain_jobs(_floats("--c1", c1), _floats("--c2", c2), _floats("--ratios", ratios), starts, duration, dt)
-    out = out or Path("runs") / f"study-gains-{time.strftime('%Y%m%d-%H%M%S')}"
-    typer.echo(f"{len(job_list)} runs of {duration:g} s on {jobs or os.cpu_count()} process(es); "
-               f"rows -> {out / 'runs.csv'}")
-    rows, stopped = _run(run_gain, job_list, jobs or os.cpu_count() or 1, out / "runs.csv", gain_columns(),
-                         "study gains")
-    summary = summarise_gains(rows)
-    write_csv(out / "summary.csv", summary)
+    out, rows, summary, stopped = _study("gains", run_gain, job_list, gain_columns(), summarise_gains, jobs, out,
+                                         f"{len(job_list)} runs of {duration:g} s")
     _gain_table(summary)
     if plot and summary:
         from swarm.study_plots import plot_gains
 
         typer.echo(f"plot: {plot_gains(summary, out / 'gains.png', duration)}")
-    typer.echo(f"results: {out}")
-    if stopped:
-        raise typer.Exit(130)
+    _done(out, stopped)
 
 
 def _gain_table(summary: list[dict]) -> None:

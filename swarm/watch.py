@@ -12,6 +12,8 @@ style name and a layer; a higher layer overwrites a lower one, never the reverse
     circle_cells(view, x, y, r)                    # a closed, 8-connected ring of cells
     dashed(cells)                                  # every other pair of cells
     draw_scene(target, bodies, width, height)      # the whole picture -> Canvas
+
+The screen around the picture (header, agents table, legend) is in swarm/live_views.py.
 """
 
 from __future__ import annotations
@@ -58,9 +60,6 @@ class View:
         row = (self.cy - y) * self.scale * self.aspect + (self.height - 1) / 2
         return int(math.floor(col + 0.5)), int(math.floor(row + 0.5))
 
-    def inside(self, col: int, row: int) -> bool:
-        return 0 <= col < self.width and 0 <= row < self.height
-
 
 def fit_view(points: Iterable[tuple[float, float]], width: int, height: int,
              aspect: float = 0.5, margin: int = 1) -> View:
@@ -71,12 +70,10 @@ def fit_view(points: Iterable[tuple[float, float]], width: int, height: int,
     pts = [(float(x), float(y)) for x, y in points if math.isfinite(x) and math.isfinite(y)]
     if not pts:
         return View(0.0, 0.0, 1.0, width, height, aspect)
-    xs = [p[0] for p in pts]
-    ys = [p[1] for p in pts]
+    xs, ys = zip(*pts)
     x0, x1, y0, y1 = min(xs), max(xs), min(ys), max(ys)
     cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
-    usable_w = max(width - 1 - 2 * margin, 1)
-    usable_h = max(height - 1 - 2 * margin, 1)
+    usable_w, usable_h = max(width - 1 - 2 * margin, 1), max(height - 1 - 2 * margin, 1)
     span_x, span_y = x1 - x0, y1 - y0
     scales = []
     if span_x > 0:
@@ -301,12 +298,3 @@ def draw_scene(target: tuple[float, float], bodies: Sequence[Body], width: int, 
                 canvas.text(start, rr, label, STYLES[b.kind], L_LABEL)
     return canvas
 
-
-LEGEND = [("→", "leader"), ("→", "follower"), ("→", "unrooted"), (DEAD_GLYPH, "dead"),
-          (TARGET_GLYPH, "target"), (f"{EDGE_GLYPH}{EDGE_GLYPH}→", "edge"), ("..", "orbit")]
-
-
-def legend_items() -> list[tuple[str, str, str]]:
-    """(glyph, style, caption) for the legend under the picture."""
-    names = {"edge": "out-neighbour", "orbit": "expected orbit", "target": "target"}
-    return [(g, STYLES[k], names.get(k, k)) for g, k in LEGEND]

@@ -1,4 +1,5 @@
-"""Shared fixtures: a small valid scenario as a dict, and a TOML writer for it."""
+"""Shared fixtures: a small valid scenario as a dict, a TOML writer for it, and `rt` (a
+private runtime for the multi-process tests)."""
 
 from __future__ import annotations
 
@@ -71,3 +72,12 @@ def write_toml(tmp_path):
 
     return write
 
+
+@pytest.fixture
+def rt(tmp_path):
+    """A private runtime dir and process tracker (tests/runtime_helpers.py) for one test; at
+    the end it kills what is left of the processes the test started and fails if there was any."""
+    from runtime_helpers import Runtime
+
+    with Runtime(tmp_path) as r:
+        yield r

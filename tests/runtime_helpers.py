@@ -1,14 +1,18 @@
-"""Helpers for the multi-process runtime tests (tests/test_runtime*.py).
+"""Helpers for the multi-process runtime tests (tests/test_runtime*.py, test_resilience.py).
 
-Everything here drives real processes over real zenoh; nothing is mocked. The test
-process itself never opens a zenoh session (zenoh is not fork-safe and the tests start
-processes): it observes runs through their files (logs/world.log, the launcher's
-output, summary.json, trajectory.npz) and through psutil.
+Everything here drives real processes over real zenoh; nothing is mocked. A run is
+observed as any client of it would: while it goes, through the world's info query over a
+zenoh client session of this test process (`Observer`, the client of swarm/live.py) and
+the launcher's output; once it has ended, through its results (summary.json with every
+event, trajectory.npz); and through psutil. The world's log is only ever shown when a
+test fails, never read for events. Processes are only ever started with subprocess
+(fork + exec), so an open zenoh session in this process does not matter to them.
 
-- `ProcessTracker` starts every process in its own session (so its pgid is its pid),
-  records every descendant (pid + create time) while they run, and at the end kills
-  only the groups it created and the descendants it recorded.
-- `wait_for` is the only way to wait: a condition polled until a deadline.
+- `ProcessTracker` starts every process in its own session (a `swarm.procs.Group`, so its
+  pgid is its pid), records every descendant (pid + create time) while they run, and at
+  the end kills only the groups it created and the descendants it recorded.
+- `wait_for` is the only way to wait: a condition polled until a deadline
+  (`swarm.procs.wait_until`), failing with what was awaited.
 - `replay_events` rebuilds the `out` and `alive` columns a run must have recorded from
   its event list (the world applies a tick's events before recording that tick).
 """
@@ -25,18 +29,18 @@ import sys
 import tempfile
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 import psutil
 
+from swarm.procs import Group, wait_until
+
 REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = REPO / "scenarios"
 
-# "[world] t=    5.16s tick 516: drop agent 3: liveliness token lost"
-WORLD_EVENT_RE = re.compile(r"^\[world\] t=\s*\S+s tick (\d+): (\w+) agent (\S+): (.*)$", re.M)
 # launcher progress line: "t=   1.84s tick 184/500 ..."
 PROGRESS_RE = re.compile(r"^t=\s*\S+s tick (\d+)/(\d+)", re.M)
 # launcher banner: "run case2-734b0c  endpoint unixsock-stream//tmp/... agents 6  clock lockstep"
@@ -53,14 +57,10 @@ def agent_cmd(agent_id: int, endpoint: str, run: str) -> list[str]:
 
 def wait_for(cond: Callable[[], object], timeout: float, what: str, interval: float = 0.01):
     """Poll `cond` until it returns something truthy (returned) or fail after `timeout` s."""
-    t_end = time.monotonic() + timeout
-    while True:
-        value = cond()
-        if value:
-            return value
-        if time.monotonic() > t_end:
-            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-        time.sleep(interval)
+    value = wait_until(cond, timeout, interval)
+    if not value:
+        raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+    return value
 
 
 def read_text(path: Path) -> str:
@@ -81,9 +81,13 @@ class Tracked:
     """One process this test started (a session leader: pgid == pid)."""
 
     name: str
-    popen: subprocess.Popen
+    group: Group
     log: Path
     started: float  # time.time() at start
+
+    @property
+    def popen(self) -> subprocess.Popen:
+        return self.group.leader
 
     @property
     def pid(self) -> int:
@@ -94,6 +98,12 @@ class Tracked:
 
     def poll(self) -> int | None:
         return self.popen.poll()
+
+    def check_running(self, what: str) -> None:
+        """Fail, with its output, if it has exited (a `check` while waiting for `what`)."""
+        if self.poll() is not None:
+            raise AssertionError(f"{self.name} (pid {self.pid}) exited ({self.poll()}) while waiting for {what}:\n"
+                                 f"{self.text()[-3000:]}")
 
     def wait(self, timeout: float) -> int:
         try:
@@ -123,6 +133,7 @@ class ProcessTracker:
         self.cwd = cwd
         self.roots: list[Tracked] = []
         self.seen: dict[int, Seen] = {}
+        self.closing: list[Callable[[], None]] = []  # run first by close() (observer sessions)
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._watch, name="process-tracker", daemon=True)
@@ -130,10 +141,11 @@ class ProcessTracker:
 
     def spawn(self, args: list[str], name: str, cwd: Path | None = None) -> Tracked:
         log = self.log_dir / f"{name}.out"
+        group = Group(session=True)
         with open(log, "ab") as f:
-            p = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=f, stderr=subprocess.STDOUT,
-                                 env=self.env, cwd=cwd or self.cwd, start_new_session=True)
-        t = Tracked(name, p, log, time.time())
+            p = group.start(args, stdin=subprocess.DEVNULL, stdout=f, stderr=subprocess.STDOUT,
+                            env=self.env, cwd=cwd or self.cwd)
+        t = Tracked(name, group, log, time.time())
         with self._lock:
             self.roots.append(t)
             try:
@@ -220,29 +232,33 @@ class ProcessTracker:
         return [f"pid {s.pid}: {' '.join(s.cmdline[:6])}" for s in seen if self._is_alive(s)]
 
     def assert_none_left(self, timeout: float = 10.0) -> None:
-        t_end = time.monotonic() + timeout
-        while True:
-            left = self.living()
-            if not left:
-                return
-            if time.monotonic() > t_end:
-                raise AssertionError("processes left alive:\n  " + "\n  ".join(left))
-            time.sleep(0.02)
+        left: list[str] = []
+
+        def none_left() -> bool:
+            left[:] = self.living()
+            return not left
+
+        if not wait_until(none_left, timeout, 0.02):
+            raise AssertionError("processes left alive:\n  " + "\n  ".join(left))
 
     def close(self) -> list[str]:
         """Stop watching; kill what is left (only our groups and recorded descendants).
 
         Returns what was still alive before killing it.
         """
+        for close in self.closing:
+            try:
+                close()
+            except Exception:
+                pass
         self._stop.set()
         self._thread.join(timeout=2)
         left = self.living()
         for r in self.roots:
-            if r.popen.poll() is None:  # not reaped: its pid, and so its group id, are still ours
-                try:
-                    os.killpg(r.pid, signal.SIGKILL)
-                except (ProcessLookupError, PermissionError):
-                    pass
+            try:
+                r.group.signal(signal.SIGKILL)  # only while unreaped: the group id is still ours
+            except PermissionError:
+                pass
         with self._lock:
             seen = list(self.seen.values())
         for s in seen:
@@ -252,10 +268,7 @@ class ProcessTracker:
                 except (ProcessLookupError, PermissionError):
                     pass
         for r in self.roots:
-            try:
-                r.popen.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                pass
+            r.group.reap(timeout=10)
         return left
 
 
@@ -268,7 +281,11 @@ def make_env(runtime_dir: str) -> dict:
 
 
 class Runtime:
-    """A private runtime dir + a process tracker; `close()` cleans both."""
+    """A private runtime dir + a process tracker; `close()` cleans both.
+
+    As a context manager (`with Runtime(dir) as r:`) it closes at the end and, unless the
+    block failed already, fails if any process was still alive then (now killed).
+    """
 
     def __init__(self, log_dir: Path, cwd: Path | None = None):
         self.dir = short_runtime_dir()
@@ -281,6 +298,90 @@ class Runtime:
         finally:
             shutil.rmtree(self.dir, ignore_errors=True)
 
+    def __enter__(self) -> "Runtime":
+        return self
+
+    def __exit__(self, exc_type, *_) -> None:
+        left = self.close()
+        if exc_type is None:
+            assert not left, "processes left alive after the test (now killed):\n  " + "\n  ".join(left)
+
+
+# --- observing a live run ----------------------------------------------------------------------
+def open_session(endpoint: str, timeout: float = 15.0, check: Callable[[], None] | None = None):
+    """A zenoh client session of this test process on `endpoint`, retried until it listens.
+    `check()` runs before each try (to fail early, e.g. when the process to listen exited)."""
+    from swarm.contracts.transport import open_client
+
+    def attempt():
+        if check is not None:
+            check()
+        try:
+            return open_client(endpoint, timeout_ms=500)
+        except Exception:
+            return None
+
+    return wait_for(attempt, timeout, f"a zenoh session on {endpoint}", interval=0.05)
+
+
+def agent_info(info: dict, agent: int) -> dict:
+    """One agent's row of the world's info (state, alive, joins, drops, missed, pid...)."""
+    return info["agents"][str(agent)]
+
+
+def has_started(info: dict) -> bool:
+    """Whether the run has started: the world says so (every agent joined, the clock runs)."""
+    return bool(info["started"])
+
+
+class Observer:
+    """This test process as an observer of a live run (as `swarm agents` is): the world's
+    info query, through swarm/live.py. Events of the run are read from summary.json once it
+    has ended; while it goes, the world's counters (joins, drops, alive, tick) tell."""
+
+    def __init__(self, endpoint: str, run: str, timeout: float = 30.0, check: Callable[[], None] | None = None):
+        from swarm.live import LiveRun, NoRun, RunRef
+
+        def attempt():
+            if check is not None:
+                check()
+            try:
+                return LiveRun(RunRef(run, endpoint)).__enter__()
+            except NoRun:  # not listening yet
+                return None
+
+        self._no_run = NoRun
+        self.live = wait_for(attempt, timeout, f"a zenoh session on {endpoint}", interval=0.05)
+
+    def info(self) -> dict | None:
+        """The world's info now, or None when it does not answer (not up yet, or ended)."""
+        try:
+            return self.live.info()
+        except self._no_run:
+            return None
+
+    def wait(self, cond: Callable[[dict], object], timeout: float, what: str,
+             check: Callable[[], None] | None = None, interval: float = 0.05) -> dict:
+        """The world's info once `cond(info)` holds; `check()` runs before each query."""
+        def ready():
+            if check is not None:
+                check()
+            info = self.info()
+            return info if info is not None and cond(info) else None
+        return wait_for(ready, timeout, what, interval)
+
+    def close(self) -> None:
+        self.live.__exit__(None, None, None)
+
+
+def observe_world(tracker: ProcessTracker, world: Tracked, endpoint: str, run: str,
+                  timeout: float = 30.0) -> Observer:
+    """An observer of a world started by hand, once it listens (failing if the world exits
+    first); the tracker closes it."""
+    obs = Observer(endpoint, run, timeout, check=lambda: world.check_running("it to listen"))
+    tracker.closing.append(obs.close)
+    return obs
+
 
 # --- runs -------------------------------------------------------------------------------------
 @dataclass
@@ -290,25 +391,15 @@ class UpRun:
     launcher: Tracked
     out: Path
     tracker: ProcessTracker
-    t_start_seen: float | None = None
-    notes: dict = field(default_factory=dict)
+    observer: Observer | None = None
 
     @property
     def world_log(self) -> Path:
         return self.out / "logs" / "world.log"
 
     def world_text(self) -> str:
+        """The world's log: for failure messages only (events come from summary.json or the info query)."""
         return read_text(self.world_log)
-
-    def world_events(self) -> list[tuple[int, str, str, str]]:
-        """(tick, kind, agent, reason) of the events the world has printed so far."""
-        return [(int(m[0]), m[1], m[2], m[3]) for m in WORLD_EVENT_RE.findall(self.world_text())]
-
-    def has_event(self, kind: str, agent: int | None = None) -> tuple | None:
-        for ev in self.world_events():
-            if ev[1] == kind and (agent is None or ev[2] == str(agent)):
-                return ev
-        return None
 
     def banner(self) -> tuple[str, str]:
         """(run id, endpoint) printed by the launcher."""
@@ -319,19 +410,43 @@ class UpRun:
         ticks = [int(m[0]) for m in PROGRESS_RE.findall(self.launcher.text())]
         return max(ticks) if ticks else -1
 
-    def wait_started(self, timeout: float = 30.0) -> None:
-        """Until the world reports its `start` event (every agent joined, tick 0 next)."""
-        def started():
-            if self.launcher.poll() is not None:
-                raise AssertionError(f"launcher exited early ({self.launcher.poll()}):\n"
-                                     f"{self.launcher.text()[-3000:]}\n{self.world_text()[-3000:]}")
-            return self.has_event("start")
-        wait_for(started, timeout, "the world's start event")
-        self.t_start_seen = time.time()
+    def running(self, what: str = "the run") -> None:
+        """Fail (with the launcher's and the world's output) when the launcher has exited."""
+        if self.launcher.poll() is not None:
+            raise AssertionError(f"launcher exited ({self.launcher.poll()}) while waiting for {what}:\n"
+                                 f"{self.launcher.text()[-3000:]}\n{self.world_text()[-3000:]}")
+
+    def observe(self, timeout: float = 60.0) -> Observer:
+        """The observer of this run (opened once the world listens; the tracker closes it)."""
+        if self.observer is None:
+            run, endpoint = self.banner()
+            self.observer = Observer(endpoint, run, timeout, check=lambda: self.running("the world to listen"))
+            self.tracker.closing.append(self.observer.close)
+        return self.observer
+
+    def info(self) -> dict | None:
+        """The world's info now (None if it does not answer)."""
+        return self.observe().info()
+
+    def wait_info(self, cond: Callable[[dict], object], timeout: float, what: str) -> dict:
+        """The world's info once `cond(info)` holds; fails at once if the launcher exits."""
+        return self.observe().wait(cond, timeout, what, check=lambda: self.running(what))
+
+    def wait_started(self, timeout: float = 30.0) -> dict:
+        """Until the run has started (every agent joined; the world's info says so)."""
+        info = self.wait_info(has_started, timeout, "the run to start (every agent joined)")
         self.tracker.poll_once()
+        return info
 
     def summary(self) -> dict:
         return json.loads((self.out / "summary.json").read_text())
+
+    def results(self, timeout: float) -> tuple[dict, dict[str, np.ndarray]]:
+        """(summary, trajectory) once the run has ended by itself (exit 0) leaving no process."""
+        rc = self.launcher.wait(timeout)
+        assert rc == 0, self.launcher.text()[-3000:] + self.world_text()[-3000:]
+        self.tracker.assert_none_left(timeout=10)
+        return self.summary(), self.trajectory()
 
     def trajectory(self) -> dict[str, np.ndarray]:
         return load_trajectory(self.out)

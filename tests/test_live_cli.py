@@ -1,9 +1,10 @@
 """Live inspection and control (`swarm runs/agents/graph/kill/spawn/pause/resume/watch`).
 
-The drawing maths of `swarm watch` (swarm/watch.py) and the pure parts of
-swarm/live_cli.py are tested offline. Everything else runs against a live multi-process
-swarm: one `swarm up` of case2 (real processes, real zenoh) shared by the module, in a
-private runtime dir so that commands without --connect/--run find exactly that run.
+The drawing maths of `swarm watch` (swarm/watch.py) and the pure data and views
+(swarm/live_data.py, swarm/live_views.py) are tested offline. Everything else runs
+against a live multi-process swarm: one `swarm up` of case2 (real processes, real zenoh)
+shared by the module, in a private runtime dir so that commands without --connect/--run
+find exactly that run.
 
 The commands run in this process through typer's CliRunner (so this test process opens
 zenoh client sessions; it only ever starts processes with subprocess, fork + exec), and
@@ -31,9 +32,11 @@ import pytest
 from typer.testing import CliRunner
 
 from runtime_helpers import SCENARIOS, Runtime, start_up, swarm_cmd, wait_for
+from swarm.procs import wait_until
 from swarm import watch as W
 from swarm.cli import app
-from swarm.live_cli import graph_dot, graph_of, merge_agents
+from swarm.live_data import graph_of, merge_agents
+from swarm.live_views import graph_dot
 
 LIVE_COMMANDS = [["runs"], ["runs", "--json"], ["agents"], ["agents", "--json"], ["graph", "--json"],
                  ["graph", "--dot"], ["graph", "--watch"], ["kill", "3"], ["spawn", "--id", "3"],
@@ -250,7 +253,7 @@ def test_draw_scene_picture():
     W.draw_scene((0.0, 0.0), [], 10, 4)
 
 
-# --- swarm/live_cli.py: pure parts ---------------------------------------------------------------
+# --- swarm/live_data.py, swarm/live_views.py: pure parts -----------------------------------------
 def _fake_info():
     def agent(i, role, alive, out, pid):
         return {"id": i, "role": role, "state": "active" if alive else "gone", "alive": alive, "pid": pid,
@@ -340,9 +343,7 @@ def live(tmp_path_factory):
 
             # Agents started by `swarm spawn` are not the launcher's: they leave on their own when
             # the world ends (its "end" notice, or its token gone); give them a deadline to.
-            t_end = time.monotonic() + 10
-            while (rt.tracker.living() or extra_alive()) and time.monotonic() < t_end:
-                time.sleep(0.05)
+            wait_until(lambda: not (rt.tracker.living() or extra_alive()), 10, 0.05)
             left = rt.close()  # kills only our groups / recorded descendants, removes the runtime dir
             strays = extra_alive()
             for p in strays:
@@ -560,9 +561,9 @@ def test_kill_stopped_and_remote(live, monkeypatch):
     live["extra_pids"].append((pid4, psutil.Process(pid4).create_time()))
 
     # an agent on "another host": the signal goes over zenoh; SIGCONT cannot
-    import swarm.live_cli
+    import swarm.control_cli
 
-    monkeypatch.setattr(swarm.live_cli.socket, "gethostname", lambda: "elsewhere.invalid")
+    monkeypatch.setattr(swarm.control_cli.socket, "gethostname", lambda: "elsewhere.invalid")
     res = invoke("kill", "5", "--signal", "CONT")
     assert res.exit_code == 1 and "cannot be delivered over zenoh" in res.stderr, res.output
     pid5 = {r["id"]: r for r in _json("agents", "--json")["agents"]}[5]["pid"]
@@ -632,9 +633,7 @@ def test_watch_renders_in_a_terminal(live):
             os.write(master, b"\x03")
         else:
             os.killpg(p.pid, signal.SIGINT)
-        t_end = time.monotonic() + 5
-        while p.poll() is None and time.monotonic() < t_end:
-            read_for(0.1)
+        wait_until(lambda: read_for(0.1) or p.poll() is not None, 5, 0)
         assert p.poll() is not None, "swarm watch did not stop on Ctrl-C"
         read_for(0.3)
         text = _strip_ansi(buf.decode(errors="replace"))

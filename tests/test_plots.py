@@ -11,6 +11,8 @@ import pytest
 from swarm.plots import PLOT_FILES, PlotError, final_graph, load_run, render_plots, switch_count
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+# The documented plot files (README, "Outputs of a run"), in the order render_plots returns them.
+EXPECTED_PNGS = ["trajectories.png", "distance.png", "control.png", "graph.png", "overview.png", "neighbours.png"]
 
 
 def make_run(
@@ -112,11 +114,11 @@ def make_run(
 
 
 def assert_pngs(run_dir: Path, paths: list[Path]) -> None:
-    assert [p.name for p in paths] == list(PLOT_FILES)
-    for name in PLOT_FILES:
-        p = run_dir / name
-        assert p in paths
-        assert p.is_file(), name
+    """`paths` are the documented files, in order, and exactly the PNGs now in `run_dir`."""
+    assert paths == [run_dir / name for name in EXPECTED_PNGS]
+    assert sorted(p.name for p in run_dir.glob("*.png")) == sorted(EXPECTED_PNGS)
+    for p in paths:
+        name = p.name
         data = p.read_bytes()
         assert len(data) > 1000, name
         assert data[:8] == PNG_MAGIC, name
@@ -124,9 +126,10 @@ def assert_pngs(run_dir: Path, paths: list[Path]) -> None:
 
 def test_render_writes_every_png(tmp_path: Path) -> None:
     run_dir = make_run(tmp_path / "run")
+    assert not list(run_dir.glob("*.png"))
     paths = render_plots(run_dir)
     assert_pngs(run_dir, paths)
-    assert "neighbours.png" in PLOT_FILES
+    assert list(PLOT_FILES) == EXPECTED_PNGS  # the public list names what is written
 
 
 def test_switches_are_counted_while_alive_only(tmp_path: Path) -> None:

@@ -18,30 +18,13 @@ import time
 import numpy as np
 import pytest
 
-from runtime_helpers import (
-    SCENARIOS,
-    Runtime,
-    agent_cmd,
-    check_time_column,
-    events_of,
-    replay_events,
-    run_sim,
-    start_up,
-    wait_for,
-)
+from runtime_helpers import (SCENARIOS, Runtime, agent_cmd, check_time_column, events_of, observe_world,
+                             replay_events, run_sim, start_up)
 from swarm.contracts.scenario import load_scenario
 
 pytestmark = pytest.mark.slow
 
 EQUIV_SCENARIOS = ["case1", "case2", "turtlebot"]
-
-
-@pytest.fixture
-def rt(tmp_path):
-    r = Runtime(tmp_path)
-    yield r
-    left = r.close()
-    assert not left, "processes left alive after the test (now killed):\n  " + "\n  ".join(left)
 
 
 @pytest.fixture(scope="module")
@@ -51,8 +34,8 @@ def lockstep_runs(tmp_path_factory):
     Each pair runs once per module (the case2 run serves equivalence and convergence).
     """
     base = tmp_path_factory.mktemp("lockstep")
-    r = Runtime(base)
     cache: dict[str, dict] = {}
+    r = Runtime(base)
 
     def get(name: str) -> dict:
         if name not in cache:
@@ -70,9 +53,8 @@ def lockstep_runs(tmp_path_factory):
                   f"{cache[name]['summary']['ticks_per_second']:.0f} ticks/s")
         return cache[name]
 
-    yield get
-    left = r.close()
-    assert not left, "processes left alive (now killed):\n  " + "\n  ".join(left)
+    with r:
+        yield get
 
 
 def switches(events: list[dict]) -> list[tuple]:
@@ -180,7 +162,7 @@ def _stop_up(rt: Runtime, out_dir, sig: int, expected: int) -> float:
     assert rt.tracker.world_pid(run.launcher) is not None
     assert run.launcher.poll() is None
     t0 = time.monotonic()
-    os.killpg(run.launcher.pid, sig)  # what the terminal does on Ctrl-C: the launcher's group
+    assert run.launcher.group.signal(sig)  # what the terminal does on Ctrl-C: the launcher's group
     # 30 s covers the launcher's escalation (10 s grace for the world, then SIGTERM and
     # SIGKILL to its group); a prompt stop is the normal case (~0.2-0.5 s measured), but see
     # test_world_honours_sigterm_while_publishing for why ~13 s stops happen now and then.
@@ -245,8 +227,7 @@ def test_world_honours_sigterm_while_publishing(rt, tmp_path):
     w = rt.tracker.spawn([sys.executable, "-c", SIGNAL_IN_TRUTH, "world", str(SCENARIOS / "turtlebot.toml"),
                           "--listen", endpoint, "--run", "sig", "--out", str(tmp_path / "out"),
                           "--duration", "20", "--no-plots", "--join-timeout", "60"], "world")
-    if not wait_for(lambda: "listening on" in w.text() or w.poll() is not None, 30, "the world"):
-        pytest.fail("world did not start")
+    observe_world(rt.tracker, w, endpoint, "sig")  # until it listens
     agents = [rt.tracker.spawn(agent_cmd(i, endpoint, "sig"), f"agent-{i}") for i in (1, 2)]
     rc = w.wait(60)
     for a in agents:

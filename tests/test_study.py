@@ -5,11 +5,9 @@ from __future__ import annotations
 
 import csv
 import math
-import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import psutil
@@ -17,6 +15,7 @@ import pytest
 from typer.testing import CliRunner
 
 from swarm.cli import app
+from swarm.procs import Group, wait_until
 from swarm.study import GainJob, SwarmSetting, cut_off_at_start, random_swarm, run_gain, summarise_swarms
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -105,28 +104,25 @@ def test_bad_options_name_the_option(tmp_path, args, message):
 @pytest.mark.slow
 def test_ctrl_c_keeps_finished_rows_and_leaves_no_worker(tmp_path):
     out = tmp_path / "s"
-    proc = subprocess.Popen([sys.executable, "-m", "swarm", "study", "swarms", "--seeds", "60", "--n", "6",
-                             "--duration", "60", "-j", "2", "--out", str(out)],
-                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            start_new_session=True)
+    group = Group(session=True)
+    proc = group.start([sys.executable, "-m", "swarm", "study", "swarms", "--seeds", "60", "--n", "6",
+                        "--duration", "60", "-j", "2", "--out", str(out)],
+                       cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        deadline = time.monotonic() + 120
         csv_path = out / "runs.csv"
-        while time.monotonic() < deadline:
-            if csv_path.exists() and len(rows(csv_path)) >= 2:
-                break
+
+        def two_rows() -> bool:
             assert proc.poll() is None, proc.stdout.read()
-            time.sleep(0.1)
-        else:
+            return csv_path.exists() and len(rows(csv_path)) >= 2
+
+        if not wait_until(two_rows, 120, interval=0.1):
             pytest.fail("no rows within 120 s")
         workers = psutil.Process(proc.pid).children(recursive=True)
         assert workers, "the study should run on worker processes"
-        os.killpg(proc.pid, signal.SIGINT)  # what a terminal's Ctrl-C does
+        group.signal(signal.SIGINT)  # what a terminal's Ctrl-C does
         output, _ = proc.communicate(timeout=60)
     finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+        group.kill()
     assert proc.returncode == 130, output
     assert "stopped:" in output and "Traceback" not in output
     finished = rows(out / "runs.csv")

@@ -5,12 +5,12 @@ swarm/contracts/transport.py carry the protocol's puts, liveliness and queries."
 from __future__ import annotations
 
 import queue
-import time
 
 import pytest
 
 from swarm.contracts import wire
 from swarm.contracts.transport import open_client, open_hub, query_statuses
+from swarm.procs import wait_until
 
 RUN = "two-sessions"
 
@@ -42,16 +42,18 @@ def test_a_command_put_by_the_client_reaches_the_hub(sessions):
                                                                                      s.payload.to_bytes())))
     try:
         cmd = wire.Command(4, 17, -0.25, 2, "track", 3, 77)
-        deadline = time.monotonic() + 5
-        while time.monotonic() < deadline:
+
+        def delivered():  # put again until the subscription has reached the client
             client.put(wire.agent_key(RUN, 4, "cmd"), wire.encode_cmd(cmd))
             try:
-                key, payload = _get(got, 0.2)
-                break
+                return _get(got, 0.2)
             except queue.Empty:
-                continue
-        else:
+                return None
+
+        first = wait_until(delivered, 5, interval=0)
+        if not first:
             pytest.fail("no command reached the hub within 5 s")
+        key, payload = first
         assert wire.agent_of_key(key) == 4 and wire.decode_cmd(payload) == cmd
     finally:
         sub.undeclare()
@@ -82,10 +84,11 @@ def test_status_query_returns_each_agents_own_status(sessions):
     liar = client.declare_queryable(wire.agent_key(RUN, 8, "status"),  # answers for another id: skipped
                                     lambda q: q.reply(wire.agent_key(RUN, 8, "status"), wire.encode_status(st)))
     try:
-        deadline = time.monotonic() + 5
-        got = {}
-        while time.monotonic() < deadline and 3 not in got:
+        def answered():
             got = query_statuses(hub, RUN, timeout=1.0)
+            return got if 3 in got else None
+
+        got = wait_until(answered, 5, interval=0) or {}
         assert set(got) == {3} and got[3]["out"] == 1
     finally:
         qa.undeclare()

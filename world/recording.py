@@ -1,5 +1,6 @@
 """A run's recording: every tick of ground truth, written as trajectory.npz, plus
-summary.json. The layout is documented in README.md ("Outputs of a run").
+summary.json. The layout is documented in README.md ("Outputs of a run"); the reader
+is world/run_reader.py.
 """
 
 from __future__ import annotations
@@ -13,6 +14,9 @@ import numpy as np
 
 from swarm.contracts.scenario import Scenario
 from world.metrics import agent_metrics, converged, recovery, relative_errors, switch_ticks
+
+TRAJECTORY_FILE = "trajectory.npz"
+SUMMARY_FILE = "summary.json"
 
 
 class Recorder:
@@ -128,9 +132,9 @@ def _json_default(o):
 def write_run(result: RunResult, out_dir: Path) -> dict:
     """Write trajectory.npz and summary.json into out_dir; returns the summary."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(out_dir / "trajectory.npz", **result.recorder.arrays())
+    np.savez_compressed(out_dir / TRAJECTORY_FILE, **result.recorder.arrays())
     summary = result.summary()
-    tmp = out_dir / "summary.json.tmp"
+    tmp = out_dir / f"{SUMMARY_FILE}.tmp"
     tmp.write_text(json.dumps(summary, indent=2, default=_json_default) + "\n")
-    tmp.replace(out_dir / "summary.json")
+    tmp.replace(out_dir / SUMMARY_FILE)
     return summary

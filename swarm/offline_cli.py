@@ -1,0 +1,119 @@
+"""Commands that need no running swarm (`swarm check / schema / plot`), and the small helpers
+every scenario command shares (the scenario argument, reading it, failing, the plots)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from swarm.contracts.scenario import Scenario, ScenarioError, load_scenario, scenario_json_schema
+
+ScenarioArg = Annotated[Path, typer.Argument(help="scenario file (TOML), e.g. scenarios/case2.toml",
+                                             show_default=False)]
+
+
+def fail(message: str, code: int = 2) -> "typer.Exit":
+    typer.secho(message, err=True, fg=typer.colors.RED)
+    return typer.Exit(code)
+
+
+def read_scenario(path: Path) -> Scenario:
+    try:
+        return load_scenario(path)
+    except ScenarioError as e:
+        raise fail(str(e), 2) from None
+
+
+def render_run_plots(out: Path) -> None:
+    """The PNG plots of the run in `out`, their names printed; a plotting failure exits 1."""
+    from swarm.plots import PlotError, render_plots
+
+    try:
+        files = render_plots(out)
+    except PlotError as e:
+        raise fail(str(e), 1) from None
+    typer.echo("plots: " + ", ".join(p.name for p in files))
+
+
+def check(scenario: ScenarioArg) -> None:
+    """Validate a scenario file and print a short summary of it.
+
+    Example: swarm check scenarios/case2.toml
+    """
+    s = read_scenario(scenario)
+    r = s.run
+    typer.echo(f"{scenario}: ok - {s.name or scenario.stem}")
+    typer.echo(f"  run: dt={r.dt} s, duration={r.duration} s ({r.ticks} ticks), clock={r.clock}, "
+               f"seed={r.seed}, on_dropout={r.on_dropout}")
+    typer.echo(f"  target: ({s.target.x}, {s.target.y}) m; gains: law={s.gains.law}, "
+               f"c1={s.gains.c1}, c2={s.gains.c2}")
+    sens = s.sensing
+    typer.echo(f"  sensing: range={'unlimited' if sens.range is None else f'{sens.range} m'}, "
+               f"fov={'all round' if sens.fov is None else f'{sens.fov} rad'}, "
+               f"selection={sens.selection}, hysteresis={sens.hysteresis}")
+    for a in s.agents:
+        extra = (f"R={a.orbit_radius} m {a.direction}" if a.role == "leader"
+                 else f"follow={a.follow}" if a.follow is not None else f"out-neighbour: {sens.selection}")
+        lim = "" if a.max_turn_rate is None else f", |u|<={a.max_turn_rate} rad/s"
+        typer.echo(f"  agent {a.id:>3} {a.role:<8} at ({a.x:g}, {a.y:g}) heading {a.heading:g} rad, "
+                   f"{a.speed:g} m/s, {extra}{lim}")
+    for f in s.faults:
+        who = "every agent" if f.agent is None else f"agent {f.agent}"
+        more = ", ".join(f"{k}={v}" for k, v in (("duration", f.duration), ("probability", f.probability),
+                                                  ("delay", f.delay), ("std", f.std)) if v is not None)
+        typer.echo(f"  fault at {f.at:g} s: {f.kind} {who}" + (f" ({more})" if more else ""))
+    _warn_nearest_graph(s)
+
+
+def _warn_nearest_graph(s: Scenario) -> None:
+    """Warn (exit 0) when the paper's nearest choice at t = 0 breaks Assumption 1."""
+    from agents.selection import nearest
+    from swarm.graph import analyse
+    from world.core import WorldCore
+
+    leaders = {a.id for a in s.agents if a.role == "leader"}
+    out = {aid: (None if aid in leaders else (c.id if (c := nearest(f.contacts)) else None))
+           for aid, f in WorldCore(s).frames().items()}
+    g = analyse(out, leaders)
+    problems = [f"follower-only cycle {' -> '.join(map(str, c + c[:1]))}" for c in g["cycles"]]
+    lone = [i for i in g["unrooted"] if not any(i in c for c in g["cycles"])]
+    if lone:
+        problems.append(f"no path to a leader from {', '.join(map(str, lone))}")
+    if not problems:
+        return
+    edges = ", ".join(f"{i}->{j}" for i, j in g["edges"])
+    cure = {"nearest": "this run keeps re-choosing the nearest agent and may never converge; "
+                       "selection = \"sticky\" (the default) keeps every follower rooted",
+            "sticky": "selection = \"sticky\" roots these followers on the nearest agent that has a path",
+            "rooted": "selection = \"rooted\" roots these followers on the nearest agent that has a path",
+            "fixed": "this scenario pins its graph with `follow`"}[s.sensing.selection]
+    typer.secho(f"  warning: nearest choice at t = 0 ({edges}) breaks the paper's Assumption 1: "
+                f"{'; '.join(problems)}. {cure}.", fg=typer.colors.YELLOW)
+
+
+def schema() -> None:
+    """Print the JSON Schema of scenario files (for editors and tools).
+
+    Example: swarm schema > scenario.schema.json
+    """
+    typer.echo(json.dumps(scenario_json_schema(), indent=2))
+
+
+def plot(run_dir: Annotated[Path, typer.Argument(help="a run directory written by swarm sim / swarm up")]) -> None:
+    """Re-render the PNG plots of a run from its trajectory.npz and summary.json.
+
+    Example: swarm plot runs/case2
+    """
+    if not run_dir.is_dir():
+        raise fail(f"{run_dir}: not a directory", 2)
+    render_run_plots(run_dir)
+
+
+def register(app: typer.Typer) -> None:
+    """Add the offline commands to the main app."""
+    app.command("check")(check)
+    app.command("schema")(schema)
+    app.command("plot")(plot)

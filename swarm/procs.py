@@ -1,0 +1,186 @@
+"""Child processes and deadlines, in one place: the launcher, the runtime tests and the
+benchmark all start, signal, stop and wait for processes through this module.
+
+- `wait_until(cond, timeout, interval)`: poll a condition until it holds or a deadline
+  passes (the only poll loop; callers decide what a timeout means).
+- `Group`: children in one process group of their own. The first child started leads
+  it (pgid == its pid; a new session with `session=True`), later ones join it. The group
+  can be signalled as a whole and stopped (SIGTERM, SIGKILL after a grace period, every
+  child reaped, and a last SIGKILL for whatever else joined it, e.g. grandchildren).
+
+While a member is unreaped, even as a zombie, it is in the group and the group id cannot
+be given to anyone else, so a signal to the group reaches only what was started in it; once
+every member is reaped, the group is not signalled any more. The leader is reaped only by
+`reap()` (or `stop()`), its exit status read meanwhile without reaping it (`exit_code`), so
+the group keeps its id, and new members can still join it, while other members come and go.
+
+Standard library only (the top `swarm` layer; used by tests and benchmarks too).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+from typing import Callable, Iterable, TypeVar
+
+T = TypeVar("T")
+
+
+def wait_until(cond: Callable[[], T], timeout: float, interval: float = 0.01) -> T | bool:
+    """Poll `cond` every `interval` s until it returns something truthy (returned) or
+    `timeout` s have passed (False). It is always called at least once, and last after the
+    deadline, so a condition that holds at the deadline counts."""
+    t_end = time.monotonic() + timeout
+    while True:
+        late = time.monotonic() >= t_end
+        value = cond()
+        if value:
+            return value
+        if late:
+            return False
+        time.sleep(interval)
+
+
+class Group:
+    """Children in one process group: the first started leads it, the rest join it.
+
+    `session=True` starts the leader in a new session (`start_new_session`: no controlling
+    terminal, so a terminal's Ctrl-C or hangup does not reach the group); otherwise in a
+    new process group of this session (`process_group=0`).
+    """
+
+    def __init__(self, session: bool = False):
+        self.session = session
+        self.pgid: int | None = None
+        self.members: list[subprocess.Popen] = []  # leader first
+
+    @property
+    def leader(self) -> subprocess.Popen | None:
+        return self.members[0] if self.members else None
+
+    def start(self, args, **popen_kwargs) -> subprocess.Popen:
+        """Popen(args, **popen_kwargs) in this group (leading it when it is the first)."""
+        if self.pgid is None:
+            where = {"start_new_session": True} if self.session else {"process_group": 0}
+        else:
+            where = {"process_group": self.pgid}
+        p = subprocess.Popen(args, **where, **popen_kwargs)
+        if self.pgid is None:
+            self.pgid = p.pid
+        self.members.append(p)
+        return p
+
+    def exit_code(self, p: subprocess.Popen) -> int | None:
+        """A member's exit status (negative: killed by that signal), None while it runs.
+        Other members are reaped by this; the leader only by `reap()`."""
+        if p.returncode is not None:
+            return p.returncode
+        if p is not self.leader:
+            return p.poll()
+        try:
+            info = os.waitid(os.P_PID, p.pid, os.WEXITED | os.WNOHANG | os.WNOWAIT)
+        except ChildProcessError:
+            return p.poll()
+        if info is None:
+            return None
+        return info.si_status if info.si_code == os.CLD_EXITED else -info.si_status
+
+    def running(self) -> list[subprocess.Popen]:
+        """The members that have not exited."""
+        return [p for p in self.members if self.exit_code(p) is None]
+
+    def signal(self, sig: int) -> bool:
+        """Send `sig` to the whole group; False when there is no group (any more) to signal."""
+        if not any(p.returncode is None for p in self.members):  # all reaped: the id is not ours any more
+            return False
+        try:
+            os.killpg(self.pgid, sig)
+        except ProcessLookupError:
+            return False
+        return True
+
+    def alive(self) -> bool:
+        """Whether anything of the group still runs: a member, or any other process in the
+        group (a grandchild). Members that exited are reaped first (the leader only by
+        `reap()`); then the group is probed with signal 0, and, where /proc tells, zombies
+        (the unreaped leader, orphans an init does not reap) do not count."""
+        if self.pgid is None:
+            return False
+        if self.running():
+            return True
+        try:
+            os.killpg(self.pgid, 0)
+        except ProcessLookupError:
+            return False
+        except PermissionError:  # it exists, but is not ours to signal
+            return True
+        runs = group_runs(self.pgid)
+        return True if runs is None else runs
+
+    def reap(self, timeout: float = 5.0) -> None:
+        """Wait up to `timeout` s for each member, so that no zombie stays. Once the leader
+        has exited, whatever else is left in the group (grandchildren) gets SIGKILL first,
+        and the leader is reaped last, when nothing of its group runs any more."""
+        for p in self.members[1:]:
+            _wait(p, timeout)
+        leader = self.leader
+        if leader is None:
+            return
+        if self.exit_code(leader) is not None and self.signal(signal.SIGKILL):
+            wait_until(lambda: not group_runs(self.pgid), timeout, 0.01)
+        _wait(leader, timeout)
+
+    def kill(self, timeout: float = 5.0) -> None:
+        """SIGKILL to the group at once, then reap."""
+        self.signal(signal.SIGKILL)
+        self.reap(timeout)
+
+    def stop(self, grace: float = 3.0, timeout: float = 5.0) -> None:
+        """SIGTERM to the group, SIGKILL if a member still runs `grace` s later, then reap."""
+        stop_groups([self], grace, timeout)
+
+
+def stop_groups(groups: Iterable[Group], grace: float = 3.0, timeout: float = 5.0) -> None:
+    """`Group.stop` for several groups at once (one grace period for all): SIGTERM to every
+    group with a member running, SIGKILL to those with one still running `grace` s later,
+    then reap every member (waiting up to `timeout` s for each)."""
+    groups = list(groups)
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        busy = [g for g in groups if g.running()]
+        if not busy:
+            break
+        for g in busy:
+            g.signal(sig)
+        wait_until(lambda: not any(g.running() for g in busy), grace, 0.02)
+    for g in groups:
+        g.reap(timeout)
+
+
+def group_runs(pgid: int) -> bool | None:
+    """Whether a process of group `pgid` runs (is not a zombie), from /proc; None where
+    there is no /proc to tell."""
+    try:
+        names = os.listdir("/proc")
+    except OSError:
+        return None
+    for name in names:
+        if not name.isdigit():
+            continue
+        try:
+            with open(f"/proc/{name}/stat", "rb") as f:
+                stat = f.read()
+        except OSError:  # gone meanwhile
+            continue
+        state, _ppid, pgrp = stat[stat.rindex(b")") + 2:].split()[:3]
+        if int(pgrp) == pgid and state != b"Z":
+            return True
+    return False
+
+
+def _wait(p: subprocess.Popen, timeout: float) -> None:
+    try:
+        p.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        pass

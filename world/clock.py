@@ -1,0 +1,142 @@
+"""The world's clocks: how ticks are paced and when a tick may end.
+
+`lockstep` waits each tick for every live agent's command (up to the deadline);
+`realtime` ticks at dt / time_scale of wall time with whatever commands arrived.
+Both hold for pause and for scripted process faults, which the launcher carries out
+while the clock waits for the drop or the rejoin. A mixin of `World`
+(world/process.py).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+from swarm.contracts import wire
+from world.core import ACTIVE
+from world.faults import fault_event
+
+
+class Clock:
+    def wait_for_agents(self) -> None:
+        ids = self.cfg.scenario.ids
+        t_end = None if self.cfg.join_timeout is None else time.monotonic() + self.cfg.join_timeout
+        last_note = 0.0
+        while True:
+            missing = [i for i in ids if self.core.state[self.core.index[i]] != ACTIVE]
+            if not missing:
+                return
+            now = time.monotonic()
+            if t_end is not None and now > t_end:
+                raise TimeoutError(f"agents {', '.join(map(str, missing))} did not join within "
+                                   f"{self.cfg.join_timeout} s")
+            if self.cfg.progress and now - last_note > 5.0:
+                last_note = now
+                print(f"[world] waiting for agents {', '.join(map(str, missing))}: "
+                      f"swarm agent --id N --connect {self.cfg.listen}", file=sys.stderr, flush=True)
+            self.drain(None, 0.1)
+
+    def _wait(self, cond, timeout: float) -> bool:
+        t_end = time.monotonic() + timeout
+        while not cond():
+            left = t_end - time.monotonic()
+            if left <= 0:
+                return False
+            self.drain(None, min(left, 0.05))
+        return True
+
+    def carry_out(self, index: int, f) -> None:
+        """A scripted fault is due at this tick. Network faults are the fault plan's job;
+        process faults are asked of the launcher (it owns the processes) while the clock
+        holds, and then, for kill and restart, the world waits to see the drop or the join."""
+        if f.kind not in ("kill", "restart", "freeze", "thaw"):
+            return
+        t_hold = time.monotonic()
+        self.control_pub.put(wire.encode_fault_notice(index, self.core.tick, fault_event(index, f)))
+        if not self._wait(lambda: index in self.faults_done, 5.0):
+            self.event("fault_skipped", f.agent, f"nobody carried out the {f.kind} (no launcher?)")
+            return
+        k = self.core.index[f.agent]
+        # Hold the clock until the fault has taken effect, so that it lands on this tick as
+        # in `swarm sim`: a killed process is dropped when its socket closes, a frozen one
+        # when its link lease runs out; a restarted or thawed one rejoins.
+        if f.kind in ("kill", "freeze"):
+            if not self._wait(lambda: self.core.state[k] != ACTIVE, 3.0 if f.kind == "kill" else 6.0):
+                self.event("fault_late", f.agent, f"the {f.kind} did not drop the agent in time")
+        elif not self._wait(lambda: self.core.state[k] == ACTIVE, 20.0):
+            self.event("fault_late", f.agent, f"the {f.kind} agent did not rejoin within 20 s")
+        self.held += time.monotonic() - t_hold
+
+    def lockstep_tick(self) -> None:
+        pending = self.publish_frames()
+        t_end = time.monotonic() + self.deadline
+        while pending:
+            left = t_end - time.monotonic()
+            if left <= 0:
+                for aid in pending:
+                    self.book[aid].missed += 1
+                self.engine.miss(len(pending))
+                break
+            self.drain(pending, left)
+        while self.drain(None, 0):  # joins/drops that arrived meanwhile take effect now
+            pass
+
+    def realtime_tick(self, t_next: float) -> None:
+        tick = self.core.tick
+        self.publish_frames()
+        while True:
+            left = t_next - time.monotonic()
+            if left <= 0:
+                break
+            self.drain(None, left)
+        for aid in self.core.active_ids():
+            b = self.book[aid]
+            stale = tick - b.last_cmd_tick if b.last_cmd_tick >= 0 else tick + 1
+            b.stale_sum += stale
+            b.stale_max = max(b.stale_max, stale)
+
+    def run(self) -> int:
+        self.t_start = time.monotonic()
+        period = self.core.dt / self.cfg.time_scale
+        last_note = time.monotonic()
+        t0_ticks = time.monotonic()
+        self.wait_for_agents()
+        self.event("start", None, f"all {len(self.book)} agents joined; clock {self.cfg.clock}",
+                   startup_s=time.monotonic() - self.t_start)
+        self.started = True
+        t_next = time.monotonic() + period
+        t0_ticks = time.monotonic()
+        while self.core.tick < self.ticks:
+            if self.paused:
+                t_pause = time.monotonic()
+                for q in self.pause_waiters:
+                    q.reply(wire.world_admin_key(self.cfg.run),
+                            wire.encode_admin_reply(True, paused=True, tick=self.core.tick))
+                self.pause_waiters.clear()
+                while self.paused:
+                    self.drain(None, 0.1)
+                t_next += time.monotonic() - t_pause
+                t0_ticks += time.monotonic() - t_pause
+            due = self.engine.due()
+            if due:
+                held = self.held
+                for i, f in due:
+                    self.carry_out(i, f)
+                t_next += self.held - held  # realtime: the hold is not lateness
+                t0_ticks += self.held - held
+            self.ticking = True
+            if self.cfg.clock == "lockstep":
+                self.lockstep_tick()
+            else:
+                self.realtime_tick(t_next)
+                t_next += period
+            self.record_and_step()
+            self.ticking = False
+            now = time.monotonic()
+            if self.cfg.progress and now - last_note > 2.0:
+                last_note = now
+                rate = self.core.tick / max(now - t0_ticks, 1e-9)
+                print(f"[world] tick {self.core.tick}/{self.ticks} t={self.core.time:.2f}s {rate:.0f} ticks/s",
+                      file=sys.stderr, flush=True)
+        self.wall_ticks = time.monotonic() - t0_ticks
+        return 0

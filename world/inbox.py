@@ -1,0 +1,177 @@
+"""The world's inbox: what it does with each message that reaches it.
+
+Commands (admission by claim key, stale or duplicate ticks, fault-plan losses),
+liveliness (join and drop), join queries (admission, new agents from `swarm spawn`),
+info queries (the live view) and admin queries (pause, resume, fault done). zenoh
+callbacks only enqueue; these run on the world's main thread. A mixin of `World`
+(world/process.py), whose state it reads and changes.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import socket
+import time
+
+from swarm.contracts import wire
+from swarm.contracts.brain_config import BrainConf
+from world.core import ACTIVE
+from world.engine import LOST, REFUSED
+from world.report import run_info
+from world.roster import AgentBook, admit, new_agent_spec
+
+
+class Inbox:
+    def handle(self, item, pending: set[int] | None) -> None:
+        kind = item[0]
+        if kind == "cmd":
+            self._on_cmd(item[1], item[2], pending)
+        elif kind == "alive":
+            self._on_alive(item[1], item[2], pending)
+        elif kind == "join":
+            self._on_join(item[1])
+        elif kind == "info":
+            self._on_info(item[1])
+        elif kind == "admin":
+            self._on_admin(item[1])
+
+    def _on_cmd(self, key: str, payload: bytes, pending: set[int] | None) -> None:
+        try:
+            aid = wire.agent_of_key(key)
+            cmd = wire.decode_cmd(payload)
+            if cmd.agent != aid:
+                raise wire.WireError(f"command for agent {cmd.agent} on agent {aid}'s key")
+        except wire.WireError:
+            self.garbage += 1
+            return
+        if cmd.out is not None and (cmd.out == aid or cmd.out not in self.core.index):
+            self.garbage += 1
+            return
+        k = self.core.index.get(aid)
+        if k is None or self.core.state[k] != ACTIVE or cmd.tick > self.core.tick:
+            self.ignored += 1
+            return
+        b = self.book[aid]
+        if b.key is None or cmd.key != b.key:
+            # Not from the process that claimed this id (a rogue session, or a stale process).
+            b.rogue += 1
+            if time.monotonic() - b.rogue_noted > 1.0:
+                b.rogue_noted = time.monotonic()
+                self.event("rogue", aid, f"command without the owner's claim key ignored ({b.rogue} so far)")
+            return
+        if cmd.tick <= b.last_cmd_tick:
+            self.ignored += 1  # duplicate or late
+            return
+        done = self.engine.command(aid, cmd.tick, cmd.u, cmd.out, cmd.hops)
+        if done == LOST:  # a network fault lost it: its last command is held
+            b.last_cmd_tick = cmd.tick
+            b.missed += 1
+            if pending is not None:
+                pending.discard(aid)
+            return
+        if done == REFUSED:
+            b.garbage += 1
+            return
+        b.commands += 1
+        b.last_cmd_tick = cmd.tick
+        b.last_cmd_wall = time.monotonic()
+        if pending is not None and cmd.tick == self.core.tick:
+            pending.discard(aid)
+
+    def _on_alive(self, key: str, kind, pending: set[int] | None) -> None:
+        import zenoh
+
+        try:
+            aid = wire.agent_of_key(key)
+        except wire.WireError:
+            self.garbage += 1
+            return
+        if aid not in self.core.index:
+            self.ignored += 1
+            return
+        k = self.core.index[aid]
+        b = self.book[aid]
+        if kind == zenoh.SampleKind.PUT:
+            if self.core.state[k] == ACTIVE:
+                return
+            b.claim_until = 0.0  # the key stays: a thawed process rejoins with the claim it had
+            b.last_cmd_tick = self.core.tick - 1
+            self.engine.join(aid, f"liveliness token appeared (pid {b.pid} on {b.host})", b.joins > 0,
+                             pid=b.pid, host=b.host)
+            b.joins += 1
+        elif self.engine.drop(aid, "liveliness token lost") is not None:
+            b.drops += 1
+            if pending is not None:
+                pending.discard(aid)
+
+    def _on_join(self, query) -> None:
+        try:
+            req = wire.decode_join_request(query.payload.to_bytes() if query.payload else b"")
+            aid = req["id"]
+            if aid not in self.core.index:
+                if req.get("spec") is None:
+                    raise wire.WireError(f"agent {aid} is not in scenario {self.cfg.scenario.name!r} "
+                                         f"(ids: {', '.join(map(str, self.core.scenario.ids))}); "
+                                         "a new agent needs a spec (swarm spawn --role --x --y ...)")
+                self.add_agent(aid, req["spec"])
+            key = admit(self.core, self.book[aid], req, time.monotonic())
+            x, y, h = self.core.pose(aid)
+            reply = wire.encode_join_reply(True, run=self.cfg.run, agent=aid, tick=self.core.tick, key=key,
+                                           clock=self.cfg.clock, pose=[x, y, h],
+                                           brain=BrainConf.from_scenario(self.core.scenario, aid).to_json())
+        except wire.WireError as e:
+            reply = wire.encode_join_reply(False, error=str(e))
+        query.reply(wire.world_join_key(self.cfg.run), reply)
+
+    def add_agent(self, aid: int, spec: dict) -> None:
+        """A new agent joins the run with its own spec (`swarm spawn`); raises WireError."""
+        a = new_agent_spec(aid, spec, self.core)
+        self.engine.add_agent(a)
+        self.book[aid] = AgentBook()
+        self.sense_pub[aid] = self.session.declare_publisher(wire.agent_key(self.cfg.run, aid, "sense"),
+                                                             express=True)
+        self.event("add", aid, f"new {a.role} at ({a.x:g}, {a.y:g}) m, {a.speed:g} m/s")
+
+    def info(self, sensing: bool = False) -> dict:
+        """The world's view of the run, for the CLI (`swarm agents`, `graph`, `watch`)."""
+        return run_info(self.engine, self.book, {
+            "run": self.cfg.run, "scenario": self.core.scenario.name, "clock": self.cfg.clock,
+            "paused": self.paused, "endpoint": self.cfg.listen, "pid": os.getpid(), "host": socket.gethostname(),
+            "ticks": self.ticks, "started": self.started, "garbage": self.garbage, "ignored": self.ignored}, sensing)
+
+    def _on_info(self, query) -> None:
+        params = str(query.parameters) if query.parameters is not None else ""
+        sensing = any(p.split("=", 1)[0] == "sensing" and p.split("=", 1)[-1] not in ("0", "false")
+                      for p in params.split(";") if p)
+        query.reply(wire.world_info_key(self.cfg.run), wire.encode_info(self.info(sensing)))
+
+    def _on_admin(self, query) -> None:
+        """pause / resume the world clock."""
+        try:
+            req = wire.decode_admin(query.payload.to_bytes() if query.payload else b"")
+            cmd = req["cmd"]
+            if cmd == "fault_done":
+                self.faults_done.add(req["index"])
+                query.reply(wire.world_admin_key(self.cfg.run), wire.encode_admin_reply(True))
+                return
+            if (cmd == "pause") != self.paused:
+                self.paused = cmd == "pause"
+                self.event(cmd, None, "asked by " + str(req.get("by", "a client")))
+            if self.paused and self.ticking:
+                self.pause_waiters.append(query)  # answered once the tick in progress is done
+                return
+            reply = wire.encode_admin_reply(True, paused=self.paused, tick=self.core.tick)
+        except wire.WireError as e:
+            self.garbage += 1
+            reply = wire.encode_admin_reply(False, error=str(e))
+        query.reply(wire.world_admin_key(self.cfg.run), reply)
+
+    def drain(self, pending: set[int] | None, timeout: float | None) -> bool:
+        """Handle one inbox item, waiting up to `timeout` s; False when none came."""
+        try:
+            item = self.inbox.get(timeout=timeout) if timeout is None or timeout > 0 else self.inbox.get_nowait()
+        except queue.Empty:
+            return False
+        self.handle(item, pending)
+        return True
