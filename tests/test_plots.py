@@ -148,6 +148,7 @@ def test_switches_are_counted_while_alive_only(tmp_path: Path) -> None:
     assert switch_count(load_run(run_dir)) == before + 2
 
 
+@pytest.mark.slow  # renders every figure: the long tier
 def test_render_without_summary_and_single_row(tmp_path: Path) -> None:
     run_dir = make_run(tmp_path / "run", ticks=0, drop=None, events=False)
     (run_dir / "summary.json").unlink()
@@ -171,6 +172,7 @@ def test_render_does_not_leak_figures(tmp_path: Path) -> None:
     assert len(plt.get_fignums()) == before
 
 
+@pytest.mark.slow  # renders every figure: the long tier
 def test_final_graph_flags_orphans(tmp_path: Path) -> None:
     # leader 1, followers 2 -> 1, 3 -> 2, 4 -> 3; follower 3 drops, so 4 has no leader path
     run_dir = make_run(tmp_path / "run", n_followers=3, drop=(1, 300))

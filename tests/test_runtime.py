@@ -92,6 +92,26 @@ def test_lockstep_up_equals_sim(lockstep_runs, name):
     assert summ["completed"] is True and summ["ticks"] == ticks and summ["clock"] == "lockstep"
 
 
+# The other shipped scenarios (pinned graphs, the `rooted` rule), over their first 20 s:
+# the same engine path, at a fraction of the suite's time. case2-leader-loss and
+# faults.toml are compared over whole runs in their own tests.
+SHORT_EQUIV = ["case1-fixed", "case2-fixed", "rooted"]
+
+
+@pytest.mark.parametrize("name", SHORT_EQUIV)
+def test_lockstep_up_equals_sim_first_20_s(rt, tmp_path, name):
+    scen = SCENARIOS / f"{name}.toml"
+    sim, sim_summ = run_sim(rt.tracker, scen, tmp_path / "sim", "--duration", "20")
+    up = start_up(rt.tracker, scen, tmp_path / "up", "--clock", "lockstep", "--duration", "20")
+    rc = up.launcher.wait(120)
+    assert rc == 0, up.launcher.text()[-3000:]
+    traj, summ = up.trajectory(), up.summary()
+    assert len(traj["t"]) == len(sim["t"]) == 2001
+    for key in ("t", "x", "y", "heading", "u", "out", "alive"):
+        np.testing.assert_array_equal(traj[key], sim[key], err_msg=f"{name}: {key}")
+    assert sorted(switches(summ["events"])) == sorted(switches(sim_summ["events"]))
+
+
 def test_case2_chooses_at_runtime_through_up(lockstep_runs):
     """The shipped case 2 pins nothing: the agents choose the paper's nearest graph at t = 0
     (2 -> 4 once 4 is rooted, everyone else -> 1) and keep it."""
