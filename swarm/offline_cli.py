@@ -102,14 +102,62 @@ def schema() -> None:
     typer.echo(json.dumps(scenario_json_schema(), indent=2))
 
 
-def plot(run_dir: Annotated[Path, typer.Argument(help="a run directory written by swarm sim / swarm up")]) -> None:
+RunDirArg = Annotated[Path, typer.Argument(help="a run directory written by swarm sim / swarm up")]
+
+
+def export_results(run_dir: Path) -> bool:
+    """trajectory.npz and summary.json from the run's recording.mcap when they are missing
+    (the world died before its end); one line says what was recovered. False: nothing to do."""
+    from swarm.results import export_run, needs_export
+    from world.recording import EXIT_NO_SPACE, RecordingError
+
+    if not needs_export(run_dir):
+        return False
+    try:
+        summary = export_run(run_dir)
+    except ValueError as e:
+        raise fail(str(e), 1) from None
+    except RecordingError as e:
+        raise fail(str(e), EXIT_NO_SPACE) from None
+    finished = "finished" if summary.get("recording_finished") else "cut short"
+    typer.echo(f"recovered {summary['ticks'] + 1} ticks (t = 0 to {summary['sim_time']:.2f} s) from the "
+               f"recording ({finished}) into {run_dir}: trajectory.npz, summary.json (complete: false)")
+    return True
+
+
+def plot(run_dir: RunDirArg) -> None:
     """Re-render the PNG plots of a run from its trajectory.npz and summary.json.
+
+    A run whose world died before writing them is first rebuilt from its recording.mcap
+    (as `swarm export` does).
 
     Example: swarm plot runs/case2
     """
     if not run_dir.is_dir():
         raise fail(f"{run_dir}: not a directory", 2)
+    export_results(run_dir)
     render_run_plots(run_dir)
+
+
+def export(
+    run_dir: RunDirArg,
+    plots: Annotated[bool, typer.Option(help="render PNG plots too")] = True,
+) -> None:
+    """Rebuild trajectory.npz and summary.json of a run from its recording.mcap.
+
+    Results already written are kept. For a run whose world was killed: everything that reached the disk (all but the last
+    second at most) becomes a valid run directory; the summary says "complete": false.
+
+    Example: swarm export runs/case2-1a2b3c
+    """
+    if not run_dir.is_dir():
+        raise fail(f"{run_dir}: not a directory", 2)
+    if not export_results(run_dir):
+        if not (run_dir / "recording.mcap").is_file():
+            raise fail(f"{run_dir}: no recording.mcap to export from", 1)
+        typer.echo(f"{run_dir}: trajectory.npz and summary.json are already there; nothing to recover")
+    if plots:
+        render_run_plots(run_dir)
 
 
 def register(app: typer.Typer) -> None:
@@ -117,3 +165,4 @@ def register(app: typer.Typer) -> None:
     app.command("check")(check)
     app.command("schema")(schema)
     app.command("plot")(plot)
+    app.command("export")(export)

@@ -8,6 +8,7 @@ reference that `swarm up --clock lockstep` equals, and a fast tool for studies.
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Callable
 
 from agents.brain import AgentBrain
@@ -17,8 +18,9 @@ from world.recording import RunResult
 
 
 def run_sim(scenario: Scenario, duration: float | None = None,
-            progress: Callable[[int, int], None] | None = None) -> RunResult:
-    """Run `scenario` for `duration` simulated seconds (default: the scenario's).
+            progress: Callable[[int, int], None] | None = None, recording: Path | None = None) -> RunResult:
+    """Run `scenario` for `duration` simulated seconds (default: the scenario's), streaming
+    the recording to `recording` (a recording.mcap) if given, else keeping it in memory.
 
     Process faults as the world process carries them out: kill drops the agent; restart
     brings it back with a fresh brain; freeze drops it (in `swarm up` when its link lease
@@ -26,7 +28,7 @@ def run_sim(scenario: Scenario, duration: float | None = None,
     """
     dt = scenario.run.dt
     ticks = int(round((duration if duration is not None else scenario.run.duration) / dt))
-    engine = Engine(scenario, ticks)
+    engine = Engine(scenario, ticks, recording=recording)
     n = len(scenario.agents)
 
     def brain(a):

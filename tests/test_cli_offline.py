@@ -15,7 +15,7 @@ from swarm.contracts.scenario import load_scenario
 SCENARIOS = sorted((Path(__file__).resolve().parent.parent / "scenarios").glob("*.toml"))
 KEYS = {"ids", "role", "speed", "orbit_radius", "target", "dt", "t", "x", "y", "heading", "u",
         "out", "alive", "missed"}
-COMMANDS = ["check", "schema", "sim", "plot"]
+COMMANDS = ["check", "schema", "sim", "plot", "export"]
 
 
 def invoke(*args: str):

@@ -19,6 +19,7 @@ restart or a thaw brings it back (a restart with a fresh brain, a thaw with the 
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -27,7 +28,7 @@ from swarm.contracts.frames import SensorFrame
 from swarm.contracts.scenario import Scenario
 from world.core import ACTIVE, WorldCore
 from world.faults import FaultPlan, fault_event
-from world.recording import Recorder, RunResult
+from world.recording import Recorder, RunResult, StreamRecorder
 
 # What became of a command (`Engine.command`).
 LATCHED, LOST, REFUSED = "latched", "lost", "refused"
@@ -36,15 +37,16 @@ LATCHED, LOST, REFUSED = "latched", "lost", "refused"
 class Engine:
     def __init__(self, scenario: Scenario, ticks: int, *, joined: bool = True,
                  wall_clock: Callable[[], float] | None = None,
-                 on_event: Callable[[dict], None] | None = None):
+                 on_event: Callable[[dict], None] | None = None, recording: Path | None = None):
         """ticks: steps to record; joined: agents start in the world (sim) or join later
         (the world process); wall_clock: stamps events with `wall_time`; on_event: told of
-        every event as it happens (the world publishes and prints them)."""
+        every event as it happens (the world publishes and prints them); recording: the
+        recording.mcap to stream ticks and events to (None: keep them in memory)."""
         self.core = WorldCore(scenario, joined=joined)
         self.fault_plan = FaultPlan(scenario.faults, scenario.run.dt, scenario.run.seed)
         self.network = self.fault_plan.affects_network()  # frames and commands go through the fault plan
         self.ticks = ticks
-        self.rec = Recorder(scenario, ticks)
+        self.rec = Recorder(scenario, ticks) if recording is None else StreamRecorder(scenario, ticks, recording)
         self.events: list[dict] = []
         self.out = np.full(len(scenario.agents), -1, dtype=np.int64)  # chosen out-neighbour ids
         self.hops_sent = self.core.hops.copy()  # hop counts this tick's frames advertise
@@ -70,6 +72,7 @@ class Engine:
             ev["wall_time"] = self.wall_clock()
         ev.update(agent=agent, kind=kind, reason=reason, **more)
         self.events.append(ev)
+        self.rec.event(ev)
         if self.on_event is not None:
             self.on_event(ev)
         return ev

@@ -29,7 +29,7 @@ from swarm.contracts.transport import open_hub, query_statuses, socket_path
 from world.clock import Clock
 from world.engine import Engine
 from world.inbox import Inbox
-from world.recording import write_run
+from world.recording import EXIT_NO_SPACE, RECORDING_FILE, RecordingError, write_run
 from world.roster import AgentBook, agent_figures
 
 TRUTH_PERIOD = 0.02  # s of wall time between ground-truth messages (observers, not the recording)
@@ -68,7 +68,15 @@ class World(Inbox, Clock):
         self.ticks = int(round((self.cfg.duration or s.run.duration) / s.run.dt))
         # The tick itself (faults, frames, commands, events, record, step) is the engine's,
         # the same one `swarm sim` drives; this class is its zenoh shell.
-        self.engine = Engine(s, self.ticks, joined=False, wall_clock=time.time, on_event=self._announce)
+        recording = None
+        if self.cfg.out_dir is not None:
+            try:
+                self.cfg.out_dir.mkdir(parents=True, exist_ok=True)
+            except OSError as e:
+                raise RecordingError(f"cannot create {self.cfg.out_dir}: {e.strerror or e}") from None
+            recording = self.cfg.out_dir / RECORDING_FILE
+        self.engine = Engine(s, self.ticks, joined=False, wall_clock=time.time, on_event=self._announce,
+                             recording=recording)
         self.core = self.engine.core
         self.book = {i: AgentBook() for i in s.ids}
         self.garbage = 0  # malformed or foreign messages on keys the world listens to
@@ -212,8 +220,8 @@ def _raise_stop(signum, _frame):
 
 
 def run_world(cfg: WorldConfig) -> int:
-    """Run a world to the end; exit code 0 when the run completed, 128+signal when stopped."""
-    world = World(cfg)
+    """Run a world to the end; exit code 0 when the run completed, 128+signal when stopped,
+    EXIT_NO_SPACE when the recording or the results could not be written."""
     sock = socket_path(cfg.listen)
     if sock is not None and sock.exists():
         # A stale socket from a crashed run blocks listening; a live one belongs to a run.
@@ -227,6 +235,11 @@ def run_world(cfg: WorldConfig) -> int:
             return 2
         except OSError:
             sock.unlink(missing_ok=True)
+    try:
+        world = World(cfg)
+    except RecordingError as e:
+        print(f"swarm world: {e}", file=sys.stderr)
+        return EXIT_NO_SPACE
     old = {sig: signal.signal(sig, _raise_stop) for sig in (signal.SIGTERM, signal.SIGINT)}
     code = 0
     try:
@@ -245,6 +258,10 @@ def run_world(cfg: WorldConfig) -> int:
         except TimeoutError as e:
             print(f"swarm world: {e}", file=sys.stderr)
             code = 3
+        except RecordingError as e:  # disk full mid-run: what reached the disk stays readable
+            print(f"swarm world: {e}; stopping the run", file=sys.stderr)
+            world.stopped_by = -1
+            code = EXIT_NO_SPACE
         except Exception:  # a bug: say so, but still write what was recorded and close cleanly
             import traceback
 
@@ -255,7 +272,12 @@ def run_world(cfg: WorldConfig) -> int:
         # Results are written even when stopped: nothing recorded is lost.
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        world.finish()
+        try:
+            world.finish()
+        except RecordingError as e:
+            if code != EXIT_NO_SPACE:
+                print(f"swarm world: {e}", file=sys.stderr)
+            code = EXIT_NO_SPACE
         world._close()
     finally:
         for sig, h in old.items():

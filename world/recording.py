@@ -1,6 +1,11 @@
-"""A run's recording: every tick of ground truth, written as trajectory.npz, plus
-summary.json. The layout is documented in README.md ("Outputs of a run"); the reader
-is world/run_reader.py.
+"""A run's recording: every tick of ground truth, and the result files made from it.
+
+A run with an output directory streams its ticks to recording.mcap as it goes
+(`StreamRecorder`, world/stream.py); one without (studies, tests) keeps them in memory
+(`Recorder`). At the end, or after a crash (`recover_run`), trajectory.npz and
+summary.json are written from the recording, each to a temporary name and renamed, so a
+result file is either whole or absent. The layout is documented in README.md ("Outputs
+of a run"); the reader of trajectory.npz is world/run_reader.py.
 """
 
 from __future__ import annotations
@@ -14,9 +19,26 @@ import numpy as np
 
 from swarm.contracts.scenario import Scenario
 from world.metrics import agent_metrics, converged, recovery, relative_errors, switch_ticks
+from world.stream import RECORDING_FILE, Recording, RecordingError, StreamWriter, read_recording
 
 TRAJECTORY_FILE = "trajectory.npz"
 SUMMARY_FILE = "summary.json"
+RESULT_FILES = (RECORDING_FILE, TRAJECTORY_FILE, SUMMARY_FILE)
+EXIT_NO_SPACE = 74  # exit code when results cannot be written (disk full, file too large): EX_IOERR
+__all__ = ["EXIT_NO_SPACE", "RECORDING_FILE", "RESULT_FILES", "RecordingError", "Recorder", "StreamRecorder", "RunResult",
+           "recover_run", "write_run"]
+
+
+def static_arrays(s: Scenario) -> dict[str, np.ndarray]:
+    """The per-agent and per-run constants of trajectory.npz."""
+    return {
+        "ids": np.array(s.ids, dtype=np.int64),
+        "role": np.array([a.role for a in s.agents]),
+        "speed": np.array([a.speed for a in s.agents], dtype=float),
+        "orbit_radius": np.array([a.orbit_radius if a.orbit_radius else math.nan for a in s.agents]),
+        "target": np.array([s.target.x, s.target.y], dtype=float),
+        "dt": np.array(s.run.dt),
+    }
 
 
 class Recorder:
@@ -57,19 +79,89 @@ class Recorder:
         self.missed[tick] = missed
         self.rows = max(self.rows, tick + 1)
 
+    def event(self, ev: dict) -> None:
+        """Events are kept by the engine; a memory recording has nothing more to do."""
+
     def arrays(self) -> dict[str, np.ndarray]:
-        s = self.scenario
         n = self.rows
-        return {
-            "ids": np.array(s.ids, dtype=np.int64),
-            "role": np.array([a.role for a in s.agents]),
-            "speed": np.array([a.speed for a in s.agents], dtype=float),
-            "orbit_radius": np.array([a.orbit_radius if a.orbit_radius else math.nan for a in s.agents]),
-            "target": np.array([s.target.x, s.target.y], dtype=float),
-            "dt": np.array(s.run.dt),
-            "t": self.t[:n], "x": self.x[:n], "y": self.y[:n], "heading": self.heading[:n],
-            "u": self.u[:n], "out": self.out[:n], "alive": self.alive[:n], "missed": self.missed[:n],
-        }
+        return {**static_arrays(self.scenario),
+                "t": self.t[:n], "x": self.x[:n], "y": self.y[:n], "heading": self.heading[:n],
+                "u": self.u[:n], "out": self.out[:n], "alive": self.alive[:n], "missed": self.missed[:n]}
+
+
+class StreamRecorder:
+    """The recorder of a run with an output directory: each tick goes to recording.mcap
+    as it is recorded (world/stream.py) and nothing stays in memory, so memory is flat
+    however long the run and however many agents join. `arrays()` finishes the file and
+    reads it back."""
+
+    def __init__(self, scenario: Scenario, ticks: int, path: Path):
+        self.scenario = scenario
+        self.ticks = ticks
+        self.path = path
+        self.rows = 0
+        self.ids = np.array(scenario.ids, dtype=np.int64)
+        self.t_last = 0.0
+        self.writer = StreamWriter(path, scenario, ticks)
+        self._arrays: dict[str, np.ndarray] | None = None
+
+    def add_agent(self, scenario: Scenario) -> None:
+        self.scenario = scenario
+        self.ids = np.array(scenario.ids, dtype=np.int64)
+        self.writer.add_agent(scenario.agents[-1], self.t_last)
+
+    def event(self, ev: dict) -> None:
+        self.writer.event(ev)
+
+    def record(self, tick: int, time: float, x, y, heading, u, out, alive, missed: int = 0) -> None:
+        self.writer.tick(tick, time, self.ids, x, y, heading, u, out, alive, missed)
+        self.t_last = time
+        self.rows = max(self.rows, tick + 1)
+
+    def close(self) -> None:
+        self.writer.close()
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        if self._arrays is None:
+            self.writer.close()
+            self._arrays = recording_arrays(read_recording(self.path))
+        return self._arrays
+
+
+def recording_arrays(rec: Recording) -> dict[str, np.ndarray]:
+    """The arrays of trajectory.npz from a recording's tick rows (agents added at run time
+    are columns of their own, absent before they were added)."""
+    s = rec.scenario
+    col = {aid: j for j, aid in enumerate(s.ids)}
+    n, rows = len(col), len(rec.rows)
+    a = {"t": np.full(rows, np.nan), "missed": np.zeros(rows, dtype=np.int64)}
+    for key in ("x", "y", "heading", "u"):
+        a[key] = np.full((rows, n), np.nan)
+    a["out"] = np.full((rows, n), -1, dtype=np.int64)
+    a["alive"] = np.zeros((rows, n), dtype=bool)
+    for r, row in enumerate(rec.rows):
+        if row["tick"] != r:
+            raise ValueError(f"recording: row {r} holds tick {row['tick']}")
+        a["t"][r], a["missed"][r] = row["time"], row["missed"]
+        m = len(row["ids"])
+        if m <= n and all(col.get(int(i)) == j for j, i in enumerate(row["ids"])):
+            cols = slice(0, m)  # the usual case: the scenario's order
+        else:
+            cols = [col[int(i)] for i in row["ids"]]
+        for key in ("x", "y", "heading", "u", "out", "alive"):
+            a[key][r, cols] = row[key]
+    return {**static_arrays(s), **a}
+
+
+
+class _Loaded:
+    """Arrays already read (a recovered run), in the recorder's place."""
+
+    def __init__(self, arrays: dict[str, np.ndarray]):
+        self._arrays = arrays
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return self._arrays
 
 
 @dataclass
@@ -115,6 +207,7 @@ class RunResult:
             "agents": agents,
             "events": self.events,
             "faults": faults,
+            "complete": True,  # False: rebuilt from the recording of a run whose world died
             **self.extra,
         }
 
@@ -129,12 +222,42 @@ def _json_default(o):
     raise TypeError(f"not JSON serialisable: {type(o)}")
 
 
+def _write_atomic(path: Path, write) -> None:
+    """`write(f)` into a temporary file beside `path`, then rename: `path` is whole or absent.
+    Raises RecordingError naming the file (disk full, file too large, ...)."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    try:
+        with open(tmp, "wb") as f:
+            write(f)
+        tmp.replace(path)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        raise RecordingError(f"cannot write {path}: {e.strerror or e}") from None
+
+
 def write_run(result: RunResult, out_dir: Path) -> dict:
-    """Write trajectory.npz and summary.json into out_dir; returns the summary."""
+    """Write trajectory.npz and summary.json into out_dir (each atomically); returns the summary."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(out_dir / TRAJECTORY_FILE, **result.recorder.arrays())
+    arrays = result.recorder.arrays()
+    _write_atomic(out_dir / TRAJECTORY_FILE, lambda f: np.savez_compressed(f, **arrays))
     summary = result.summary()
-    tmp = out_dir / f"{SUMMARY_FILE}.tmp"
-    tmp.write_text(json.dumps(summary, indent=2, default=_json_default) + "\n")
-    tmp.replace(out_dir / SUMMARY_FILE)
+    text = (json.dumps(summary, indent=2, default=_json_default) + "\n").encode()
+    _write_atomic(out_dir / SUMMARY_FILE, lambda f: f.write(text))
     return summary
+
+
+def recover_run(run_dir: Path) -> dict:
+    """Rebuild trajectory.npz and summary.json from what reached run_dir/recording.mcap (a
+    world killed mid-run): every tick up to the last flush. The summary says
+    `"complete": false`; figures only the world process knew (commands, missed ticks,
+    wall time) are absent. Raises ValueError when there is no readable recording."""
+    path = run_dir / RECORDING_FILE
+    if not path.is_file():
+        raise ValueError(f"{path}: no recording to recover from")
+    rec = read_recording(path)
+    if not rec.rows:
+        raise ValueError(f"{path}: the recording holds no tick")
+    result = RunResult(rec.scenario, _Loaded(recording_arrays(rec)), rec.events,
+                       {"engine": "recovered", "complete": False, "recording_finished": rec.complete,
+                        "completed": False})
+    return write_run(result, run_dir)

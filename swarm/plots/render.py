@@ -12,10 +12,11 @@ from swarm.plots.graph import panel_graph, panel_neighbours
 from swarm.plots.style import DPI, MAX_POINTS, agent_colours, decimation_rows
 from swarm.plots.timeseries import panel_control, panel_distance
 from swarm.plots.trajectories import panel_trajectories
+from swarm.results import PLOT_NAMES
 from world.run_reader import RunData, load_run, run_events
 
 #: Files written by `render_plots`, in the order they are returned.
-PLOT_FILES = ("trajectories.png", "distance.png", "control.png", "graph.png", "overview.png", "neighbours.png")
+PLOT_FILES = PLOT_NAMES  # the list lives with the rest of a run directory's layout (swarm/results.py)
 
 #: The panels of overview.png, row by row (the paper's (a)-(d)).
 OVERVIEW = ("graph.png", "trajectories.png", "distance.png", "control.png")
@@ -34,9 +35,13 @@ def title_suffix(run: RunData) -> str:
 
 
 def _save(fig: Any, path: Path) -> None:
+    """Save to a temporary name, then rename: a PNG is whole or absent."""
+    tmp = path.with_name(f".{path.name}.tmp")
     try:
-        fig.savefig(path, dpi=DPI)
+        fig.savefig(tmp, dpi=DPI, format="png")
+        tmp.replace(path)
     finally:
+        tmp.unlink(missing_ok=True)
         plt.close(fig)
 
 

@@ -1,0 +1,52 @@
+"""A run's output directory: never overwritten by accident, and rebuilt after a crash.
+
+- `claim_out_dir(out, force)`: refuses a directory that already holds results (unless
+  `force`, which removes them first, so a new run never mixes with an old one).
+- `export_run(run_dir)`: trajectory.npz and summary.json from recording.mcap, for a run
+  whose world died before writing them (`"complete": false` in the summary).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from world.recording import RECORDING_FILE, RESULT_FILES, SUMMARY_FILE, TRAJECTORY_FILE, recover_run
+
+PLOT_NAMES = ("trajectories.png", "distance.png", "control.png", "graph.png", "overview.png", "neighbours.png")
+
+
+class OutDirError(Exception):
+    """The output directory cannot be used; the message is one line naming it."""
+
+
+def results_in(out: Path) -> list[str]:
+    """Names of the result files `out` holds (recording, trajectory, summary)."""
+    return [name for name in RESULT_FILES if (out / name).exists()]
+
+
+def claim_out_dir(out: Path, force: bool) -> None:
+    """Make `out` ready for a new run's results, or raise OutDirError."""
+    if out.exists() and not out.is_dir():
+        raise OutDirError(f"--out {out} is a file, not a directory")
+    held = results_in(out) if out.is_dir() else []
+    if held and not force:
+        raise OutDirError(f"--out {out} already holds the results of a run ({', '.join(held)}); "
+                          "choose another directory, or pass --force to replace them")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        for name in (*held, *PLOT_NAMES):
+            (out / name).unlink(missing_ok=True)
+    except OSError as e:
+        raise OutDirError(f"--out {out}: {e.strerror or e}") from None
+
+
+def needs_export(run_dir: Path) -> bool:
+    """A recording without the files made from it (the world died before its end)."""
+    return (run_dir / RECORDING_FILE).is_file() and not (
+        (run_dir / TRAJECTORY_FILE).is_file() and (run_dir / SUMMARY_FILE).is_file())
+
+
+def export_run(run_dir: Path) -> dict:
+    """Rebuild trajectory.npz and summary.json from run_dir/recording.mcap; returns the
+    summary. Raises ValueError (no usable recording) or RecordingError (cannot write)."""
+    return recover_run(run_dir)

@@ -1,0 +1,232 @@
+"""A run's recording as it goes: an MCAP file (`recording.mcap`) written tick by tick.
+
+MCAP is the robotics ecosystem's log format (Foxglove, ROS 2 bags). The file is written
+with foxglove-sdk and read back with the `mcap` package. Its channels:
+
+- `/swarm/ticks`  every tick, exact: message encoding `swarm-tick-v1`, little-endian
+  `int64 tick, float64 time, int64 n, int64 missed`, then `int64 ids[n]`, `float64 x[n],
+  y[n], heading[n], u[n]`, `int64 out[n]` (-1: none), `uint8 alive[n]`. trajectory.npz
+  and summary.json are rebuilt from these rows.
+- `/swarm/scene`  foxglove.SceneUpdate at most 10 times per simulated second: agents as
+  arrows (leaders red, followers blue), out-neighbour edges as lines, the target as a
+  sphere; what Foxglove draws in its 3D panel.
+- `/swarm/events` JSON, one message per event (join, drop, switch, fault, ...).
+- `/swarm/run`    JSON: first `{"scenario": ..., "ticks": ...}`, then `{"add_agent": spec}`
+  for each agent added at run time, so that a recording is readable on its own.
+
+Log times are simulated time in nanoseconds. A chunk is written every FLUSH_PERIOD s of
+wall time (and only then: no size limit, so every write, and every write error, happens
+in `flush`), so a writer killed with SIGKILL leaves a file that `read_recording` reads
+up to its last flush: at most about a second is lost. Memory stays flat: nothing is
+kept but the chunk being filled.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from swarm.contracts.scenario import AgentSpec, Scenario
+
+RECORDING_FILE = "recording.mcap"
+TICK_ENCODING = "swarm-tick-v1"
+FLUSH_PERIOD = 0.5  # s of wall time between flushes (a SIGKILL loses at most about this)
+SCENE_RATE = 10.0  # scene updates per simulated second, at most
+_HEAD = np.dtype([("tick", "<i8"), ("time", "<f8"), ("n", "<i8"), ("missed", "<i8")])
+
+
+class RecordingError(Exception):
+    """The recording cannot be written (disk full, file too large, I/O error)."""
+
+
+def encode_tick(tick: int, t: float, ids, x, y, heading, u, out, alive, missed: int) -> bytes:
+    n = len(ids)
+    head = np.array([(tick, t, n, missed)], dtype=_HEAD).tobytes()
+    return b"".join((head, np.asarray(ids, "<i8").tobytes(), np.asarray(x, "<f8").tobytes(),
+                     np.asarray(y, "<f8").tobytes(), np.asarray(heading, "<f8").tobytes(),
+                     np.asarray(u, "<f8").tobytes(), np.asarray(out, "<i8").tobytes(),
+                     np.asarray(alive, np.uint8).tobytes()))
+
+
+def decode_tick(data: bytes) -> dict:
+    head = np.frombuffer(data, _HEAD, 1)[0]
+    n = int(head["n"])
+    if n < 0 or len(data) != _HEAD.itemsize + n * (6 * 8 + 1):
+        raise ValueError(f"a {TICK_ENCODING} message of {len(data)} bytes for {n} agents")
+    o = _HEAD.itemsize
+    cols = {}
+    for name, dt in (("ids", "<i8"), ("x", "<f8"), ("y", "<f8"), ("heading", "<f8"), ("u", "<f8"), ("out", "<i8")):
+        cols[name] = np.frombuffer(data, dt, n, o)
+        o += 8 * n
+    cols["alive"] = np.frombuffer(data, np.uint8, n, o).astype(bool)
+    return {"tick": int(head["tick"]), "time": float(head["time"]), "missed": int(head["missed"]), **cols}
+
+
+class StreamWriter:
+    """Writes one run's recording.mcap; `close()` finishes the file."""
+
+    def __init__(self, path: Path, scenario: Scenario, ticks: int):
+        import foxglove
+        from foxglove.channels import SceneUpdateChannel
+        from foxglove.mcap import MCAPCompression, MCAPWriteOptions
+
+        self.path = path
+        self.ctx = foxglove.Context()  # one per recording: runs in one process never mix
+        try:
+            self.writer = foxglove.open_mcap(str(path), allow_overwrite=True, context=self.ctx,
+                                             writer_options=MCAPWriteOptions(compression=MCAPCompression.Zstd,
+                                                                              chunk_size=None))
+        except Exception as e:
+            raise RecordingError(f"cannot write {path}: {e}") from None
+        schema = foxglove.Schema(name="swarm.Tick", encoding="", data=b"")
+        self.ticks_ch = foxglove.Channel("/swarm/ticks", schema=schema, message_encoding=TICK_ENCODING,
+                                         context=self.ctx)
+        self.events_ch = foxglove.Channel("/swarm/events", schema={"type": "object"}, context=self.ctx)
+        self.run_ch = foxglove.Channel("/swarm/run", schema={"type": "object"}, context=self.ctx)
+        self.scene_ch = SceneUpdateChannel("/swarm/scene", context=self.ctx)
+        self.scene_every = max(1, int(round(1.0 / (SCENE_RATE * scenario.run.dt))))
+        self.target = (scenario.target.x, scenario.target.y)
+        self.leader = np.array([a.role == "leader" for a in scenario.agents])
+        self.last_flush = time.monotonic()
+        self.closed = False
+        self.run_ch.log({"scenario": scenario.model_dump(mode="json"), "ticks": ticks}, log_time=0)
+
+    @staticmethod
+    def _ns(t: float) -> int:
+        return max(0, int(round(t * 1e9)))
+
+    def add_agent(self, spec: AgentSpec, t: float) -> None:
+        self.leader = np.append(self.leader, spec.role == "leader")
+        self.run_ch.log({"add_agent": spec.model_dump(mode="json")}, log_time=self._ns(t))
+
+    def event(self, ev: dict) -> None:
+        self.events_ch.log(json.loads(json.dumps(ev, default=_plain)), log_time=self._ns(ev.get("time", 0.0)))
+
+    def tick(self, tick: int, t: float, ids, x, y, heading, u, out, alive, missed: int) -> None:
+        ns = self._ns(t)
+        self.ticks_ch.log(encode_tick(tick, t, ids, x, y, heading, u, out, alive, missed), log_time=ns)
+        if tick % self.scene_every == 0:
+            self.scene_ch.log(self._scene(ns, ids, x, y, heading, out, alive), log_time=ns)
+        now = time.monotonic()
+        if now - self.last_flush >= FLUSH_PERIOD:
+            self.flush()
+
+    def flush(self) -> None:
+        self.last_flush = time.monotonic()
+        try:
+            self.writer.flush()
+        except Exception:  # foxglove reports an I/O error as RuntimeError
+            self._failed()
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        try:
+            self.writer.close()
+        except Exception:
+            self._failed()
+
+    def _failed(self):
+        """A write failed (disk full, file too large): what was flushed before stays readable.
+        The writer is closed now, so that it has nothing left to say when it is dropped."""
+        self.closed = True
+        try:
+            self.writer.close()
+        except Exception:
+            pass
+        raise RecordingError(f"cannot write {self.path}: I/O error (disk full or file too large?)")
+
+    def _scene(self, ns, ids, x, y, heading, out, alive):
+        from foxglove.messages import (ArrowPrimitive, Color, LinePrimitive, LinePrimitiveLineType, Point3, Pose,
+                                       Quaternion, SceneEntity, SceneUpdate, SpherePrimitive, Timestamp, Vector3)
+
+        ts = Timestamp(sec=ns // 10**9, nsec=ns % 10**9)
+        red, blue, grey = Color(r=0.85, g=0.15, b=0.15, a=1.0), Color(r=0.15, g=0.35, b=0.85, a=1.0), \
+            Color(r=0.4, g=0.4, b=0.4, a=0.8)
+        col = {int(i): k for k, i in enumerate(ids)}
+        arrows, points = [], []
+        for k in range(len(ids)):
+            if not alive[k]:
+                continue
+            h = float(heading[k])
+            arrows.append(ArrowPrimitive(
+                pose=Pose(position=Vector3(x=float(x[k]), y=float(y[k]), z=0.0),
+                          orientation=Quaternion(x=0.0, y=0.0, z=math.sin(h / 2), w=math.cos(h / 2))),
+                shaft_length=3.0, shaft_diameter=0.6, head_length=1.5, head_diameter=1.5,
+                color=red if self.leader[k] else blue))
+            j = col.get(int(out[k]))
+            if j is not None:
+                points += [Point3(x=float(x[k]), y=float(y[k]), z=0.0), Point3(x=float(x[j]), y=float(y[j]), z=0.0)]
+        tx, ty = self.target
+        target = SpherePrimitive(pose=Pose(position=Vector3(x=tx, y=ty, z=0.0),
+                                           orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
+                                 size=Vector3(x=2.0, y=2.0, z=2.0), color=Color(r=0.1, g=0.1, b=0.1, a=1.0))
+        return SceneUpdate(entities=[
+            SceneEntity(timestamp=ts, frame_id="world", id="agents", arrows=arrows),
+            SceneEntity(timestamp=ts, frame_id="world", id="edges", lines=[LinePrimitive(
+                type=LinePrimitiveLineType.LineList, thickness=0.3, points=points, color=grey)]),
+            SceneEntity(timestamp=ts, frame_id="world", id="target", spheres=[target])])
+
+
+def _plain(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    raise TypeError(f"not JSON serialisable: {type(o)}")
+
+
+@dataclass
+class Recording:
+    """What `read_recording` found: the scenario (with agents added at run time), the tick
+    rows in order, the events, and whether the file was finished (False: its writer died)."""
+
+    scenario: Scenario
+    ticks: int
+    rows: list[dict] = field(default_factory=list)
+    events: list[dict] = field(default_factory=list)
+    complete: bool = False
+
+
+def read_recording(path: Path) -> Recording:
+    """Read a recording.mcap, finished or cut short (a torn tail is where it stops).
+    Raises ValueError when the file is not a swarm recording at all."""
+    from mcap.exceptions import McapError
+    from mcap.records import Channel, Footer, Message
+    from mcap.stream_reader import StreamReader
+
+    topics: dict[int, str] = {}
+    rec: Recording | None = None
+    added: list[dict] = []
+    with open(path, "rb") as f:
+        try:
+            for r in StreamReader(f, skip_magic=False).records:
+                if isinstance(r, Channel):
+                    topics[r.id] = r.topic
+                elif isinstance(r, Message):
+                    topic = topics.get(r.channel_id)
+                    if topic == "/swarm/ticks" and rec is not None:
+                        rec.rows.append(decode_tick(r.data))
+                    elif topic == "/swarm/events" and rec is not None:
+                        rec.events.append(json.loads(r.data))
+                    elif topic == "/swarm/run":
+                        msg = json.loads(r.data)
+                        if "scenario" in msg:
+                            rec = Recording(Scenario.model_validate(msg["scenario"]), int(msg["ticks"]))
+                        elif "add_agent" in msg:
+                            added.append(msg["add_agent"])
+                elif isinstance(r, Footer) and rec is not None:
+                    rec.complete = True
+        except McapError:
+            pass  # the torn tail of a file whose writer died
+    if rec is None:
+        raise ValueError(f"{path}: not a swarm recording (no /swarm/run header)")
+    if added:
+        dump = rec.scenario.model_dump(mode="json")
+        dump["agents"] += added
+        rec.scenario = Scenario.model_validate(dump)
+    return rec
