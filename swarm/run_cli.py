@@ -11,16 +11,20 @@ from typing import Annotated, Optional
 
 import typer
 
-from swarm.offline_cli import ScenarioArg, fail, read_scenario, render_run_plots
+from swarm.offline_cli import ScenarioArg, export_results, fail, read_scenario, render_run_plots
 
 
 def _out_option(help: str):
     return Annotated[Optional[Path], typer.Option("--out", "-o", help=help)]
 
 
-SimOutOpt = _out_option("output directory (default runs/<scenario>-sim-<time>)")
-UpOutOpt = _out_option("output directory (default runs/<scenario>-up-<time>)")
-WorldOutOpt = _out_option("where to write the results")
+SimOutOpt = _out_option("output directory (default runs/<scenario>-sim-<time>-<random>); one that "
+                        "already holds results is refused unless --force")
+UpOutOpt = _out_option("output directory (default runs/<run id>); one that already holds results is "
+                       "refused unless --force")
+WorldOutOpt = _out_option("where to write the results (default: nowhere); one that already holds "
+                          "results is refused unless --force")
+ForceOpt = Annotated[bool, typer.Option("--force", help="replace the results already in --out")]
 DurationOpt = Annotated[Optional[float], typer.Option(help="simulated seconds (default: the "
                                                       "scenario's run.duration)", min=0.0)]
 ClockOpt = Annotated[Optional[str], typer.Option(help="lockstep | realtime (default: the scenario's)")]
@@ -30,7 +34,19 @@ EndPlotsOpt = Annotated[bool, typer.Option(help="render PNG plots at the end")]
 
 
 def default_out(scenario_path: Path, kind: str) -> Path:
-    return Path("runs") / f"{scenario_path.stem}-{kind}-{time.strftime('%Y%m%d-%H%M%S')}"
+    """A new directory under runs/: the time and a random part, so two runs never share one."""
+    import secrets
+
+    return Path("runs") / f"{scenario_path.stem}-{kind}-{time.strftime('%Y%m%d-%H%M%S')}-{secrets.token_hex(3)}"
+
+
+def _claim_out(out: Path, force: bool) -> None:
+    from swarm.results import OutDirError, claim_out_dir
+
+    try:
+        claim_out_dir(out, force)
+    except OutDirError as e:
+        raise fail(str(e), 2) from None
 
 
 def _check_duration(duration: float | None, dt: float) -> None:
@@ -81,28 +97,34 @@ def sim(
     out: SimOutOpt = None,
     duration: DurationOpt = None,
     plots: Annotated[bool, typer.Option(help="render PNG plots")] = True,
+    force: ForceOpt = False,
 ) -> None:
     """Run a scenario in one process (the reference engine) and write its results.
 
-    Writes summary.json, trajectory.npz and PNG plots into --out.
+    Streams recording.mcap into --out as it runs, then writes trajectory.npz, summary.json
+    and PNG plots.
 
     Example: swarm sim scenarios/case2.toml --out runs/case2
     """
-    from world.recording import write_run
     from swarm.sim import run_sim
+    from world.recording import EXIT_NO_SPACE, RECORDING_FILE, RecordingError, write_run
 
     s = read_scenario(scenario)
     _check_duration(duration, s.run.dt)
     out = out or default_out(scenario, "sim")
+    _claim_out(out, force)
     total = int(round((duration or s.run.duration) / s.run.dt))
     t0 = time.perf_counter()
-    with _progress_bar(f"sim {scenario.stem}") as prog:
-        task = prog.add_task("sim", total=total)
-        result = run_sim(s, duration, lambda k, n: prog.update(task, completed=k))
-    wall = time.perf_counter() - t0
-    result.extra["wall_time"] = wall
-    result.extra["sim_seconds_per_wall_second"] = total * s.run.dt / wall if wall > 0 else None
-    summary = write_run(result, out)
+    try:
+        with _progress_bar(f"sim {scenario.stem}") as prog:
+            task = prog.add_task("sim", total=total)
+            result = run_sim(s, duration, lambda k, n: prog.update(task, completed=k), out / RECORDING_FILE)
+        wall = time.perf_counter() - t0
+        result.extra["wall_time"] = wall
+        result.extra["sim_seconds_per_wall_second"] = total * s.run.dt / wall if wall > 0 else None
+        summary = write_run(result, out)
+    except RecordingError as e:
+        raise fail(f"swarm sim: {e}", EXIT_NO_SPACE) from None
     _print_summary(summary, out)
     typer.echo(f"speed: {total * s.run.dt / wall:.1f} simulated s per wall s ({total / wall:.0f} ticks/s)")
     if plots:
@@ -122,6 +144,7 @@ def world(
     join_timeout: Annotated[Optional[float], typer.Option(help="give up if not every agent joined "
                                                           "within this many s (default: wait)")] = None,
     plots: EndPlotsOpt = True,
+    force: ForceOpt = False,
 ) -> None:
     """Run the world of a scenario by hand: the hub, physics, sensors and the recording.
 
@@ -142,7 +165,8 @@ def world(
     clock = clock or s.run.clock
     _check_clock(clock)
     listen = listen or default_endpoint(run)
-    out = out or default_out(scenario, "up")
+    if out is not None:
+        _claim_out(out, force)
     typer.echo(f"run {run} on {listen}; results in {out}", err=True)
     code = run_world(WorldConfig(s, run, listen, out, clock, time_scale, duration, join_timeout))
     if plots and code in (0, 130, 143) and (out / "trajectory.npz").exists():
@@ -159,6 +183,9 @@ def up(
     listen: Annotated[Optional[str], typer.Option(help="endpoint of the run (default: a Unix socket in "
                                                   "$SWARM_RUNTIME_DIR or /tmp/swarm-<uid>)")] = None,
     plots: EndPlotsOpt = True,
+    force: ForceOpt = False,
+    world_grace: Annotated[float, typer.Option(help="s the agents wait for a world that stopped answering "
+                                               "(a stalled, not a vanished, world)", min=0.0)] = 10.0,
 ) -> None:
     """Run a scenario as a distributed system: a world process and one OS process per agent.
 
@@ -173,9 +200,11 @@ def up(
     s = read_scenario(scenario)
     _check_clock(clock)
     _check_duration(duration, s.run.dt)
-    out = out or default_out(scenario, "up")
     run_id = _new_run_id(scenario)
-    launcher = Launcher(UpConfig(scenario, s, out, run_id, listen, duration, clock, time_scale))
+    out = out or Path("runs") / run_id
+    _claim_out(out, force)
+    launcher = Launcher(UpConfig(scenario, s, out, run_id, listen, duration, clock, time_scale,
+                                 world_grace=world_grace))
     typer.echo(f"run {run_id}  endpoint {launcher.endpoint}  agents {len(s.agents)}  "
                f"clock {clock or s.run.clock}")
     typer.echo(f"attach from another terminal: swarm agent --id N --connect {launcher.endpoint} --run {run_id}")
@@ -203,20 +232,47 @@ def up(
     code = launcher.run(show)
     if tty:
         typer.echo("")
+    code = _up_outcome(launcher, code, out)
+    try:  # a world that died before writing its results: rebuild them from its recording
+        export_results(out)
+    except typer.Exit:
+        pass  # said why in one line; the exit code stays the run's
     summary_path = out / "summary.json"
-    if launcher.stop_signal is not None:
-        typer.echo(f"stopped by signal {launcher.stop_signal}; partial results in {out}")
-        code = 128 + launcher.stop_signal
-    elif code != 0:
-        typer.secho(f"the world exited with code {code}; see {out / 'logs' / 'world.log'}", err=True,
-                    fg=typer.colors.RED)
-        code = 1
     if summary_path.exists():
         summary = json.loads(summary_path.read_text())
         _print_summary(summary, out)
         if plots:
             render_run_plots(out)
+    for r in launcher.exits if launcher.failure is None else []:
+        typer.echo(f"  {r.line()}" + ("" if r.sent else "  (not in summary.json: the world did not hear of it)"))
     raise typer.Exit(code)
+
+
+EXIT_AGENT_FAILED, EXIT_DESERTED = 4, 5  # swarm up's exit codes: README, "What `swarm up` watches"
+
+
+def _up_outcome(launcher, code: int, out: Path) -> int:
+    """Say how the run ended (one line) and return `swarm up`'s exit code."""
+    err = dict(err=True, fg=typer.colors.RED)
+    if launcher.stop_signal is not None:
+        typer.echo(f"stopped by signal {launcher.stop_signal}; partial results in {out}")
+        return 128 + launcher.stop_signal
+    if launcher.failure is not None:  # an agent could not start (said live), or no world to reach
+        typer.secho(f"swarm up: {launcher.failure}; the run is stopped", **err)
+        return EXIT_AGENT_FAILED if launcher.exits else 1
+    if code not in (0, EXIT_DESERTED):
+        from world.recording import EXIT_NO_SPACE
+
+        typer.secho(f"swarm up: {launcher.world_failure()} (see {out / 'logs' / 'world.log'})", **err)
+        return EXIT_NO_SPACE if code == EXIT_NO_SPACE else 1
+    crashed = launcher.crashed()
+    if crashed:
+        typer.secho(f"swarm up: {len(crashed)} agent process(es) failed: {crashed[0].line()}", **err)
+        return EXIT_AGENT_FAILED
+    if code == EXIT_DESERTED:
+        typer.secho("swarm up: the run ended early: no agent process was left", **err)
+        return EXIT_DESERTED
+    return 0
 
 
 def agent(
@@ -225,14 +281,19 @@ def agent(
                                          "unixsock-stream/PATH")],
     run: Annotated[Optional[str], typer.Option(help="run id (default: the only run on the endpoint)")] = None,
     wait_world: Annotated[bool, typer.Option(help="keep waiting when the world vanishes")] = False,
+    world_grace: Annotated[float, typer.Option(help="s to wait for a world that stopped answering (a "
+                                               "frozen or cut-off world; exit 5 after that)", min=0.0)] = 10.0,
 ) -> None:
     """Run one agent process; it takes its initial state from the world, so only its id is needed.
+
+    Exit codes: 0 the run ended, 1 crashed (e.g. an exception in its law), 3 refused,
+    4 the world vanished, 5 the world did not answer within --world-grace, 130/143 stopped.
 
     Example: swarm agent --id 3 --connect tcp/127.0.0.1:7447
     """
     from agents.process import run_agent
 
-    raise typer.Exit(run_agent(id, connect, run, wait_world))
+    raise typer.Exit(run_agent(id, connect, run, wait_world, world_grace=world_grace))
 
 
 def register(app: typer.Typer) -> None:

@@ -121,6 +121,11 @@ class StreamRecorder:
     def close(self) -> None:
         self.writer.close()
 
+    @property
+    def torn(self) -> bool:
+        """The recording could not be written to the end: it stops at its last good flush."""
+        return self.writer.failed
+
     def arrays(self) -> dict[str, np.ndarray]:
         if self._arrays is None:
             self.writer.close()
@@ -130,18 +135,23 @@ class StreamRecorder:
 
 def recording_arrays(rec: Recording) -> dict[str, np.ndarray]:
     """The arrays of trajectory.npz from a recording's tick rows (agents added at run time
-    are columns of their own, absent before they were added)."""
+    are columns of their own, absent before they were added). A tick written twice (a
+    signal between writing a row and counting it, then the final row) counts once, the
+    later; rows stop at the first missing tick."""
     s = rec.scenario
     col = {aid: j for j, aid in enumerate(s.ids)}
-    n, rows = len(col), len(rec.rows)
+    by_tick = {row["tick"]: row for row in rec.rows}
+    rows = 0
+    while rows in by_tick:
+        rows += 1
+    n = len(col)
     a = {"t": np.full(rows, np.nan), "missed": np.zeros(rows, dtype=np.int64)}
     for key in ("x", "y", "heading", "u"):
         a[key] = np.full((rows, n), np.nan)
     a["out"] = np.full((rows, n), -1, dtype=np.int64)
     a["alive"] = np.zeros((rows, n), dtype=bool)
-    for r, row in enumerate(rec.rows):
-        if row["tick"] != r:
-            raise ValueError(f"recording: row {r} holds tick {row['tick']}")
+    for r in range(rows):
+        row = by_tick[r]
         a["t"][r], a["missed"][r] = row["time"], row["missed"]
         m = len(row["ids"])
         if m <= n and all(col.get(int(i)) == j for j, i in enumerate(row["ids"])):
@@ -151,7 +161,6 @@ def recording_arrays(rec: Recording) -> dict[str, np.ndarray]:
         for key in ("x", "y", "heading", "u", "out", "alive"):
             a[key][r, cols] = row[key]
     return {**static_arrays(s), **a}
-
 
 
 class _Loaded:
@@ -198,7 +207,8 @@ class RunResult:
             faults = recovery(specs, a["t"], err, a["missed"], self.events)
         return {
             "scenario": self.scenario.name,
-            "converged": converged(agents),
+            # An agent process that crashed (not a scripted kill: that is a "fault") fails the run.
+            "converged": converged(agents) and not any(e["kind"] == "crash" for e in self.events),
             "ticks": ticks,
             "selection": self.scenario.sensing.selection,
             "switches": switches,
@@ -207,7 +217,9 @@ class RunResult:
             "agents": agents,
             "events": self.events,
             "faults": faults,
-            "complete": True,  # False: rebuilt from the recording of a run whose world died
+            # False: rebuilt from the recording of a run whose world died, or a recording
+            # that could not be written to the end (disk full)
+            "complete": not getattr(self.recorder, "torn", False),
             **self.extra,
         }
 

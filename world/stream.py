@@ -86,14 +86,17 @@ class StreamWriter:
         schema = foxglove.Schema(name="swarm.Tick", encoding="", data=b"")
         self.ticks_ch = foxglove.Channel("/swarm/ticks", schema=schema, message_encoding=TICK_ENCODING,
                                          context=self.ctx)
-        self.events_ch = foxglove.Channel("/swarm/events", schema={"type": "object"}, context=self.ctx)
-        self.run_ch = foxglove.Channel("/swarm/run", schema={"type": "object"}, context=self.ctx)
+        self.events_ch = foxglove.Channel("/swarm/events", schema={"title": "swarm.Event", "type": "object"},
+                                          context=self.ctx)
+        self.run_ch = foxglove.Channel("/swarm/run", schema={"title": "swarm.Run", "type": "object"},
+                                       context=self.ctx)
         self.scene_ch = SceneUpdateChannel("/swarm/scene", context=self.ctx)
         self.scene_every = max(1, int(round(1.0 / (SCENE_RATE * scenario.run.dt))))
         self.target = (scenario.target.x, scenario.target.y)
         self.leader = np.array([a.role == "leader" for a in scenario.agents])
         self.last_flush = time.monotonic()
         self.closed = False
+        self.failed = False  # a write failed: the file ends at the last good flush
         self.run_ch.log({"scenario": scenario.model_dump(mode="json"), "ticks": ticks}, log_time=0)
 
     @staticmethod
@@ -135,7 +138,7 @@ class StreamWriter:
     def _failed(self):
         """A write failed (disk full, file too large): what was flushed before stays readable.
         The writer is closed now, so that it has nothing left to say when it is dropped."""
-        self.closed = True
+        self.closed = self.failed = True
         try:
             self.writer.close()
         except Exception:
@@ -192,37 +195,50 @@ class Recording:
     complete: bool = False
 
 
+def _records(f):
+    """The MCAP records of `f` up to its end, or up to where it is torn (a writer killed
+    mid-chunk): whatever the reader raises there (a short read, a bad length, a truncated
+    compressed chunk) ends the file. The second value says whether the footer was reached."""
+    from mcap.records import Footer
+    from mcap.stream_reader import StreamReader
+
+    records = iter(StreamReader(f, skip_magic=False).records)
+    while True:
+        try:
+            r = next(records)
+        except StopIteration:
+            return
+        except Exception:  # the torn tail of a file whose writer died
+            return
+        yield r, isinstance(r, Footer)
+
+
 def read_recording(path: Path) -> Recording:
     """Read a recording.mcap, finished or cut short (a torn tail is where it stops).
     Raises ValueError when the file is not a swarm recording at all."""
-    from mcap.exceptions import McapError
-    from mcap.records import Channel, Footer, Message
-    from mcap.stream_reader import StreamReader
+    from mcap.records import Channel, Message
 
     topics: dict[int, str] = {}
     rec: Recording | None = None
     added: list[dict] = []
     with open(path, "rb") as f:
-        try:
-            for r in StreamReader(f, skip_magic=False).records:
-                if isinstance(r, Channel):
-                    topics[r.id] = r.topic
-                elif isinstance(r, Message):
-                    topic = topics.get(r.channel_id)
-                    if topic == "/swarm/ticks" and rec is not None:
-                        rec.rows.append(decode_tick(r.data))
-                    elif topic == "/swarm/events" and rec is not None:
-                        rec.events.append(json.loads(r.data))
-                    elif topic == "/swarm/run":
-                        msg = json.loads(r.data)
-                        if "scenario" in msg:
-                            rec = Recording(Scenario.model_validate(msg["scenario"]), int(msg["ticks"]))
-                        elif "add_agent" in msg:
-                            added.append(msg["add_agent"])
-                elif isinstance(r, Footer) and rec is not None:
-                    rec.complete = True
-        except McapError:
-            pass  # the torn tail of a file whose writer died
+        for r, footer in _records(f):
+            if isinstance(r, Channel):
+                topics[r.id] = r.topic
+            elif isinstance(r, Message):
+                topic = topics.get(r.channel_id)
+                if topic == "/swarm/ticks" and rec is not None:
+                    rec.rows.append(decode_tick(r.data))
+                elif topic == "/swarm/events" and rec is not None:
+                    rec.events.append(json.loads(r.data))
+                elif topic == "/swarm/run":
+                    msg = json.loads(r.data)
+                    if "scenario" in msg:
+                        rec = Recording(Scenario.model_validate(msg["scenario"]), int(msg["ticks"]))
+                    elif "add_agent" in msg:
+                        added.append(msg["add_agent"])
+            elif footer and rec is not None:
+                rec.complete = True
     if rec is None:
         raise ValueError(f"{path}: not a swarm recording (no /swarm/run header)")
     if added:
