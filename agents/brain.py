@@ -60,6 +60,8 @@ class AgentBrain:
         self.hops: int | None = None  # hops advertised last tick (rooted rule)
         self.feasible: int | None = None  # rooted rule: accept only agents with fewer hops
         self.unrooted_ticks = 0
+        self.nonfinite = 0  # ticks on which the follower law returned NaN or inf (last u held)
+        self.last_nonfinite: float | None = None
         # selection = "sticky": wait and drain for max_hops ticks (the deepest a path can be)
         self.sticky = Sticky(max_hops, max_hops) if sensing.selection == "sticky" else None
 
@@ -105,8 +107,14 @@ class AgentBrain:
             u = saturate(math.copysign(self.gains.c2, self.last_u or 1.0), self.spec.max_turn_rate)
             return Decision(frame.tick, u, None, "lost", choice.fallback)
         c = choice.contact
-        u = saturate(self.law(frame.heading, c.heading, c.bearing), self.spec.max_turn_rate)
-        if not math.isfinite(u):
+        u = self.law(frame.heading, c.heading, c.bearing)
+        if math.isfinite(u):
+            u = saturate(u, self.spec.max_turn_rate)  # (before saturating: min/max would hide a NaN)
+        else:
+            # A law that returns NaN or inf: counted (the agent reports it in its status and
+            # the run's summary), and its last turn rate is held for this tick.
+            self.nonfinite += 1
+            self.last_nonfinite = u
             u = self.last_u
         hops = c.hops + 1 if choice.rooted and 0 <= c.hops < self.max_hops else None
         return Decision(frame.tick, u, c.id, "track", choice.fallback, hops)

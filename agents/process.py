@@ -6,9 +6,13 @@ token, and then answers each of its own sensor frames with a command. It never r
 ground truth. It publishes its status (role, out-neighbour, path to a leader and hops,
 leader phase, counters) on change and a few times per second.
 
-Callbacks only enqueue; the main thread decides and publishes. Exit codes:
-0 the run ended, 3 refused (id live, unknown, no world), 4 the world vanished,
-128+signal when stopped by a signal.
+Callbacks only enqueue; the main thread decides and publishes. When the world stops
+answering it waits up to --world-grace s for it (agents/world_link.py). Started by
+`swarm up`, it also stops when the launcher dies (swarm/contracts/lifeline.py). Exit codes:
+0 the run ended, 1 crashed (an exception, e.g. in a follower law: the traceback is the last
+thing in its output), 3 refused (id live, unknown, no world, unusable configuration),
+4 the world vanished, 5 the world did not answer within the grace, 128+signal when stopped
+by a signal.
 """
 
 from __future__ import annotations
@@ -20,56 +24,24 @@ import socket
 import sys
 import time
 
+from agents.joining import EXIT_REFUSED, AgentExit, claim, find_run
+from agents.joining import log as _log
+from agents.world_link import EXIT_WORLD_SILENT, NEW_WORLD, WorldLink
 from swarm.contracts import wire
+from swarm.contracts.lifeline import tie_to_launcher
 from swarm.contracts.transport import open_client
 
 STATUS_PERIOD = 0.2  # s of wall time between periodic status messages
-EXIT_OK, EXIT_REFUSED, EXIT_WORLD_GONE = 0, 3, 4
-
-
-class AgentExit(BaseException):  # also raised by signal handlers: never swallowed by `except Exception`
-    def __init__(self, code: int, message: str = ""):
-        super().__init__(message)
-        self.code = code
-        self.message = message
-
-
-def _log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
-
-
-def find_run(session, timeout: float = 2.0) -> str:
-    """The one run whose world is reachable through `session`."""
-    runs = sorted({wire.run_of_key(str(r.ok.key_expr))
-                   for r in session.liveliness().get(wire.ANY_WORLD_ALIVE, timeout=timeout) if r.ok})
-    if not runs:
-        raise AgentExit(EXIT_REFUSED, "no world is running on this endpoint")
-    if len(runs) > 1:
-        raise AgentExit(EXIT_REFUSED, f"several runs on this endpoint ({', '.join(runs)}): pick one with --run")
-    return runs[0]
-
-
-def claim(session, run: str, agent_id: int, timeout: float = 5.0, spec: dict | None = None) -> dict:
-    """Ask the world for agent_id (a new agent brings its spec); returns the reply or raises AgentExit."""
-    req = wire.encode_join_request(agent_id, os.getpid(), socket.gethostname(), spec)
-    replies = list(session.get(wire.world_join_key(run), payload=req, timeout=timeout))
-    for r in replies:
-        if r.ok is None:
-            continue
-        try:
-            rep = wire.decode_join_reply(r.ok.payload.to_bytes())
-        except wire.WireError as e:
-            raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: bad join reply: {e}") from None
-        if not rep["ok"]:
-            raise AgentExit(EXIT_REFUSED, f"agent {agent_id} refused: {rep['error']}")
-        return rep
-    raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: no world answered on run {run!r}")
+NONFINITE_NOTE_S = 5.0  # at most one log line per this many s about non-finite law outputs
+WORLD_GRACE = 10.0  # s an agent waits for a world that stopped answering (--world-grace)
+EXIT_OK, EXIT_CRASH = 0, 1  # and EXIT_REFUSED = 3 (agents/joining.py), 4 and 5 (agents/world_link.py)
 
 
 class AgentNode:
     """The process shell around an AgentBrain."""
 
-    def __init__(self, session, run: str, agent_id: int, reply: dict, wait_world: bool):
+    def __init__(self, session, run: str, agent_id: int, reply: dict, wait_world: bool,
+                 endpoint: str | None = None, world_grace: float = 0.0):
         import zenoh
 
         from swarm.contracts.brain_config import BrainConf
@@ -95,7 +67,9 @@ class AgentNode:
         self.garbage = 0
         self.last_tick = -1
         self.last = None  # last Decision
-        self.world_alive = True
+        self.link = WorldLink(session, run, agent_id, endpoint, world_grace, wait_world)
+        self.nonfinite_before = 0  # non-finite law outputs of earlier brains (a new world)
+        self.nonfinite_noted = 0.0
         self.status_sent = 0.0
         self.last_status: tuple | None = None
         self.stalled = 0.0  # s this process was not running before the current batch
@@ -141,7 +115,12 @@ class AgentNode:
             "pinned": self.spec.follow,
             "u": None if d is None else d.u,
             "commands": self.commands, "last_tick": self.last_tick, "garbage": self.garbage,
+            "nonfinite": self.nonfinite(),
         }
+
+    def nonfinite(self) -> int:
+        """Ticks on which the follower law returned NaN or inf (its last turn rate held)."""
+        return self.nonfinite_before + self.brain.nonfinite
 
     def maybe_publish_status(self, force: bool = False) -> None:
         """Publish on change of what others rely on, and every STATUS_PERIOD s anyway."""
@@ -171,7 +150,12 @@ class AgentNode:
     def on_sense(self, frame) -> None:
         if frame.tick <= self.last_tick:
             return  # duplicate or old frame
+        bad = self.brain.nonfinite
         d = self.brain.decide(frame)
+        if self.brain.nonfinite != bad and time.monotonic() - self.nonfinite_noted > NONFINITE_NOTE_S:
+            self.nonfinite_noted = time.monotonic()
+            _log(f"[agent {self.id}] tick {frame.tick}: the follower law {self.conf.gains.law!r} returned "
+                 f"{self.brain.last_nonfinite}; the last turn rate is held ({self.nonfinite()} so far)")
         self.cmd_pub.put(wire.encode_cmd(wire.Command(self.id, frame.tick, d.u, d.out, d.phase, d.hops,
                                                       self.key)))
         self.commands += 1
@@ -184,38 +168,17 @@ class AgentNode:
         self.last = d
 
     def on_world(self, kind) -> None:
-        if kind == self.zenoh.SampleKind.PUT:
-            if not self.world_alive:
-                # A world came back (--wait-world): its ticks start afresh, and so does the brain.
-                self.brain = self.new_brain()
-                self.last_tick, self.last = -1, None
-                _log(f"[agent {self.id}] the world is back; rejoining")
-                self.key = claim(self.session, self.run, self.id).get("key", 0)
-            self.world_alive = True
-            return
-        # A DELETE also comes when only our own link dropped (after a stall: SIGSTOP, a
-        # starved CPU): ask again before concluding; a dead world is still noticed within ~0.6 s.
-        if self._world_still_there(3.0 if self.stalled else 0.6):
-            _log(f"[agent {self.id}] lost the world's token but the world is still there "
-                 f"(stalled {self.stalled:.1f} s before): carrying on")
-            return
-        self.world_alive = False
-        if not self.wait_world:
-            raise AgentExit(EXIT_WORLD_GONE, f"agent {self.id}: the world of run {self.run} vanished; exiting "
-                                             "(use --wait-world to wait for it)")
-        _log(f"[agent {self.id}] the world vanished; waiting for it to come back")
-
-    def _world_still_there(self, timeout: float) -> bool:
-        """Wait up to `timeout` s for a link to the hub and the world's token on it."""
-        t_end = time.monotonic() + timeout
-        while time.monotonic() < t_end:
-            if list(self.session.info.routers_zid()):
-                left = max(0.1, t_end - time.monotonic())
-                replies = self.session.liveliness().get(wire.world_alive_key(self.run), timeout=min(left, 0.5))
-                if any(r.ok is not None for r in replies):
-                    return True
-            time.sleep(0.05)
-        return False
+        """The world's token came or went (agents/world_link.py says what that means)."""
+        if kind != self.zenoh.SampleKind.PUT:
+            self.link.on_delete(self.stalled)  # raises AgentExit when the world is gone
+        elif self.link.on_put() == NEW_WORLD:
+            # A new world (--wait-world, or one restarted meanwhile): its ticks start afresh,
+            # and so does the brain.
+            self.nonfinite_before = self.nonfinite()
+            self.brain = self.new_brain()
+            self.last_tick, self.last = -1, None
+            _log(f"[agent {self.id}] a world is back; rejoining")
+            self.key = claim(self.session, self.run, self.id).get("key", 0)
 
     def on_ctl(self, payload: bytes) -> None:
         """`swarm kill` from a machine that cannot signal this process: end abruptly."""
@@ -268,6 +231,7 @@ class AgentNode:
                         return EXIT_OK
             if newest is not None:
                 self.on_sense(newest)
+            self.link.check()  # raises AgentExit past the grace
             self.maybe_publish_status()
 
 
@@ -276,38 +240,72 @@ def _raise_exit(signum, _frame):
 
 
 def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: bool = False,
-              spec: dict | None = None) -> int:
+              spec: dict | None = None, world_grace: float = WORLD_GRACE) -> int:
     """Entry point of an agent process; returns its exit code."""
     signal.signal(signal.SIGTERM, _raise_exit)
     signal.signal(signal.SIGINT, _raise_exit)
+    try:
+        tie_to_launcher()  # started by `swarm up`: SIGTERM when the launcher dies
+    except AgentExit as e:
+        return e.code
     try:
         session = open_client(connect)
     except Exception as e:
         _log(f"swarm agent {agent_id}: cannot connect to {connect}: {e}")
         return EXIT_REFUSED
+    code = EXIT_CRASH
     try:
         run = run or find_run(session)
         reply = claim(session, run, agent_id, spec=spec)
-        node = AgentNode(session, run, agent_id, reply, wait_world)
+        node = AgentNode(session, run, agent_id, reply, wait_world, connect, world_grace)
         node.open()
-        return node.loop()
+        code = node.loop()
     except AgentExit as e:
         if e.message:
             _log(f"swarm agent: {e.message}")
-        return e.code
+        code = e.code
+    except Exception:  # a bug, or an exception in a follower law: the traceback ends the log
+        import traceback
+
+        traceback.print_exc()
     finally:
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
         signal.signal(signal.SIGINT, signal.SIG_IGN)
-        session.close()
+        _close(session, code)
+    return code
+
+
+def _close(session, code: int) -> None:
+    """Close the session, but exit with `code` anyway if that takes more than a moment: with a
+    silent hub, zenoh's close waits for its reconnection attempt (up to ~10 s)."""
+    import threading
+
+    def force():
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+
+    t = threading.Timer(1.0 if code == EXIT_WORLD_SILENT else 3.0, force)
+    t.daemon = True
+    t.start()
+    session.close()
+    t.cancel()
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Lean entry for launchers: `python -m agents.process ID ENDPOINT [RUN [SPEC_JSON]]` (no typer/rich)."""
+    """Lean entry for launchers (no typer/rich):
+    `python -m agents.process ID ENDPOINT [RUN [SPEC_JSON]] [--world-grace S]`."""
     import json
 
-    args = sys.argv[1:] if argv is None else argv
+    args = list(sys.argv[1:] if argv is None else argv)
+    grace = WORLD_GRACE
+    if "--world-grace" in args:
+        i = args.index("--world-grace")
+        grace = float(args[i + 1])
+        del args[i:i + 2]
     spec = json.loads(args[3]) if len(args) > 3 else None
-    sys.exit(run_agent(int(args[0]), args[1], args[2] if len(args) > 2 and args[2] else None, spec=spec))
+    sys.exit(run_agent(int(args[0]), args[1], args[2] if len(args) > 2 and args[2] else None, spec=spec,
+                       world_grace=grace))
 
 
 if __name__ == "__main__":

@@ -6,6 +6,12 @@ world writes the results; the launcher watches the run over zenoh like any obser
 (ground truth and events), prints progress, and on Ctrl-C/SIGTERM stops the world first
 (so the results are written), then the agents, then anything left in the group.
 Each child's output goes to `<out>/logs/`.
+
+It supervises: an agent process that exits by itself is reported live, sent to the world
+(an `agent_exit` admin request: the world records a `crash` or `exit` event, see
+swarm/supervision.py) and listed at the end; one that exits before the run started, or a
+world that does, stops the run with one line naming the cause. Children get the
+launcher's pid (swarm/contracts/lifeline.py) and stop by themselves if it dies.
 """
 
 from __future__ import annotations
@@ -22,12 +28,19 @@ from pathlib import Path
 from typing import Callable
 
 from swarm.contracts import wire
+from swarm.contracts.lifeline import LAUNCHER_PID_ENV
 from swarm.contracts.orbits import expected_radius, root_of
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.transport import default_endpoint, open_client
 from swarm.procs import Group, wait_until
+from swarm.supervision import AgentExitReport, agent_exit, send_report, world_failure
 
 EXIT_WORLD_FAILED = 1
+
+
+def _say(msg: str) -> None:
+    """A line on stdout, clearing the progress line first on a terminal."""
+    print(("\r\033[K" if sys.stdout.isatty() else "") + msg, flush=True)
 
 
 @dataclass
@@ -41,10 +54,11 @@ class UpConfig:
     clock: str | None = None
     time_scale: float = 1.0  # realtime clock: simulated s per wall s
     join_timeout: float = 60.0
+    world_grace: float = 10.0  # s agents wait for a world that stopped answering
 
 
 class Launcher:
-    def __init__(self, cfg: UpConfig, say: Callable[[str], None] = lambda m: print(m, flush=True)):
+    def __init__(self, cfg: UpConfig, say: Callable[[str], None] = _say):
         self.cfg = cfg
         self.say = say
         self.endpoint = cfg.listen or default_endpoint(cfg.run)
@@ -60,12 +74,19 @@ class Launcher:
         self.notices: list[bytes] = []  # world/control notices (faults to carry out)
         self.dropped_notices = 0  # malformed control notices ignored
         self.dropped_noted = 0.0
+        self.started = False  # the world's `start` event was seen (every agent joined)
+        self.procs: list[tuple[int, subprocess.Popen]] = []  # every agent process started
+        self.seen_exit: set[int] = set()  # pids whose exit was handled
+        self.scripted: set[int] = set()  # pids signalled for a scripted fault
+        self.exits: list[AgentExitReport] = []
+        self.failure: str | None = None  # one line: why the run could not start
 
     # -- processes --------------------------------------------------------------------------
     def _spawn(self, args: list[str], log_name: str) -> subprocess.Popen:
         log = open(self.logs / log_name, "ab")
+        env = {**os.environ, LAUNCHER_PID_ENV: str(os.getpid())}  # children stop when we die
         try:
-            return self.group.start(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT)
+            return self.group.start(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, env=env)
         finally:
             log.close()
 
@@ -81,9 +102,10 @@ class Launcher:
         self.world = self._spawn(args, "world.log")
 
     def start_agent(self, agent_id: int) -> subprocess.Popen:
-        p = self._spawn([sys.executable, "-m", "agents.process", str(agent_id), self.endpoint, self.cfg.run],
-                        f"agent-{agent_id}.log")
+        p = self._spawn([sys.executable, "-m", "agents.process", str(agent_id), self.endpoint, self.cfg.run,
+                         "--world-grace", str(self.cfg.world_grace)], f"agent-{agent_id}.log")
         self.agents[agent_id] = p
+        self.procs.append((agent_id, p))
         return p
 
     def world_exit_code(self) -> int | None:
@@ -136,6 +158,8 @@ class Launcher:
             return
         with self.lock:
             self.events.append(ev)
+        if ev["kind"] == "start":
+            self.started = True
 
     def progress(self) -> dict | None:
         """Figures for the progress line from the latest ground truth."""
@@ -183,8 +207,7 @@ class Launcher:
                 for a in self.cfg.scenario.agents:
                     self.start_agent(a.id)
             elif self.stop_signal is None and self.world_exit_code() is None:
-                self.say(f"swarm up: cannot reach the world at {self.endpoint}; stopping "
-                         f"(see {self.logs / 'world.log'})")
+                self.failure = f"cannot reach the world at {self.endpoint} (see {self.logs / 'world.log'})"
                 self.failed = True
             t0 = time.monotonic()
             while self.stop_signal is None and not self.failed:
@@ -193,8 +216,12 @@ class Launcher:
                     break
                 for _ in range(5 if self.cfg.scenario.faults else 1):
                     self.carry_out_faults(session)
+                    if self.supervise(session):
+                        break
                     time.sleep(0.05 if self.cfg.scenario.faults else 0.25)
                 show(self.progress(), time.monotonic() - t0)
+            if self.stop_signal is None and not self.failed:
+                self.supervise(None)  # exits just before the world ended (the world has ended)
         finally:
             if session is not None:
                 session.close()
@@ -204,6 +231,40 @@ class Launcher:
         if self.failed or self.world is None:
             return EXIT_WORLD_FAILED
         return self.world.returncode
+
+    # -- supervision --------------------------------------------------------------------------
+    def supervise(self, session) -> bool:
+        """Report agent processes that exited by themselves; True when the run must stop (an
+        agent could not start). `session` None: the world has ended, nothing is sent."""
+        for aid, p in self.procs:
+            code = p.poll()
+            if code is None or p.pid in self.seen_exit:
+                continue
+            self.seen_exit.add(p.pid)
+            if code == 0 or p.pid in self.scripted:
+                continue  # the end of the run, or a scripted fault (the world has its event)
+            r = agent_exit(aid, p.pid, code, self.logs / f"agent-{aid}.log", before_start=not self.started)
+            if session is None and not r.crash:
+                continue  # after the world ended: agents that saw it go are no news
+            self.exits.append(r)
+            if r.before_start and self.world_exit_code() is None:
+                self.failure = r.line()  # said once, by `swarm up` at the end
+                self.failed = True
+            else:
+                self.say(f"swarm up: {r.line()}")
+        if session is not None:
+            for r in self.exits:
+                if not r.sent and not send_report(session, self.cfg.run, r):
+                    break  # the world does not answer now: again on the next round
+        return self.failed
+
+    def crashed(self) -> list[AgentExitReport]:
+        return [r for r in self.exits if r.crash]
+
+    def world_failure(self) -> str:
+        """One line: why the world exited with a failure (the last line of its log)."""
+        code = self.world.returncode if self.world is not None and self.world.returncode is not None else -1
+        return world_failure(code, self.started, self.logs / "world.log")
 
     def carry_out_faults(self, session) -> None:
         """Scripted process faults the world asks for (it holds its clock meanwhile)."""
@@ -228,6 +289,8 @@ class Launcher:
                     self.start_agent(aid)
             elif running and kind in ("kill", "freeze", "thaw"):
                 sig = {"kill": signal.SIGKILL, "freeze": signal.SIGSTOP, "thaw": signal.SIGCONT}[kind]
+                if kind == "kill":
+                    self.scripted.add(p.pid)  # its exit is the fault's, not a crash
                 try:
                     os.kill(p.pid, sig)
                 except ProcessLookupError:

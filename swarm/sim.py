@@ -63,4 +63,5 @@ def run_sim(scenario: Scenario, duration: float | None = None,
     if progress is not None:
         progress(ticks, ticks)
     return engine.result({"engine": "sim", "rejected_commands": engine.core.rejected,
-                          "lost_frames": engine.fault_plan.lost_sense, "lost_commands": engine.fault_plan.lost_cmd})
+                          "lost_frames": engine.fault_plan.lost_sense, "lost_commands": engine.fault_plan.lost_cmd},
+                         {str(aid): {"nonfinite": b.nonfinite} for aid, b in brains.items()})

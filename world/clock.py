@@ -5,6 +5,11 @@
 Both hold for pause and for scripted process faults, which the launcher carries out
 while the clock waits for the drop or the rejoin. A mixin of `World`
 (world/process.py).
+
+When no agent is left in a started run and no scripted restart or thaw is to bring one
+back, the lockstep clock holds (there is nobody to step for) and the realtime clock goes
+on; if nobody joins within DESERTED_GRACE s of wall time, the world records a `deserted`
+event and ends the run (exit EXIT_DESERTED; `completed` is false).
 """
 
 from __future__ import annotations
@@ -13,11 +18,17 @@ import sys
 import time
 
 from swarm.contracts import wire
+from swarm.contracts.lifeline import tie_to_launcher
 from world.core import ACTIVE
 from world.faults import fault_event
 
+DESERTED_GRACE = 5.0  # s of wall time a started run may go on with no agent at all
+EXIT_DESERTED = 5
+
 
 class Clock:
+    deserted_since: float | None = None  # monotonic s since when no agent is in the started run
+
     def wait_for_agents(self) -> None:
         ids = self.cfg.scenario.ids
         t_end = None if self.cfg.join_timeout is None else time.monotonic() + self.cfg.join_timeout
@@ -67,6 +78,22 @@ class Clock:
             self.event("fault_late", f.agent, f"the {f.kind} agent did not rejoin within 20 s")
         self.held += time.monotonic() - t_hold
 
+    def deserted(self) -> bool:
+        """No agent in the run, and no scripted restart or thaw to come (see the module)."""
+        if ACTIVE in self.core.state:
+            self.deserted_since = None
+            return False
+        plan = self.engine.fault_plan
+        if any(f.kind in ("restart", "thaw") and t >= self.core.tick for t, f in zip(plan.tick_of, plan.faults)):
+            return False
+        now = time.monotonic()
+        if self.deserted_since is None:
+            self.deserted_since = now
+            if self.cfg.progress:
+                print(f"[world] no agent left at tick {self.core.tick}; ending the run unless one joins within "
+                      f"{DESERTED_GRACE:g} s", file=sys.stderr, flush=True)
+        return now - self.deserted_since > DESERTED_GRACE
+
     def lockstep_tick(self) -> None:
         pending = self.publish_frames()
         t_end = time.monotonic() + self.deadline
@@ -96,6 +123,7 @@ class Clock:
             b.stale_max = max(b.stale_max, stale)
 
     def run(self) -> int:
+        tie_to_launcher()  # started by `swarm up`: SIGTERM (results written) when the launcher dies
         self.t_start = time.monotonic()
         period = self.core.dt / self.cfg.time_scale
         last_note = time.monotonic()
@@ -107,6 +135,16 @@ class Clock:
         t_next = time.monotonic() + period
         t0_ticks = time.monotonic()
         while self.core.tick < self.ticks:
+            if self.deserted():
+                self.event("deserted", None, f"no agent process for {DESERTED_GRACE:g} s of wall time; "
+                                             "the run ends here")
+                self.wall_ticks = time.monotonic() - t0_ticks
+                return EXIT_DESERTED
+            if self.cfg.clock == "lockstep" and self.deserted_since is not None:
+                t_hold = time.monotonic()
+                self.drain(None, 0.1)  # nobody to step for: hold (a join ends the hold)
+                t0_ticks += time.monotonic() - t_hold
+                continue
             if self.paused:
                 t_pause = time.monotonic()
                 for q in self.pause_waiters:

@@ -2,9 +2,14 @@
 
 Commands (admission by claim key, stale or duplicate ticks, fault-plan losses),
 liveliness (join and drop), join queries (admission, new agents from `swarm spawn`),
-info queries (the live view) and admin queries (pause, resume, fault done). zenoh
-callbacks only enqueue; these run on the world's main thread. A mixin of `World`
+info queries (the live view) and admin queries (pause, resume, fault done, agent exit).
+zenoh callbacks only enqueue; these run on the world's main thread. A mixin of `World`
 (world/process.py), whose state it reads and changes.
+
+After the world itself has stalled (SIGSTOP, a starved CPU: more than STALL_S s without
+reaching its inbox), every agent's link has timed out on the agent's side and comes back
+at once: a token that vanishes then is given REJOIN_WAIT s to come back before the agent
+is dropped, so a stalled world does not drop and rejoin every agent.
 """
 
 from __future__ import annotations
@@ -12,17 +17,26 @@ from __future__ import annotations
 import os
 import queue
 import socket
+import sys
 import time
 
 from swarm.contracts import wire
 from swarm.contracts.brain_config import BrainConf
+from swarm.contracts.lifeline import exit_status
 from world.core import ACTIVE
 from world.engine import LOST, REFUSED
 from world.report import run_info
 from world.roster import AgentBook, admit, new_agent_spec
 
+STALL_S = 0.8  # s the world's main thread may go without reaching its inbox (the link lease is 1 s)
+REJOIN_WAIT = 2.0  # s a token lost just after a stall of the world has to come back
+
 
 class Inbox:
+    drained_at = 0.0  # monotonic s the main thread last came back from its inbox
+    stall_seen = -1e9  # monotonic s a stall of the world itself was last noticed
+    lost_after_stall: dict | None = None  # agent -> monotonic s its drop is due (token lost after a stall)
+
     def handle(self, item, pending: set[int] | None) -> None:
         kind = item[0]
         if kind == "cmd":
@@ -92,7 +106,10 @@ class Inbox:
             return
         k = self.core.index[aid]
         b = self.book[aid]
+        waiting = self.lost_after_stall if self.lost_after_stall is not None else {}
         if kind == zenoh.SampleKind.PUT:
+            if waiting.pop(aid, None) is not None and self.cfg.progress:
+                print(f"[world] agent {aid}: its link is back after the world's stall", file=sys.stderr, flush=True)
             if self.core.state[k] == ACTIVE:
                 return
             b.claim_until = 0.0  # the key stays: a thawed process rejoins with the claim it had
@@ -100,10 +117,24 @@ class Inbox:
             self.engine.join(aid, f"liveliness token appeared (pid {b.pid} on {b.host})", b.joins > 0,
                              pid=b.pid, host=b.host)
             b.joins += 1
-        elif self.engine.drop(aid, "liveliness token lost") is not None:
-            b.drops += 1
+        elif self.core.state[k] == ACTIVE and time.monotonic() - self.stall_seen < REJOIN_WAIT:
+            self.lost_after_stall = {**waiting, aid: time.monotonic() + REJOIN_WAIT}
+        else:
+            self._drop(aid, pending)
+
+    def _drop(self, aid: int, pending: set[int] | None, why: str = "liveliness token lost") -> None:
+        if self.engine.drop(aid, why) is not None:
+            self.book[aid].drops += 1
             if pending is not None:
                 pending.discard(aid)
+
+    def _due_drops(self, pending: set[int] | None) -> None:
+        """Tokens lost after a stall of the world that did not come back in time: dropped now."""
+        now = time.monotonic()
+        for aid, due in list((self.lost_after_stall or {}).items()):
+            if now >= due:
+                del self.lost_after_stall[aid]
+                self._drop(aid, pending, f"liveliness token lost (not back {REJOIN_WAIT:g} s after the world's stall)")
 
     def _on_join(self, query) -> None:
         try:
@@ -147,12 +178,16 @@ class Inbox:
         query.reply(wire.world_info_key(self.cfg.run), wire.encode_info(self.info(sensing)))
 
     def _on_admin(self, query) -> None:
-        """pause / resume the world clock."""
+        """pause / resume the world clock; fault done and agent exit (from the launcher)."""
         try:
             req = wire.decode_admin(query.payload.to_bytes() if query.payload else b"")
             cmd = req["cmd"]
             if cmd == "fault_done":
                 self.faults_done.add(req["index"])
+                query.reply(wire.world_admin_key(self.cfg.run), wire.encode_admin_reply(True))
+                return
+            if cmd == "agent_exit":
+                self._on_agent_exit(req)
                 query.reply(wire.world_admin_key(self.cfg.run), wire.encode_admin_reply(True))
                 return
             if (cmd == "pause") != self.paused:
@@ -167,11 +202,34 @@ class Inbox:
             reply = wire.encode_admin_reply(False, error=str(e))
         query.reply(wire.world_admin_key(self.cfg.run), reply)
 
+    def _on_agent_exit(self, req: dict) -> None:
+        """The launcher saw an agent process it started exit by itself: a `crash` event (a
+        failure of the agent: the run does not count as converged) or an `exit` event."""
+        aid = req["id"]
+        if aid not in self.core.index:
+            raise wire.WireError(f"agent_exit: agent {aid} is not in the run")
+        status = exit_status(req["code"])
+        if self.lost_after_stall and self.lost_after_stall.pop(aid, None) is not None:
+            self._drop(aid, None, "liveliness token lost (its process exited)")
+        self.event("crash" if req["crash"] else "exit", aid,
+                   f"process {req['pid']} ended ({status})" + (f": {req['cause']}" if req["cause"] else ""),
+                   code=req["code"], pid=req["pid"], cause=req["cause"], log=req["log"])
+
     def drain(self, pending: set[int] | None, timeout: float | None) -> bool:
         """Handle one inbox item, waiting up to `timeout` s; False when none came."""
+        t0 = time.monotonic()
+        if self.drained_at and t0 - self.drained_at > STALL_S:  # away from the inbox too long
+            self.stall_seen = t0
         try:
             item = self.inbox.get(timeout=timeout) if timeout is None or timeout > 0 else self.inbox.get_nowait()
         except queue.Empty:
+            item = None
+        self.drained_at = time.monotonic()
+        if timeout is not None and self.drained_at - t0 > max(timeout, 0.0) + STALL_S:
+            self.stall_seen = self.drained_at  # stopped while waiting
+        if self.lost_after_stall:
+            self._due_drops(pending)
+        if item is None:
             return False
         self.handle(item, pending)
         return True

@@ -181,17 +181,18 @@ class World(Inbox, Clock):
         except Exception:  # an observer's problem never stops the world
             pass
 
-    def agent_garbage(self, timeout: float = 1.0) -> dict[int, int]:
-        """Malformed messages each live agent dropped (from its status), for the summary."""
-        counts: dict[int, int] = {}
+    def agent_reports(self, timeout: float = 1.0) -> dict[int, dict]:
+        """What each live agent counted itself (from its status), for the summary: malformed
+        messages it dropped (`garbage`) and non-finite law outputs (`nonfinite`)."""
+        reports: dict[int, dict] = {}
         try:
             for aid, st in query_statuses(self.session, self.cfg.run, timeout).items():
-                g = st.get("garbage")
-                if aid in self.book and type(g) is int and g >= 0:
-                    counts[aid] = g
+                if aid in self.book:
+                    reports[aid] = {k: st[k] for k in ("garbage", "nonfinite")
+                                    if type(st.get(k)) is int and st[k] >= 0}
         except Exception:  # the summary is written whatever the agents do
             pass
-        return counts
+        return reports
 
     def finish(self) -> dict | None:
         """Record the final state row and write the results; returns the summary."""
@@ -201,8 +202,8 @@ class World(Inbox, Clock):
             self.publish_truth(np.full(len(c.ids), np.nan), force=True)
         if self.cfg.out_dir is None:
             return None
-        own = self.agent_garbage()
-        agent_extra = {str(aid): agent_figures(b, c.tick, self.cfg.clock == "realtime", own.get(aid, 0))
+        own = self.agent_reports()
+        agent_extra = {str(aid): agent_figures(b, c.tick, self.cfg.clock == "realtime", **own.get(aid, {}))
                        for aid, b in self.book.items()}
         wall = getattr(self, "wall_ticks", None)
         result = self.engine.result({

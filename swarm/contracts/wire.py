@@ -6,7 +6,7 @@ Keys (every key of a run starts with `swarm/<run>`, so runs never hear each othe
     swarm/<run>/world/alive          liveliness token of the world process
     swarm/<run>/world/join           queryable: an agent claims its id, gets the scenario
     swarm/<run>/world/info           queryable: run info (scenario, clock, tick, agents)
-    swarm/<run>/world/admin          queryable: pause / resume the world clock
+    swarm/<run>/world/admin          queryable: pause / resume the world clock, fault done, agent exit
     swarm/<run>/world/control        world -> all: run-wide notices (JSON), e.g. the end
     swarm/<run>/truth                world -> observers: ground truth of one tick (binary)
     swarm/<run>/events               world -> observers: one event (JSON)
@@ -286,6 +286,10 @@ def decode_status(buf: bytes) -> dict:
     _field(obj, "out", int, "status", optional=True)
     _field(obj, "hops", int, "status", optional=True)
     _field(obj, "rooted", bool, "status")
+    for name in ("garbage", "nonfinite"):  # counters: absent in older agents
+        v = _field(obj, name, int, "status", optional=True)
+        if v is not None and v < 0:
+            raise WireError(f"status: negative {name}")
     return obj
 
 
@@ -344,12 +348,23 @@ def decode_info(buf: bytes) -> dict:
     return obj
 
 
-ADMIN_CMDS = ("pause", "resume", "fault_done")
+ADMIN_CMDS = ("pause", "resume", "fault_done", "agent_exit")
+EXIT_LOG_LINES, EXIT_LINE_CHARS = 20, 500  # agent_exit: at most this much of the agent's log
 
 
 def encode_admin(cmd: str, **fields) -> bytes:
-    """operator -> world/admin query: pause, resume (with `by`), fault_done (with `index`)."""
+    """operator -> world/admin query: pause, resume (with `by`), fault_done (with `index`);
+    agent_exit: see `encode_agent_exit`."""
     return encode_json({"cmd": cmd, **fields})
+
+
+def encode_agent_exit(agent: int, pid: int, code: int, crash: bool, cause: str, log: list[str]) -> bytes:
+    """launcher -> world/admin query: an agent process it started exited by itself.
+    code: its exit status (negative: killed by that signal); crash: a failure of the agent
+    (not the end of the run, a scripted fault or a signal from outside); cause: one line;
+    log: the last lines of its output (trimmed to EXIT_LOG_LINES of EXIT_LINE_CHARS)."""
+    return encode_admin("agent_exit", id=agent, pid=pid, code=code, crash=crash, cause=cause[:EXIT_LINE_CHARS],
+                        log=[line[:EXIT_LINE_CHARS] for line in log[-EXIT_LOG_LINES:]])
 
 
 def decode_admin(buf: bytes) -> dict:
@@ -359,6 +374,19 @@ def decode_admin(buf: bytes) -> dict:
         raise WireError(f"admin request: unknown cmd {cmd!r} ({', '.join(ADMIN_CMDS)})")
     if cmd == "fault_done":
         _field(obj, "index", int, "admin request: fault_done")
+    elif cmd == "agent_exit":
+        what = "admin request: agent_exit"
+        if not 0 <= _field(obj, "id", int, what) <= MAX_AGENT_ID:
+            raise WireError(f"{what}: agent id {obj['id']} out of 0..{MAX_AGENT_ID}")
+        _field(obj, "pid", int, what)
+        if not -255 <= _field(obj, "code", int, what) <= 255:
+            raise WireError(f"{what}: exit code {obj['code']} out of -255..255")
+        _field(obj, "crash", bool, what)
+        if len(_field(obj, "cause", str, what)) > EXIT_LINE_CHARS:
+            raise WireError(f"{what}: cause longer than {EXIT_LINE_CHARS} characters")
+        log = _field(obj, "log", list, what)
+        if len(log) > EXIT_LOG_LINES or any(type(x) is not str or len(x) > EXIT_LINE_CHARS for x in log):
+            raise WireError(f"{what}: log must be at most {EXIT_LOG_LINES} strings of {EXIT_LINE_CHARS} characters")
     return obj
 
 
