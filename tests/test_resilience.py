@@ -294,10 +294,14 @@ def test_nearest_selection_cycle_is_flagged_live(rt, tmp_path):
 
 
 def test_rooted_selection_keeps_every_follower_rooted(rt, tmp_path):
-    up = start_up(rt.tracker, SCENARIOS / "rooted.toml", tmp_path / "run", "--clock", "lockstep")
+    """The first 100 s of rooted.toml through `swarm up`: every follower rooted, no cycle at
+    any tick. (Convergence of the whole run: tests/test_rooted.py under `swarm sim`, which
+    lockstep `swarm up` equals: test_runtime.py.)"""
+    up = start_up(rt.tracker, SCENARIOS / "rooted.toml", tmp_path / "run", "--clock", "lockstep",
+                  "--duration", "100")
     summ, traj = up.results(240)
-    assert summ["completed"] is True and summ["ticks"] == 30000
-    check_time_column(traj, 30000, 0.01)
+    assert summ["completed"] is True and summ["ticks"] == 10000
+    check_time_column(traj, 10000, 0.01)
     ids = [int(i) for i in traj["ids"]]
     leaders = {i for i, r in zip(ids, traj["role"]) if r == "leader"}
     final = analyse({i: (int(o) if o >= 0 else None) for i, o in zip(ids, traj["out"][-1])}, leaders)
@@ -306,8 +310,6 @@ def test_rooted_selection_keeps_every_follower_rooted(rt, tmp_path):
     assert final["cycles"] == [] and final["unrooted"] == [], final
     for aid, a in summ["agents"].items():
         assert a["root"] in leaders, (aid, a)
-        assert a["relative_error"] < 0.01, (aid, a)
-    assert summ["converged"] is True
     # Loop-free at every tick of the run, not only at the end.
     rows = np.unique(traj["out"], axis=0)
     for row in rows:

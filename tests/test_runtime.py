@@ -25,11 +25,15 @@ from swarm.contracts.scenario import load_scenario
 pytestmark = pytest.mark.slow
 
 EQUIV_SCENARIOS = ["case1", "case2", "turtlebot"]
+# Simulated seconds where a whole run would cost the suite too much (case 1: its first half,
+# 15000 ticks, well past the leaders' CC paths and every follower's settling).
+EQUIV_DURATION = {"case1": 150.0}
 
 
 @pytest.fixture(scope="module")
 def lockstep_runs(tmp_path_factory):
-    """get(name) -> the scenario run, full duration, by `swarm sim` and `swarm up --clock lockstep`.
+    """get(name) -> the scenario run (full duration unless EQUIV_DURATION says) by `swarm sim`
+    and `swarm up --clock lockstep`.
 
     Each pair runs once per module (the case2 run serves equivalence and convergence).
     """
@@ -40,15 +44,18 @@ def lockstep_runs(tmp_path_factory):
     def get(name: str) -> dict:
         if name not in cache:
             scen = SCENARIOS / f"{name}.toml"
-            sim_traj, sim_summary = run_sim(r.tracker, scen, base / f"{name}-sim")
-            up = start_up(r.tracker, scen, base / f"{name}-up", "--clock", "lockstep", name=f"up-{name}")
+            d = EQUIV_DURATION.get(name)
+            extra = ("--duration", str(d)) if d else ()
+            sim_traj, sim_summary = run_sim(r.tracker, scen, base / f"{name}-sim", *extra)
+            up = start_up(r.tracker, scen, base / f"{name}-up", "--clock", "lockstep", *extra, name=f"up-{name}")
             t0 = time.monotonic()
             rc = up.launcher.wait(240)
             wall = time.monotonic() - t0
             r.tracker.assert_none_left(timeout=10)
             cache[name] = {"rc": rc, "run": up, "wall": wall, "sim": sim_traj, "sim_summary": sim_summary,
                            "traj": up.trajectory(), "summary": up.summary(),
-                           "scenario": load_scenario(scen)}
+                           "scenario": load_scenario(scen), "ticks": round((d or 0) / load_scenario(scen).run.dt)
+                           or load_scenario(scen).run.ticks}
             print(f"\n[timing] swarm up {name}: {wall:.1f} s wall, "
                   f"{cache[name]['summary']['ticks_per_second']:.0f} ticks/s")
         return cache[name]
@@ -68,7 +75,7 @@ def test_lockstep_up_equals_sim(lockstep_runs, name):
     assert res["rc"] == 0, res["run"].launcher.text()[-3000:]
     s = res["scenario"]
     up, sim = res["traj"], res["sim"]
-    ticks = s.run.ticks
+    ticks = res["ticks"]
     check_time_column(up, ticks, s.run.dt)
     check_time_column(sim, ticks, s.run.dt)
     assert list(up["ids"]) == list(sim["ids"]) == [a.id for a in s.agents]
@@ -209,7 +216,7 @@ def _stop_up(rt: Runtime, out_dir, sig: int, expected: int) -> float:
     return stop_s
 
 
-@pytest.mark.parametrize("attempt", range(20))
+@pytest.mark.parametrize("attempt", range(10))
 def test_ctrl_c_leaves_no_process(rt, tmp_path, attempt):
     _stop_up(rt, tmp_path, signal.SIGINT, 130)
 
