@@ -1,7 +1,8 @@
 """A run's output directory: never overwritten by accident, and rebuilt after a crash.
 
 - `claim_out_dir(out, force)`: refuses a directory that already holds results (unless
-  `force`, which removes them first, so a new run never mixes with an old one).
+  `force`, which removes them and the old logs first, so a new run never mixes with an
+  old one).
 - `export_run(run_dir)`: trajectory.npz and summary.json from recording.mcap, for a run
   whose world died before writing them (`"complete": false` in the summary).
 """
@@ -36,6 +37,9 @@ def claim_out_dir(out: Path, force: bool) -> None:
         out.mkdir(parents=True, exist_ok=True)
         for name in (*held, *PLOT_NAMES):
             (out / name).unlink(missing_ok=True)
+        if force:  # a crash's cause is read from the log's last line: never the old run's
+            for log in (out / "logs").glob("*.log"):
+                log.unlink()
     except OSError as e:
         raise OutDirError(f"--out {out}: {e.strerror or e}") from None
 

@@ -167,9 +167,9 @@ def world(
     listen = listen or default_endpoint(run)
     if out is not None:
         _claim_out(out, force)
-    typer.echo(f"run {run} on {listen}; results in {out}", err=True)
+    typer.echo(f"run {run} on {listen}; " + (f"results in {out}" if out else "no results kept (no --out)"), err=True)
     code = run_world(WorldConfig(s, run, listen, out, clock, time_scale, duration, join_timeout))
-    if plots and code in (0, 130, 143) and (out / "trajectory.npz").exists():
+    if plots and out is not None and code in (0, 130, 143) and (out / "trajectory.npz").exists():
         render_run_plots(out)
     raise typer.Exit(code)
 

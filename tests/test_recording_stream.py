@@ -234,3 +234,29 @@ def test_full_disk_under_swarm_up(rt, tmp_path):
     assert summ["complete"] is False and summ["completed"] is False
     run = load_run(out)
     assert 10 < run.n_rows < 15001 and np.all(np.diff(run.t) > 0)
+
+
+def test_agent_added_to_a_fixed_graph_run_keeps_the_results(tmp_path):
+    """An agent added at run time is read back from the recording as the world added it
+    (its spec checked by itself), and the results are written."""
+    from world.engine import Engine
+
+    s = load_scenario(ROOT / "scenarios" / "case2-fixed.toml")
+    eng = Engine(s, 5, recording=tmp_path / "recording.mcap")
+    eng.add_agent(AgentSpec(id=9, role="follower", x=5.0, y=5.0, heading=0.0, speed=10.0, follow=1))
+    for _ in range(5):
+        eng.end_tick()
+    eng.close()
+    summ = write_run(eng.result({}), tmp_path)
+    assert summ["complete"] is True and "9" in summ["agents"]
+    assert read_recording(tmp_path / "recording.mcap").scenario.ids[-1] == 9
+
+
+def test_a_fixed_graph_run_refuses_a_follower_without_follow():
+    from swarm.contracts.wire import WireError
+    from world.core import WorldCore
+    from world.roster import new_agent_spec
+
+    core = WorldCore(load_scenario(ROOT / "scenarios" / "case2-fixed.toml"))
+    with pytest.raises(WireError, match="needs --follow"):
+        new_agent_spec(9, {"role": "follower", "x": 1.0, "y": 1.0, "heading": 0.0, "speed": 10.0}, core)

@@ -194,6 +194,16 @@ class World(Inbox, Clock):
             pass
         return reports
 
+    def discard_recording(self) -> None:
+        """The run never started (no endpoint): leave no empty recording behind."""
+        rec = self.engine.rec
+        if getattr(rec, "path", None) is not None and rec.rows == 0:
+            try:
+                rec.close()
+            except RecordingError:
+                pass
+            rec.path.unlink(missing_ok=True)
+
     def finish(self) -> dict | None:
         """Record the final state row and write the results; returns the summary."""
         c = self.core
@@ -217,6 +227,10 @@ class World(Inbox, Clock):
 
 
 def _raise_stop(signum, _frame):
+    # One Stop only: a second Ctrl-C (or a SIGTERM after it) must not interrupt the
+    # writing of the results that the first one started.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     raise Stop(signum)
 
 
@@ -246,7 +260,11 @@ def run_world(cfg: WorldConfig) -> int:
     try:
         try:
             world._open()
+        except Stop as s:  # stopped before it listened: nothing to record
+            world.discard_recording()
+            return 128 + s.signum
         except Exception as e:  # zenoh.ZError: endpoint unusable
+            world.discard_recording()
             print(f"swarm world: cannot listen on {cfg.listen}: {e}", file=sys.stderr)
             return 2
         if cfg.progress:
@@ -279,6 +297,13 @@ def run_world(cfg: WorldConfig) -> int:
             if code != EXIT_NO_SPACE:
                 print(f"swarm world: {e}", file=sys.stderr)
             code = EXIT_NO_SPACE
+        except Exception:  # a bug in writing the results: say so, and still close (end notice)
+            import traceback
+
+            traceback.print_exc()
+            print(f"swarm world: internal error writing the results; recording.mcap in {cfg.out_dir} "
+                  "keeps the run (swarm export)", file=sys.stderr)
+            code = 1
         world._close()
     finally:
         for sig, h in old.items():

@@ -55,6 +55,9 @@ def new_agent_spec(aid: int, spec, core: WorldCore):
         raise wire.WireError(format_validation_error(f"agent {aid} spec", e).replace("\n", ";")) from None
     if a.follow is not None and a.follow not in core.index:
         raise wire.WireError(f"agent {aid} spec: follow: no agent has id {a.follow}")
+    if a.role == "follower" and a.follow is None and core.scenario.sensing.selection == "fixed":
+        raise wire.WireError(f"agent {aid} spec: follow: this run pins its graph (selection = \"fixed\"); "
+                             "a new follower needs --follow J")
     return a
 
 

@@ -241,8 +241,7 @@ def read_recording(path: Path) -> Recording:
                 rec.complete = True
     if rec is None:
         raise ValueError(f"{path}: not a swarm recording (no /swarm/run header)")
-    if added:
-        dump = rec.scenario.model_dump(mode="json")
-        dump["agents"] += added
-        rec.scenario = Scenario.model_validate(dump)
+    if added:  # as the world added them: each spec checked, not the scenario's cross-agent rules again
+        rec.scenario = rec.scenario.model_copy(
+            update={"agents": [*rec.scenario.agents, *(AgentSpec.model_validate(a) for a in added)]})
     return rec
