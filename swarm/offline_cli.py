@@ -108,13 +108,13 @@ RunDirArg = Annotated[Path, typer.Argument(help="a run directory written by swar
 def export_results(run_dir: Path) -> bool:
     """trajectory.npz and summary.json from the run's recording.mcap when they are missing
     (the world died before its end); one line says what was recovered. False: nothing to do."""
-    from swarm.results import export_run, needs_export
-    from world.recording import EXIT_NO_SPACE, RecordingError
+    from swarm.results import needs_export
+    from world.recording import EXIT_NO_SPACE, RecordingError, recover_run
 
     if not needs_export(run_dir):
         return False
     try:
-        summary = export_run(run_dir)
+        summary = recover_run(run_dir)
     except ValueError as e:
         raise fail(str(e), 1) from None
     except RecordingError as e:

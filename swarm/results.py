@@ -3,15 +3,15 @@
 - `claim_out_dir(out, force)`: refuses a directory that already holds results (unless
   `force`, which removes them and the old logs first, so a new run never mixes with an
   old one).
-- `export_run(run_dir)`: trajectory.npz and summary.json from recording.mcap, for a run
-  whose world died before writing them (`"complete": false` in the summary).
+- `needs_export(run_dir)`: a recording without the files made from it (a world that died
+  before writing them; `world.recording.recover_run` rebuilds them).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from world.recording import RECORDING_FILE, RESULT_FILES, SUMMARY_FILE, TRAJECTORY_FILE, recover_run
+from world.recording import RECORDING_FILE, RESULT_FILES, SUMMARY_FILE, TRAJECTORY_FILE
 
 PLOT_NAMES = ("trajectories.png", "distance.png", "control.png", "graph.png", "overview.png", "neighbours.png")
 
@@ -48,9 +48,3 @@ def needs_export(run_dir: Path) -> bool:
     """A recording without the files made from it (the world died before its end)."""
     return (run_dir / RECORDING_FILE).is_file() and not (
         (run_dir / TRAJECTORY_FILE).is_file() and (run_dir / SUMMARY_FILE).is_file())
-
-
-def export_run(run_dir: Path) -> dict:
-    """Rebuild trajectory.npz and summary.json from run_dir/recording.mcap; returns the
-    summary. Raises ValueError (no usable recording) or RecordingError (cannot write)."""
-    return recover_run(run_dir)

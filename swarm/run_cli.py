@@ -248,11 +248,12 @@ def up(
     raise typer.Exit(code)
 
 
-EXIT_AGENT_FAILED, EXIT_DESERTED = 4, 5  # swarm up's exit codes: README, "What `swarm up` watches"
+EXIT_AGENT_FAILED = 4  # swarm up's exit codes: README, "What `swarm up` watches" (5: the world's own)
 
 
 def _up_outcome(launcher, code: int, out: Path) -> int:
     """Say how the run ended (one line) and return `swarm up`'s exit code."""
+    from world.clock import EXIT_DESERTED
     err = dict(err=True, fg=typer.colors.RED)
     if launcher.stop_signal is not None:
         typer.echo(f"stopped by signal {launcher.stop_signal}; partial results in {out}")

@@ -36,6 +36,7 @@ from typing import Callable
 import numpy as np
 import psutil
 
+from swarm.contracts.scenario import load_scenario
 from swarm.procs import Group, wait_until
 
 REPO = Path(__file__).resolve().parents[1]
@@ -455,6 +456,17 @@ class UpRun:
 def start_up(tracker: ProcessTracker, scenario: Path | str, out: Path, *extra, name: str = "up") -> UpRun:
     args = swarm_cmd("up", scenario, "--out", out, "--no-plots", *extra)
     return UpRun(tracker.spawn(args, name), Path(out), tracker)
+
+
+def start_ticking(tracker: ProcessTracker, out: Path, duration: float,
+                  scenario: Path | str = SCENARIOS / "case2.toml") -> tuple[UpRun, dict[int, int], dict]:
+    """A lockstep `swarm up` of `scenario` for `duration` s, once every agent process is known
+    and the world ticks: (the run, agent pids by id, the world's info at that moment)."""
+    up = start_up(tracker, scenario, out, "--duration", str(duration), "--clock", "lockstep")
+    up.wait_started(60)
+    pids = tracker.wait_agent_pids(up.launcher, len(load_scenario(scenario).agents))
+    info = up.wait_info(lambda i: i["tick"] > 0, 30, "the run to tick")
+    return up, pids, info
 
 
 def load_trajectory(out: Path) -> dict[str, np.ndarray]:

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from runtime_helpers import (SCENARIOS, Runtime, agent_cmd, agent_info, check_time_column, events_of, has_started,
-                             observe_world, replay_events, start_up, swarm_cmd)
+                             observe_world, replay_events, start_ticking, start_up, swarm_cmd)
 from swarm.procs import wait_until
 
 pytestmark = pytest.mark.slow
@@ -252,11 +252,7 @@ def test_agents_exit_when_the_world_vanishes(rt, tmp_path):
 # --- 9. a frozen agent ----------------------------------------------------------------------------
 def test_frozen_agent_is_dropped(rt, tmp_path):
     # Long enough (15000 ticks, ~10 s) that the freeze surely lands mid-run.
-    up = start_up(rt.tracker, SCENARIOS / "case2.toml", tmp_path / "run", "--duration", "150",
-                  "--clock", "lockstep")
-    up.wait_started(60)
-    pids = rt.tracker.wait_agent_pids(up.launcher, 6)
-    up.wait_info(lambda i: i["tick"] > 0, 30, "the run to tick")
+    up, pids, _ = start_ticking(rt.tracker, tmp_path / "run", 150)
     victim = pids[3]
     t_stop = time.time()
     os.kill(victim, signal.SIGSTOP)

@@ -20,7 +20,8 @@ import time
 import pytest
 
 from conftest import to_toml
-from runtime_helpers import SCENARIOS, agent_cmd, events_of, has_started, observe_world, start_up, swarm_cmd
+from runtime_helpers import (SCENARIOS, agent_cmd, events_of, has_started, observe_world, start_ticking, start_up,
+                             swarm_cmd)
 
 pytestmark = pytest.mark.slow
 
@@ -81,11 +82,7 @@ def test_raising_law_is_a_crash_event_and_exit_4(rt, tmp_path, base):
 
 
 def test_hand_killed_agents_are_exit_events_and_a_deserted_run_ends(rt, tmp_path):
-    up = start_up(rt.tracker, SCENARIOS / "case2.toml", tmp_path / "run", "--duration", "150",
-                  "--clock", "lockstep")
-    up.wait_started(60)
-    pids = rt.tracker.wait_agent_pids(up.launcher, 6)
-    up.wait_info(lambda i: i["tick"] > 0, 30, "the run to tick")
+    up, pids, _ = start_ticking(rt.tracker, tmp_path / "run", 150)
     for pid in pids.values():
         os.kill(pid, signal.SIGKILL)
     rc = up.launcher.wait(60)
@@ -102,11 +99,7 @@ def test_hand_killed_agents_are_exit_events_and_a_deserted_run_ends(rt, tmp_path
 
 
 def test_sigkilled_launcher_leaves_nothing_behind(rt, tmp_path):
-    up = start_up(rt.tracker, SCENARIOS / "case2.toml", tmp_path / "run", "--duration", "150",
-                  "--clock", "lockstep")
-    up.wait_started(60)
-    rt.tracker.wait_agent_pids(up.launcher, 6)
-    up.wait_info(lambda i: i["tick"] > 0, 30, "the run to tick")
+    up, _, _ = start_ticking(rt.tracker, tmp_path / "run", 150)
     assert rt.tracker.world_pid(up.launcher) is not None
     t0 = time.monotonic()
     os.kill(up.launcher.pid, signal.SIGKILL)
@@ -117,11 +110,7 @@ def test_sigkilled_launcher_leaves_nothing_behind(rt, tmp_path):
 
 
 def test_world_stopped_for_5_s_the_run_goes_on(rt, tmp_path):
-    up = start_up(rt.tracker, SCENARIOS / "case2.toml", tmp_path / "run", "--duration", "40",
-                  "--clock", "lockstep")
-    up.wait_started(60)
-    pids = rt.tracker.wait_agent_pids(up.launcher, 6)
-    info = up.wait_info(lambda i: i["tick"] > 0, 30, "the run to tick")
+    up, pids, info = start_ticking(rt.tracker, tmp_path / "run", 40)
     world = rt.tracker.world_pid(up.launcher)
     os.kill(world, signal.SIGSTOP)
     try:
