@@ -274,9 +274,11 @@ def test_two_runs_side_by_side(rt, tmp_path):
     duration = "10"
     a = start_up(rt.tracker, scen, tmp_path / "a", "--duration", duration, "--clock", "lockstep", name="up-a")
     b = start_up(rt.tracker, scen, tmp_path / "b", "--duration", duration, "--clock", "lockstep", name="up-b")
+    # The agents' pids are taken while they run (a 10 s lockstep run can end in 2 s, so
+    # waiting for the world's "started" could miss a run that already ended).
+    rt.tracker.wait_agent_pids(a.launcher, 6, timeout=60)
+    rt.tracker.wait_agent_pids(b.launcher, 6, timeout=60)
     ref, _ = run_sim(rt.tracker, scen, tmp_path / "sim", "--duration", duration)
-    a.wait_started(60)
-    b.wait_started(60)
     rc_a, rc_b = a.launcher.wait(120), b.launcher.wait(120)
     assert (rc_a, rc_b) == (0, 0), (a.launcher.text()[-2000:], b.launcher.text()[-2000:])
     rt.tracker.assert_none_left(timeout=10)
