@@ -23,21 +23,10 @@ def log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
-def find_run(session, timeout: float = 2.0) -> str:
-    """The one run whose world is reachable through `session`."""
-    runs = sorted({wire.run_of_key(str(r.ok.key_expr))
-                   for r in session.liveliness().get(wire.ANY_WORLD_ALIVE, timeout=timeout) if r.ok})
-    if not runs:
-        raise AgentExit(EXIT_REFUSED, "no world is running on this endpoint")
-    if len(runs) > 1:
-        raise AgentExit(EXIT_REFUSED, f"several runs on this endpoint ({', '.join(runs)}): pick one with --run")
-    return runs[0]
-
-
 def claim(session, run: str, agent_id: int, timeout: float = 5.0, spec: dict | None = None) -> dict:
     """Ask the world for agent_id (a new agent brings its spec); returns the reply or raises AgentExit."""
     req = wire.encode_join_request(agent_id, os.getpid(), socket.gethostname(), spec)
-    replies = list(session.get(wire.world_join_key(run), payload=req, timeout=timeout))
+    replies = list(session.get(wire.agent_key(run, agent_id, "join"), payload=req, timeout=timeout))
     for r in replies:
         if r.ok is None:
             continue

@@ -23,12 +23,15 @@ import signal
 import socket
 import sys
 import time
+from pathlib import Path
 
-from agents.joining import EXIT_REFUSED, AgentExit, claim, find_run
+from agents.joining import EXIT_REFUSED, AgentExit, claim
 from agents.joining import log as _log
 from agents.world_link import EXIT_WORLD_SILENT, NEW_WORLD, WorldLink
 from swarm.contracts import wire
 from swarm.contracts.lifeline import tie_to_launcher
+from swarm.contracts import credentials
+from swarm.contracts.laws import LawError, check_trusted, trusted_laws
 from swarm.contracts.transport import open_client
 
 STATUS_PERIOD = 0.2  # s of wall time between periodic status messages
@@ -41,7 +44,7 @@ class AgentNode:
     """The process shell around an AgentBrain."""
 
     def __init__(self, session, run: str, agent_id: int, reply: dict, wait_world: bool,
-                 endpoint: str | None = None, world_grace: float = 0.0):
+                 endpoint: str | None = None, world_grace: float = 0.0, trusted: set[str] | None = None):
         import zenoh
 
         from swarm.contracts.brain_config import BrainConf
@@ -55,6 +58,13 @@ class AgentNode:
             self.conf = BrainConf.from_json(reply.get("brain"))
             if self.conf.agent.id != agent_id:
                 raise ValueError(f"agent.id: {self.conf.agent.id}, asked for {agent_id}")
+        except (ValueError, AttributeError, TypeError) as e:
+            raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: unusable join reply: {e}") from None
+        try:
+            check_trusted(self.conf.gains.law, trusted_laws() if trusted is None else trusted)
+        except LawError as e:
+            raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: {e}") from None
+        try:
             self.brain = self.new_brain()
         except (ValueError, AttributeError, TypeError) as e:
             raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: unusable join reply: {e}") from None
@@ -240,8 +250,11 @@ def _raise_exit(signum, _frame):
 
 
 def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: bool = False,
-              spec: dict | None = None, world_grace: float = WORLD_GRACE) -> int:
-    """Entry point of an agent process; returns its exit code."""
+              spec: dict | None = None, world_grace: float = WORLD_GRACE, creds_file: Path | None = None,
+              trust: tuple[str, ...] = ()) -> int:
+    """Entry point of an agent process; returns its exit code. It connects as `agent-<id>`
+    with the run's credentials (`creds_file`, else $SWARM_CREDENTIALS, else the local run's
+    file in the runtime directory) and imports only a law that is built in or trusted."""
     signal.signal(signal.SIGTERM, _raise_exit)
     signal.signal(signal.SIGINT, _raise_exit)
     try:
@@ -249,15 +262,22 @@ def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: b
     except AgentExit as e:
         return e.code
     try:
-        session = open_client(connect)
+        creds = credentials.find(run, connect, creds_file)
+    except credentials.CredentialsError as e:
+        _log(f"swarm agent {agent_id}: {e}")
+        return EXIT_REFUSED
+    user = credentials.agent_user(agent_id)
+    try:
+        session = open_client(connect, creds=creds, user=user)
     except Exception as e:
-        _log(f"swarm agent {agent_id}: cannot connect to {connect}: {e}")
+        _log(f"swarm agent {agent_id}: cannot connect to {connect} as {user} of run {creds.run}: {e} "
+             "(no world there, or it refused these credentials)")
         return EXIT_REFUSED
     code = EXIT_CRASH
     try:
-        run = run or find_run(session)
+        run = run or creds.run
         reply = claim(session, run, agent_id, spec=spec)
-        node = AgentNode(session, run, agent_id, reply, wait_world, connect, world_grace)
+        node = AgentNode(session, run, agent_id, reply, wait_world, connect, world_grace, trusted_laws(trust))
         node.open()
         code = node.loop()
     except AgentExit as e:

@@ -29,6 +29,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from swarm.contracts import wire  # noqa: E402
+from swarm.contracts import credentials  # noqa: E402
 from swarm.contracts.transport import open_client  # noqa: E402
 from swarm.procs import Group, wait_until  # noqa: E402
 
@@ -45,9 +46,13 @@ def main() -> int:
     work = Path(tempfile.mkdtemp(prefix="swbm-"))
     env = {**os.environ, "SWARM_RUNTIME_DIR": str(work / "rt")}
     out = work / "run"
+    # case2, with room for the agents this benchmark adds (the hub's rules name each of them)
+    scenario = work / "case2-add.toml"
+    scenario.write_text((ROOT / "scenarios" / "case2.toml").read_text().replace(
+        "[run]\n", f"[run]\nmax_added_agents = {a.add}\n", 1))
     group = Group(session=True)
-    up = group.start([sys.executable, "-m", "swarm", "up", str(ROOT / "scenarios" / "case2.toml"), "--out", str(out),
-                      "--clock", "realtime", "--duration", "100000", "--no-plots"],
+    up = group.start([sys.executable, "-m", "swarm", "up", str(scenario), "--out", str(out),
+                      "--clock", "realtime", "--duration", "3000", "--no-plots"],
                      env=env, stdout=open(work / "up.log", "wb"), stderr=open(work / "up.err", "wb"))
     try:
         endpoint = run = None
@@ -65,7 +70,8 @@ def main() -> int:
             print("swarm up printed no banner; see", work / "up.log")
             return 1
         run, endpoint = got
-        ses = open_client(endpoint, timeout_ms=5000)
+        creds = credentials.read(work / "rt" / f"{run}{credentials.SUFFIX}")
+        ses = open_client(endpoint, timeout_ms=5000, creds=creds)
 
         def info():
             for r in ses.get(wire.world_info_key(run), timeout=2.0):
@@ -87,11 +93,15 @@ def main() -> int:
         spec = {"role": "follower", "x": 50.0, "y": 50.0, "heading": 0.0, "speed": 10.0}
         host = socket.gethostname()
         ok = 0
-        for k in range(a.add):
-            payload = wire.encode_join_request(1000 + k, os.getpid(), host, spec)
-            for r in ses.get(wire.world_join_key(run), payload=payload, timeout=5.0):
-                if r.ok and wire.decode_join_reply(r.ok.payload.to_bytes()).get("ok"):
-                    ok += 1
+        for aid in range(7, 7 + a.add):  # the ids case2 (agents 1..6) reserves for added agents
+            payload = wire.encode_join_request(aid, os.getpid(), host, spec)
+            agent_ses = open_client(endpoint, timeout_ms=5000, creds=creds, user=credentials.agent_user(aid))
+            try:
+                for r in agent_ses.get(wire.agent_key(run, aid, "join"), payload=payload, timeout=5.0):
+                    if r.ok and wire.decode_join_reply(r.ok.payload.to_bytes()).get("ok"):
+                        ok += 1
+            finally:
+                agent_ses.close()
         time.sleep(2.0)
         m2, t2 = rss_mb(pid), info()["time"]
         time.sleep(a.run_for)

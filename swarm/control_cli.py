@@ -18,7 +18,9 @@ from typing import Annotated, Optional
 
 import typer
 
-from swarm.live_cli import EXIT_USAGE, ConnectOpt, RunOpt, attached, fail
+from swarm.contracts.credentials import ENV_CREDENTIALS
+from swarm.contracts.laws import ENV_TRUSTED_LAWS
+from swarm.live_cli import EXIT_USAGE, ConnectOpt, CredentialsOpt, RunOpt, attached, fail
 from swarm.procs import wait_until
 
 SPAWN_DEADLINE = 10.0  # s for a spawned agent to show up alive in the world's info
@@ -50,6 +52,7 @@ def kill(
     signal: Annotated[str, typer.Option("--signal", "-s", help="KILL | TERM | STOP | CONT")] = "KILL",
     connect: ConnectOpt = None,
     run: RunOpt = None,
+    credentials: CredentialsOpt = None,
 ) -> None:
     """Send a signal (default KILL) to an agent's process.
 
@@ -62,7 +65,7 @@ def kill(
     name = signal.upper().removeprefix("SIG")
     if name not in SIGNALS:
         raise fail(f"--signal {signal!r}: use one of {', '.join(SIGNALS)}", EXIT_USAGE)
-    with attached(connect, run) as live:
+    with attached(connect, run, credentials) as live:
         info = live.info()
         a = info["agents"].get(str(agent_id))
         if a is None:
@@ -138,10 +141,15 @@ def spawn(
                                                            show_default=False)] = None,
     connect: ConnectOpt = None,
     run: RunOpt = None,
+    credentials: CredentialsOpt = None,
+    trust_law: Annotated[Optional[list[str]], typer.Option(
+        "--trust-law", metavar="MODULE:FUNCTION",
+        help="a follower law of your own the agent may import if the run uses it (repeatable)")] = None,
 ) -> None:
     """Start an agent process on this machine (detached) and wait until it is live.
 
-    A dropped id rejoins from the pose it had; a new id joins the run with the given spec.
+    A dropped id rejoins from the pose it had; a new id joins the run with the given spec
+    (new ids: the range `swarm check` shows for the scenario, up to run.max_added_agents).
     Its output goes to a log file in the runtime dir.
 
     Example: swarm spawn --id 7 --x 10 --y -5 --heading 0 --speed 20 --follow 1
@@ -154,7 +162,7 @@ def spawn(
     given = {k: v for k, v in dict(x=x, y=y, heading=heading, speed=speed, role=role, orbit_radius=orbit_radius,
                                    direction=direction, follow=follow, max_turn_rate=max_turn_rate).items()
              if v is not None}
-    with attached(connect, run) as live:
+    with attached(connect, run, credentials) as live:
         info = live.info()
         ref = live.ref
         spec = None
@@ -164,6 +172,13 @@ def spawn(
                            f"--{'/--'.join(k.replace('_', '-') for k in given)} only apply to a new id",
                            EXIT_USAGE)
         else:
+            lo, hi = info.get("added_ids", (None, None))
+            if lo is not None and not lo <= agent_id <= hi:
+                raise fail(f"--id {agent_id}: agents added to run {ref.run} take ids {lo}..{hi} "
+                           "(the hub's access rules are made for those ids before the run starts)", EXIT_USAGE)
+            if info.get("added", 0) >= info.get("max_added", float("inf")):
+                raise fail(f"run {ref.run} has added {info['added']} agents already, its limit "
+                           "(run.max_added_agents in the scenario)", EXIT_USAGE)
             spec = {"role": "follower", **given}
             try:
                 AgentSpec.model_validate({**spec, "id": agent_id})
@@ -180,9 +195,14 @@ def spawn(
         args = [sys.executable, "-m", "agents.process", str(agent_id), ref.endpoint, ref.run]
         if spec is not None:
             args.append(json.dumps(spec))
+        env = dict(os.environ)
+        if credentials is not None:
+            env[ENV_CREDENTIALS] = str(credentials.resolve())
+        if trust_law:
+            env[ENV_TRUSTED_LAWS] = ",".join([*trust_law, *filter(None, [env.get(ENV_TRUSTED_LAWS)])])
         with open(log_path, "ab") as log:
             proc = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
-                                    start_new_session=True, close_fds=True)
+                                    start_new_session=True, close_fds=True, env=env)
         def started():
             rc = proc.poll()
             if rc is not None:
@@ -206,28 +226,28 @@ def spawn(
                    f"stopped it (log {log_path})")
 
 
-def _clock(connect: str | None, run: str | None, cmd: str, done: str) -> None:
-    with attached(connect, run) as live:
+def _clock(connect: str | None, run: str | None, credentials: Path | None, cmd: str, done: str) -> None:
+    with attached(connect, run, credentials) as live:
         rep = live.admin(cmd)
         typer.echo(f"run {live.ref.run} {done} at tick {rep.get('tick')}")
 
 
-def pause(connect: ConnectOpt = None, run: RunOpt = None) -> None:
+def pause(connect: ConnectOpt = None, run: RunOpt = None, credentials: CredentialsOpt = None) -> None:
     """Pause the world's clock and print the tick it stopped at.
 
     Agents stay connected; no tick happens until `swarm resume`.
 
     Example: swarm pause --run case2-1a2b3c
     """
-    _clock(connect, run, "pause", "paused")
+    _clock(connect, run, credentials, "pause", "paused")
 
 
-def resume(connect: ConnectOpt = None, run: RunOpt = None) -> None:
+def resume(connect: ConnectOpt = None, run: RunOpt = None, credentials: CredentialsOpt = None) -> None:
     """Resume the world's clock after `swarm pause` and print the tick.
 
     Example: swarm resume --run case2-1a2b3c
     """
-    _clock(connect, run, "resume", "resumed")
+    _clock(connect, run, credentials, "resume", "resumed")
 
 
 def register(app: typer.Typer) -> None:

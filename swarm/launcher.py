@@ -27,7 +27,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from swarm.contracts import wire
+from swarm.contracts import credentials, wire
+from swarm.contracts.laws import ENV_TRUSTED_LAWS
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV
 from swarm.contracts.orbits import expected_radius, root_of
 from swarm.contracts.scenario import Scenario
@@ -84,7 +85,10 @@ class Launcher:
     # -- processes --------------------------------------------------------------------------
     def _spawn(self, args: list[str], log_name: str) -> subprocess.Popen:
         log = open(self.logs / log_name, "ab")
-        env = {**os.environ, LAUNCHER_PID_ENV: str(os.getpid())}  # children stop when we die
+        env = {**os.environ, LAUNCHER_PID_ENV: str(os.getpid()),  # children stop when we die
+               # the law of our own scenario is the one law our agents may import
+               ENV_TRUSTED_LAWS: ",".join(filter(None, [self.cfg.scenario.gains.law,
+                                                        os.environ.get(ENV_TRUSTED_LAWS)]))}
         try:
             return self.group.start(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, env=env)
         finally:
@@ -135,8 +139,9 @@ class Launcher:
         def ready() -> bool:  # True: connected, or no point in trying any more
             if self.stop_signal is not None or self.world_exit_code() is not None:
                 return True
-            try:
-                ses = open_client(self.endpoint, timeout_ms=500)
+            try:  # the world writes the run's credentials before it listens
+                creds = credentials.read(credentials.run_file(self.cfg.run))
+                ses = open_client(self.endpoint, timeout_ms=500, creds=creds)
             except Exception:
                 return False
             if any(r.ok for r in ses.liveliness().get(wire.world_alive_key(self.cfg.run), timeout=1.0)):

@@ -2,17 +2,21 @@
 over zenoh (liveliness, queries, puts), never through files of the running processes,
 so it works the same when the swarm runs on other machines.
 
-Finding a run: with --connect EP, that endpoint; otherwise every Unix socket of local
-runs in the runtime dir ($SWARM_RUNTIME_DIR or /tmp/swarm-<uid>). With --run ID, that
-run; otherwise the only one found.
+Finding a run: every run has a credentials file (swarm/contracts/credentials.py) and the
+CLI connects as the run's operator with it. With --credentials FILE (or
+$SWARM_CREDENTIALS), that file's run; otherwise the local runs in the runtime dir
+($SWARM_RUNTIME_DIR or /tmp/swarm-<uid>), those on --connect EP if given. With --run
+ID, that run; otherwise the only one found.
 """
 
 from __future__ import annotations
 
 import socket as so
 from dataclasses import dataclass
+from pathlib import Path
 
-from swarm.contracts import wire
+from swarm.contracts import credentials, wire
+from swarm.contracts.credentials import Credentials, CredentialsError
 from swarm.contracts.transport import QUERY_TIMEOUT, open_client, query_statuses, runtime_dir, socket_path
 
 
@@ -24,6 +28,7 @@ class NoRun(Exception):
 class RunRef:
     run: str
     endpoint: str
+    creds: Credentials | None = None
 
 
 def _socket_answers(path) -> bool:
@@ -38,48 +43,66 @@ def _socket_answers(path) -> bool:
         s.close()
 
 
-def local_endpoints() -> list[str]:
-    """Endpoints of local runs whose sockets accept connections (stale ones are skipped)."""
-    d = runtime_dir()
-    return [f"unixsock-stream/{p}" for p in sorted(d.glob("*.sock")) if _socket_answers(p)]
-
-
-def runs_on(endpoint: str, timeout: float = 0.5) -> list[str]:
-    """Run ids whose world is alive on `endpoint` ([] if it does not answer)."""
-    path = socket_path(endpoint)
+def world_answers(ref: RunRef, timeout: float = 0.5) -> bool:
+    """Whether the world of `ref` is alive on its endpoint (and lets these credentials in)."""
+    path = socket_path(ref.endpoint)
     if path is not None and not _socket_answers(path):
-        return []
+        return False
     try:
-        ses = open_client(endpoint, timeout_ms=int(timeout * 1000))
+        ses = open_client(ref.endpoint, timeout_ms=int(timeout * 1000), creds=ref.creds)
     except Exception:
-        return []
+        return False
     try:
-        replies = ses.liveliness().get(wire.ANY_WORLD_ALIVE, timeout=timeout)
-        return sorted({wire.run_of_key(str(r.ok.key_expr)) for r in replies if r.ok is not None})
+        replies = ses.liveliness().get(wire.world_alive_key(ref.run), timeout=timeout)
+        return any(r.ok is not None for r in replies)
     finally:
         ses.close()
 
 
-def find_runs(connect: str | None = None) -> list[RunRef]:
-    endpoints = [connect] if connect else local_endpoints()
-    return [RunRef(run, ep) for ep in endpoints for run in runs_on(ep)]
+def candidates(connect: str | None = None, creds_file: Path | None = None) -> list[RunRef]:
+    """The runs these options point at, before asking any world: a credentials file's run,
+    or the local runs (on `connect` only, if given)."""
+    given = credentials.read(creds_file) if creds_file is not None else credentials.from_environment()
+    if given is not None:
+        return [RunRef(given.run, connect or given.endpoint, given)]
+    return [RunRef(c.run, c.endpoint, c) for c in credentials.local_runs()
+            if connect is None or c.endpoint == connect]
 
 
-def resolve(connect: str | None = None, run: str | None = None) -> RunRef:
+def find_runs(connect: str | None = None, creds_file: Path | None = None) -> list[RunRef]:
+    """The runs these options point at whose world answers."""
+    try:
+        refs = candidates(connect, creds_file)
+    except CredentialsError as e:
+        raise NoRun(str(e)) from None
+    return [r for r in refs if world_answers(r)]
+
+
+def where_looked(connect: str | None = None, creds_file: Path | None = None) -> str:
+    if creds_file is not None:
+        return str(creds_file)
+    env = credentials.from_environment_path()
+    if env is not None:
+        return f"{env} ($SWARM_CREDENTIALS)"
+    return f"local runs in {runtime_dir()}" + (f" on {connect}" if connect else "")
+
+
+def resolve(connect: str | None = None, run: str | None = None, creds_file: Path | None = None) -> RunRef:
     """The run a command should talk to, or NoRun with a one-line reason."""
-    where = connect or f"local runs in {runtime_dir()}"
-    if run is not None and connect is not None:
+    if run is not None:
         try:
             wire.check_run_id(run)
         except wire.WireError as e:
             raise NoRun(str(e)) from None
-    found = find_runs(connect)
+    where = where_looked(connect, creds_file)
+    found = find_runs(connect, creds_file)
     if run is not None:
         found = [r for r in found if r.run == run]
     if not found:
         what = f"run {run!r}" if run else "no swarm is running"
         raise NoRun(f"{what} not found: looked at {where}" if run else f"{what}: looked at {where} "
-                    "(start one with `swarm up SCENARIO`, or pass --connect ENDPOINT)")
+                    "(start one with `swarm up SCENARIO`; for a run on another machine pass "
+                    "--credentials FILE from `swarm credentials`)")
     if len(found) > 1:
         raise NoRun(f"{len(found)} runs found ({', '.join(f'{r.run} on {r.endpoint}' for r in found)}); "
                     "pick one with --run")
@@ -95,7 +118,7 @@ class LiveRun:
 
     def __enter__(self) -> "LiveRun":
         try:
-            self.session = open_client(self.ref.endpoint, timeout_ms=1000)
+            self.session = open_client(self.ref.endpoint, timeout_ms=1000, creds=self.ref.creds)
         except Exception as e:
             raise NoRun(f"cannot connect to {self.ref.endpoint}: {e}") from None
         return self

@@ -15,6 +15,7 @@ import json
 import sys
 import time
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Annotated, Iterator, Optional
 
 import typer
@@ -32,6 +33,10 @@ ConnectOpt = Annotated[Optional[str], typer.Option(
 RunOpt = Annotated[Optional[str], typer.Option(
     "--run", help="run id (default: the only live run found)", show_default=False)]
 JsonOpt = Annotated[bool, typer.Option("--json", help="machine-readable JSON (see docs/cli.md)")]
+CredentialsOpt = Annotated[Optional[Path], typer.Option(
+    "--credentials", metavar="FILE", help="the run's credentials (default: $SWARM_CREDENTIALS, else the "
+    "local run's own file); for a run on another machine, a file from `swarm credentials`",
+    show_default=False)]
 
 
 def fail(message: str, code: int = EXIT_NO_RUN) -> typer.Exit:
@@ -45,18 +50,19 @@ def _one_line(e: BaseException | str) -> str:
 
 
 @contextmanager
-def attached(connect: str | None, run: str | None) -> Iterator:
+def attached(connect: str | None, run: str | None, creds: Path | None = None) -> Iterator:
     """A LiveRun on the run picked by --connect/--run; any failure to reach it (or its world
     ending mid-command) becomes one line on stderr and exit 1."""
-    from swarm.live import LiveRun, NoRun, resolve
+    from swarm.contracts.credentials import CredentialsError
     from swarm.contracts.wire import WireError
+    from swarm.live import LiveRun, NoRun, resolve
 
     try:
-        with LiveRun(resolve(connect, run)) as live:
+        with LiveRun(resolve(connect, run, creds)) as live:
             yield live
     except typer.Exit:
         raise
-    except (NoRun, WireError) as e:
+    except (NoRun, WireError, CredentialsError) as e:
         raise fail(_one_line(e)) from None
     except Exception as e:  # zenoh errors: a clear line, never a traceback
         raise fail(f"cannot talk to the run: {_one_line(e)}") from None
@@ -76,6 +82,7 @@ def _dumps(obj) -> str:
 def runs(
     connect: ConnectOpt = None,
     run: RunOpt = None,
+    credentials: CredentialsOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
     """List the live runs reachable: id, endpoint, scenario, tick, clock, agents live/total.
@@ -85,10 +92,12 @@ def runs(
 
     Example: swarm runs --connect tcp/10.0.0.5:7447 --json
     """
-    from swarm.live import LiveRun, find_runs
-    from swarm.contracts.transport import runtime_dir
+    from swarm.live import LiveRun, NoRun, find_runs, where_looked
 
-    found = [r for r in find_runs(connect) if run is None or r.run == run]
+    try:
+        found = [r for r in find_runs(connect, credentials) if run is None or r.run == run]
+    except NoRun as e:
+        raise fail(_one_line(e)) from None
     docs = []
     for ref in found:
         doc = {"run": ref.run, "endpoint": ref.endpoint, "scenario": None, "clock": None, "paused": None,
@@ -107,7 +116,7 @@ def runs(
         docs.append(doc)
     if as_json:
         typer.echo(_dumps(docs))
-    where = connect or f"local runs in {runtime_dir()}"
+    where = where_looked(connect, credentials)
     if not docs:
         raise fail(f"run {run!r} not found: looked at {where}" if run else
                    f"no swarm is running: looked at {where} (start one with `swarm up SCENARIO`, "
@@ -119,6 +128,7 @@ def runs(
 def agents(
     connect: ConnectOpt = None,
     run: RunOpt = None,
+    credentials: CredentialsOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
     """One row per agent: pid, host, alive, out-neighbour, hops, errors, command age, missed ticks.
@@ -130,7 +140,7 @@ def agents(
 
     Example: swarm agents --json
     """
-    with attached(connect, run) as live:
+    with attached(connect, run, credentials) as live:
         snap = snapshot(live)
     info = snap["info"]
     if as_json:
@@ -146,6 +156,7 @@ def agents(
 def graph(
     connect: ConnectOpt = None,
     run: RunOpt = None,
+    credentials: CredentialsOpt = None,
     as_json: JsonOpt = False,
     dot: Annotated[bool, typer.Option("--dot", help="Graphviz DOT (pipe into `dot -Tpng`)")] = False,
     watch: Annotated[bool, typer.Option("--watch", help="redraw whenever the graph changes, "
@@ -176,7 +187,7 @@ def graph(
                 con.print()
             con.print(graph_renderable(g))
 
-    with attached(connect, run) as live:
+    with attached(connect, run, credentials) as live:
         g = graph_of(snapshot(live, sensing), sensing)
         if not watch:
             show(g, True)
@@ -215,6 +226,7 @@ def graph(
 def watch(
     connect: ConnectOpt = None,
     run: RunOpt = None,
+    credentials: CredentialsOpt = None,
     rate: Annotated[float, typer.Option(help="refreshes per second", min=0.2, max=30.0)] = 4.0,
 ) -> None:
     """A live terminal view: a top-down picture of the run beside the agents table.
@@ -234,7 +246,7 @@ def watch(
     period = 1.0 / rate
     tty = sys.stdout.isatty()
     con = _console()
-    with attached(connect, run) as live:
+    with attached(connect, run, credentials) as live:
         snap = snapshot(live)
         ended_at: float | None = None
 

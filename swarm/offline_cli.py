@@ -48,6 +48,9 @@ def check(scenario: ScenarioArg) -> None:
     typer.echo(f"{scenario}: ok - {s.name or scenario.stem}")
     typer.echo(f"  run: dt={r.dt} s, duration={r.duration} s ({r.ticks} ticks), clock={r.clock}, "
                f"seed={r.seed}, on_dropout={r.on_dropout}")
+    ids = s.added_id_range
+    typer.echo(f"  added agents: up to {s.added_agents_cap}"
+               + (f" (ids {ids.start}..{ids.stop - 1})" if ids else " (run.max_added_agents = 0)"))
     typer.echo(f"  target: ({s.target.x}, {s.target.y}) m; gains: law={s.gains.law}, "
                f"c1={s.gains.c1}, c2={s.gains.c2}")
     sens = s.sensing

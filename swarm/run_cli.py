@@ -12,6 +12,7 @@ from typing import Annotated, Optional
 import typer
 
 from swarm.offline_cli import ScenarioArg, export_results, fail, read_scenario, render_run_plots
+from swarm.live_cli import CredentialsOpt
 
 
 def _out_option(help: str):
@@ -49,9 +50,18 @@ def _claim_out(out: Path, force: bool) -> None:
         raise fail(str(e), 2) from None
 
 
-def _check_duration(duration: float | None, dt: float) -> None:
-    if duration is not None and duration < dt:
-        raise fail(f"--duration {duration} s is shorter than one step (dt = {dt} s)")
+def _check_duration(s, duration: float | None, path: Path) -> None:
+    """--duration goes through the scenario's own checks (finite, at least one step, a
+    recording that fits in memory): one line naming the option, exit 2."""
+    if duration is None:
+        return
+    from swarm.contracts.scenario import ScenarioError, parse_scenario
+
+    try:
+        parse_scenario({**s.model_dump(), "run": {**s.run.model_dump(), "duration": duration}},
+                       f"{path} with --duration {duration:g}")
+    except ScenarioError as e:
+        raise fail(" ".join(line.strip() for line in str(e).splitlines())) from None
 
 
 def _check_clock(clock: str | None) -> None:
@@ -110,7 +120,7 @@ def sim(
     from world.recording import EXIT_NO_SPACE, RECORDING_FILE, RecordingError, write_run
 
     s = read_scenario(scenario)
-    _check_duration(duration, s.run.dt)
+    _check_duration(s, duration, scenario)
     out = out or default_out(scenario, "sim")
     _claim_out(out, force)
     total = int(round((duration or s.run.duration) / s.run.dt))
@@ -157,6 +167,7 @@ def world(
     from world.process import WorldConfig, run_world
 
     s = read_scenario(scenario)
+    _check_duration(s, duration, scenario)
     run = run or _new_run_id(scenario)
     try:
         check_run_id(run)
@@ -199,7 +210,7 @@ def up(
 
     s = read_scenario(scenario)
     _check_clock(clock)
-    _check_duration(duration, s.run.dt)
+    _check_duration(s, duration, scenario)
     run_id = _new_run_id(scenario)
     out = out or Path("runs") / run_id
     _claim_out(out, force)
@@ -284,17 +295,28 @@ def agent(
     wait_world: Annotated[bool, typer.Option(help="keep waiting when the world vanishes")] = False,
     world_grace: Annotated[float, typer.Option(help="s to wait for a world that stopped answering (a "
                                                "frozen or cut-off world; exit 5 after that)", min=0.0)] = 10.0,
+    credentials: CredentialsOpt = None,
+    trust_law: Annotated[Optional[list[str]], typer.Option(
+        "--trust-law", metavar="MODULE:FUNCTION",
+        help="a follower law of your own this agent may import if the run uses it (repeatable; "
+             "built-in laws need nothing)")] = None,
 ) -> None:
     """Run one agent process; it takes its initial state from the world, so only its id is needed.
+
+    It connects as agent-ID with the run's credentials: --credentials FILE, else
+    $SWARM_CREDENTIALS, else the local run's file in the runtime directory. On another
+    machine, use a file from `swarm credentials --agent ID` (see README, "Agents on other
+    machines").
 
     Exit codes: 0 the run ended, 1 crashed (e.g. an exception in its law), 3 refused,
     4 the world vanished, 5 the world did not answer within --world-grace, 130/143 stopped.
 
-    Example: swarm agent --id 3 --connect tcp/127.0.0.1:7447
+    Example: swarm agent --id 3 --connect tcp/10.0.0.5:7447 --credentials agent-3.cred
     """
     from agents.process import run_agent
 
-    raise typer.Exit(run_agent(id, connect, run, wait_world, world_grace=world_grace))
+    raise typer.Exit(run_agent(id, connect, run, wait_world, world_grace=world_grace, creds_file=credentials,
+                               trust=tuple(trust_law or ())))
 
 
 def register(app: typer.Typer) -> None:

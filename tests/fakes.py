@@ -25,6 +25,7 @@ class FakeQuery:
     payload_bytes: bytes | None = None
     parameters: str = ""
     replies: list = field(default_factory=list)
+    key_expr: str = ""
 
     @property
     def payload(self):

@@ -309,8 +309,29 @@ class Runtime:
 
 
 # --- observing a live run ----------------------------------------------------------------------
-def open_session(endpoint: str, timeout: float = 15.0, check: Callable[[], None] | None = None):
-    """A zenoh client session of this test process on `endpoint`, retried until it listens.
+def run_credentials(endpoint: str, run: str):
+    """The credentials of a local run (from the runtime dir its socket is in), or None
+    while the world has not written them."""
+    from swarm.contracts import credentials
+    from swarm.contracts.transport import socket_path
+
+    path = socket_path(endpoint).parent / f"{run}{credentials.SUFFIX}"
+    try:
+        return credentials.read(path)
+    except credentials.CredentialsError:
+        return None
+
+
+def open_hub(rt: "Runtime") -> None:
+    """Processes this runtime starts from now on open their hub to anyone (SWARM_OPEN_HUB):
+    for tests of what garbage from a stranger does behind the hub's checks."""
+    rt.env["SWARM_OPEN_HUB"] = "1"
+
+
+def open_session(endpoint: str, timeout: float = 15.0, check: Callable[[], None] | None = None,
+                 creds=None, user: str = "operator"):
+    """A zenoh client session of this test process on `endpoint` (as `user` with `creds`;
+    without, a stranger, which only an open hub lets in), retried until it listens.
     `check()` runs before each try (to fail early, e.g. when the process to listen exited)."""
     from swarm.contracts.transport import open_client
 
@@ -318,7 +339,7 @@ def open_session(endpoint: str, timeout: float = 15.0, check: Callable[[], None]
         if check is not None:
             check()
         try:
-            return open_client(endpoint, timeout_ms=500)
+            return open_client(endpoint, timeout_ms=500, creds=creds, user=user)
         except Exception:
             return None
 
@@ -346,8 +367,11 @@ class Observer:
         def attempt():
             if check is not None:
                 check()
+            creds = run_credentials(endpoint, run)
+            if creds is None:  # the world writes them just before it listens
+                return None
             try:
-                return LiveRun(RunRef(run, endpoint)).__enter__()
+                return LiveRun(RunRef(run, endpoint, creds)).__enter__()
             except NoRun:  # not listening yet
                 return None
 

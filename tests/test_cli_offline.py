@@ -184,3 +184,62 @@ def test_check_with_unknown_law_exits_2_naming_the_field(bad_law_file):
     res = invoke("check", bad_law_file)
     assert res.exit_code == 2
     assert "gains.law" in res.stderr
+
+
+# -- scenario values that cannot run: `swarm check` exits 2 with one line naming file and field --
+
+def _check_fails(path, *fragments):
+    res = invoke("check", path)
+    assert res.exit_code == 2, res.output
+    assert isinstance(res.exception, SystemExit)
+    assert "Traceback" not in res.output and "ok" not in res.stdout
+    assert str(path) in res.stderr
+    for frag in fragments:
+        assert frag in res.stderr, f"{frag!r} not in {res.stderr!r}"
+    return res.stderr.strip().splitlines()
+
+
+def test_check_rejects_inf_duration(base, write_toml):
+    path = write_toml(base)
+    path.write_text(path.read_text().replace("duration = 10.0", "duration = inf"))
+    lines = _check_fails(path, "run.duration", "finite")
+    assert lines == [f"{path}: invalid scenario", "  run.duration: Input should be a finite number"]
+
+
+def test_check_rejects_a_recording_too_large_for_memory(base, write_toml):
+    base["run"].update(dt=0.001, duration=1e5)  # 1e8 ticks x (3 + 12) agents
+    lines = _check_fails(write_toml(base), "run.duration", "1.5e+09 agent-ticks", "2e8", "larger run.dt")
+    assert len(lines) == 2
+
+
+def test_check_rejects_more_agents_than_the_wire_carries(base, write_toml):
+    base["run"]["max_added_agents"] = 9998
+    _check_fails(write_toml(base), "run.max_added_agents", "10001 agents", "(10000)")
+
+
+def test_check_rejects_added_ids_past_the_wire(base, write_toml):
+    base["agents"][2]["id"] = 2**31 - 2
+    base["run"]["max_added_agents"] = 5
+    _check_fails(write_toml(base), "agents[2].id", "2147483647", "run.max_added_agents = 1 or fewer")
+
+
+def test_check_rejects_deep_nesting_in_one_line(tmp_path):
+    path = tmp_path / "deep.toml"
+    path.write_text("a = " + "[" * 100_000 + "]" * 100_000)
+    assert _check_fails(path, "nested too deeply") == [
+        f"{path}: nested too deeply (arrays or tables inside one another)"]
+
+
+def test_check_rejects_a_binary_file(tmp_path):
+    path = tmp_path / "binary.toml"
+    path.write_bytes(bytes(range(256)))
+    assert len(_check_fails(path, "cannot read: not UTF-8 text")) == 1
+
+
+def test_check_shows_the_added_agents(base, write_toml):
+    res = invoke("check", write_toml(base))
+    assert res.exit_code == 0, res.output
+    assert "  added agents: up to 12 (ids 4..15)\n" in res.stdout
+    base["run"]["max_added_agents"] = 0
+    res = invoke("check", write_toml(base))
+    assert "  added agents: up to 0 (run.max_added_agents = 0)\n" in res.stdout

@@ -31,7 +31,7 @@ import psutil
 import pytest
 from typer.testing import CliRunner
 
-from runtime_helpers import SCENARIOS, Runtime, start_up, swarm_cmd, wait_for
+from runtime_helpers import SCENARIOS, Runtime, run_credentials, start_up, swarm_cmd, wait_for
 from swarm.procs import wait_until
 from swarm import watch as W
 from swarm.cli import app
@@ -362,7 +362,7 @@ def _json(*args):
 def _statuses(state):
     from swarm.live import LiveRun, RunRef
 
-    with LiveRun(RunRef(state["run"], state["endpoint"])) as lv:
+    with LiveRun(RunRef(state["run"], state["endpoint"], run_credentials(state["endpoint"], state["run"]))) as lv:
         return lv.statuses(), lv.info()
 
 
@@ -447,7 +447,7 @@ def test_pause_and_resume(live):
     res = invoke("pause")
     assert res.exit_code == 0 and "paused at tick" in res.stdout, res.output
     try:
-        with LiveRun(RunRef(live["run"], live["endpoint"])) as lv:
+        with LiveRun(RunRef(live["run"], live["endpoint"], run_credentials(live["endpoint"], live["run"]))) as lv:
             a = lv.info()
             time.sleep(0.3)
             b = lv.info()
@@ -458,7 +458,7 @@ def test_pause_and_resume(live):
     finally:
         res2 = invoke("resume")
     assert res2.exit_code == 0 and "resumed at tick" in res2.stdout, res2.output
-    with LiveRun(RunRef(live["run"], live["endpoint"])) as lv:
+    with LiveRun(RunRef(live["run"], live["endpoint"], run_credentials(live["endpoint"], live["run"]))) as lv:
         t0 = lv.info()["tick"]
         wait_for(lambda: lv.info()["tick"] > t0 + 5, 3, "ticks after resume")
         assert not lv.info()["paused"]

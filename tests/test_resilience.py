@@ -26,8 +26,8 @@ import numpy as np
 import psutil
 import pytest
 
-from runtime_helpers import (SCENARIOS, agent_info, check_time_column, events_of, open_session, replay_events, run_sim,
-                             start_up, swarm_cmd, wait_for)
+from runtime_helpers import (SCENARIOS, agent_info, check_time_column, events_of, open_hub, open_session,
+                             replay_events, run_sim, start_up, swarm_cmd, wait_for)
 from malformed import (
     ADMIN_BAD,
     BAD_JSON,
@@ -89,6 +89,7 @@ def _case2_beside_sim(rt, tmp_path):
     """case2 for 30 s by `swarm sim`, then through `swarm up` (lockstep), as it starts:
     (sim trajectory, the run, its run id, a zenoh session of this test process on it)."""
     scen = SCENARIOS / "case2.toml"
+    open_hub(rt)  # the stranger gets in: what the world's own checks do behind the hub's
     sim, _ = run_sim(rt.tracker, scen, tmp_path / "sim", "--duration", "30")
     up = start_up(rt.tracker, scen, tmp_path / "run", "--clock", "lockstep", "--duration", "30")
     run_id, endpoint = up.banner()
@@ -341,7 +342,7 @@ def garbage_plan(run: str, rng: random.Random) -> list[tuple[str, str, bytes]]:
             ("put", wire.truth_key(run), _oversized(rng)),
             ("get", wire.world_admin_key(run), _oversized(rng, b'{"v": 1, "cmd": "pause"}')),
             ("get", wire.world_admin_key(run), _oversized(rng)),
-            ("get", wire.world_join_key(run), _oversized(rng)),
+            ("get", wire.agent_key(run, 3, "join"), _oversized(rng)),
             ("get", wire.world_info_key(run), _oversized(rng)),
             ("get", wire.agent_key(run, 4, "status"), _oversized(rng))]
     plan += big
@@ -359,7 +360,7 @@ def garbage_plan(run: str, rng: random.Random) -> list[tuple[str, str, bytes]]:
     add(counts["events"], lambda: ("put", wire.events_key(run), rng.choice(EVENTS_BAD)))
     add(counts["truth"], lambda: ("put", wire.truth_key(run), _truth_bad(rng)))
     add(counts["admin"], lambda: ("get", wire.world_admin_key(run), rng.choice(ADMIN_BAD)))
-    add(counts["join"], lambda: ("get", wire.world_join_key(run), rng.choice(JOIN_BAD)))
+    add(counts["join"], lambda: ("get", wire.agent_key(run, rng.choice(some), "join"), rng.choice(JOIN_BAD)))
     add(counts["info"], lambda: ("get", wire.world_info_key(run) + rng.choice(
         ["", "?sensing=maybe", "?x=1;y", "?;;;", "?sensing=0;sensing=1"]), rng.choice(BAD_JSON)))
     add(counts["status"], lambda: ("get", wire.agent_key(run, rng.choice(some), "status"), rng.choice(BAD_JSON)))
@@ -402,6 +403,7 @@ def send_garbage(ses, plan) -> dict:
 
 
 def test_malformed_messages_on_every_key(rt, tmp_path):
+    open_hub(rt)  # a stranger sends it: behind the hub's checks (tests/test_access.py tests those)
     up, run_id, endpoint, agents = _realtime_case2(rt, tmp_path)
     world = rt.tracker.world_pid(up.launcher)
     assert world is not None
@@ -509,6 +511,7 @@ def test_rogue_commands_change_nothing(rt, tmp_path):
 @pytest.mark.parametrize("fault", [{"agent": [4], "kind": "kill"}, {"agent": "a/b", "kind": "restart"}],
                          ids=["list-agent", "path-agent"])
 def test_launcher_survives_malformed_fault_notice(rt, tmp_path, fault):
+    open_hub(rt)  # a stranger sends it: behind the hub's checks (tests/test_access.py tests those)
     up, run_id, endpoint, agents = _realtime_case2(rt, tmp_path)
     ses = open_session(endpoint)
     try:
@@ -533,6 +536,7 @@ def test_launcher_survives_truth_of_unknown_agent(rt, tmp_path):
     """Well-formed ground truth with an agent the scenario file does not have (what the world
     itself sends once `swarm spawn` adds one, or a stranger on the truth key): the launcher's
     progress line skips it. (It used to raise KeyError in Launcher.progress and end the run.)"""
+    open_hub(rt)  # a stranger sends it: behind the hub's checks (tests/test_access.py tests those)
     up, run_id, endpoint, agents = _realtime_case2(rt, tmp_path)
     ids = np.array([1, 99])
     buf = wire.encode_truth(5, 0.05, ids, np.array([28.0, 10.0]), np.zeros(2), np.zeros(2), np.zeros(2),

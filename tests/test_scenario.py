@@ -11,7 +11,9 @@ import pytest
 from typer.testing import CliRunner
 
 from swarm.cli import app
+from swarm.contracts import scenario as scenario_module
 from swarm.contracts.scenario import Scenario, ScenarioError, load_scenario, parse_scenario
+from swarm.contracts.wire import MAX_AGENT_ID, MAX_AGENTS
 
 SCENARIOS = sorted((Path(__file__).resolve().parent.parent / "scenarios").glob("*.toml"))
 
@@ -87,6 +89,34 @@ BAD = [
     # v / max_turn_rate = 1.0 / 0.25 = 4 m > R = 2 m
     ("unreachable-orbit", _set("agents.0.max_turn_rate", 0.25), ["agents[0].orbit_radius", "not reachable"]),
     ("no-agents", _set("agents", []), ["agents"]),
+    # values that validate one by one but cannot run (base: 3 agents, dt 0.05 s, 10 s)
+    ("inf-duration", _set("run.duration", math.inf), ["run.duration", "finite"]),
+    ("nan-duration", _set("run.duration", math.nan), ["run.duration", "finite"]),
+    ("inf-dt", _set("run.dt", math.inf), ["run.dt", "finite"]),
+    ("nan-dt", _set("run.dt", math.nan), ["run.dt", "finite"]),
+    ("huge-duration", _set("run.duration", 1e300),
+     ["run.duration", "2e+301 steps", "2e8 agent-ticks", "shorter run.duration or a larger run.dt"]),
+    ("steps-overflow", _all(_set("run.duration", 1e300), _set("run.dt", 1e-300)),
+     ["run.duration", "inf steps", "larger run.dt"]),
+    ("duration-under-half-a-step", _set("run.duration", 0.02),
+     ["run.duration", "shorter than one step (dt = 0.05 s)"]),
+    # 1e8 ticks x (3 + 12) agents
+    ("recording-too-large", _all(_set("run.dt", 0.001), _set("run.duration", 1e5)),
+     ["run.duration", "100000000 ticks x 15 agents", "1.5e+09 agent-ticks", "2e8", "larger run.dt"]),
+    ("added-agents-over-wire", _set("run.max_added_agents", 9998),
+     ["run.max_added_agents", "10001 agents", "wire carries (10000)", "9997 or fewer"]),
+    ("added-agents-above-limit", _set("run.max_added_agents", 10**6), ["run.max_added_agents", "10000"]),
+    ("negative-added-agents", _set("run.max_added_agents", -1), ["run.max_added_agents"]),
+    ("added-ids-past-wire", lambda d: (d["run"].update(max_added_agents=12), d["agents"][2].update(id=2**31 - 5)),
+     ["agents[2].id", "2147483644..2147483655", "2147483647", "run.max_added_agents = 4 or fewer"]),
+    ("negative-id", _set("agents.2.id", -3), ["agents[2].id", "greater than or equal to 0"]),
+    ("huge-id", _set("agents.2.id", 10**400), ["agents[2].id", "2147483647"]),
+    ("huge-follow", _set("agents.2.follow", 10**400), ["agents[2].follow", "2147483647"]),
+    ("huge-fault-agent", _set("faults", [{"at": 1.0, "kind": "kill", "agent": 10**400}]),
+     ["faults[0].agent", "2147483647"]),
+    ("negative-seed", _set("run.seed", -1), ["run.seed", "greater than or equal to 0"]),
+    ("huge-seed", _set("run.seed", 10**400), ["run.seed", "less than or equal to"]),
+    ("relative-law-module", _set("gains.law", ".nowhere:law"), ["gains.law", "cannot import"]),
 ]
 
 
@@ -234,3 +264,136 @@ def test_toml_writer_round_trips(base, write_toml):
     # the conftest writer is what every bad-input case relies on
     with open(write_toml(base), "rb") as f:
         assert tomllib.load(f) == base
+
+
+# -- added agents, and what the wire and the recording can hold -------------------------
+
+def test_added_agents_default_to_four_per_scenario_agent(base):
+    s = parse_scenario(base)
+    assert s.run.max_added_agents is None
+    assert s.added_agents_cap == 12
+    assert s.added_id_range == range(4, 16)
+
+
+def test_added_agents_set_explicitly(base):
+    base["agents"][2]["id"] = 30
+    base["run"]["max_added_agents"] = 5
+    s = parse_scenario(base)
+    assert s.added_agents_cap == 5
+    assert s.added_id_range == range(31, 36)
+
+
+def test_no_added_agents_allows_the_largest_id(base):
+    base["run"]["max_added_agents"] = 0
+    base["agents"][2]["id"] = MAX_AGENT_ID
+    s = parse_scenario(base)
+    assert s.added_agents_cap == 0 and len(s.added_id_range) == 0
+
+
+def test_added_ids_up_to_the_largest_wire_id(base):
+    base["agents"][2]["id"] = MAX_AGENT_ID - 12
+    assert parse_scenario(base).added_id_range[-1] == MAX_AGENT_ID
+
+
+def _leaders(n: int) -> list[dict]:
+    return [{"id": i, "role": "leader", "x": float(i), "y": 0.0, "heading": 0.0, "speed": 1.0,
+             "orbit_radius": 2.0} for i in range(n)]
+
+
+def test_more_agents_than_the_wire_carries(base):
+    base["agents"] = _leaders(MAX_AGENTS + 1)
+    with pytest.raises(ScenarioError, match=r"\n  agents: 10001 agents, more than the wire carries \(10000\)$"):
+        parse_scenario(base, "big.toml")
+
+
+def test_default_added_agents_stay_within_the_wire(base):
+    # 2001 agents: the default (4 x) would pass 10,000 agents, so it stops at what the wire carries
+    base["agents"] = _leaders(2001)
+    assert parse_scenario(base, "many.toml").added_agents_cap == 10_000 - 2001
+    # ... and below the largest id the wire carries
+    base["agents"] = _leaders(3)
+    base["agents"][2]["id"] = 2**31 - 5
+    assert parse_scenario(base).added_agents_cap == 4
+    # set by hand, past the wire: refused, with what to set instead
+    base["agents"] = _leaders(2001)
+    base["run"]["max_added_agents"] = 8004
+    with pytest.raises(ScenarioError) as exc:
+        parse_scenario(base, "many.toml")
+    msg = str(exc.value)
+    assert "run.max_added_agents: 10005 agents (2001 + 8004 that may be added)" in msg
+    assert "set run.max_added_agents = 7999 or fewer" in msg
+
+
+def test_recording_limit_counts_added_agents(base):
+    # 1e6 ticks x 15 agents = 1.5e7: fine; x 300 agents = 3e8: too much
+    base["run"].update(dt=0.01, duration=1e4)
+    assert parse_scenario(base).run.ticks == 10**6
+    base["run"]["max_added_agents"] = 297
+    with pytest.raises(ScenarioError, match=r"run\.duration: .*3e\+08 agent-ticks.*max_added_agents lower"):
+        parse_scenario(base)
+
+
+def test_inf_duration_in_toml_is_rejected(base, write_toml):
+    path = write_toml(base)
+    path.write_text(path.read_text().replace("duration = 10.0", "duration = inf"))
+    assert "duration = inf\n" in path.read_text()  # the TOML literal, as a user writes it
+    with pytest.raises(ScenarioError, match=r"run\.duration: Input should be a finite number"):
+        load_scenario(path)
+
+
+def test_schema_describes_max_added_agents():
+    prop = Scenario.model_json_schema()["$defs"]["RunSpec"]["properties"]["max_added_agents"]
+    assert prop["description"] == ("agents that may be added while the run goes (swarm spawn of a new id); "
+                                   "default 4 x the scenario's agents")
+
+
+# -- files that are not scenarios: always a ScenarioError naming the file --------------
+
+@pytest.mark.parametrize("text", [
+    pytest.param("a = " + "[" * 100_000 + "]" * 100_000, id="deep-arrays"),
+    pytest.param("a = " + "{b = " * 5_000 + "1" + "}" * 5_000, id="deep-inline-tables"),
+    pytest.param("gains = " + "[" * 600 + "]" * 600, id="deep-in-a-field"),
+])
+def test_nested_too_deeply(tmp_path, text):
+    path = tmp_path / "deep.toml"
+    path.write_text(text)
+    with pytest.raises(ScenarioError) as exc:
+        load_scenario(path)
+    assert str(exc.value) == f"{path}: nested too deeply (arrays or tables inside one another)"
+
+
+@pytest.mark.parametrize("raw, fragment", [
+    pytest.param(bytes(range(256)) * 4, "not UTF-8 text", id="binary"),
+    pytest.param(b'name = "\xff\xfe"\n', "not UTF-8 text (byte 8", id="latin-1"),
+    pytest.param(b"\x00\x00\x00", "TOML syntax error", id="nul-bytes"),
+    pytest.param(b"", "gains: Field required", id="empty"),
+    pytest.param(b"[run]\nseed = " + b"9" * 5000 + b"\n", "cannot parse: Exceeds the limit (4300 digits)",
+                 id="5000-digit-integer"),
+])
+def test_not_a_scenario_file(tmp_path, raw, fragment):
+    path = tmp_path / "odd.toml"
+    path.write_bytes(raw)
+    with pytest.raises(ScenarioError) as exc:
+        load_scenario(path)
+    assert str(exc.value).startswith(f"{path}: ")
+    assert fragment in str(exc.value)
+
+
+def test_file_larger_than_the_limit(tmp_path, monkeypatch, base, write_toml):
+    path = write_toml(base)
+    monkeypatch.setattr(scenario_module, "MAX_SCENARIO_BYTES", path.stat().st_size - 1)
+    with pytest.raises(ScenarioError, match=r"larger than .* MiB; not a scenario file"):
+        load_scenario(path)
+
+
+@pytest.mark.skipif(not Path("/dev/zero").exists(), reason="no /dev/zero")
+def test_endless_file_is_read_bounded(monkeypatch):
+    monkeypatch.setattr(scenario_module, "MAX_SCENARIO_BYTES", 1 << 16)
+    with pytest.raises(ScenarioError, match=r"^/dev/zero: larger than"):
+        load_scenario("/dev/zero")
+
+
+def test_byte_order_mark_and_crlf_are_read(base, write_toml):
+    path = write_toml(base)
+    path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes().replace(b"\n", b"\r\n"))
+    assert parse_scenario(base) == load_scenario(path)

@@ -31,11 +31,13 @@ def open_world():
     return world, ses
 
 
-def claim(world, aid: int) -> dict:
-    q = FakeQuery(wire.encode_join_request(aid, 100 + aid, "host"))
+def claim(world, aid: int, on: int | None = None) -> dict:
+    """Agent `aid` claims its id on agent `on`'s join key (default: its own)."""
+    key = wire.agent_key(RUN, aid if on is None else on, "join")
+    q = FakeQuery(wire.encode_join_request(aid, 100 + aid, "host"), key_expr=key)
     world._on_join(q)
-    ((key, payload),) = q.replies
-    assert key == wire.world_join_key(RUN)
+    ((reply_key, payload),) = q.replies
+    assert reply_key == key
     return wire.decode_join_reply(payload)
 
 

@@ -30,6 +30,23 @@ from world.roster import AgentBook, admit, new_agent_spec
 
 STALL_S = 0.8  # s the world's main thread may go without reaching its inbox (the link lease is 1 s)
 REJOIN_WAIT = 2.0  # s a token lost just after a stall of the world has to come back
+JOIN_RATE = 20.0  # join claims per s, on average (a bucket: every agent of the run may claim at once)
+
+
+class TokenBucket:
+    """At most `rate` per s on average, and `burst` at once."""
+
+    def __init__(self, rate: float, burst: float):
+        self.rate, self.burst, self.level, self.at = rate, burst, burst, None
+
+    def take(self, now: float) -> bool:
+        if self.at is not None:
+            self.level = min(self.burst, self.level + (now - self.at) * self.rate)
+        self.at = now
+        if self.level < 1.0:
+            return False
+        self.level -= 1.0
+        return True
 
 
 class Inbox:
@@ -137,14 +154,21 @@ class Inbox:
                 self._drop(aid, pending, f"liveliness token lost (not back {REJOIN_WAIT:g} s after the world's stall)")
 
     def _on_join(self, query) -> None:
+        if not self.join_limit.take(time.monotonic()):
+            self.limited("join_rate", f"more than {JOIN_RATE:g} join claims per s: claim refused")
+            query.reply(str(query.key_expr), wire.encode_join_reply(False, error="too many join claims; retry later"))
+            return
         try:
             req = wire.decode_join_request(query.payload.to_bytes() if query.payload else b"")
             aid = req["id"]
+            if wire.agent_of_key(str(query.key_expr)) != aid:
+                raise wire.WireError(f"a claim of agent {aid} on another agent's join key")
             if aid not in self.core.index:
                 if req.get("spec") is None:
                     raise wire.WireError(f"agent {aid} is not in scenario {self.cfg.scenario.name!r} "
                                          f"(ids: {', '.join(map(str, self.core.scenario.ids))}); "
                                          "a new agent needs a spec (swarm spawn --role --x --y ...)")
+                self._check_addable(aid)
                 self.add_agent(aid, req["spec"])
             key = admit(self.core, self.book[aid], req, time.monotonic())
             x, y, h = self.core.pose(aid)
@@ -153,7 +177,26 @@ class Inbox:
                                            brain=BrainConf.from_scenario(self.core.scenario, aid).to_json())
         except wire.WireError as e:
             reply = wire.encode_join_reply(False, error=str(e))
-        query.reply(wire.world_join_key(self.cfg.run), reply)
+        query.reply(str(query.key_expr), reply)
+
+    def _check_addable(self, aid: int) -> None:
+        """A new agent takes an id of the range the hub's access rules were made for, and
+        only as many join the run as the scenario allows (run.max_added_agents)."""
+        s = self.cfg.scenario
+        ids = s.added_id_range
+        if aid not in ids:
+            raise wire.WireError(f"agent {aid}: agents added to this run take ids {ids.start}..{ids.stop - 1}")
+        if len(self.book) - len(s.ids) >= s.added_agents_cap:
+            self.limited("added_agents", f"{s.added_agents_cap} agents added already (run.max_added_agents): "
+                         f"agent {aid} refused")
+            raise wire.WireError(f"agent {aid}: this run has added {s.added_agents_cap} agents already, "
+                                 "its limit (run.max_added_agents)")
+
+    def limited(self, what: str, reason: str) -> None:
+        """Something over a limit: counted each time, one event the first time."""
+        self.over_limit[what] = self.over_limit.get(what, 0) + 1
+        if self.over_limit[what] == 1:
+            self.event("limit", None, reason, limit=what)
 
     def add_agent(self, aid: int, spec: dict) -> None:
         """A new agent joins the run with its own spec (`swarm spawn`); raises WireError."""
@@ -169,7 +212,11 @@ class Inbox:
         return run_info(self.engine, self.book, {
             "run": self.cfg.run, "scenario": self.core.scenario.name, "clock": self.cfg.clock,
             "paused": self.paused, "endpoint": self.cfg.listen, "pid": os.getpid(), "host": socket.gethostname(),
-            "ticks": self.ticks, "started": self.started, "garbage": self.garbage, "ignored": self.ignored}, sensing)
+            "ticks": self.ticks, "started": self.started, "garbage": self.garbage, "ignored": self.ignored,
+            "over_limit": self.over_limit, "added_ids": [self.cfg.scenario.added_id_range.start,
+                                                         self.cfg.scenario.added_id_range.stop - 1],
+            "max_added": self.cfg.scenario.added_agents_cap, "added": len(self.book) - len(self.cfg.scenario.ids)},
+            sensing)
 
     def _on_info(self, query) -> None:
         params = str(query.parameters) if query.parameters is not None else ""

@@ -14,6 +14,7 @@ keys, publishing, results), `world/inbox.py` (what each message does) and
 
 from __future__ import annotations
 
+import os
 import queue
 import signal
 import sys
@@ -25,10 +26,11 @@ import numpy as np
 
 from swarm.contracts import wire
 from swarm.contracts.scenario import Scenario
-from swarm.contracts.transport import open_hub, query_statuses, socket_path
+from swarm.contracts import credentials
+from swarm.contracts.transport import HubAuth, open_hub, open_hub_requested, query_statuses, socket_path
 from world.clock import Clock
 from world.engine import Engine
-from world.inbox import Inbox
+from world.inbox import JOIN_RATE, Inbox, TokenBucket
 from world.recording import EXIT_NO_SPACE, RECORDING_FILE, RecordingError, write_run
 from world.roster import AgentBook, agent_figures
 
@@ -56,6 +58,7 @@ class WorldConfig:
     join_timeout: float | None = None  # s to wait for every agent before tick 0; None = forever
     deadline: float | None = None  # lockstep deadline override (s)
     progress: bool = True
+    auth: HubAuth | None = None  # who may connect and do what (None: an open hub)
 
 
 @dataclass
@@ -80,6 +83,9 @@ class World(Inbox, Clock):
         self.core = self.engine.core
         self.book = {i: AgentBook() for i in s.ids}
         self.garbage = 0  # malformed or foreign messages on keys the world listens to
+        self.over_limit: dict[str, int] = {}  # how often each limit refused something (world/inbox.py)
+        # Every agent (and every one that may be added) can claim at once, then JOIN_RATE per s.
+        self.join_limit = TokenBucket(JOIN_RATE, 2 * (len(s.ids) + s.added_agents_cap) + 10)
         self.ignored = 0
         self.deadline = self.cfg.deadline or s.run.lockstep_deadline
         self.stopped_by: int | None = None
@@ -97,7 +103,7 @@ class World(Inbox, Clock):
         """Declare the world's keys on `session` (default: a new hub on cfg.listen; tests
         pass a fake one, tests/fakes.py)."""
         run = self.cfg.run
-        self.session = session if session is not None else open_hub(self.cfg.listen)
+        self.session = session if session is not None else open_hub(self.cfg.listen, self.cfg.auth)
         ses = self.session
         put = self.inbox.put
         self._subs = [
@@ -106,7 +112,7 @@ class World(Inbox, Clock):
             ses.liveliness().declare_subscriber(wire.agent_key(run, "*", "alive"),
                                                 lambda s: put(("alive", str(s.key_expr), s.kind)),
                                                 history=True),
-            ses.declare_queryable(wire.world_join_key(run), lambda q: put(("join", q))),
+            ses.declare_queryable(wire.agent_key(run, "*", "join"), lambda q: put(("join", q))),
             ses.declare_queryable(wire.world_info_key(run), lambda q: put(("info", q))),
             ses.declare_queryable(wire.world_admin_key(run), lambda q: put(("admin", q))),
         ]
@@ -220,7 +226,7 @@ class World(Inbox, Clock):
             "engine": "up", "run": self.cfg.run, "endpoint": self.cfg.listen, "clock": self.cfg.clock,
             "time_scale": self.cfg.time_scale, "completed": self.stopped_by is None and c.tick >= self.ticks,
             "stopped_by_signal": self.stopped_by, "garbage_messages": self.garbage,
-            "ignored_messages": self.ignored, "rejected_commands": c.rejected,
+            "ignored_messages": self.ignored, "rejected_commands": c.rejected, "over_limit": self.over_limit,
             "wall_time": wall, "ticks_per_second": (c.tick / wall) if wall else None,
         }, agent_extra)
         return write_run(result, self.cfg.out_dir)
@@ -234,9 +240,52 @@ def _raise_stop(signum, _frame):
     raise Stop(signum)
 
 
+def run_auth(cfg: WorldConfig) -> HubAuth | None:
+    """The run's credentials, written to <runtime dir>/<run>.cred for its user only, and
+    the hub's rules built from them (None for an open hub: SWARM_OPEN_HUB=1)."""
+    if open_hub_requested():
+        print("swarm world: SWARM_OPEN_HUB is set: anyone who reaches the endpoint can act on this run",
+              file=sys.stderr, flush=True)
+    path = credentials.run_file(cfg.run)
+    if path.exists():
+        old = credentials.read(path)
+        if old.pid is not None and credentials.pid_alive(old.pid) and old.pid != os.getpid():
+            raise credentials.CredentialsError(f"run {cfg.run} is already running (world pid {old.pid})")
+    tls_settings, ca = None, None
+    if cfg.listen.startswith("tls/"):
+        from swarm.contracts import tls
+
+        tls_settings, ca = tls.run_hub_settings(credentials.runtime_dir(), cfg.run, cfg.listen)
+    creds = credentials.new_credentials(cfg.run, cfg.listen, pid=os.getpid(), tls_ca=ca,
+                                        open_hub=open_hub_requested())
+    credentials.write(creds, path)
+    if open_hub_requested():
+        return None
+    s = cfg.scenario
+    return HubAuth(creds, tuple(s.ids) + tuple(s.added_id_range), tls_settings)
+
+
 def run_world(cfg: WorldConfig) -> int:
     """Run a world to the end; exit code 0 when the run completed, 128+signal when stopped,
     EXIT_NO_SPACE when the recording or the results could not be written."""
+    try:
+        cfg.auth = run_auth(cfg)
+    except credentials.CredentialsError as e:
+        print(f"swarm world: {e}", file=sys.stderr)
+        return 2
+    try:
+        return _run_world(cfg)
+    finally:
+        credentials.run_file(cfg.run).unlink(missing_ok=True)
+        if cfg.listen.startswith("tls/"):
+            import shutil
+
+            from swarm.contracts.tls import run_tls_dir
+
+            shutil.rmtree(run_tls_dir(credentials.runtime_dir(), cfg.run), ignore_errors=True)
+
+
+def _run_world(cfg: WorldConfig) -> int:
     sock = socket_path(cfg.listen)
     if sock is not None and sock.exists():
         # A stale socket from a crashed run blocks listening; a live one belongs to a run.

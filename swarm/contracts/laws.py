@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import os
 from typing import Callable
 
 FollowerLaw = Callable[[float, float, float, float, float], float]
@@ -19,8 +20,29 @@ FollowerLaw = Callable[[float, float, float, float, float], float]
 LAW_NAMES: dict[str, str] = {"bearing": "agents.laws:bearing_law"}
 
 
+# A law named "module:function" is code: an agent imports it only when its own user said
+# so (the launcher names its scenario's law here; `swarm agent --trust-law`), never
+# because a join reply names it.
+ENV_TRUSTED_LAWS = "SWARM_TRUSTED_LAWS"
+
+
 class LawError(ValueError):
     """A law name that does not resolve to a callable."""
+
+
+def trusted_laws(extra: tuple[str, ...] | list[str] = ()) -> set[str]:
+    """Laws this process may import: $SWARM_TRUSTED_LAWS (comma-separated) and `extra`."""
+    env = os.environ.get(ENV_TRUSTED_LAWS, "")
+    return {n.strip() for n in env.split(",") if n.strip()} | set(extra)
+
+
+def check_trusted(name: str, trusted: set[str]) -> None:
+    """LawError unless `name` is registered (built in) or trusted by this process's user."""
+    if name in LAW_NAMES or name in trusted:
+        return
+    raise LawError(f"the world asks for follower law {name!r}, which this agent was not told to trust "
+                   f"(a law is code it would import): start it with --trust-law {name} or set "
+                   f"{ENV_TRUSTED_LAWS}={name}")
 
 
 def resolve_law(name: str) -> FollowerLaw:

@@ -4,7 +4,9 @@ The field names here are the contract between users, tools and every process of 
 run. Units: metres, seconds, radians, m/s and rad/s throughout.
 
 `load_scenario(path)` is the one entry point; every problem with a file comes out of
-it as a `ScenarioError` whose message names the file and the field.
+it as a `ScenarioError` whose message names the file and the field. That includes values
+that validate one by one but cannot run together: more agents than the wire carries, ids
+past its largest id, a recording too large for memory (see `Scenario._limits`).
 """
 
 from __future__ import annotations
@@ -24,8 +26,17 @@ from pydantic import (
     model_validator,
 )
 
+from swarm.contracts.wire import MAX_AGENT_ID, MAX_AGENTS
+
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
+AgentId = Annotated[int, Field(ge=0, le=MAX_AGENT_ID)]
+
+MAX_SEED = 2**63 - 1  # fits a signed 64-bit integer wherever the seed is stored
+MAX_SCENARIO_BYTES = 32 << 20  # a 10,000-agent scenario is about 1.5 MB
+# Trajectory arrays cost about 40 bytes per agent and tick: 2e8 agent-ticks is about 8 GB.
+MAX_AGENT_TICKS = 200_000_000
+_RECORDING_LIMIT = "2e8 agent-ticks (about 8 GB)"
 
 
 class _Strict(BaseModel):
@@ -41,7 +52,8 @@ class RunSpec(_Strict):
     clock: Literal["lockstep", "realtime"] = Field(
         "lockstep", description="lockstep: step when every agent answered; realtime: wall clock"
     )
-    seed: int = Field(0, description="seed for every random choice of the run")
+    seed: Annotated[int, Field(ge=0, le=MAX_SEED)] = Field(
+        0, description="seed for every random choice of the run (0 .. 2**63 - 1)")
     on_dropout: Literal["leave", "coast"] = Field(
         "leave",
         description="what the world does with a dead agent: leave the world, or coast uncontrolled",
@@ -50,6 +62,23 @@ class RunSpec(_Strict):
         0.5,
         description="lockstep: wall seconds to wait for a live agent's command before holding its last one",
     )
+    max_added_agents: Annotated[int, Field(ge=0, le=MAX_AGENTS)] | None = Field(
+        None,
+        description="agents that may be added while the run goes (swarm spawn of a new id); "
+                    "default 4 x the scenario's agents",
+    )
+
+    @model_validator(mode="after")
+    def _steps(self) -> "RunSpec":
+        steps = self.duration / self.dt
+        if not math.isfinite(steps) or steps > MAX_AGENT_TICKS:
+            # even one agent would be too many for the recording (the scenario checks agents x ticks)
+            raise ValueError(f"duration: {self.duration:g} s at dt = {self.dt:g} s is {steps:.3g} steps, more "
+                             f"than the recording limit of {_RECORDING_LIMIT}; use a shorter run.duration "
+                             f"or a larger run.dt")
+        if self.ticks == 0:
+            raise ValueError(f"duration: {self.duration:g} s is shorter than one step (dt = {self.dt:g} s)")
+        return self
 
     @property
     def ticks(self) -> int:
@@ -84,6 +113,8 @@ class GainsSpec(_Strict):
             check_law(name)
         except LawError as e:
             raise ValueError(str(e)) from None
+        except Exception as e:  # importing the module ran its code, and that failed
+            raise ValueError(f"follower law {name!r}: cannot import it: {type(e).__name__}: {e}") from None
         return name
 
 
@@ -112,7 +143,7 @@ class SensingSpec(_Strict):
 class AgentSpec(_Strict):
     """[[agents]]: one unicycle."""
 
-    id: Annotated[int, Field(ge=0, le=2**31 - 1, description="agent id (fits the int32 wire fields)")]
+    id: Annotated[AgentId, Field(description="agent id (fits the int32 wire fields)")]
     role: Literal["leader", "follower"]
     x: Finite
     y: Finite
@@ -120,7 +151,7 @@ class AgentSpec(_Strict):
     speed: PositiveFloat = Field(description="constant forward speed (m/s)")
     orbit_radius: PositiveFloat | None = Field(None, description="leaders: orbit radius (m)")
     direction: Literal["ccw", "cw"] = Field("ccw", description="leaders: orbit direction")
-    follow: int | None = Field(None, description="followers: fixed out-neighbour id")
+    follow: AgentId | None = Field(None, description="followers: fixed out-neighbour id")
     max_turn_rate: PositiveFloat | None = Field(None, description="turn-rate limit (rad/s)")
 
     @model_validator(mode="after")
@@ -155,7 +186,7 @@ class FaultSpec(_Strict):
 
     at: Annotated[float, Field(ge=0, allow_inf_nan=False)] = Field(description="simulated time (s)")
     kind: Literal["kill", "restart", "freeze", "thaw", "partition", "loss", "delay", "noise"]
-    agent: int | None = Field(None, description="agent id; loss/delay/noise without it hit every agent")
+    agent: AgentId | None = Field(None, description="agent id; loss/delay/noise without it hit every agent")
     duration: PositiveFloat | None = Field(None, description="partition/loss/delay/noise: how long (s)")
     probability: Annotated[float, Field(ge=0, le=1)] | None = Field(None, description="loss: per message")
     what: Literal["sense", "cmd", "both"] = Field("both", description="loss: which messages")
@@ -187,6 +218,14 @@ class Scenario(_Strict):
     sensing: SensingSpec = SensingSpec()
     agents: list[AgentSpec] = Field(min_length=1)
     faults: list[FaultSpec] = Field(default_factory=list, description="scripted faults, by time")
+
+    @field_validator("agents", mode="before")
+    @classmethod
+    def _not_too_many(cls, agents):
+        # before validating each one: a file of a million agents fails at once
+        if isinstance(agents, list) and len(agents) > MAX_AGENTS:
+            raise ValueError(f"{len(agents)} agents, more than the wire carries ({MAX_AGENTS})")
+        return agents
 
     @field_validator("agents")
     @classmethod
@@ -230,6 +269,30 @@ class Scenario(_Strict):
                     seen.append(cur.id)
         return self
 
+    @model_validator(mode="after")
+    def _limits(self) -> "Scenario":
+        """What the wire and the recording can hold, counting the agents that may be added."""
+        n, cap = len(self.agents), self.added_agents_cap
+        default = " (the default, 4 x agents)" if self.run.max_added_agents is None else ""
+        if n + cap > MAX_AGENTS:
+            raise ValueError(
+                f"run.max_added_agents: {n + cap} agents ({n} + {cap} that may be added{default}), more "
+                f"than the wire carries ({MAX_AGENTS}); set run.max_added_agents = {MAX_AGENTS - n} or fewer")
+        top = max(self.ids)
+        if cap and top + cap > MAX_AGENT_ID:
+            raise ValueError(
+                f"agents[{self.ids.index(top)}].id: the {cap} agents that may be added{default} take ids "
+                f"{top + 1}..{top + cap}, past the largest id the wire carries ({MAX_AGENT_ID}); use "
+                f"smaller ids or set run.max_added_agents = {MAX_AGENT_ID - top} or fewer")
+        ticks = self.run.ticks
+        if ticks * (n + cap) > MAX_AGENT_TICKS:
+            raise ValueError(
+                f"run.duration: the recording would hold {ticks} ticks x {n + cap} agents ({n} + {cap} that "
+                f"may be added{default}) = {ticks * (n + cap):.3g} agent-ticks, more than the limit of "
+                f"{_RECORDING_LIMIT}; use a shorter run.duration or a larger run.dt"
+                + (", or set run.max_added_agents lower" if cap else ""))
+        return self
+
     def agent(self, agent_id: int) -> AgentSpec:
         for a in self.agents:
             if a.id == agent_id:
@@ -239,6 +302,26 @@ class Scenario(_Strict):
     @property
     def ids(self) -> list[int]:
         return [a.id for a in self.agents]
+
+    @property
+    def added_agents_cap(self) -> int:
+        """How many agents may be added while the run goes: run.max_added_agents, or by
+        default 4 x the scenario's agents (fewer if the wire's limits on the number of agents
+        or on ids come first: the default never makes a scenario invalid)."""
+        if self.run.max_added_agents is not None:
+            return self.run.max_added_agents
+        n = len(self.agents)
+        top = max((a.id for a in self.agents), default=-1)
+        return max(0, min(4 * n, MAX_AGENTS - n, MAX_AGENT_ID - top))
+
+    @property
+    def added_id_range(self) -> range:
+        """The ids agents added while the run goes may take: right after the largest
+        scenario id, `added_agents_cap` of them. Every identity is known before the run
+        starts (the hub's access rules need them). Computed from `agents` as they stand: read
+        it from the scenario as loaded, not from a copy the world has added agents to."""
+        start = max(self.ids) + 1
+        return range(start, start + self.added_agents_cap)
 
 
 class ScenarioError(Exception):
@@ -271,27 +354,48 @@ def format_validation_error(source: str, err: ValidationError) -> str:
     return "\n".join(lines)
 
 
+_TOO_DEEP = "nested too deeply (arrays or tables inside one another)"
+
+
 def parse_scenario(data: dict, source: str = "<scenario>") -> Scenario:
     """Validate an already-parsed TOML document."""
     try:
         return Scenario.model_validate(data)
     except ValidationError as err:
         raise ScenarioError(format_validation_error(source, err)) from None
+    except RecursionError:
+        raise ScenarioError(f"{source}: {_TOO_DEEP}") from None
+    except MemoryError:
+        raise ScenarioError(f"{source}: too large to validate") from None
 
 
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario file; raise ScenarioError naming file and field."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        with open(p, "rb") as f:
+            raw = f.read(MAX_SCENARIO_BYTES + 1)  # bounded: /dev/zero or a huge file cannot fill memory
     except FileNotFoundError:
         raise ScenarioError(f"{p}: no such file") from None
-    except (IsADirectoryError, PermissionError, UnicodeDecodeError) as e:
-        raise ScenarioError(f"{p}: cannot read: {e}") from None
+    except (OSError, ValueError) as e:  # a directory, no permission, a bad path...
+        raise ScenarioError(f"{p}: cannot read: {getattr(e, 'strerror', None) or e}") from None
+    if len(raw) > MAX_SCENARIO_BYTES:
+        raise ScenarioError(f"{p}: larger than {MAX_SCENARIO_BYTES >> 20} MiB; not a scenario file")
+    try:
+        # as read_text() would, plus a UTF-8 byte-order mark is allowed
+        text = raw.decode("utf-8-sig").replace("\r\n", "\n").replace("\r", "\n")
+    except UnicodeDecodeError as e:
+        raise ScenarioError(f"{p}: cannot read: not UTF-8 text (byte {e.start}: {e.reason})") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ScenarioError(f"{p}: TOML syntax error: {e}") from None
+    except ValueError as e:  # e.g. an integer of more than 4300 digits
+        raise ScenarioError(f"{p}: cannot parse: {str(e).split(';')[0]}") from None
+    except RecursionError:
+        raise ScenarioError(f"{p}: {_TOO_DEEP}") from None
+    except MemoryError:
+        raise ScenarioError(f"{p}: too large to read") from None
     return parse_scenario(data, str(p))
 
 

@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
-from swarm.contracts import wire
+from swarm.contracts import access, wire
+from swarm.contracts.credentials import OPERATOR, WORLD, Credentials, write_private
+from swarm.contracts.credentials import runtime_dir as runtime_dir  # re-exported: the one place it is decided
 
 LEASE_MS = 1000  # a frozen (SIGSTOP) process is dropped after ~0.95 s
 CONNECT_TIMEOUT_MS = 10000
@@ -28,8 +30,26 @@ def _config(settings: dict):
     return cfg
 
 
-def hub_config(listen: str):
-    return _config({
+# For benchmarks and debugging only: a hub that accepts anyone and checks nothing
+# (docs/protocol.md, threat model). Clients with credentials still connect to it.
+ENV_OPEN_HUB = "SWARM_OPEN_HUB"
+
+
+@dataclass(frozen=True)
+class HubAuth:
+    """What the hub needs to check who connects and what they may do."""
+
+    creds: Credentials  # the run's own credentials (with its secret)
+    agent_ids: tuple[int, ...]  # every id an agent of this run may take
+    tls: dict | None = None  # zenoh settings for a tls/ endpoint (swarm/contracts/tls.py)
+
+
+def open_hub_requested() -> bool:
+    return os.environ.get(ENV_OPEN_HUB, "") not in ("", "0")
+
+
+def hub_config(listen: str, auth: HubAuth | None = None, dictionary: Path | None = None):
+    settings = {
         "mode": "router",
         "listen/endpoints": [listen],
         "scouting/multicast/enabled": False,
@@ -37,11 +57,23 @@ def hub_config(listen: str):
         "transport/link/tx/lease": LEASE_MS,
         # Small messages over loopback: the 16 MB shared-memory pool would only add RSS.
         "transport/shared_memory/enabled": False,
-    })
+    }
+    if auth is not None:
+        run = auth.creds.run
+        user, password = auth.creds.identity(WORLD)
+        settings.update({
+            "transport/auth/usrpwd": {"user": user, "password": password, "dictionary_file": str(dictionary)},
+            "access_control": access.access_control(run, auth.agent_ids),
+            "low_pass_filter": access.size_filters(run),
+            "transport/link/rx/max_message_size": access.MAX_MESSAGE,
+            **(auth.tls or {}),
+        })
+    return _config(settings)
 
 
-def client_config(connect: str, timeout_ms: int = CONNECT_TIMEOUT_MS):
-    return _config({
+def client_config(connect: str, timeout_ms: int = CONNECT_TIMEOUT_MS, identity: tuple[str, str] | None = None,
+                  tls: dict | None = None):
+    settings = {
         "mode": "client",
         "connect/endpoints": [connect],
         "connect/timeout_ms": timeout_ms,
@@ -49,27 +81,44 @@ def client_config(connect: str, timeout_ms: int = CONNECT_TIMEOUT_MS):
         "transport/link/tx/lease": LEASE_MS,
         # Small messages over loopback: the 16 MB shared-memory pool would only add RSS.
         "transport/shared_memory/enabled": False,
-    })
+    }
+    if identity is not None:
+        settings["transport/auth/usrpwd"] = {"user": identity[0], "password": identity[1]}
+    settings.update(tls or {})
+    return _config(settings)
 
 
-def open_hub(listen: str):
+def open_hub(listen: str, auth: HubAuth | None = None):
+    """Open the run's hub. With `auth`, only the run's identities may connect and each may
+    do only what swarm/contracts/access.py allows. zenoh reads the user dictionary once,
+    at open: it lives in a private file for that moment only."""
     import zenoh
 
-    return zenoh.open(hub_config(listen))
+    if auth is None:
+        return zenoh.open(hub_config(listen))
+    dictionary = runtime_dir() / f".{auth.creds.run}.users"
+    write_private(dictionary, access.user_dictionary(auth.creds.secret, auth.creds.run, auth.agent_ids).encode())
+    try:
+        return zenoh.open(hub_config(listen, auth, dictionary))
+    finally:
+        dictionary.unlink(missing_ok=True)
 
 
-def open_client(connect: str, timeout_ms: int = CONNECT_TIMEOUT_MS):
-    """Open a client session; raises zenoh.ZError when the endpoint does not answer."""
+def open_client(connect: str, timeout_ms: int = CONNECT_TIMEOUT_MS, creds: Credentials | None = None,
+                user: str = OPERATOR):
+    """Open a client session as `user` (with `creds`; without, only an open hub lets it in);
+    raises zenoh.ZError when the endpoint does not answer or refuses the identity."""
     import zenoh
 
-    return zenoh.open(client_config(connect, timeout_ms))
+    identity = creds.identity(user) if creds is not None and not creds.open_hub else None
+    tls = _client_tls(creds) if creds is not None and connect.startswith("tls/") else None
+    return zenoh.open(client_config(connect, timeout_ms, identity, tls))
 
 
-def runtime_dir() -> Path:
-    """Where local runs put their Unix sockets ($SWARM_RUNTIME_DIR or /tmp/swarm-<uid>)."""
-    d = Path(os.environ.get("SWARM_RUNTIME_DIR") or Path(tempfile.gettempdir()) / f"swarm-{os.getuid()}")
-    d.mkdir(mode=0o700, parents=True, exist_ok=True)
-    return d
+def _client_tls(creds: Credentials) -> dict | None:
+    from swarm.contracts import tls
+
+    return tls.client_settings_for(creds)
 
 
 def default_endpoint(run: str) -> str:

@@ -62,10 +62,6 @@ def world_alive_key(run: str) -> str:
     return f"{run_prefix(run)}/world/alive"
 
 
-def world_join_key(run: str) -> str:
-    return f"{run_prefix(run)}/world/join"
-
-
 def world_info_key(run: str) -> str:
     return f"{run_prefix(run)}/world/info"
 
@@ -87,11 +83,8 @@ def events_key(run: str) -> str:
 
 
 def agent_key(run: str, agent: int | str, leaf: str) -> str:
-    """Key of one agent's `leaf` (alive, sense, cmd, status); agent may be '*'."""
+    """Key of one agent's `leaf` (alive, sense, cmd, status, ctl, join); agent may be '*'."""
     return f"{run_prefix(run)}/agent/{agent}/{leaf}"
-
-
-ANY_WORLD_ALIVE = f"{PREFIX}/*/world/alive"
 
 
 def run_of_key(key: str) -> str:
@@ -307,7 +300,8 @@ def decode_join_request(buf: bytes) -> dict:
 # Nothing outside this module builds or checks these payloads (docs/protocol.md, section 5).
 
 def encode_join_request(agent: int, pid: int, host: str, spec: dict | None = None) -> bytes:
-    """agent -> world/join: claim `agent` (a new agent brings its scenario spec)."""
+    """agent -> agent/<id>/join (the world's queryable): claim `agent` (a new agent brings
+    its scenario spec). The id in the key and in the request must be the same."""
     return encode_json({"id": agent, "pid": pid, "host": host, **({"spec": spec} if spec is not None else {})})
 
 

@@ -1,0 +1,108 @@
+"""What each identity may do on a run's hub: zenoh access-control rules, message-size
+filters and the user dictionary, built from the run id and the ids its agents may take.
+
+The hub (the world's router session) enforces all of this in zenoh itself: a message a
+rule does not allow never reaches a subscriber or queryable, and a declaration it does
+not allow (a subscriber, a queryable, a liveliness token) is never routed. Nothing
+here runs per message in Python. Default: deny. Allowed, on the ingress of the hub
+(what a client may send):
+
+- `agent-<k>`: put its own `cmd` and `status`; subscribe to its own `sense` and `ctl`
+  and to `world/control`; declare and answer its own `status` queryable; claim its id
+  on its own `join` key; declare its own `alive` token; watch and query `world/alive`.
+- `operator` (the `swarm up` launcher and the CLI): read everything of the run
+  (subscribe, query, liveliness), query `world/info` and `world/admin` (pause,
+  resume, fault done, agent exit), put on any agent's `ctl`. It cannot put commands,
+  frames, truth, events or control notices, and declares no queryable or token.
+
+Everything the hub sends to a client (egress) is allowed: a client only receives what
+its allowed declarations and queries asked for.
+
+The rules must name every identity before the hub opens, so an agent added at run time
+takes an id from the range the scenario reserves (`Scenario.added_id_range`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+from swarm.contracts import wire
+from swarm.contracts.credentials import OPERATOR, agent_user, password_for
+
+ALL_MESSAGES = ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
+                "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"]
+
+# Largest payload the hub accepts from a client, per key (bytes). zenoh drops a bigger
+# message at the hub before any Python code sees it.
+CMD_LIMIT = 256  # a command is 38 bytes
+SMALL_LIMIT = 64 << 10  # status, ctl, admin requests and replies
+JOIN_LIMIT = wire.MAX_JSON_BYTES  # a join claim may bring a new agent's spec
+MAX_MESSAGE = 2 * wire.MAX_JSON_BYTES  # the link closes on anything bigger (transport/link/rx)
+
+
+def _rule(rid: str, messages: list[str], keys: list[str], flow: str = "ingress") -> dict:
+    return {"id": rid, "permission": "allow", "flows": [flow], "messages": messages, "key_exprs": keys}
+
+
+def agent_rules(run: str, aid: int) -> list[dict]:
+    def k(leaf: str) -> str:
+        return wire.agent_key(run, aid, leaf)
+
+    p = f"a{aid}"
+    return [
+        _rule(f"{p}-put", ["put"], [k("cmd"), k("status")]),
+        _rule(f"{p}-sub", ["declare_subscriber"], [k("sense"), k("ctl"), wire.world_control_key(run)]),
+        _rule(f"{p}-status", ["declare_queryable", "reply"], [k("status")]),
+        _rule(f"{p}-join", ["query"], [k("join")]),
+        _rule(f"{p}-token", ["liveliness_token"], [k("alive")]),
+        _rule(f"{p}-world", ["declare_liveliness_subscriber", "liveliness_query"], [wire.world_alive_key(run)]),
+    ]
+
+
+def operator_rules(run: str) -> list[dict]:
+    everything = f"{wire.run_prefix(run)}/**"
+    return [
+        _rule("op-read", ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"], [everything]),
+        _rule("op-query", ["query"], [wire.world_info_key(run), wire.world_admin_key(run),
+                                      wire.agent_key(run, "*", "status")]),
+        _rule("op-ctl", ["put"], [wire.agent_key(run, "*", "ctl")]),
+    ]
+
+
+def access_control(run: str, agent_ids: Iterable[int]) -> dict:
+    """zenoh's `access_control` section for run `run` whose agents may take `agent_ids`."""
+    rules, subjects, policies = [], [], []
+    ids = list(agent_ids)
+    for aid in ids:
+        rs = agent_rules(run, aid)
+        rules += rs
+        subjects.append({"id": agent_user(aid), "usernames": [agent_user(aid)]})
+        policies.append({"rules": [r["id"] for r in rs], "subjects": [agent_user(aid)]})
+    op = operator_rules(run)
+    rules += op
+    subjects.append({"id": OPERATOR, "usernames": [OPERATOR]})
+    policies.append({"rules": [r["id"] for r in op], "subjects": [OPERATOR]})
+    rules.append(_rule("egress", ALL_MESSAGES, [f"{wire.run_prefix(run)}/**"], flow="egress"))
+    policies.append({"rules": ["egress"], "subjects": [OPERATOR] + [agent_user(a) for a in ids]})
+    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
+            "policies": policies}
+
+
+def size_filters(run: str) -> list[dict]:
+    """zenoh's `low_pass_filter` section: the largest payload accepted on each key."""
+    def f(fid: str, keys: list[str], limit: int) -> dict:
+        return {"id": fid, "flows": ["ingress"], "messages": ["put", "query", "reply"],
+                "key_exprs": keys, "size_limit": limit}
+
+    return [
+        f("cmd", [wire.agent_key(run, "*", "cmd")], CMD_LIMIT),
+        f("small", [wire.agent_key(run, "*", "status"), wire.agent_key(run, "*", "ctl"),
+                    wire.world_admin_key(run), wire.world_info_key(run)], SMALL_LIMIT),
+        f("join", [wire.agent_key(run, "*", "join")], JOIN_LIMIT),
+    ]
+
+
+def user_dictionary(secret: str, run: str, agent_ids: Iterable[int]) -> str:
+    """The hub's `dictionary_file` content: one `user:password` line per identity."""
+    users = [OPERATOR] + [agent_user(a) for a in agent_ids]
+    return "".join(f"{u}:{password_for(secret, run, u)}\n" for u in users)

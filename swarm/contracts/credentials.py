@@ -1,0 +1,279 @@
+"""Who may talk to a run: its secret, the identities derived from it, and the files that
+carry them.
+
+Every run has a random secret. Each process that connects has an identity (a zenoh
+username) with a password derived from that secret: `operator` (the launcher and the
+CLI), `agent-<id>` (one per agent) and `world` (the hub itself). The world writes the
+secret and the endpoint to `<runtime dir>/<run>.cred` (mode 0600, in a 0700 directory
+owned by the user). Local processes of that user derive any identity from it. For
+another machine, `swarm credentials` exports a file that holds one identity's
+password only (and the run's TLS certificate authority, if the run uses TLS): an
+agent on that machine can then act as itself and nothing else.
+
+This module only builds, checks, reads and writes those files; zenoh's configuration
+from them is swarm/contracts/transport.py and swarm/contracts/access.py.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import json
+import os
+import secrets
+import stat
+import tempfile
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from swarm.contracts import wire
+
+ENV_CREDENTIALS = "SWARM_CREDENTIALS"  # path of a credentials file (remote agents, CI)
+ENV_RUNTIME_DIR = "SWARM_RUNTIME_DIR"
+SUFFIX = ".cred"
+OPERATOR = "operator"
+WORLD = "world"
+
+
+class CredentialsError(Exception):
+    """A credentials file or the runtime directory cannot be used; the message is one line."""
+
+
+def agent_user(agent_id: int) -> str:
+    return f"agent-{int(agent_id)}"
+
+
+def password_for(secret: str, run: str, user: str) -> str:
+    """The password of `user` in run `run` (HMAC-SHA256 of the run's secret; 128 bits)."""
+    return hmac.new(bytes.fromhex(secret), f"{run}/{user}".encode(), hashlib.sha256).hexdigest()[:32]
+
+
+@dataclass(frozen=True)
+class Credentials:
+    """What a process needs to connect to a run. A run's own file has the `secret` (any
+    identity can be derived); an exported file has one `user` and its `password`."""
+
+    run: str
+    endpoint: str
+    secret: str | None = None
+    user: str | None = None
+    password: str | None = None
+    pid: int | None = None  # the world's pid (local runs: is it still there?)
+    tls_ca: str | None = None  # PEM of the run's certificate authority (tls/ endpoints)
+    open_hub: bool = False  # the hub checks nothing (SWARM_OPEN_HUB): connect without an identity
+    path: Path | None = field(default=None, compare=False)
+
+    def identity(self, user: str) -> tuple[str, str]:
+        """(user, password) for `user`, or CredentialsError naming what the file holds."""
+        if self.secret is not None:
+            return user, password_for(self.secret, self.run, user)
+        if self.user == user and self.password is not None:
+            return user, self.password
+        where = f" in {self.path}" if self.path else ""
+        raise CredentialsError(f"the credentials{where} are for {self.user!r} of run {self.run}, not {user!r}")
+
+    def export(self, user: str) -> "Credentials":
+        """A copy that holds only `user`'s password (for another machine)."""
+        u, p = self.identity(user)
+        return replace(self, secret=None, user=u, password=p, path=None)
+
+    def to_json(self) -> dict:
+        d = {"v": 1, "run": self.run, "endpoint": self.endpoint}
+        for k in ("secret", "user", "password", "pid", "tls_ca"):
+            if getattr(self, k) is not None:
+                d[k] = getattr(self, k)
+        if self.open_hub:
+            d["open_hub"] = True
+        return d
+
+
+def new_credentials(run: str, endpoint: str, pid: int | None = None, tls_ca: str | None = None,
+                    open_hub: bool = False) -> Credentials:
+    return Credentials(wire.check_run_id(run), endpoint, secret=secrets.token_hex(32), pid=pid, tls_ca=tls_ca,
+                       open_hub=open_hub)
+
+
+def parse(text: str, path: Path | None = None) -> Credentials:
+    where = str(path) if path else "credentials"
+    try:
+        d = json.loads(text)
+    except (ValueError, RecursionError) as e:
+        raise CredentialsError(f"{where}: not a credentials file ({e})") from None
+    if not isinstance(d, dict) or d.get("v") != 1:
+        raise CredentialsError(f"{where}: not a swarm credentials file (no \"v\": 1)")
+
+    def text_field(name: str, optional: bool = True) -> str | None:
+        v = d.get(name)
+        if v is None and optional:
+            return None
+        if not isinstance(v, str) or not v:
+            raise CredentialsError(f"{where}: {name}: expected a non-empty string")
+        return v
+
+    try:
+        run = wire.check_run_id(text_field("run", optional=False))
+    except wire.WireError as e:
+        raise CredentialsError(f"{where}: run: {e}") from None
+    secret = text_field("secret")
+    if secret is not None:
+        try:
+            if len(bytes.fromhex(secret)) < 16:
+                raise ValueError
+        except ValueError:
+            raise CredentialsError(f"{where}: secret: expected at least 32 hex digits") from None
+    user, password = text_field("user"), text_field("password")
+    if secret is None and (user is None or password is None):
+        raise CredentialsError(f"{where}: holds neither a secret nor a user and password")
+    pid = d.get("pid")
+    if pid is not None and (type(pid) is not int or pid <= 0):
+        raise CredentialsError(f"{where}: pid: expected a positive integer")
+    open_hub = d.get("open_hub", False)
+    if type(open_hub) is not bool:
+        raise CredentialsError(f"{where}: open_hub: expected true or false")
+    return Credentials(run, text_field("endpoint", optional=False), secret, user, password, pid,
+                       text_field("tls_ca"), open_hub, path)
+
+
+def read(path: Path) -> Credentials:
+    """A credentials file; it must be the user's own and readable by nobody else."""
+    path = Path(path)
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW)
+    except FileNotFoundError:
+        raise CredentialsError(f"{path}: no such credentials file") from None
+    except OSError as e:
+        raise CredentialsError(f"{path}: cannot open: {e.strerror or e}") from None
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise CredentialsError(f"{path}: not a regular file")
+        if st.st_uid != os.getuid():
+            raise CredentialsError(f"{path}: owned by uid {st.st_uid}, not by you (uid {os.getuid()}); "
+                                   "refusing to use it")
+        if st.st_mode & 0o077:
+            raise CredentialsError(f"{path}: readable by others (mode {stat.S_IMODE(st.st_mode):04o}); "
+                                   f"run `chmod 600 {path}`")
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            data = f.read(1 << 20)
+    finally:
+        os.close(fd)
+    try:
+        return parse(data.decode("utf-8"), path)
+    except UnicodeDecodeError:
+        raise CredentialsError(f"{path}: not a credentials file (not UTF-8)") from None
+
+
+def write_private(path: Path, data: bytes) -> None:
+    """Write `data` to `path` (mode 0600 whatever the umask), atomically (temporary + rename)."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
+    try:
+        os.fchmod(fd, 0o600)
+        with os.fdopen(fd, "wb", closefd=False) as f:
+            f.write(data)
+            f.flush()
+            os.fsync(fd)
+    except BaseException:
+        os.close(fd)
+        tmp.unlink(missing_ok=True)
+        raise
+    os.close(fd)
+    os.replace(tmp, path)
+
+
+def write(creds: Credentials, path: Path) -> Path:
+    write_private(path, (json.dumps(creds.to_json(), indent=1) + "\n").encode())
+    return Path(path)
+
+
+def private_dir(path: Path) -> Path:
+    """`path` as a directory only its user can use: created 0700 if missing (whatever the
+    umask); refused with one line if another user owns it or others may write or enter it."""
+    path = Path(path)
+    try:
+        os.mkdir(path, 0o700)
+        os.chmod(path, 0o700)
+    except FileExistsError:
+        pass
+    except OSError as e:
+        raise CredentialsError(f"cannot create the runtime directory {path}: {e.strerror or e}") from None
+    st = os.lstat(path)
+    if not stat.S_ISDIR(st.st_mode):
+        raise CredentialsError(f"the runtime directory {path} is not a directory")
+    if st.st_uid != os.getuid():
+        raise CredentialsError(f"the runtime directory {path} belongs to uid {st.st_uid}, not to you "
+                               f"(uid {os.getuid()}); set {ENV_RUNTIME_DIR} to a directory of your own")
+    if st.st_mode & 0o077:
+        raise CredentialsError(f"the runtime directory {path} is open to others (mode "
+                               f"{stat.S_IMODE(st.st_mode):04o}); run `chmod 700 {path}` or set {ENV_RUNTIME_DIR}")
+    return path
+
+
+def runtime_dir() -> Path:
+    """Where local runs keep their sockets and credentials ($SWARM_RUNTIME_DIR or
+    /tmp/swarm-<uid>), checked private to the user."""
+    return private_dir(Path(os.environ.get(ENV_RUNTIME_DIR) or Path(tempfile.gettempdir()) / f"swarm-{os.getuid()}"))
+
+
+def run_file(run: str) -> Path:
+    return runtime_dir() / f"{wire.check_run_id(run)}{SUFFIX}"
+
+
+def local_runs() -> list[Credentials]:
+    """The credentials of every local run whose world still exists (stale files are skipped)."""
+    out = []
+    for p in sorted(runtime_dir().glob(f"*{SUFFIX}")):
+        try:
+            c = read(p)
+        except CredentialsError:
+            continue
+        if c.secret is not None and (c.pid is None or pid_alive(c.pid)):
+            out.append(c)
+    return out
+
+
+def pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def from_environment() -> Credentials | None:
+    """The file named by $SWARM_CREDENTIALS, if set."""
+    p = os.environ.get(ENV_CREDENTIALS)
+    return read(Path(p)) if p else None
+
+
+def find(run: str | None = None, endpoint: str | None = None, path: Path | None = None) -> Credentials:
+    """The credentials to use: `path` (--credentials), else $SWARM_CREDENTIALS, else the
+    local run file that matches `run` and/or `endpoint`. CredentialsError says what was
+    looked at when none fits."""
+    c = read(path) if path is not None else from_environment()
+    if c is not None:
+        if run is not None and c.run != run:
+            raise CredentialsError(f"{c.path}: credentials of run {c.run}, not of run {run}")
+        return c
+    if run is not None:
+        f = run_file(run)
+        if f.exists():
+            c = read(f)
+            if endpoint is None or c.endpoint == endpoint:
+                return c
+    found = [c for c in local_runs() if (run is None or c.run == run) and (endpoint is None or c.endpoint == endpoint)]
+    if len(found) == 1:
+        return found[0]
+    what = " and ".join(x for x in (f"run {run}" if run else "", f"endpoint {endpoint}" if endpoint else "") if x)
+    if not found:
+        raise CredentialsError(f"no credentials for {what or 'a local run'} in {runtime_dir()}: pass "
+                               f"--credentials FILE or set {ENV_CREDENTIALS} (swarm credentials exports one)")
+    raise CredentialsError(f"{len(found)} local runs match ({', '.join(c.run for c in found)}); pick one with --run")
+
+
+def from_environment_path() -> Path | None:
+    p = os.environ.get(ENV_CREDENTIALS)
+    return Path(p) if p else None
