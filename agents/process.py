@@ -263,6 +263,7 @@ def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: b
         return e.code
     try:
         creds = credentials.find(run, connect, creds_file)
+        creds.check_agent(agent_id)
     except credentials.CredentialsError as e:
         _log(f"swarm agent {agent_id}: {e}")
         return EXIT_REFUSED

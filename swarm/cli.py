@@ -5,6 +5,7 @@ own module and added here with its `register(app)`; failures are one message and
     offline_cli  check, schema, plot            (no running swarm needed)
     live_cli     runs, agents, graph, watch     (read a live run)
     control_cli  kill, spawn, pause, resume     (act on a live run)
+    access_cli   credentials                    (hand an identity to another machine)
     study_cli    study swarms, study gains      (batch studies)
 """
 
@@ -12,7 +13,7 @@ from __future__ import annotations
 
 import typer
 
-from swarm import control_cli, live_cli, offline_cli, run_cli
+from swarm import access_cli, control_cli, live_cli, offline_cli, run_cli
 from swarm.study_cli import study_app
 
 app = typer.Typer(
@@ -22,7 +23,7 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 
-for group in (run_cli, offline_cli, live_cli, control_cli):
+for group in (run_cli, offline_cli, live_cli, control_cli, access_cli):
     group.register(app)
 app.add_typer(study_app, name="study")
 

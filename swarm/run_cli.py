@@ -64,6 +64,16 @@ def _check_duration(s, duration: float | None, path: Path) -> None:
         raise fail(" ".join(line.strip() for line in str(e).splitlines())) from None
 
 
+def _check_runtime_dir() -> None:
+    """The runtime dir (sockets, credentials) must be the user's own: one line, exit 2."""
+    from swarm.contracts.credentials import CredentialsError, runtime_dir
+
+    try:
+        runtime_dir()
+    except CredentialsError as e:
+        raise fail(f"swarm: {e}") from None
+
+
 def _check_clock(clock: str | None) -> None:
     if clock is not None and clock not in ("lockstep", "realtime"):
         raise fail(f"--clock must be lockstep or realtime, not {clock!r}")
@@ -168,6 +178,7 @@ def world(
 
     s = read_scenario(scenario)
     _check_duration(s, duration, scenario)
+    _check_runtime_dir()
     run = run or _new_run_id(scenario)
     try:
         check_run_id(run)
@@ -211,6 +222,7 @@ def up(
     s = read_scenario(scenario)
     _check_clock(clock)
     _check_duration(s, duration, scenario)
+    _check_runtime_dir()
     run_id = _new_run_id(scenario)
     out = out or Path("runs") / run_id
     _claim_out(out, force)

@@ -140,12 +140,12 @@ class ProcessTracker:
         self._thread = threading.Thread(target=self._watch, name="process-tracker", daemon=True)
         self._thread.start()
 
-    def spawn(self, args: list[str], name: str, cwd: Path | None = None) -> Tracked:
+    def spawn(self, args: list[str], name: str, cwd: Path | None = None, env: dict | None = None) -> Tracked:
         log = self.log_dir / f"{name}.out"
         group = Group(session=True)
         with open(log, "ab") as f:
             p = group.start(args, stdin=subprocess.DEVNULL, stdout=f, stderr=subprocess.STDOUT,
-                            env=self.env, cwd=cwd or self.cwd)
+                            env=self.env if env is None else env, cwd=cwd or self.cwd)
         t = Tracked(name, group, log, time.time())
         with self._lock:
             self.roots.append(t)
@@ -309,13 +309,14 @@ class Runtime:
 
 
 # --- observing a live run ----------------------------------------------------------------------
-def run_credentials(endpoint: str, run: str):
-    """The credentials of a local run (from the runtime dir its socket is in), or None
-    while the world has not written them."""
+def run_credentials(endpoint: str, run: str, runtime_dir: str | Path | None = None):
+    """The credentials of a local run (from `runtime_dir`, default the one its socket is
+    in), or None while the world has not written them."""
     from swarm.contracts import credentials
     from swarm.contracts.transport import socket_path
 
-    path = socket_path(endpoint).parent / f"{run}{credentials.SUFFIX}"
+    d = Path(runtime_dir) if runtime_dir is not None else socket_path(endpoint).parent
+    path = d / f"{run}{credentials.SUFFIX}"
     try:
         return credentials.read(path)
     except credentials.CredentialsError:
@@ -361,13 +362,14 @@ class Observer:
     info query, through swarm/live.py. Events of the run are read from summary.json once it
     has ended; while it goes, the world's counters (joins, drops, alive, tick) tell."""
 
-    def __init__(self, endpoint: str, run: str, timeout: float = 30.0, check: Callable[[], None] | None = None):
+    def __init__(self, endpoint: str, run: str, timeout: float = 30.0, check: Callable[[], None] | None = None,
+                 runtime_dir: str | None = None):
         from swarm.live import LiveRun, NoRun, RunRef
 
         def attempt():
             if check is not None:
                 check()
-            creds = run_credentials(endpoint, run)
+            creds = run_credentials(endpoint, run, runtime_dir)
             if creds is None:  # the world writes them just before it listens
                 return None
             try:
@@ -403,7 +405,8 @@ def observe_world(tracker: ProcessTracker, world: Tracked, endpoint: str, run: s
                   timeout: float = 30.0) -> Observer:
     """An observer of a world started by hand, once it listens (failing if the world exits
     first); the tracker closes it."""
-    obs = Observer(endpoint, run, timeout, check=lambda: world.check_running("it to listen"))
+    obs = Observer(endpoint, run, timeout, check=lambda: world.check_running("it to listen"),
+                   runtime_dir=tracker.env.get("SWARM_RUNTIME_DIR"))
     tracker.closing.append(obs.close)
     return obs
 
@@ -445,7 +448,8 @@ class UpRun:
         """The observer of this run (opened once the world listens; the tracker closes it)."""
         if self.observer is None:
             run, endpoint = self.banner()
-            self.observer = Observer(endpoint, run, timeout, check=lambda: self.running("the world to listen"))
+            self.observer = Observer(endpoint, run, timeout, check=lambda: self.running("the world to listen"),
+                                     runtime_dir=self.tracker.env.get("SWARM_RUNTIME_DIR"))
             self.tracker.closing.append(self.observer.close)
         return self.observer
 

@@ -518,8 +518,11 @@ def test_kill_and_spawn(live):
     assert r.exit_code == 1 and "already live" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.output
     r = invoke("spawn", "--id", "3", "--x", "1")
     assert r.exit_code == 2 and "only apply to a new id" in r.stderr
-    r = invoke("spawn", "--id", "42", "--x", "1")
+    r = invoke("spawn", "--id", "8", "--x", "1")
     assert r.exit_code == 2 and "--speed" in r.stderr
+    # new ids come from the range the hub's rules were made for (case2: 7..30)
+    r = invoke("spawn", "--id", "42", "--x", "1", "--y", "1", "--heading", "0", "--speed", "5")
+    assert r.exit_code == 2 and "take ids 7..30" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.output
     # the respawned 3 chooses at runtime (a fresh brain: the nearest agent with a path, now)
     def chosen():
         g = _json("graph", "--json")

@@ -460,8 +460,11 @@ def test_malformed_messages_on_every_key(rt, tmp_path):
     for aid, a in summ["agents"].items():
         assert isinstance(a["garbage"], int) and a["garbage"] >= 0, (aid, a)
         assert a["alive"] and a["joins"] == 1 and a["drops"] == 0, (aid, a)
-    assert {e["kind"] for e in summ["events"]} <= {"join", "start", "switch"}, \
+    # a flood of join claims is rate-limited (one `limit` event, counted): nothing else happened
+    assert {e["kind"] for e in summ["events"]} <= {"join", "start", "switch", "limit"}, \
         sorted({e["kind"] for e in summ["events"]})
+    assert set(summ["over_limit"]) <= {"join_rate"}, summ["over_limit"]
+    assert [e["limit"] for e in summ["events"] if e["kind"] == "limit"] == list(summ["over_limit"])
 
 
 # --- 5. a rogue session's commands change nothing -----------------------------------------------

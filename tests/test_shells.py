@@ -138,3 +138,72 @@ def test_agent_answers_its_frames_with_commands_and_counts_garbage():
     node.maybe_publish_status(force=True)
     st = wire.decode_status(ses.on(wire.agent_key(RUN, 2, "status"))[-1])
     assert (st["out"], st["hops"], st["rooted"], st["commands"]) == (1, 1, True, 1)
+
+
+# -- limits and trust (issue 10) ---------------------------------------------------------------
+NEW = {"role": "follower", "x": 1.0, "y": 1.0, "heading": 0.0, "speed": 1.0}
+
+
+def add(world, aid: int, spec: dict | None = None) -> dict:
+    q = FakeQuery(wire.encode_join_request(aid, 100 + aid, "host", spec or NEW), key_expr=wire.agent_key(RUN, aid, "join"))
+    world._on_join(q)
+    return wire.decode_join_reply(q.replies[0][1])
+
+
+def test_added_agents_take_reserved_ids_up_to_the_cap():
+    """Added agents take ids from the range the hub's rules were made for; once the cap is
+    reached every further claim with a spec is refused: one `limit` event, and a count."""
+    world, _ = open_world()  # 2 agents: ids 3..10 may be added, 8 of them
+    events = []
+    world.engine.on_event = events.append
+    s = world.cfg.scenario
+    assert (s.added_agents_cap, s.added_id_range) == (8, range(3, 11))
+    outside = add(world, 11)
+    assert not outside["ok"] and "take ids 3..10" in outside["error"]
+    assert "added_agents" not in world.over_limit  # a wrong id is not the cap
+    assert all(add(world, aid)["ok"] for aid in range(3, 11))
+    assert world.info()["added"] == 8
+    refused = [add(world, aid) for aid in (11, 12, 11)]
+    assert all(not r["ok"] and "its limit (run.max_added_agents)" in r["error"] for r in refused)
+    assert world.over_limit["added_agents"] == 3 and world.info()["over_limit"] == {"added_agents": 3}
+    assert [e["kind"] for e in events].count("limit") == 1
+    assert len(world.book) == 10
+
+
+def test_join_claims_are_rate_limited_with_one_event_and_a_count():
+    world, _ = open_world()
+    events = []
+    world.engine.on_event = events.append
+    burst = int(world.join_limit.burst)
+    replies = [claim(world, 2) for _ in range(burst + 5)]
+    limited = [r for r in replies if not r["ok"] and "too many join claims" in r["error"]]
+    assert len(limited) == 5 and world.over_limit["join_rate"] == 5
+    assert [e["kind"] for e in events].count("limit") == 1
+
+
+def test_a_law_from_the_join_reply_is_not_imported_unless_trusted(tmp_path, monkeypatch):
+    """A join reply (from the world, or once from a rogue) names a law "module:function":
+    the agent refuses it, without importing the module, unless its own user trusts it."""
+    import json
+    import sys
+
+    import pytest
+
+    from agents.joining import EXIT_REFUSED, AgentExit
+    from agents.process import AgentNode
+
+    marker = tmp_path / "imported"
+    (tmp_path / "evil_law.py").write_text(
+        f"open({str(marker)!r}, 'w').write('x')\n\ndef law(gi, gj, lam, c1, c2):\n    return 0.0\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delenv("SWARM_TRUSTED_LAWS", raising=False)
+    world, _ = open_world()
+    reply = claim(world, 2)
+    brain = json.loads(json.dumps(reply["brain"]))
+    brain["gains"]["law"] = "evil_law:law"
+    with pytest.raises(AgentExit) as exc:
+        AgentNode(FakeSession(), RUN, 2, {**reply, "brain": brain}, wait_world=False)
+    assert exc.value.code == EXIT_REFUSED and "--trust-law evil_law:law" in exc.value.message
+    assert not marker.exists() and "evil_law" not in sys.modules
+    node = AgentNode(FakeSession(), RUN, 2, {**reply, "brain": brain}, wait_world=False, trusted={"evil_law:law"})
+    assert marker.exists() and node.brain is not None

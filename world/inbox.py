@@ -183,14 +183,14 @@ class Inbox:
         """A new agent takes an id of the range the hub's access rules were made for, and
         only as many join the run as the scenario allows (run.max_added_agents)."""
         s = self.cfg.scenario
-        ids = s.added_id_range
-        if aid not in ids:
-            raise wire.WireError(f"agent {aid}: agents added to this run take ids {ids.start}..{ids.stop - 1}")
         if len(self.book) - len(s.ids) >= s.added_agents_cap:
             self.limited("added_agents", f"{s.added_agents_cap} agents added already (run.max_added_agents): "
                          f"agent {aid} refused")
             raise wire.WireError(f"agent {aid}: this run has added {s.added_agents_cap} agents already, "
                                  "its limit (run.max_added_agents)")
+        ids = s.added_id_range
+        if aid not in ids:
+            raise wire.WireError(f"agent {aid}: agents added to this run take ids {ids.start}..{ids.stop - 1}")
 
     def limited(self, what: str, reason: str) -> None:
         """Something over a limit: counted each time, one event the first time."""

@@ -256,12 +256,13 @@ def run_auth(cfg: WorldConfig) -> HubAuth | None:
         from swarm.contracts import tls
 
         tls_settings, ca = tls.run_hub_settings(credentials.runtime_dir(), cfg.run, cfg.listen)
+    s = cfg.scenario
     creds = credentials.new_credentials(cfg.run, cfg.listen, pid=os.getpid(), tls_ca=ca,
-                                        open_hub=open_hub_requested())
+                                        open_hub=open_hub_requested(), ids=tuple(s.ids),
+                                        added_ids=(s.added_id_range.start, s.added_id_range.stop - 1))
     credentials.write(creds, path)
     if open_hub_requested():
         return None
-    s = cfg.scenario
     return HubAuth(creds, tuple(s.ids) + tuple(s.added_id_range), tls_settings)
 
 

@@ -61,7 +61,20 @@ class Credentials:
     pid: int | None = None  # the world's pid (local runs: is it still there?)
     tls_ca: str | None = None  # PEM of the run's certificate authority (tls/ endpoints)
     open_hub: bool = False  # the hub checks nothing (SWARM_OPEN_HUB): connect without an identity
+    ids: tuple[int, ...] | None = None  # the scenario's agent ids
+    added_ids: tuple[int, int] | None = None  # first and last id an added agent may take
     path: Path | None = field(default=None, compare=False)
+
+    def check_agent(self, agent_id: int) -> None:
+        """CredentialsError unless the hub knows `agent_id` (it refuses any other identity
+        at connect, with no reason given, after its connect timeout)."""
+        if self.ids is None or agent_id in self.ids or (
+                self.added_ids is not None and self.added_ids[0] <= agent_id <= self.added_ids[1]):
+            return
+        added = (f"; agents added at run time take ids {self.added_ids[0]}..{self.added_ids[1]}"
+                 if self.added_ids is not None and self.added_ids[0] <= self.added_ids[1] else "")
+        raise CredentialsError(f"agent {agent_id} is not in scenario of run {self.run} "
+                               f"(ids: {', '.join(map(str, self.ids))}{added})")
 
     def identity(self, user: str) -> tuple[str, str]:
         """(user, password) for `user`, or CredentialsError naming what the file holds."""
@@ -84,13 +97,18 @@ class Credentials:
                 d[k] = getattr(self, k)
         if self.open_hub:
             d["open_hub"] = True
+        if self.ids is not None:
+            d["ids"] = list(self.ids)
+        if self.added_ids is not None:
+            d["added_ids"] = list(self.added_ids)
         return d
 
 
 def new_credentials(run: str, endpoint: str, pid: int | None = None, tls_ca: str | None = None,
-                    open_hub: bool = False) -> Credentials:
+                    open_hub: bool = False, ids: tuple[int, ...] | None = None,
+                    added_ids: tuple[int, int] | None = None) -> Credentials:
     return Credentials(wire.check_run_id(run), endpoint, secret=secrets.token_hex(32), pid=pid, tls_ca=tls_ca,
-                       open_hub=open_hub)
+                       open_hub=open_hub, ids=ids, added_ids=added_ids)
 
 
 def parse(text: str, path: Path | None = None) -> Credentials:
@@ -130,8 +148,15 @@ def parse(text: str, path: Path | None = None) -> Credentials:
     open_hub = d.get("open_hub", False)
     if type(open_hub) is not bool:
         raise CredentialsError(f"{where}: open_hub: expected true or false")
+    ids, added = d.get("ids"), d.get("added_ids")
+    if ids is not None and not (isinstance(ids, list) and all(type(i) is int and i >= 0 for i in ids)):
+        raise CredentialsError(f"{where}: ids: expected a list of agent ids")
+    if added is not None and not (isinstance(added, list) and len(added) == 2
+                                  and all(type(i) is int for i in added)):
+        raise CredentialsError(f"{where}: added_ids: expected [first, last]")
     return Credentials(run, text_field("endpoint", optional=False), secret, user, password, pid,
-                       text_field("tls_ca"), open_hub, path)
+                       text_field("tls_ca"), open_hub, None if ids is None else tuple(ids),
+                       None if added is None else (added[0], added[1]), path)
 
 
 def read(path: Path) -> Credentials:
@@ -188,8 +213,9 @@ def write(creds: Credentials, path: Path) -> Path:
 
 
 def private_dir(path: Path) -> Path:
-    """`path` as a directory only its user can use: created 0700 if missing (whatever the
-    umask); refused with one line if another user owns it or others may write or enter it."""
+    """`path` as a directory only its user can change: created 0700 if missing (whatever the
+    umask); refused with one line if another user owns it or others may write to it (they
+    could replace a socket or a credentials file). Files in it are 0600 anyway."""
     path = Path(path)
     try:
         os.mkdir(path, 0o700)
@@ -204,8 +230,8 @@ def private_dir(path: Path) -> Path:
     if st.st_uid != os.getuid():
         raise CredentialsError(f"the runtime directory {path} belongs to uid {st.st_uid}, not to you "
                                f"(uid {os.getuid()}); set {ENV_RUNTIME_DIR} to a directory of your own")
-    if st.st_mode & 0o077:
-        raise CredentialsError(f"the runtime directory {path} is open to others (mode "
+    if st.st_mode & 0o022:
+        raise CredentialsError(f"the runtime directory {path} is writable by others (mode "
                                f"{stat.S_IMODE(st.st_mode):04o}); run `chmod 700 {path}` or set {ENV_RUNTIME_DIR}")
     return path
 
