@@ -261,13 +261,14 @@ def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: b
         tie_to_launcher()  # started by `swarm up`: SIGTERM when the launcher dies
     except AgentExit as e:
         return e.code
+    user = credentials.agent_user(agent_id)
     try:
         creds = credentials.find(run, connect, creds_file)
         creds.check_agent(agent_id)
+        creds.identity(user)
     except credentials.CredentialsError as e:
         _log(f"swarm agent {agent_id}: {e}")
         return EXIT_REFUSED
-    user = credentials.agent_user(agent_id)
     try:
         session = open_client(connect, creds=creds, user=user)
     except Exception as e:

@@ -1,6 +1,6 @@
 """One client of the bare-zenoh lockstep baseline (see bare_hub.py).
 
-    python benchmarks/bare_client.py INDEX ENDPOINT RUN [--timeout S]
+    python benchmarks/bare_client.py INDEX ENDPOINT RUN [--timeout S] [--creds FILE]
 
 Connects to the hub as a zenoh client (swarm.contracts.transport.client_config, like an agent),
 subscribes to its own tick key, declares a liveliness token (how the hub knows it is
@@ -8,6 +8,11 @@ ready) and answers each tick with one small message on its own ack key. The call
 only enqueues; the main thread publishes (the same structure as agents/process.py,
 without decoding, law or status traffic). Exits on the hub's end message, or after
 --timeout seconds whatever happens.
+
+With --creds (a run's credentials file, see swarm/contracts/credentials.py) it connects as
+`agent-<INDEX>` and uses swarm's own keys (frames on agent/<i>/sense, answers on
+agent/<i>/cmd, its token on agent/<i>/alive, the end on world/control), so that a hub
+with swarm's access rules lets it through: the cost of the hub's checks, measured bare.
 """
 
 from __future__ import annotations
@@ -25,8 +30,18 @@ TICK = struct.Struct("<q")  # tick
 ACK = struct.Struct("<iq")  # client index, tick
 
 
+def _key(run: str, index: int | str | None, leaf: str, swarm_keys: bool = False) -> str:
+    if swarm_keys:
+        from swarm.contracts import wire
+
+        if leaf == "end":
+            return wire.world_control_key(run)
+        return wire.agent_key(run, index, {"tick": "sense", "ack": "cmd"}.get(leaf, leaf))
+    return f"bench/{run}/c/{index}/{leaf}" if leaf != "end" else f"bench/{run}/end"
+
+
 def key(run: str, index: int | str, leaf: str) -> str:
-    return f"bench/{run}/c/{index}/{leaf}"
+    return _key(run, index, leaf)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -38,16 +53,22 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--handler", choices=("callback", "channel"), default="callback",
                     help="callback: Python callback enqueues (like agents/process.py); "
                          "channel: zenoh's FIFO channel, the main thread blocks in recv()")
+    ap.add_argument("--creds", help="a run's credentials file: connect as agent-INDEX on swarm's keys")
     a = ap.parse_args(argv)
 
-    import zenoh
-
-    from swarm.contracts.transport import client_config
+    from swarm.contracts import credentials
+    from swarm.contracts.transport import open_client
 
     deadline = time.monotonic() + a.timeout
     inbox: queue.SimpleQueue = queue.SimpleQueue()
     put = inbox.put
-    session = zenoh.open(client_config(a.endpoint))
+    creds = credentials.read(Path(a.creds)) if a.creds else None
+    sk = creds is not None
+
+    def key(run, index, leaf):
+        return _key(run, index, leaf, sk)
+
+    session = open_client(a.endpoint, creds=creds, user=credentials.agent_user(a.index))
     try:
         ack = session.declare_publisher(key(a.run, a.index, "ack"), express=True)
         me = a.index
@@ -66,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
         subs = [  # noqa: F841 (kept alive until close)
             session.declare_subscriber(key(a.run, a.index, "tick"),
                                        lambda s: put(s.payload.to_bytes())),
-            session.declare_subscriber(f"bench/{a.run}/end", lambda s: put(None)),
+            session.declare_subscriber(key(a.run, None, "end"), lambda s: put(None)),
         ]
         token = session.liveliness().declare_token(key(a.run, a.index, "alive"))  # noqa: F841
         while time.monotonic() < deadline:

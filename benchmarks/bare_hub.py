@@ -2,7 +2,7 @@
 
     python benchmarks/bare_hub.py --listen ENDPOINT --run RUN --n N --ticks T
                                   [--warmup W] [--join-timeout S] [--tick-timeout S] --result FILE
-                                  [--ready FILE] [--linger S] [--handler callback|channel]
+                                  [--ready FILE] [--linger S] [--handler callback|channel] [--creds FILE]
 
 A router-mode session with swarm's own hub config (swarm.contracts.transport.hub_config). It
 waits until N bare_client.py processes have declared their liveliness tokens, then per
@@ -13,6 +13,10 @@ does the rest (the structure of world/process.py's lockstep loop). Writes one JS
 object to --result, lingers --linger s (so that the clients' memory can be sampled
 undisturbed), ends the clients and exits 0; exits 2 when the clients did not all join
 or a tick timed out.
+
+With --creds (the run's own credentials file, with its secret) the hub checks who connects
+and what they may do exactly as a world does (swarm.contracts.transport.open_hub with
+HubAuth: usrpwd, access rules, size filters; clients are agents 0..N-1), on swarm's keys.
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.bare_client import ACK, TICK, key  # noqa: E402
+from benchmarks.bare_client import ACK, TICK, _key  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -46,17 +50,24 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--handler", choices=("callback", "channel"), default="callback",
                     help="callback: Python callback enqueues (like world/process.py); "
                          "channel: zenoh's FIFO channel, the main thread blocks in recv() (no tick timeout)")
+    ap.add_argument("--creds", help="the run's credentials file: check clients as a world does")
     a = ap.parse_args(argv)
 
     import zenoh
 
-    from swarm.contracts.transport import hub_config
+    from swarm.contracts import credentials
+    from swarm.contracts.transport import HubAuth, open_hub
+
+    auth = HubAuth(credentials.read(Path(a.creds)), tuple(range(a.n))) if a.creds else None
+
+    def key(run, index, leaf):
+        return _key(run, index, leaf, auth is not None)
 
     t_start = time.monotonic()
     acks: queue.SimpleQueue = queue.SimpleQueue()
     joins: queue.SimpleQueue = queue.SimpleQueue()
     result: dict = {"n": a.n, "ticks": a.ticks, "warmup": a.warmup, "handler": a.handler, "ok": False}
-    session = zenoh.open(hub_config(a.listen))
+    session = open_hub(a.listen, auth)
     try:
         if a.handler == "channel":
             ack_sub = session.declare_subscriber(key(a.run, "*", "ack"))
@@ -73,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
                 lambda s: joins.put((str(s.key_expr), s.kind == zenoh.SampleKind.PUT)), history=True),
         ]
         pubs = [session.declare_publisher(key(a.run, i, "tick"), express=True) for i in range(a.n)]
-        end = session.declare_publisher(f"bench/{a.run}/end")
+        end = session.declare_publisher(key(a.run, None, "end"))
 
         # -- wait for every client's token ------------------------------------------------
         alive: set[str] = set()

@@ -93,7 +93,8 @@ def main() -> int:
         spec = {"role": "follower", "x": 50.0, "y": 50.0, "heading": 0.0, "speed": 10.0}
         host = socket.gethostname()
         ok = 0
-        for aid in range(7, 7 + a.add):  # the ids case2 (agents 1..6) reserves for added agents
+        first_added = first["added_ids"][0]  # the ids the run reserves for added agents
+        for aid in range(first_added, first_added + a.add):
             payload = wire.encode_join_request(aid, os.getpid(), host, spec)
             agent_ses = open_client(endpoint, timeout_ms=5000, creds=creds, user=credentials.agent_user(aid))
             try:

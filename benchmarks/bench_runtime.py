@@ -282,13 +282,19 @@ def wait_quiet(threshold: float, max_wait: float) -> dict:
 
 
 # -- 1. bare baseline ------------------------------------------------------------------------------
-def run_baseline(n: int, ticks: int, warmup: int, work: Path, env: dict, tag: str) -> dict:
+def run_baseline(n: int, ticks: int, warmup: int, work: Path, env: dict, tag: str, auth: bool = False) -> dict:
+    """The bare lockstep floor; with `auth`, the hub checks every client as a world does."""
     d = work / f"bare-{tag}"
     d.mkdir()
     endpoint = f"unixsock-stream/{env['SWARM_RUNTIME_DIR']}/b{tag}.sock"
     result = d / "result.json"
     ready = d / "ready"
     run = f"b{tag}"
+    creds = []
+    if auth:
+        from swarm.contracts import credentials
+
+        creds = ["--creds", str(credentials.write(credentials.new_credentials(run, endpoint), d / "run.cred"))]
     tr = Tracked()
     mem = MemSampler()
     cpu = CpuMeter()
@@ -296,9 +302,9 @@ def run_baseline(n: int, ticks: int, warmup: int, work: Path, env: dict, tag: st
     try:
         hub = tr.spawn([PY, str(BENCH / "bare_hub.py"), "--listen", endpoint, "--run", run, "--n", str(n),
                         "--ticks", str(ticks), "--warmup", str(warmup), "--result", str(result),
-                        "--join-timeout", "90", "--linger", "2", "--ready", str(ready)],
+                        "--join-timeout", "90", "--linger", "2", "--ready", str(ready), *creds],
                        d / "hub.log", env)
-        clients = [tr.spawn([PY, str(BENCH / "bare_client.py"), str(i), endpoint, run, "--timeout", "240"],
+        clients = [tr.spawn([PY, str(BENCH / "bare_client.py"), str(i), endpoint, run, "--timeout", "240", *creds],
                             d / f"client-{i}.log", env, own_group=False) for i in range(n)]
         cps = [tr.seen[c.pid] for c in clients if c.pid in tr.seen]
         state = {"uss": False}
@@ -598,6 +604,25 @@ def report(results: dict) -> str:
         lines.append(f"{n:>3} | {fmt(b and b['ticks_per_second']):>16} | {fmt(s and s['ticks_per_second']):>13} | "
                      f"{fmt(ratio, '.2f'):>5} | {('yes' if met else 'NO') if met is not None else '-':>24} | {runs}")
     lines.append("")
+    if any(r.get("swarm_open") for r in results["by_n"].values()):
+        lines.append("cost of the hub's checks (authentication, access rules, size filters): lockstep ticks/s "
+                     "with them / with an open hub, best runs (target: at most 10% slower)")
+        for n, r in results["by_n"].items():
+            s, o = best(r["swarm"]), best(r.get("swarm_open", []))
+            ratio = (s["ticks_per_second"] / o["ticks_per_second"]) if (s and o) else None
+            r["access_ratio"] = ratio
+            runs = (", ".join(fmt(x.get("ticks_per_second")) for x in r["swarm"]) + " / "
+                    + ", ".join(fmt(x.get("ticks_per_second")) for x in r.get("swarm_open", [])))
+            lines.append(f"{n:>5} agents, swarm up: {fmt(s and s['ticks_per_second'])} / "
+                         f"{fmt(o and o['ticks_per_second'])} ticks/s = {fmt(ratio, '.3f')} (all runs: {runs})")
+            b, ba = best(r["baseline"]), best(r.get("baseline_auth", []))
+            bratio = (ba["ticks_per_second"] / b["ticks_per_second"]) if (b and ba) else None
+            r["access_ratio_bare"] = bratio
+            runs = (", ".join(fmt(x.get("ticks_per_second")) for x in r.get("baseline_auth", [])) + " / "
+                    + ", ".join(fmt(x.get("ticks_per_second")) for x in r["baseline"]))
+            lines.append(f"{n:>5} agents, bare:     {fmt(ba and ba['ticks_per_second'])} / "
+                         f"{fmt(b and b['ticks_per_second'])} ticks/s = {fmt(bratio, '.3f')} (all runs: {runs})")
+        lines.append("")
     big = str(max(results["sizes"]))
     sw = [x for x in results["by_n"][big]["swarm"] if x.get("first_tick_s") is not None]
     if sw:
@@ -700,6 +725,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--profile-n", type=int, default=20, help="agents in the --profile run (default 20)")
     ap.add_argument("--json", type=Path, help="write all results to this JSON file")
     ap.add_argument("--keep", action="store_true", help="keep the work directory (logs, runs)")
+    ap.add_argument("--access-cost", action="store_true",
+                    help="also run swarm up with an open hub (SWARM_OPEN_HUB=1: no authentication, no access "
+                         "rules, no size filters) after each swarm run, and report the cost of the hub's checks")
     a = ap.parse_args(argv)
     sizes = [int(x) for x in a.sizes.split(",") if x.strip()]
     repeat = a.repeat or (1 if a.quick else 2)
@@ -744,6 +772,19 @@ def main(argv: list[str] | None = None) -> int:
                 r["swarm"].append(s)
                 log(f"  -> {fmt(s.get('ticks_per_second'))} ticks/s, first tick {fmt(s.get('first_tick_s'), '.2f')} s"
                     f" (others busy before: {fmt(q.get('busy_cores'), '.2f')} cores) {s.get('error', '')}")
+                if a.access_cost:
+                    log(f"[N={n} run {k + 1}/{repeat}] bare baseline with the hub's checks")
+                    q = quiet()
+                    ba = run_baseline(n, ticks, warmup, work, env, f"{n}-{k}-auth", auth=True)
+                    ba["quiet"] = q
+                    r.setdefault("baseline_auth", []).append(ba)
+                    log(f"  -> {fmt(ba.get('ticks_per_second'))} ticks/s {ba.get('error', '')}")
+                    log(f"[N={n} run {k + 1}/{repeat}] swarm up, open hub: {sticks} ticks")
+                    q = quiet()
+                    o = run_swarm(n, sticks, work, {**env, "SWARM_OPEN_HUB": "1"}, f"{n}-{k}-open")
+                    o["quiet"] = q
+                    r.setdefault("swarm_open", []).append(o)
+                    log(f"  -> {fmt(o.get('ticks_per_second'))} ticks/s {o.get('error', '')}")
         if a.profile:
             n = a.profile_n
             b = best(results["by_n"][str(n)]["baseline"]) if str(n) in results["by_n"] else None

@@ -22,11 +22,11 @@ def credentials(
     agent: Annotated[Optional[int], typer.Option("--agent", metavar="ID", min=0,
                                                  help="export agent ID's identity", show_default=False)] = None,
     operator: Annotated[bool, typer.Option("--operator", help="export the operator's identity (the live "
-                                           "commands: agents, graph, pause, kill, spawn...)")] = False,
+                                           "commands: agents, graph, watch, pause, resume, kill)")] = False,
     run: RunOpt = None,
     endpoint: Annotated[Optional[str], typer.Option(
-        help="the endpoint the other machine dials, e.g. tcp/10.0.0.5:7447 (default: the run's "
-             "listen endpoint)", show_default=False)] = None,
+        help="the endpoint the other machine dials, e.g. tls/10.0.0.5:7447 (needed when the run's own "
+             "endpoint is a Unix socket or loopback)", show_default=False)] = None,
     out: Annotated[Optional[Path], typer.Option("--out", "-o", help="file to write (mode 0600; default "
                                                 "<run>-agent-<ID>.cred or <run>-operator.cred here)",
                                                 show_default=False)] = None,
@@ -44,15 +44,16 @@ def credentials(
         raise fail("give one of --agent ID or --operator", EXIT_USAGE)
     user = C.OPERATOR if operator else C.agent_user(agent)
     try:
-        own = C.find(run)
-        if own.secret is None:
-            raise C.CredentialsError(f"{own.path}: holds one identity ({own.user}), not the run's secret; "
-                                     "export from the machine the run was started on")
+        own = C.find_local(run)  # the run's own file ($SWARM_CREDENTIALS is for connecting, not this)
         if agent is not None:
             own.check_agent(agent)
         exported = own.export(user)
     except C.CredentialsError as e:
         raise fail(str(e), EXIT_USAGE) from None
+    if endpoint is None and _local_only(own.endpoint):
+        raise fail(f"run {own.run} is reached at {own.endpoint} from this machine only: give --endpoint, the "
+                   "address the other machine dials (e.g. tls/10.0.0.5:7447; start the run with --listen "
+                   "tls/0.0.0.0:7447 to be reachable)", EXIT_USAGE)
     if endpoint is not None:
         exported = replace(exported, endpoint=endpoint)
     path = out or Path(f"{own.run}-{user}.cred")
@@ -66,6 +67,11 @@ def credentials(
     if not operator:
         typer.echo(f"on the other machine: swarm agent --id {agent} --connect {exported.endpoint} "
                    f"--credentials {path.name}")
+
+
+def _local_only(endpoint: str) -> bool:
+    proto, _, rest = endpoint.partition("/")
+    return proto.startswith("unix") or rest.startswith(("127.", "localhost:", "[::1]:"))
 
 
 def register(app: typer.Typer) -> None:

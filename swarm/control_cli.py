@@ -18,9 +18,9 @@ from typing import Annotated, Optional
 
 import typer
 
-from swarm.contracts.credentials import ENV_CREDENTIALS
-from swarm.contracts.laws import ENV_TRUSTED_LAWS
-from swarm.live_cli import EXIT_USAGE, ConnectOpt, CredentialsOpt, RunOpt, attached, fail
+from swarm.contracts.credentials import ENV_CREDENTIALS, CredentialsError, agent_user
+from swarm.contracts.laws import ENV_TRUSTED_LAWS, with_trusted_laws
+from swarm.live_cli import EXIT_USAGE, ConnectOpt, CredentialsOpt, RunOpt, TrustLawOpt, attached, fail
 from swarm.procs import wait_until
 
 SPAWN_DEADLINE = 10.0  # s for a spawned agent to show up alive in the world's info
@@ -142,9 +142,7 @@ def spawn(
     connect: ConnectOpt = None,
     run: RunOpt = None,
     credentials: CredentialsOpt = None,
-    trust_law: Annotated[Optional[list[str]], typer.Option(
-        "--trust-law", metavar="MODULE:FUNCTION",
-        help="a follower law of your own the agent may import if the run uses it (repeatable)")] = None,
+    trust_law: TrustLawOpt = None,
 ) -> None:
     """Start an agent process on this machine (detached) and wait until it is live.
 
@@ -195,11 +193,14 @@ def spawn(
         args = [sys.executable, "-m", "agents.process", str(agent_id), ref.endpoint, ref.run]
         if spec is not None:
             args.append(json.dumps(spec))
-        env = dict(os.environ)
-        if credentials is not None:
-            env[ENV_CREDENTIALS] = str(credentials.resolve())
-        if trust_law:
-            env[ENV_TRUSTED_LAWS] = ",".join([*trust_law, *filter(None, [env.get(ENV_TRUSTED_LAWS)])])
+        try:  # the agent connects as itself: the run's own file, or one of agent_id's
+            ref.creds.identity(agent_user(agent_id))
+        except CredentialsError as e:
+            raise fail(f"swarm spawn needs the run's own credentials (on the run's machine) or a file from "
+                       f"`swarm credentials --agent {agent_id}`: {e}", EXIT_USAGE) from None
+        env = {**os.environ, ENV_TRUSTED_LAWS: with_trusted_laws(trust_law or [])}
+        if ref.creds.path is not None:
+            env[ENV_CREDENTIALS] = str(Path(ref.creds.path).resolve())
         with open(log_path, "ab") as log:
             proc = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
                                     start_new_session=True, close_fds=True, env=env)

@@ -28,11 +28,11 @@ from pathlib import Path
 from typing import Callable
 
 from swarm.contracts import credentials, wire
-from swarm.contracts.laws import ENV_TRUSTED_LAWS
+from swarm.contracts.laws import ENV_TRUSTED_LAWS, with_trusted_laws
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV
 from swarm.contracts.orbits import expected_radius, root_of
 from swarm.contracts.scenario import Scenario
-from swarm.contracts.transport import default_endpoint, open_client
+from swarm.contracts.transport import default_endpoint, dial_endpoint, open_client
 from swarm.procs import Group, wait_until
 from swarm.supervision import AgentExitReport, agent_exit, send_report, world_failure
 
@@ -63,6 +63,7 @@ class Launcher:
         self.cfg = cfg
         self.say = say
         self.endpoint = cfg.listen or default_endpoint(cfg.run)
+        self.dial = dial_endpoint(self.endpoint)  # where the agents and the launcher connect
         self.world: subprocess.Popen | None = None
         self.agents: dict[int, subprocess.Popen] = {}
         self.group = Group()  # led by the world, which is reaped last
@@ -87,8 +88,9 @@ class Launcher:
         log = open(self.logs / log_name, "ab")
         env = {**os.environ, LAUNCHER_PID_ENV: str(os.getpid()),  # children stop when we die
                # the law of our own scenario is the one law our agents may import
-               ENV_TRUSTED_LAWS: ",".join(filter(None, [self.cfg.scenario.gains.law,
-                                                        os.environ.get(ENV_TRUSTED_LAWS)]))}
+               ENV_TRUSTED_LAWS: with_trusted_laws([self.cfg.scenario.gains.law]),
+               # our agents use our run's own credentials, whatever the shell says
+               credentials.ENV_CREDENTIALS: str(credentials.run_file(self.cfg.run))}
         try:
             return self.group.start(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, env=env)
         finally:
@@ -106,7 +108,7 @@ class Launcher:
         self.world = self._spawn(args, "world.log")
 
     def start_agent(self, agent_id: int) -> subprocess.Popen:
-        p = self._spawn([sys.executable, "-m", "agents.process", str(agent_id), self.endpoint, self.cfg.run,
+        p = self._spawn([sys.executable, "-m", "agents.process", str(agent_id), self.dial, self.cfg.run,
                          "--world-grace", str(self.cfg.world_grace)], f"agent-{agent_id}.log")
         self.agents[agent_id] = p
         self.procs.append((agent_id, p))
@@ -141,7 +143,7 @@ class Launcher:
                 return True
             try:  # the world writes the run's credentials before it listens
                 creds = credentials.read(credentials.run_file(self.cfg.run))
-                ses = open_client(self.endpoint, timeout_ms=500, creds=creds)
+                ses = open_client(self.dial, timeout_ms=500, creds=creds)
             except Exception:
                 return False
             if any(r.ok for r in ses.liveliness().get(wire.world_alive_key(self.cfg.run), timeout=1.0)):

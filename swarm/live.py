@@ -64,9 +64,10 @@ def candidates(connect: str | None = None, creds_file: Path | None = None) -> li
     or the local runs (on `connect` only, if given)."""
     given = credentials.read(creds_file) if creds_file is not None else credentials.from_environment()
     if given is not None:
+        given.identity(credentials.OPERATOR)  # a file of one agent's cannot run the live commands
         return [RunRef(given.run, connect or given.endpoint, given)]
-    return [RunRef(c.run, c.endpoint, c) for c in credentials.local_runs()
-            if connect is None or c.endpoint == connect]
+    dial = None if connect is None else credentials.dial_endpoint(connect)
+    return [RunRef(c.run, c.endpoint, c) for c in credentials.local_runs() if dial is None or c.endpoint == dial]
 
 
 def find_runs(connect: str | None = None, creds_file: Path | None = None) -> list[RunRef]:

@@ -37,6 +37,10 @@ CredentialsOpt = Annotated[Optional[Path], typer.Option(
     "--credentials", metavar="FILE", help="the run's credentials (default: $SWARM_CREDENTIALS, else the "
     "local run's own file); for a run on another machine, a file from `swarm credentials`",
     show_default=False)]
+TrustLawOpt = Annotated[Optional[list[str]], typer.Option(
+    "--trust-law", metavar="MODULE:FUNCTION",
+    help="a follower law of your own the agent may import if the run uses it (repeatable; built-in laws "
+         "need nothing)")]
 
 
 def fail(message: str, code: int = EXIT_NO_RUN) -> typer.Exit:

@@ -12,7 +12,7 @@ from typing import Annotated, Optional
 import typer
 
 from swarm.offline_cli import ScenarioArg, export_results, fail, read_scenario, render_run_plots
-from swarm.live_cli import CredentialsOpt
+from swarm.live_cli import CredentialsOpt, TrustLawOpt
 
 
 def _out_option(help: str):
@@ -230,7 +230,9 @@ def up(
                                  world_grace=world_grace))
     typer.echo(f"run {run_id}  endpoint {launcher.endpoint}  agents {len(s.agents)}  "
                f"clock {clock or s.run.clock}")
-    typer.echo(f"attach from another terminal: swarm agent --id N --connect {launcher.endpoint} --run {run_id}")
+    typer.echo(f"attach from another terminal: swarm agent --id N --connect {launcher.dial} --run {run_id}"
+               + ("" if launcher.dial.startswith("unixsock") else
+                  "; from another machine: swarm credentials --agent N (README, \"Agents on other machines\")"))
     total = int(round((duration or s.run.duration) / s.run.dt))
     tty = sys.stdout.isatty()
     state = {"last": 0.0, "tick": 0, "wall": 0.0}
@@ -308,10 +310,7 @@ def agent(
     world_grace: Annotated[float, typer.Option(help="s to wait for a world that stopped answering (a "
                                                "frozen or cut-off world; exit 5 after that)", min=0.0)] = 10.0,
     credentials: CredentialsOpt = None,
-    trust_law: Annotated[Optional[list[str]], typer.Option(
-        "--trust-law", metavar="MODULE:FUNCTION",
-        help="a follower law of your own this agent may import if the run uses it (repeatable; "
-             "built-in laws need nothing)")] = None,
+    trust_law: TrustLawOpt = None,
 ) -> None:
     """Run one agent process; it takes its initial state from the world, so only its id is needed.
 

@@ -373,7 +373,8 @@ class Observer:
             if creds is None:  # the world writes them just before it listens
                 return None
             try:
-                return LiveRun(RunRef(run, endpoint, creds)).__enter__()
+                # dialled as the run's own file says (a wildcard listen address as 127.0.0.1)
+                return LiveRun(RunRef(run, creds.endpoint, creds)).__enter__()
             except NoRun:  # not listening yet
                 return None
 

@@ -12,12 +12,14 @@ from __future__ import annotations
 import json
 import os
 import signal
+import stat
+import subprocess
 import time
 
 import psutil
 import pytest
 
-from runtime_helpers import SCENARIOS, Runtime, open_session, run_credentials, start_up, wait_for
+from runtime_helpers import SCENARIOS, Runtime, UpRun, open_session, run_credentials, swarm_cmd, wait_for
 from swarm.contracts import credentials, wire
 from swarm.contracts.credentials import agent_user
 from swarm.contracts.transport import open_client, query_statuses
@@ -30,11 +32,14 @@ REFUSE_MS = 1500
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
-    """One realtime case2 run for every attack of this module; stopped (and checked for
-    leftovers) at the end."""
+    """One realtime case2 run for every attack of this module, started under umask 000 (the
+    runtime dir and files must be private anyway); stopped and checked for leftovers."""
     d = tmp_path_factory.mktemp("access")
     with Runtime(d) as rt:
-        up = start_up(rt.tracker, SCENARIOS / "case2.toml", d / "run", "--clock", "realtime", "--duration", "600")
+        args = swarm_cmd("up", SCENARIOS / "case2.toml", "--out", d / "run", "--no-plots", "--clock", "realtime",
+                         "--duration", "600")
+        up = UpRun(rt.tracker.spawn(["/bin/sh", "-c", 'umask 000; exec "$@"', "sh", *map(str, args)], "up"),
+                   d / "run", rt.tracker)
         run_id, endpoint = up.banner()
         up.wait_started(60)
         pids = rt.tracker.wait_agent_pids(up.launcher, 6)
@@ -68,6 +73,38 @@ def all_alive(r) -> bool:
 
 
 # -- strangers ---------------------------------------------------------------------------------
+NOBODY = 65534
+PROBE = """
+import json, os, socket, sys
+rt, run = sys.argv[1], sys.argv[2]
+out = {}
+for what, act in [("list", lambda: os.listdir(rt)),
+                  ("read", lambda: open(os.path.join(rt, run + ".cred")).read()),
+                  ("connect", lambda: socket.socket(socket.AF_UNIX).connect(os.path.join(rt, run + ".sock")))]:
+    try:
+        act()
+        out[what] = "ok"
+    except OSError as e:
+        out[what] = type(e).__name__
+print(json.dumps(out))
+"""
+
+
+def test_runtime_dir_and_files_are_private_under_umask_000(run):
+    rt = run["rt"].dir
+    assert stat.S_IMODE(os.stat(rt).st_mode) == 0o700  # the test made it; the world checked it
+    cred = os.path.join(rt, f"{run['run']}.cred")
+    assert stat.S_IMODE(os.stat(cred).st_mode) == 0o600
+    assert not [p for p in os.listdir(rt) if p.endswith(".users")]  # the hub's dictionary lived for its open only
+
+
+@pytest.mark.skipif(os.getuid() != 0 or not os.path.exists("/usr/bin/python3"), reason="needs root and a system python")
+def test_another_local_user_reaches_nothing(run):
+    """Another user of the machine (it once paused a run through a world-writable socket)."""
+    r = subprocess.run(["/usr/bin/python3", "-c", PROBE, run["rt"].dir, run["run"]], user=NOBODY,
+                       capture_output=True, text=True, timeout=30)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout) == {"list": "PermissionError", "read": "PermissionError", "connect": "PermissionError"}
 def test_no_credentials_refused_at_connect(run):
     with pytest.raises(Exception):
         open_client(run["endpoint"], timeout_ms=REFUSE_MS).close()
@@ -88,7 +125,8 @@ def test_credentials_of_another_run_refused(run):
 
 # -- an insider: agent 5's identity ----------------------------------------------------------
 def test_insider_reads_nothing_but_its_own(run):
-    """The claim keys travel in every command: no one but the world may read them."""
+    """The claim keys travel in every command: no one but the world (and the operator, the
+    run's owner) may read them."""
     got = []
     sub = run["insider"].declare_subscriber(f"{wire.run_prefix(run['run'])}/**", lambda s: got.append(str(s.key_expr)))
     try:

@@ -25,21 +25,26 @@ def _free_port() -> int:
 
 
 def test_agent_elsewhere_rejoins_over_tls_with_an_exported_identity(rt, tmp_path):
-    endpoint = f"tls/127.0.0.1:{_free_port()}"
+    """The world listens on every interface (as across machines); its own agents dial
+    127.0.0.1, the one elsewhere the address its exported file names."""
+    port = _free_port()
+    listen, endpoint = f"tls/0.0.0.0:{port}", f"tls/127.0.0.1:{port}"
     up = start_up(rt.tracker, SCENARIOS / "case2.toml", tmp_path / "run", "--clock", "realtime",
-                  "--duration", "600", "--listen", endpoint)
+                  "--duration", "600", "--listen", listen)
     run_id, ep = up.banner()
-    assert ep == endpoint
+    assert ep == listen
     up.wait_started(60)
     pids = rt.tracker.wait_agent_pids(up.launcher, 6)
 
     # the operator exports agent 3's identity (and the run's CA) for the other machine
     cred = tmp_path / "agent-3.cred"
-    p = rt.tracker.spawn(swarm_cmd("credentials", "--agent", "3", "--run", run_id, "-o", cred), "export")
+    p = rt.tracker.spawn(swarm_cmd("credentials", "--agent", "3", "--run", run_id, "--endpoint", endpoint,
+                                   "-o", cred), "export")
     assert p.wait(30) == 0, p.text()
     assert stat.S_IMODE(cred.stat().st_mode) == 0o600
     doc = json.loads(cred.read_text())
     assert doc["user"] == "agent-3" and "secret" not in doc and doc["tls_ca"].startswith("-----BEGIN CERTIFICATE")
+    assert doc["endpoint"] == endpoint
 
     os.kill(pids[3], signal.SIGKILL)
     up.wait_info(lambda i: not agent_info(i, 3)["alive"], 10, "agent 3 to drop")

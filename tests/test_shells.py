@@ -170,15 +170,35 @@ def test_added_agents_take_reserved_ids_up_to_the_cap():
     assert len(world.book) == 10
 
 
-def test_join_claims_are_rate_limited_with_one_event_and_a_count():
+def test_join_claims_are_rate_limited_per_agent_with_one_event_and_a_count():
+    """A burst of claims on one agent's key, then one per s: that agent's flood does not
+    use up another agent's claims."""
+    from world.inbox import JOIN_BURST
+
     world, _ = open_world()
     events = []
     world.engine.on_event = events.append
-    burst = int(world.join_limit.burst)
-    replies = [claim(world, 2) for _ in range(burst + 5)]
+    replies = [claim(world, 2) for _ in range(JOIN_BURST + 5)]
     limited = [r for r in replies if not r["ok"] and "too many join claims" in r["error"]]
     assert len(limited) == 5 and world.over_limit["join_rate"] == 5
     assert [e["kind"] for e in events].count("limit") == 1
+    assert claim(world, 1)["ok"], "agent 2's flood blocked agent 1's claim"
+
+
+def test_a_full_inbox_drops_commands_and_queries_but_never_liveliness(monkeypatch):
+    import world.inbox as inbox_mod
+
+    monkeypatch.setattr(inbox_mod, "INBOX_MAX", 3)
+    world, _ = open_world()
+    events = []
+    world.engine.on_event = events.append
+    for k in range(5):
+        world.enqueue(("cmd", wire.agent_key(RUN, 1, "cmd"), b"x"))
+    world.enqueue(("alive", wire.agent_key(RUN, 1, "alive"), zenoh.SampleKind.PUT), False)
+    assert world.inbox.qsize() == 4 and world.inbox_dropped == 2
+    while world.drain(None, 0):
+        pass
+    assert world.over_limit["inbox"] == 2 and [e["kind"] for e in events].count("limit") == 1
 
 
 def test_a_law_from_the_join_reply_is_not_imported_unless_trusted(tmp_path, monkeypatch):

@@ -30,7 +30,12 @@ from world.roster import AgentBook, admit, new_agent_spec
 
 STALL_S = 0.8  # s the world's main thread may go without reaching its inbox (the link lease is 1 s)
 REJOIN_WAIT = 2.0  # s a token lost just after a stall of the world has to come back
-JOIN_RATE = 20.0  # join claims per s, on average (a bucket: every agent of the run may claim at once)
+# Join claims are limited per agent id (the hub lets agent k claim on its own key only, so
+# one agent cannot use up another's): a burst, then a claim per s. Keys of ids the run
+# cannot have (only an open hub lets those through) share one bucket.
+JOIN_BURST, JOIN_RATE = 5, 1.0
+STRANGER_BURST, STRANGER_RATE = 40, 20.0
+INBOX_MAX = 100_000  # messages waiting for the main thread; commands and queries past it are dropped
 
 
 class TokenBucket:
@@ -50,6 +55,7 @@ class TokenBucket:
 
 
 class Inbox:
+    inbox_dropped = 0  # messages dropped by the callbacks with the inbox full
     drained_at = 0.0  # monotonic s the main thread last came back from its inbox
     stall_seen = -1e9  # monotonic s a stall of the world itself was last noticed
     lost_after_stall: dict | None = None  # agent -> monotonic s its drop is due (token lost after a stall)
@@ -153,9 +159,22 @@ class Inbox:
                 del self.lost_after_stall[aid]
                 self._drop(aid, pending, f"liveliness token lost (not back {REJOIN_WAIT:g} s after the world's stall)")
 
+    def _join_allowed(self, key: str) -> bool:
+        try:
+            kid = wire.agent_of_key(key)
+        except wire.WireError:
+            kid = None
+        if kid is None or (kid not in self.book and kid not in self.cfg.scenario.added_id_range):
+            kid = None
+        if kid not in self.join_buckets:
+            self.join_buckets[kid] = (TokenBucket(JOIN_RATE, JOIN_BURST) if kid is not None
+                                      else TokenBucket(STRANGER_RATE, STRANGER_BURST))
+        return self.join_buckets[kid].take(time.monotonic())
+
     def _on_join(self, query) -> None:
-        if not self.join_limit.take(time.monotonic()):
-            self.limited("join_rate", f"more than {JOIN_RATE:g} join claims per s: claim refused")
+        if not self._join_allowed(str(query.key_expr)):
+            self.limited("join_rate", f"join claims faster than {JOIN_BURST} at once and {JOIN_RATE:g} per s "
+                         "on one agent's key: claim refused")
             query.reply(str(query.key_expr), wire.encode_join_reply(False, error="too many join claims; retry later"))
             return
         try:
@@ -191,6 +210,22 @@ class Inbox:
         ids = s.added_id_range
         if aid not in ids:
             raise wire.WireError(f"agent {aid}: agents added to this run take ids {ids.start}..{ids.stop - 1}")
+
+    def _note_inbox_dropped(self) -> None:
+        """Messages the zenoh callbacks dropped because the inbox was full (counted there)."""
+        first = "inbox" not in self.over_limit
+        self.over_limit["inbox"] = self.inbox_dropped
+        if first:
+            self.event("limit", None, f"more than {INBOX_MAX} messages waiting: commands and queries dropped",
+                       limit="inbox")
+
+    def enqueue(self, item, droppable: bool = True) -> None:
+        """What a zenoh callback does with a message: queue it for the main thread; past
+        INBOX_MAX waiting, a command or a query is dropped and counted (liveliness never)."""
+        if droppable and self.inbox.qsize() >= INBOX_MAX:
+            self.inbox_dropped += 1
+            return
+        self.inbox.put(item)
 
     def limited(self, what: str, reason: str) -> None:
         """Something over a limit: counted each time, one event the first time."""
@@ -272,6 +307,8 @@ class Inbox:
         except queue.Empty:
             item = None
         self.drained_at = time.monotonic()
+        if self.inbox_dropped:
+            self._note_inbox_dropped()
         if timeout is not None and self.drained_at - t0 > max(timeout, 0.0) + STALL_S:
             self.stall_seen = self.drained_at  # stopped while waiting
         if self.lost_after_stall:

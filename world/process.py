@@ -14,7 +14,6 @@ keys, publishing, results), `world/inbox.py` (what each message does) and
 
 from __future__ import annotations
 
-import os
 import queue
 import signal
 import sys
@@ -25,12 +24,13 @@ from pathlib import Path
 import numpy as np
 
 from swarm.contracts import wire
+from swarm.contracts.credentials import CredentialsError
 from swarm.contracts.scenario import Scenario
-from swarm.contracts import credentials
-from swarm.contracts.transport import HubAuth, open_hub, open_hub_requested, query_statuses, socket_path
+from swarm.contracts.transport import HubAuth, open_hub, query_statuses, socket_path
 from world.clock import Clock
 from world.engine import Engine
-from world.inbox import JOIN_RATE, Inbox, TokenBucket
+from world.hub_auth import forget_run, run_auth
+from world.inbox import Inbox, TokenBucket
 from world.recording import EXIT_NO_SPACE, RECORDING_FILE, RecordingError, write_run
 from world.roster import AgentBook, agent_figures
 
@@ -84,8 +84,7 @@ class World(Inbox, Clock):
         self.book = {i: AgentBook() for i in s.ids}
         self.garbage = 0  # malformed or foreign messages on keys the world listens to
         self.over_limit: dict[str, int] = {}  # how often each limit refused something (world/inbox.py)
-        # Every agent (and every one that may be added) can claim at once, then JOIN_RATE per s.
-        self.join_limit = TokenBucket(JOIN_RATE, 2 * (len(s.ids) + s.added_agents_cap) + 10)
+        self.join_buckets: dict[int | None, TokenBucket] = {}  # join claims per agent id (world/inbox.py)
         self.ignored = 0
         self.deadline = self.cfg.deadline or s.run.lockstep_deadline
         self.stopped_by: int | None = None
@@ -105,16 +104,16 @@ class World(Inbox, Clock):
         run = self.cfg.run
         self.session = session if session is not None else open_hub(self.cfg.listen, self.cfg.auth)
         ses = self.session
-        put = self.inbox.put
+        put = self.enqueue
         self._subs = [
             ses.declare_subscriber(wire.agent_key(run, "*", "cmd"),
                                    lambda s: put(("cmd", str(s.key_expr), s.payload.to_bytes()))),
             ses.liveliness().declare_subscriber(wire.agent_key(run, "*", "alive"),
-                                                lambda s: put(("alive", str(s.key_expr), s.kind)),
+                                                lambda s: put(("alive", str(s.key_expr), s.kind), False),
                                                 history=True),
             ses.declare_queryable(wire.agent_key(run, "*", "join"), lambda q: put(("join", q))),
             ses.declare_queryable(wire.world_info_key(run), lambda q: put(("info", q))),
-            ses.declare_queryable(wire.world_admin_key(run), lambda q: put(("admin", q))),
+            ses.declare_queryable(wire.world_admin_key(run), lambda q: put(("admin", q), False)),  # the launcher's
         ]
         self.sense_pub = {i: ses.declare_publisher(wire.agent_key(run, i, "sense"), express=True)
                           for i in self.cfg.scenario.ids}
@@ -240,50 +239,26 @@ def _raise_stop(signum, _frame):
     raise Stop(signum)
 
 
-def run_auth(cfg: WorldConfig) -> HubAuth | None:
-    """The run's credentials, written to <runtime dir>/<run>.cred for its user only, and
-    the hub's rules built from them (None for an open hub: SWARM_OPEN_HUB=1)."""
-    if open_hub_requested():
-        print("swarm world: SWARM_OPEN_HUB is set: anyone who reaches the endpoint can act on this run",
-              file=sys.stderr, flush=True)
-    path = credentials.run_file(cfg.run)
-    if path.exists():
-        old = credentials.read(path)
-        if old.pid is not None and credentials.pid_alive(old.pid) and old.pid != os.getpid():
-            raise credentials.CredentialsError(f"run {cfg.run} is already running (world pid {old.pid})")
-    tls_settings, ca = None, None
-    if cfg.listen.startswith("tls/"):
-        from swarm.contracts import tls
-
-        tls_settings, ca = tls.run_hub_settings(credentials.runtime_dir(), cfg.run, cfg.listen)
-    s = cfg.scenario
-    creds = credentials.new_credentials(cfg.run, cfg.listen, pid=os.getpid(), tls_ca=ca,
-                                        open_hub=open_hub_requested(), ids=tuple(s.ids),
-                                        added_ids=(s.added_id_range.start, s.added_id_range.stop - 1))
-    credentials.write(creds, path)
-    if open_hub_requested():
-        return None
-    return HubAuth(creds, tuple(s.ids) + tuple(s.added_id_range), tls_settings)
-
-
 def run_world(cfg: WorldConfig) -> int:
     """Run a world to the end; exit code 0 when the run completed, 128+signal when stopped,
     EXIT_NO_SPACE when the recording or the results could not be written."""
+    # Stop (SIGTERM/SIGINT) from the first moment: the run's credentials, once written,
+    # must go with it however early it is stopped.
+    old = {sig: signal.signal(sig, _raise_stop) for sig in (signal.SIGTERM, signal.SIGINT)}
     try:
-        cfg.auth = run_auth(cfg)
-    except credentials.CredentialsError as e:
-        print(f"swarm world: {e}", file=sys.stderr)
-        return 2
-    try:
+        try:
+            cfg.auth = run_auth(cfg.run, cfg.listen, cfg.scenario)
+        except (CredentialsError, OSError) as e:
+            print(f"swarm world: {e if isinstance(e, CredentialsError) else f'cannot write the run credentials: {e}'}",
+                  file=sys.stderr)
+            return 2
         return _run_world(cfg)
+    except Stop as s:  # before the world listened: nothing recorded
+        return 128 + s.signum
     finally:
-        credentials.run_file(cfg.run).unlink(missing_ok=True)
-        if cfg.listen.startswith("tls/"):
-            import shutil
-
-            from swarm.contracts.tls import run_tls_dir
-
-            shutil.rmtree(run_tls_dir(credentials.runtime_dir(), cfg.run), ignore_errors=True)
+        forget_run(cfg.run, cfg.listen)
+        for sig, h in old.items():
+            signal.signal(sig, h)
 
 
 def _run_world(cfg: WorldConfig) -> int:
@@ -305,8 +280,7 @@ def _run_world(cfg: WorldConfig) -> int:
     except RecordingError as e:
         print(f"swarm world: {e}", file=sys.stderr)
         return EXIT_NO_SPACE
-    old = {sig: signal.signal(sig, _raise_stop) for sig in (signal.SIGTERM, signal.SIGINT)}
-    code = 0
+    code = 0  # SIGTERM/SIGINT raise Stop here (run_world installed the handlers)
     try:
         try:
             world._open()
@@ -356,8 +330,6 @@ def _run_world(cfg: WorldConfig) -> int:
             code = 1
         world._close()
     finally:
-        for sig, h in old.items():
-            signal.signal(sig, h)
         if sock is not None:
             sock.unlink(missing_ok=True)
     return code

@@ -60,7 +60,7 @@ class Credentials:
     password: str | None = None
     pid: int | None = None  # the world's pid (local runs: is it still there?)
     tls_ca: str | None = None  # PEM of the run's certificate authority (tls/ endpoints)
-    open_hub: bool = False  # the hub checks nothing (SWARM_OPEN_HUB): connect without an identity
+    hub_is_open: bool = False  # the hub checks nothing (SWARM_OPEN_HUB): connect without an identity
     ids: tuple[int, ...] | None = None  # the scenario's agent ids
     added_ids: tuple[int, int] | None = None  # first and last id an added agent may take
     path: Path | None = field(default=None, compare=False)
@@ -95,7 +95,7 @@ class Credentials:
         for k in ("secret", "user", "password", "pid", "tls_ca"):
             if getattr(self, k) is not None:
                 d[k] = getattr(self, k)
-        if self.open_hub:
+        if self.hub_is_open:
             d["open_hub"] = True
         if self.ids is not None:
             d["ids"] = list(self.ids)
@@ -105,10 +105,10 @@ class Credentials:
 
 
 def new_credentials(run: str, endpoint: str, pid: int | None = None, tls_ca: str | None = None,
-                    open_hub: bool = False, ids: tuple[int, ...] | None = None,
+                    hub_is_open: bool = False, ids: tuple[int, ...] | None = None,
                     added_ids: tuple[int, int] | None = None) -> Credentials:
     return Credentials(wire.check_run_id(run), endpoint, secret=secrets.token_hex(32), pid=pid, tls_ca=tls_ca,
-                       open_hub=open_hub, ids=ids, added_ids=added_ids)
+                       hub_is_open=hub_is_open, ids=ids, added_ids=added_ids)
 
 
 def parse(text: str, path: Path | None = None) -> Credentials:
@@ -145,8 +145,8 @@ def parse(text: str, path: Path | None = None) -> Credentials:
     pid = d.get("pid")
     if pid is not None and (type(pid) is not int or pid <= 0):
         raise CredentialsError(f"{where}: pid: expected a positive integer")
-    open_hub = d.get("open_hub", False)
-    if type(open_hub) is not bool:
+    hub_is_open = d.get("open_hub", False)
+    if type(hub_is_open) is not bool:
         raise CredentialsError(f"{where}: open_hub: expected true or false")
     ids, added = d.get("ids"), d.get("added_ids")
     if ids is not None and not (isinstance(ids, list) and all(type(i) is int and i >= 0 for i in ids)):
@@ -155,7 +155,7 @@ def parse(text: str, path: Path | None = None) -> Credentials:
                                   and all(type(i) is int for i in added)):
         raise CredentialsError(f"{where}: added_ids: expected [first, last]")
     return Credentials(run, text_field("endpoint", optional=False), secret, user, password, pid,
-                       text_field("tls_ca"), open_hub, None if ids is None else tuple(ids),
+                       text_field("tls_ca"), hub_is_open, None if ids is None else tuple(ids),
                        None if added is None else (added[0], added[1]), path)
 
 
@@ -194,17 +194,18 @@ def write_private(path: Path, data: bytes) -> None:
     tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
     try:
-        os.fchmod(fd, 0o600)
-        with os.fdopen(fd, "wb", closefd=False) as f:
-            f.write(data)
-            f.flush()
-            os.fsync(fd)
-    except BaseException:
-        os.close(fd)
+        try:
+            os.fchmod(fd, 0o600)
+            with os.fdopen(fd, "wb", closefd=False) as f:
+                f.write(data)
+                f.flush()
+                os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
+    except BaseException:  # nothing half-written stays behind (it may hold a password)
         tmp.unlink(missing_ok=True)
         raise
-    os.close(fd)
-    os.replace(tmp, path)
 
 
 def write(creds: Credentials, path: Path) -> Path:
@@ -243,7 +244,22 @@ def runtime_dir() -> Path:
 
 
 def run_file(run: str) -> Path:
-    return runtime_dir() / f"{wire.check_run_id(run)}{SUFFIX}"
+    try:
+        return runtime_dir() / f"{wire.check_run_id(run)}{SUFFIX}"
+    except wire.WireError as e:
+        raise CredentialsError(str(e)) from None
+
+
+def dial_endpoint(listen: str) -> str:
+    """Where a process on the world's own machine connects to reach `listen`: a wildcard
+    listen address (`tcp/0.0.0.0:P`, `tls/[::]:P`) is dialled on 127.0.0.1 (also a name
+    the run's TLS certificate carries); anything else as it is."""
+    proto, sep, rest = listen.partition("/")
+    if proto in ("tcp", "tls") and sep:
+        for wildcard in ("0.0.0.0:", "[::]:"):
+            if rest.startswith(wildcard):
+                return f"{proto}/127.0.0.1:{rest[len(wildcard):]}"
+    return listen
 
 
 def local_runs() -> list[Credentials]:
@@ -275,29 +291,34 @@ def from_environment() -> Credentials | None:
     return read(Path(p)) if p else None
 
 
+def find_local(run: str | None = None, endpoint: str | None = None) -> Credentials:
+    """The own credentials file of a local run (the runtime dir only): run `run`, or the one
+    listening on `endpoint`, or the only one. CredentialsError says what was looked at."""
+    if run is not None:
+        f = run_file(run)
+        if f.exists():  # the run id says which; the endpoint may be any way of dialling it
+            return read(f)
+    dial = None if endpoint is None else dial_endpoint(endpoint)
+    found = [c for c in local_runs() if (run is None or c.run == run) and (dial is None or c.endpoint == dial)]
+    if len(found) == 1:
+        return found[0]
+    what = " and ".join(x for x in (f"run {run}" if run else "", f"endpoint {endpoint}" if endpoint else "") if x)
+    if not found:
+        raise CredentialsError(f"no credentials for {what or 'a local run'} in {runtime_dir()} (a run on "
+                               f"another machine: a file from `swarm credentials` there, with --credentials "
+                               f"or {ENV_CREDENTIALS})")
+    raise CredentialsError(f"{len(found)} local runs match ({', '.join(c.run for c in found)}); pick one with --run")
+
+
 def find(run: str | None = None, endpoint: str | None = None, path: Path | None = None) -> Credentials:
     """The credentials to use: `path` (--credentials), else $SWARM_CREDENTIALS, else the
-    local run file that matches `run` and/or `endpoint`. CredentialsError says what was
-    looked at when none fits."""
+    local run's own file (`find_local`)."""
     c = read(path) if path is not None else from_environment()
     if c is not None:
         if run is not None and c.run != run:
             raise CredentialsError(f"{c.path}: credentials of run {c.run}, not of run {run}")
         return c
-    if run is not None:
-        f = run_file(run)
-        if f.exists():
-            c = read(f)
-            if endpoint is None or c.endpoint == endpoint:
-                return c
-    found = [c for c in local_runs() if (run is None or c.run == run) and (endpoint is None or c.endpoint == endpoint)]
-    if len(found) == 1:
-        return found[0]
-    what = " and ".join(x for x in (f"run {run}" if run else "", f"endpoint {endpoint}" if endpoint else "") if x)
-    if not found:
-        raise CredentialsError(f"no credentials for {what or 'a local run'} in {runtime_dir()}: pass "
-                               f"--credentials FILE or set {ENV_CREDENTIALS} (swarm credentials exports one)")
-    raise CredentialsError(f"{len(found)} local runs match ({', '.join(c.run for c in found)}); pick one with --run")
+    return find_local(run, endpoint)
 
 
 def from_environment_path() -> Path | None:

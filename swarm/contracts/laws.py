@@ -36,6 +36,11 @@ def trusted_laws(extra: tuple[str, ...] | list[str] = ()) -> set[str]:
     return {n.strip() for n in env.split(",") if n.strip()} | set(extra)
 
 
+def with_trusted_laws(names) -> str:
+    """$SWARM_TRUSTED_LAWS for a child process: `names` and what this process trusts."""
+    return ",".join(dict.fromkeys([*names, *sorted(trusted_laws())]))
+
+
 def check_trusted(name: str, trusted: set[str]) -> None:
     """LawError unless `name` is registered (built in) or trusted by this process's user."""
     if name in LAW_NAMES or name in trusted:

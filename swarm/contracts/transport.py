@@ -15,6 +15,7 @@ from pathlib import Path
 
 from swarm.contracts import access, wire
 from swarm.contracts.credentials import OPERATOR, WORLD, Credentials, write_private
+from swarm.contracts.credentials import dial_endpoint as dial_endpoint  # re-exported
 from swarm.contracts.credentials import runtime_dir as runtime_dir  # re-exported: the one place it is decided
 
 LEASE_MS = 1000  # a frozen (SIGSTOP) process is dropped after ~0.95 s
@@ -110,7 +111,7 @@ def open_client(connect: str, timeout_ms: int = CONNECT_TIMEOUT_MS, creds: Crede
     raises zenoh.ZError when the endpoint does not answer or refuses the identity."""
     import zenoh
 
-    identity = creds.identity(user) if creds is not None and not creds.open_hub else None
+    identity = creds.identity(user) if creds is not None and not creds.hub_is_open else None
     tls = _client_tls(creds) if creds is not None and connect.startswith("tls/") else None
     return zenoh.open(client_config(connect, timeout_ms, identity, tls))
 

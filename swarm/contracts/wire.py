@@ -4,17 +4,19 @@ in the project builds a key or packs a payload; docs/protocol.md describes the s
 Keys (every key of a run starts with `swarm/<run>`, so runs never hear each other):
 
     swarm/<run>/world/alive          liveliness token of the world process
-    swarm/<run>/world/join           queryable: an agent claims its id, gets the scenario
-    swarm/<run>/world/info           queryable: run info (scenario, clock, tick, agents)
-    swarm/<run>/world/admin          queryable: pause / resume the world clock, fault done, agent exit
+    swarm/<run>/world/info           queryable (operator): run info (scenario, clock, tick, agents)
+    swarm/<run>/world/admin          queryable (operator): pause / resume the clock, fault done, agent exit
     swarm/<run>/world/control        world -> all: run-wide notices (JSON), e.g. the end
     swarm/<run>/truth                world -> observers: ground truth of one tick (binary)
     swarm/<run>/events               world -> observers: one event (JSON)
     swarm/<run>/agent/<id>/alive     liveliness token of agent <id>'s process
     swarm/<run>/agent/<id>/sense     world -> agent <id>: its sensor frame (binary)
     swarm/<run>/agent/<id>/cmd       agent <id> -> world: its command (binary)
-    swarm/<run>/agent/<id>/status    agent <id> -> all: its status (JSON); also its queryable
-    swarm/<run>/agent/<id>/ctl       anyone -> agent <id>: {"kind": "signal", "signal": "KILL"}
+    swarm/<run>/agent/<id>/status    agent <id> -> operator: its status (JSON); also its queryable
+    swarm/<run>/agent/<id>/ctl       operator -> agent <id>: {"kind": "signal", "signal": "KILL"}
+    swarm/<run>/agent/<id>/join      queryable of the world: agent <id> claims its id, gets its brain
+
+Who may send what on these keys is the hub's business (swarm/contracts/access.py).
 
 Hot-path payloads (sense, cmd, truth) are little-endian binary records led by a kind
 byte and a version byte; cold-path payloads are UTF-8 JSON objects with "v": 1.
@@ -398,7 +400,7 @@ CTL_SIGNALS = ("KILL", "TERM", "STOP")
 
 
 def encode_ctl(signal_name: str) -> bytes:
-    """anyone -> agent/<id>/ctl: take this signal (for agents on hosts one cannot signal)."""
+    """operator -> agent/<id>/ctl: take this signal (for agents on hosts one cannot signal)."""
     return encode_json({"kind": "signal", "signal": signal_name})
 
 
