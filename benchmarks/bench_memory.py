@@ -70,7 +70,11 @@ def main() -> int:
             print("swarm up printed no banner; see", work / "up.log")
             return 1
         run, endpoint = got
-        creds = credentials.read(work / "rt" / f"{run}{credentials.SUFFIX}")
+        cred_file = work / "rt" / f"{run}{credentials.SUFFIX}"  # written by the world as it starts
+        if not wait_until(cred_file.exists, 30, 0.1):
+            print("the world wrote no credentials; see", work / "up.log")
+            return 1
+        creds = credentials.read(cred_file)
         ses = open_client(endpoint, timeout_ms=5000, creds=creds)
 
         def info():
