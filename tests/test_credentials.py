@@ -195,3 +195,37 @@ def test_an_agent_the_hub_does_not_know_is_refused_before_connecting():
                                                  r"agents added at run time take ids 4..15\)"):
         c.check_agent(99)
     assert C.parse(json.dumps(c.to_json())).added_ids == (4, 15)
+
+
+def _cli(*args):
+    from typer.testing import CliRunner
+
+    from swarm.cli import app
+
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+def test_swarm_credentials_exports_one_identity_or_says_why_not(rtdir, tmp_path, monkeypatch):
+    C.write(C.new_credentials("r1", "unixsock-stream/x.sock", pid=os.getpid(), ids=(1, 2), added_ids=(3, 10)),
+            C.run_file("r1"))
+    out = tmp_path / "a2.cred"
+    res = _cli("credentials", "--agent", "2")
+    assert res.exit_code == 2 and "from this machine only: give --endpoint" in res.output
+    res = _cli("credentials", "--agent", "2", "--endpoint", "tcp/10.0.0.5:7447", "-o", out)
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    assert (doc["user"], doc["endpoint"], "secret" in doc) == ("agent-2", "tcp/10.0.0.5:7447", False)
+    assert stat.S_IMODE(out.stat().st_mode) == 0o600
+    assert _cli("credentials", "--agent", "2", "--endpoint", "tcp/h:1", "-o", out).exit_code == 2  # exists
+    for args, what in [((), "give one of --agent ID or --operator"),
+                       (("--agent", "1", "--operator"), "give one of"),
+                       (("--agent", "99", "--endpoint", "tcp/h:1"), "agent 99 is not in scenario of run r1"),
+                       (("--operator", "--run", "a/b"), "run id"),
+                       (("--operator", "--run", "r9"), "no credentials for run r9")]:
+        res = _cli("credentials", *args)
+        assert res.exit_code == 2 and what in res.output and "Traceback" not in res.output, (args, res.output)
+    # $SWARM_CREDENTIALS (an exported file) does not change which file is exported from
+    monkeypatch.setenv("SWARM_CREDENTIALS", str(out))
+    res = _cli("credentials", "--operator", "--endpoint", "tcp/h:1", "-o", tmp_path / "op.cred")
+    assert res.exit_code == 0, res.output
+    assert json.loads((tmp_path / "op.cred").read_text())["user"] == "operator"
