@@ -64,6 +64,23 @@ def _check_duration(s, duration: float | None, path: Path) -> None:
         raise fail(" ".join(line.strip() for line in str(e).splitlines())) from None
 
 
+PROGRESS_AGENTS = 12  # more agents than this: the progress line sums them up
+
+
+def progress_errors(p: dict) -> str:
+    """The progress line's radial errors: one per agent for a small swarm; for a large one
+    the median, the worst and how many have no leader to follow ("-" per agent)."""
+    errs, dropped = p["errors"], p["dropped"]
+    if len(errs) + len(dropped) <= PROGRESS_AGENTS:
+        text = " ".join(f"{i}:{'-' if e is None else f'{100 * e:.1f}%'}" for i, e in sorted(errs.items()))
+        return f"radial error {text}" + (f"  dropped {dropped}" if dropped else "")
+    rooted = sorted((e, i) for i, e in errs.items() if e is not None)
+    text = (f"radial error median {100 * rooted[len(rooted) // 2][0]:.1f}%, worst {100 * rooted[-1][0]:.1f}% "
+            f"(agent {rooted[-1][1]})" if rooted else "radial error -")
+    return (f"{text}; {len(errs) - len(rooted)} of {len(errs)} live agents without a leader"
+            + (f"; {len(dropped)} dropped" if dropped else ""))
+
+
 def _check_runtime_dir() -> None:
     """The runtime dir (sockets, credentials) must be the user's own: one line, exit 2."""
     from swarm.contracts.credentials import CredentialsError, runtime_dir
@@ -245,10 +262,7 @@ def up(
             return
         rate = (p["tick"] - state["tick"]) / max(wall - state["wall"], 1e-9)
         state.update(last=now, tick=p["tick"], wall=wall)
-        errs = " ".join(f"{i}:{'-' if e is None else f'{100 * e:.1f}%'}" for i, e in sorted(p["errors"].items()))
-        drop = f"  dropped {p['dropped']}" if p["dropped"] else ""
-        line = (f"t={p['time']:7.2f}s tick {p['tick']}/{total} {rate:6.0f} ticks/s  "
-                f"radial error {errs}{drop}")
+        line = f"t={p['time']:7.2f}s tick {p['tick']}/{total} {rate:6.0f} ticks/s  " + progress_errors(p)
         if tty:
             typer.echo("\r\033[K" + line[:200], nl=False)
         else:

@@ -243,3 +243,15 @@ def test_check_shows_the_added_agents(base, write_toml):
     base["run"]["max_added_agents"] = 0
     res = invoke("check", write_toml(base))
     assert "  added agents: up to 0 (run.max_added_agents = 0)\n" in res.stdout
+
+
+def test_progress_line_sums_up_a_large_swarm():
+    from swarm.run_cli import progress_errors
+
+    small = {"errors": {1: 0.0, 2: None, 3: 0.25}, "dropped": [4]}
+    assert progress_errors(small) == "radial error 1:0.0% 2:- 3:25.0%  dropped [4]"
+    big = {"errors": {i: (None if i % 4 == 0 else i / 1000) for i in range(1, 201)}, "dropped": [201, 202]}
+    line = progress_errors(big)
+    assert line == ("radial error median 10.1%, worst 19.9% (agent 199); 50 of 200 live agents without a leader; "
+                    "2 dropped"), line
+    assert progress_errors({"errors": {i: None for i in range(20)}, "dropped": []}).startswith("radial error -;")
