@@ -28,10 +28,9 @@ from pathlib import Path
 from agents.joining import EXIT_REFUSED, AgentExit, claim
 from agents.joining import log as _log
 from agents.world_link import EXIT_WORLD_SILENT, NEW_WORLD, WorldLink
-from swarm.contracts import wire
-from swarm.contracts.lifeline import tie_to_launcher
-from swarm.contracts import credentials
+from swarm.contracts import credentials, wire
 from swarm.contracts.laws import LawError, check_trusted, trusted_laws
+from swarm.contracts.lifeline import tie_to_launcher
 from swarm.contracts.transport import open_client
 
 STATUS_PERIOD = 0.2  # s of wall time between periodic status messages

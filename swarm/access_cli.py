@@ -60,7 +60,7 @@ def credentials(
     if path.exists() and not force:
         raise fail(f"{path} exists; pass --force to replace it", EXIT_USAGE)
     try:
-        C.write(replace(exported, pid=None), path)
+        C.write(exported, path)
     except OSError as e:
         raise fail(f"cannot write {path}: {e.strerror or e}", 1) from None
     typer.echo(f"wrote {path} ({user} of run {own.run}, endpoint {exported.endpoint}, mode 0600)")

@@ -36,6 +36,10 @@ def run(tmp_path_factory):
     runtime dir and files must be private anyway); stopped and checked for leftovers."""
     d = tmp_path_factory.mktemp("access")
     with Runtime(d) as rt:
+        # a runtime dir the run itself creates, under umask 000, in a directory others may
+        # pass through (so that only the run's own modes keep another user out)
+        os.chmod(rt.dir, 0o711)
+        rt.env["SWARM_RUNTIME_DIR"] = os.path.join(rt.dir, "rt")
         args = swarm_cmd("up", SCENARIOS / "case2.toml", "--out", d / "run", "--no-plots", "--clock", "realtime",
                          "--duration", "600")
         up = UpRun(rt.tracker.spawn(["/bin/sh", "-c", 'umask 000; exec "$@"', "sh", *map(str, args)], "up"),
@@ -91,8 +95,8 @@ print(json.dumps(out))
 
 
 def test_runtime_dir_and_files_are_private_under_umask_000(run):
-    rt = run["rt"].dir
-    assert stat.S_IMODE(os.stat(rt).st_mode) == 0o700  # the test made it; the world checked it
+    rt = run["rt"].env["SWARM_RUNTIME_DIR"]
+    assert stat.S_IMODE(os.stat(rt).st_mode) == 0o700  # made by `swarm up` under umask 000
     cred = os.path.join(rt, f"{run['run']}.cred")
     assert stat.S_IMODE(os.stat(cred).st_mode) == 0o600
     assert not [p for p in os.listdir(rt) if p.endswith(".users")]  # the hub's dictionary lived for its open only
@@ -101,7 +105,7 @@ def test_runtime_dir_and_files_are_private_under_umask_000(run):
 @pytest.mark.skipif(os.getuid() != 0 or not os.path.exists("/usr/bin/python3"), reason="needs root and a system python")
 def test_another_local_user_reaches_nothing(run):
     """Another user of the machine (it once paused a run through a world-writable socket)."""
-    r = subprocess.run(["/usr/bin/python3", "-c", PROBE, run["rt"].dir, run["run"]], user=NOBODY,
+    r = subprocess.run(["/usr/bin/python3", "-c", PROBE, run["rt"].env["SWARM_RUNTIME_DIR"], run["run"]], user=NOBODY,
                        capture_output=True, text=True, timeout=30)
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout) == {"list": "PermissionError", "read": "PermissionError", "connect": "PermissionError"}

@@ -229,3 +229,24 @@ def test_swarm_credentials_exports_one_identity_or_says_why_not(rtdir, tmp_path,
     res = _cli("credentials", "--operator", "--endpoint", "tcp/h:1", "-o", tmp_path / "op.cred")
     assert res.exit_code == 0, res.output
     assert json.loads((tmp_path / "op.cred").read_text())["user"] == "operator"
+
+
+def test_a_world_that_comes_back_keeps_its_runs_secret(rtdir, monkeypatch):
+    """--wait-world: agents of a run whose world was killed get back in with the credentials
+    they have; a world of the same run that still lives is not replaced."""
+    from swarm.contracts.scenario import parse_scenario
+    from world.hub_auth import run_auth
+
+    monkeypatch.delenv("SWARM_OPEN_HUB", raising=False)
+    s = parse_scenario({"gains": {"c1": 1.0, "c2": 0.5}, "agents": [
+        {"id": 1, "role": "leader", "x": 1.0, "y": 0.0, "heading": 0.0, "speed": 1.0, "orbit_radius": 1.0}]})
+    dead = C.new_credentials("r1", "unixsock-stream/x", pid=2**22 + 12345)
+    C.write(dead, C.run_file("r1"))
+    auth = run_auth("r1", "unixsock-stream/x", s)
+    assert auth.creds.secret == dead.secret and auth.creds.pid == os.getpid()
+    assert C.read(C.run_file("r1")).identity("agent-1") == dead.identity("agent-1")
+    C.write(C.new_credentials("r2", "unixsock-stream/y", pid=os.getppid()), C.run_file("r2"))
+    with pytest.raises(C.CredentialsError, match=f"run r2 is already running \\(world pid {os.getppid()}\\)"):
+        run_auth("r2", "unixsock-stream/y", s)
+    fresh = run_auth("r3", "unixsock-stream/z", s)
+    assert fresh.creds.secret not in (dead.secret, None)

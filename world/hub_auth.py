@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import shutil
+from dataclasses import replace
 import sys
 
 from swarm.contracts import credentials
@@ -21,12 +22,13 @@ from swarm.contracts.transport import HubAuth, dial_endpoint, open_hub_requested
 
 def run_auth(run: str, listen: str, scenario: Scenario) -> HubAuth | None:
     """Write the run's credentials; return the hub's rules (None for an open hub:
-    SWARM_OPEN_HUB=1). CredentialsError, one line, when the run cannot be made private."""
+    SWARM_OPEN_HUB=1). CredentialsError, one line, when the run cannot be made private or
+    its world is still running. A world that comes back after its run's world died keeps
+    that run's secret (not its TLS authority, which is made anew)."""
     path = credentials.run_file(run)
-    if path.exists():
-        old = credentials.read(path)
-        if old.pid is not None and old.pid != os.getpid() and credentials.pid_alive(old.pid):
-            raise CredentialsError(f"run {run} is already running (world pid {old.pid})")
+    old = credentials.read(path) if path.exists() else None
+    if old is not None and old.pid is not None and old.pid != os.getpid() and credentials.pid_alive(old.pid):
+        raise CredentialsError(f"run {run} is already running (world pid {old.pid})")
     tls_settings, ca = None, None
     if listen.startswith("tls/"):
         from swarm.contracts import tls
@@ -41,6 +43,10 @@ def run_auth(run: str, listen: str, scenario: Scenario) -> HubAuth | None:
     creds = credentials.new_credentials(run, dial_endpoint(listen), pid=os.getpid(), tls_ca=ca,
                                         hub_is_open=open_hub, ids=tuple(scenario.ids),
                                         added_ids=(added.start, added.stop - 1))
+    if old is not None and old.secret is not None:
+        # The file of a world of this run that died (killed: it had no time to remove it):
+        # its secret is kept, so that agents waiting for the world (--wait-world) get back in.
+        creds = replace(creds, secret=old.secret)
     credentials.write(creds, path)
     if open_hub:
         print("swarm world: SWARM_OPEN_HUB is set: anyone who reaches the endpoint can act on this run",

@@ -86,9 +86,9 @@ class Credentials:
         raise CredentialsError(f"the credentials{where} are for {self.user!r} of run {self.run}, not {user!r}")
 
     def export(self, user: str) -> "Credentials":
-        """A copy that holds only `user`'s password (for another machine)."""
+        """A copy that holds only `user`'s password (for another machine; no pid either)."""
         u, p = self.identity(user)
-        return replace(self, secret=None, user=u, password=p, path=None)
+        return replace(self, secret=None, user=u, password=p, pid=None, path=None)
 
     def to_json(self) -> dict:
         d = {"v": 1, "run": self.run, "endpoint": self.endpoint}

@@ -22,7 +22,7 @@ import socket
 from dataclasses import dataclass
 from pathlib import Path
 
-from swarm.contracts.credentials import Credentials, CredentialsError, write_private
+from swarm.contracts.credentials import Credentials, CredentialsError, private_dir, write_private
 
 VALID_DAYS = 30
 TLS = "transport/link/tls"
@@ -261,9 +261,7 @@ def run_hub_settings(directory: Path, run: str, listen: str) -> tuple[dict, str]
     """Certificates for run `run` listening on `listen` (in `<directory>/<run>.tls/`): the
     hub's settings and the CA's PEM text, which goes into the run's credentials."""
     d = run_tls_dir(directory, run)
-    d.mkdir(mode=0o700, exist_ok=True)
-    os.chmod(d, 0o700)
-    files = generate_run_certificates(d, run, hosts_of_endpoint(listen))
+    files = generate_run_certificates(private_dir(d), run, hosts_of_endpoint(listen))
     return hub_tls_settings(files), files.ca.read_text()
 
 
