@@ -6,7 +6,12 @@ token, and then answers each of its own sensor frames with a command. It never r
 ground truth. It publishes its status (role, out-neighbour, path to a leader and hops,
 leader phase, counters) on change and a few times per second.
 
-Callbacks only enqueue; the main thread decides and publishes. When the world stops
+A sensor frame is answered in the zenoh callback that delivers it (decode, decide,
+publish, under one lock), with no hand-over to another thread: that hand-over cost as much
+CPU per tick as all the rest (benchmarks/bare_client.py --handler direct vs callback). An
+exception there (a follower law that raises) is handed to the main thread, which ends the
+process with its traceback. Everything else only enqueues, and the main thread handles it:
+status (on change and a few times per second), queries, control, the world's token. When the world stops
 answering it waits up to --world-grace s for it (agents/world_link.py). Started by
 `swarm up`, it also stops when the launcher dies (swarm/contracts/lifeline.py). Exit codes:
 0 the run ended, 1 crashed (an exception, e.g. in a follower law: the traceback is the last
@@ -22,6 +27,7 @@ import queue
 import signal
 import socket
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -82,6 +88,8 @@ class AgentNode:
         self.status_sent = 0.0
         self.last_status: tuple | None = None
         self.stalled = 0.0  # s this process was not running before the current batch
+        self.lock = threading.Lock()  # the brain and its counters: frames are answered in zenoh's thread
+        self.answering = True  # False while (re)claiming the id of a new world, and after a crash
 
     def new_brain(self):
         from agents.brain import AgentBrain
@@ -94,8 +102,7 @@ class AgentNode:
         self.cmd_pub = ses.declare_publisher(wire.agent_key(run, self.id, "cmd"), express=True)
         self.status_pub = ses.declare_publisher(wire.agent_key(run, self.id, "status"))
         self.subs = [
-            ses.declare_subscriber(wire.agent_key(run, self.id, "sense"),
-                                   lambda s: put(("sense", s.payload.to_bytes()))),
+            ses.declare_subscriber(wire.agent_key(run, self.id, "sense"), self.on_sense_sample),
             ses.declare_subscriber(wire.world_control_key(run),
                                    lambda s: put(("control", s.payload.to_bytes()))),
             ses.declare_subscriber(wire.agent_key(run, self.id, "ctl"),
@@ -131,12 +138,15 @@ class AgentNode:
         """Ticks on which the follower law returned NaN or inf (its last turn rate held)."""
         return self.nonfinite_before + self.brain.nonfinite
 
+    def status_key(self) -> tuple:
+        """What others rely on in the status: a change is published at once."""
+        d = self.last
+        return (None, None, False, self.hops()) if d is None else (d.out, d.phase, d.fallback, d.hops)
+
     def maybe_publish_status(self, force: bool = False) -> None:
         """Publish on change of what others rely on, and every STATUS_PERIOD s anyway."""
         now = time.monotonic()
-        d = self.last
-        key = (None, None, False) if d is None else (d.out, d.phase, d.fallback)
-        key = (*key, self.hops())
+        key = self.status_key()
         if force or key != self.last_status or now - self.status_sent >= STATUS_PERIOD:
             self.status_pub.put(wire.encode_status(self.status()))
             self.status_sent = now
@@ -156,25 +166,46 @@ class AgentNode:
             return None
         return frame
 
-    def on_sense(self, frame) -> None:
+    def on_sense_sample(self, sample) -> None:
+        """zenoh's callback for a sensor frame: answer it here and now. A change of status
+        wakes the main thread to publish it; an exception (a law that raises) is handed to
+        the main thread, which ends the process with it, and no frame is answered after it."""
+        try:
+            payload = sample.payload.to_bytes()
+            with self.lock:
+                if not self.answering:
+                    return
+                frame = self.decode_frame(payload)
+                if frame is not None and self.on_sense(frame):
+                    self.inbox.put(("status", None))
+        except BaseException as e:  # noqa: BLE001 (re-raised in the main thread)
+            self.answering = False
+            self.inbox.put(("crash", e))
+
+    def on_sense(self, frame) -> bool:
+        """Answer `frame` (not an older or repeated one); True when what the status says
+        changed (out-neighbour, phase, fallback or hops)."""
         if frame.tick <= self.last_tick:
-            return  # duplicate or old frame
-        bad = self.brain.nonfinite
-        d = self.brain.decide(frame)
-        if self.brain.nonfinite != bad and time.monotonic() - self.nonfinite_noted > NONFINITE_NOTE_S:
+            return False  # duplicate or old frame
+        brain = self.brain
+        bad = brain.nonfinite
+        d = brain.decide(frame)
+        if brain.nonfinite != bad and time.monotonic() - self.nonfinite_noted > NONFINITE_NOTE_S:
             self.nonfinite_noted = time.monotonic()
             _log(f"[agent {self.id}] tick {frame.tick}: the follower law {self.conf.gains.law!r} returned "
-                 f"{self.brain.last_nonfinite}; the last turn rate is held ({self.nonfinite()} so far)")
-        self.cmd_pub.put(wire.encode_cmd(wire.Command(self.id, frame.tick, d.u, d.out, d.phase, d.hops,
-                                                      self.key)))
+                 f"{brain.last_nonfinite}; the last turn rate is held ({self.nonfinite()} so far)")
+        self.cmd_pub.put(wire.encode_cmd_fields(self.id, frame.tick, d.u, d.out, d.phase, d.hops, self.key))
         self.commands += 1
         self.last_tick = frame.tick
-        if self.last is None or d.out != self.last.out or d.phase != self.last.phase:
-            if self.last is not None and d.out != self.last.out:
-                why = ("pinned out-neighbour not sensed, nearest used" if d.fallback
-                       else f"selection = {self.conf.sensing.selection}")
-                _log(f"[agent {self.id}] tick {frame.tick}: out-neighbour {self.last.out} -> {d.out} ({why})")
-        self.last = d
+        last, self.last = self.last, d
+        if last is None:
+            return True
+        if d.out != last.out:
+            why = ("pinned out-neighbour not sensed, nearest used" if d.fallback
+                   else f"selection = {self.conf.sensing.selection}")
+            _log(f"[agent {self.id}] tick {frame.tick}: out-neighbour {last.out} -> {d.out} ({why})")
+            return True
+        return d.phase != last.phase or d.fallback != last.fallback or d.hops != last.hops
 
     def on_world(self, kind) -> None:
         """The world's token came or went (agents/world_link.py says what that means)."""
@@ -182,26 +213,32 @@ class AgentNode:
             self.link.on_delete(self.stalled)  # raises AgentExit when the world is gone
         elif self.link.on_put() == NEW_WORLD:
             # A new world (--wait-world, or one restarted meanwhile): its ticks start afresh,
-            # and so does the brain.
-            self.nonfinite_before = self.nonfinite()
-            self.brain = self.new_brain()
-            self.last_tick, self.last = -1, None
+            # and so does the brain. No frame is answered until the id is claimed again.
+            with self.lock:
+                self.answering = False
+                self.nonfinite_before = self.nonfinite()
+                self.brain = self.new_brain()
+                self.last_tick, self.last = -1, None
             _log(f"[agent {self.id}] a world is back; rejoining")
-            self.key = claim(self.session, self.run, self.id).get("key", 0)
+            key = claim(self.session, self.run, self.id).get("key", 0)
+            with self.lock:
+                self.key, self.answering = key, True
 
     def on_ctl(self, payload: bytes) -> None:
         """`swarm kill` from a machine that cannot signal this process: end abruptly."""
         try:
             name = wire.decode_ctl(payload)
         except wire.WireError:
-            self.garbage += 1
+            with self.lock:
+                self.garbage += 1
             return
         sig = {"KILL": signal.SIGKILL, "TERM": signal.SIGTERM, "STOP": signal.SIGSTOP}[name]
         _log(f"[agent {self.id}] asked over zenoh to take SIG{name}")
         os.kill(os.getpid(), sig)
 
     def loop(self) -> int:
-        self.maybe_publish_status(force=True)
+        with self.lock:
+            self.maybe_publish_status(force=True)
         woke = time.monotonic()
         while True:
             try:
@@ -212,36 +249,37 @@ class AgentNode:
             gap = now - woke - STATUS_PERIOD  # time beyond the longest wait: we were not running
             self.stalled = gap if gap > 0.5 else 0.0
             woke = now
-            while True:  # take whatever else is waiting: only the newest frame is answered
+            while True:  # take whatever else is waiting
                 try:
                     batch.append(self.inbox.get_nowait())
                 except queue.Empty:
                     break
-            newest = None
             for item in batch:
                 kind = item[0]
-                if kind == "sense":
-                    frame = self.decode_frame(item[1])  # garbage after a frame must not hide it
-                    if frame is not None and (newest is None or frame.tick >= newest.tick):
-                        newest = frame
-                elif kind == "world":
+                if kind == "crash":
+                    raise item[1]
+                if kind == "world":
                     self.on_world(item[1])
                 elif kind == "query":
-                    item[1].reply(wire.agent_key(self.run, self.id, "status"), wire.encode_status(self.status()))
+                    with self.lock:
+                        status = wire.encode_status(self.status())
+                    item[1].reply(wire.agent_key(self.run, self.id, "status"), status)
                 elif kind == "ctl":
                     self.on_ctl(item[1])
                 elif kind == "control":
                     try:
                         msg = wire.decode_control(item[1])
                     except wire.WireError:
-                        self.garbage += 1
+                        with self.lock:
+                            self.garbage += 1
                         continue
                     if isinstance(msg, int):  # the end of the run (fault notices are the launcher's)
+                        with self.lock:
+                            self.answering = False
                         return EXIT_OK
-            if newest is not None:
-                self.on_sense(newest)
             self.link.check()  # raises AgentExit past the grace
-            self.maybe_publish_status()
+            with self.lock:
+                self.maybe_publish_status()
 
 
 def _raise_exit(signum, _frame):

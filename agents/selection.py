@@ -18,13 +18,12 @@ free, reacting on the tick the out-neighbour is lost. Pure: no I/O.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from swarm.contracts.frames import Contact
 
 
-@dataclass(frozen=True, slots=True)
-class Choice:
+class Choice(NamedTuple):
     out: int | None  # chosen out-neighbour id, None if nobody is sensed (or a leader)
     contact: Contact | None
     fallback: bool  # a pinned out-neighbour was not sensed and the nearest was used instead

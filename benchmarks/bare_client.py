@@ -50,9 +50,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("endpoint")
     ap.add_argument("run")
     ap.add_argument("--timeout", type=float, default=300.0, help="exit after this many s in any case")
-    ap.add_argument("--handler", choices=("callback", "channel"), default="callback",
-                    help="callback: Python callback enqueues (like agents/process.py); "
-                         "channel: zenoh's FIFO channel, the main thread blocks in recv()")
+    ap.add_argument("--handler", choices=("callback", "channel", "direct"), default="callback",
+                    help="callback: Python callback enqueues, the main thread answers; "
+                         "channel: zenoh's FIFO channel, the main thread blocks in recv(); "
+                         "direct: the callback answers (like agents/process.py)")
     ap.add_argument("--creds", help="a run's credentials file: connect as agent-INDEX on swarm's keys")
     a = ap.parse_args(argv)
 
@@ -83,6 +84,26 @@ def main(argv: list[str] | None = None) -> int:
                     break
                 (tick,) = unpack(buf)
                 ack.put(pack(me, tick))
+            return 0
+        if a.handler == "direct":
+            done = queue.SimpleQueue()
+
+            def on_tick(s):
+                buf = s.payload.to_bytes()
+                if len(buf) != TICK.size:
+                    done.put(None)
+                    return
+                ack.put(pack(me, unpack(buf)[0]))
+
+            subs = [  # noqa: F841 (kept alive until close)
+                session.declare_subscriber(key(a.run, a.index, "tick"), on_tick),
+                session.declare_subscriber(key(a.run, None, "end"), lambda s: done.put(None)),
+            ]
+            token = session.liveliness().declare_token(key(a.run, a.index, "alive"))  # noqa: F841
+            try:
+                done.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                pass
             return 0
         subs = [  # noqa: F841 (kept alive until close)
             session.declare_subscriber(key(a.run, a.index, "tick"),

@@ -8,7 +8,10 @@ Measured in one run, on this machine:
 1. Bare-zenoh lockstep baseline for each N: benchmarks/bare_hub.py (router mode, swarm's
    own hub_config) and N benchmarks/bare_client.py processes (client_config); per tick
    the hub sends one small message to each client on its own key and waits for every
-   client's answer. No physics, no law. ticks/s over a fixed tick count after a warm-up.
+   client's answer, which the client sends from its zenoh callback, as agents do
+   (--floor-handler callback: from its main thread after a queue). No physics, no law.
+   ticks/s over a fixed tick count after a warm-up. With --neighbours K the scenario
+   gets a sensing range under which each agent senses about K others at the start.
 2. Lockstep ticks/s of `swarm up` for the same N on a generated scenario (1-2 leaders,
    the rest followers with selection = "nearest", on a ring; speeds and radii like
    scenarios/case2.toml), read from summary.json (`ticks_per_second`).
@@ -304,7 +307,9 @@ def run_baseline(n: int, ticks: int, warmup: int, work: Path, env: dict, tag: st
                         "--ticks", str(ticks), "--warmup", str(warmup), "--result", str(result),
                         "--join-timeout", "90", "--linger", "2", "--ready", str(ready), *creds],
                        d / "hub.log", env)
-        clients = [tr.spawn([PY, str(BENCH / "bare_client.py"), str(i), endpoint, run, "--timeout", "240", *creds],
+        handler = ["--handler", env.get("BENCH_CLIENT_HANDLER", "direct")]
+        clients = [tr.spawn([PY, str(BENCH / "bare_client.py"), str(i), endpoint, run, "--timeout", "240", *creds,
+                             *handler],
                             d / f"client-{i}.log", env, own_group=False) for i in range(n)]
         cps = [tr.seen[c.pid] for c in clients if c.pid in tr.seen]
         state = {"uss": False}
@@ -339,9 +344,23 @@ FOLLOWER_SPEEDS = [35.0, 50.0, 18.0, 22.0, 30.0, 45.0, 25.0, 40.0]  # m/s, case2
 LEADERS = [(28.0, 28.0), (40.0, 40.0)]  # (speed m/s, orbit radius m): omega = v / R = 1 rad/s
 
 
-def scenario_toml(n: int) -> str:
-    """n agents on a 30 m ring around the target: 1-2 leaders, the rest nearest-selection followers."""
+RING_M = 30.0  # the generated scenario's agents start on a ring of this radius
+
+
+def sensing_range(n: int, neighbours: int | None) -> float | None:
+    """A sensing range under which each agent on the starting ring senses about `neighbours`
+    others (half on each side); None (unlimited) when that is everyone anyway."""
+    if neighbours is None or neighbours >= n - 1:
+        return None
+    half = (neighbours + 1) // 2
+    return 2 * RING_M * math.sin(math.pi * (half + 0.5) / n)  # halfway to the next one out
+
+
+def scenario_toml(n: int, neighbours: int | None = None) -> str:
+    """n agents on a 30 m ring around the target: 1-2 leaders, the rest nearest-selection
+    followers; with `neighbours`, a sensing range under which each senses about that many."""
     rng = random.Random(n)
+    sr = sensing_range(n, neighbours)
     n_leaders = 1 if n < 4 else 2
     leader_slots = {0: 0} if n_leaders == 1 else {0: 0, n // 2: 1}
     lines = [f'name = "bench-{n}"',
@@ -349,11 +368,11 @@ def scenario_toml(n: int) -> str:
              "", "[run]", f"dt = {DT}", "duration = 60.0", 'clock = "lockstep"', "seed = 1",
              "", "[target]", "x = 0.0", "y = 0.0",
              "", "[gains]", "c1 = 1.0", "c2 = 0.5",
-             "", "[sensing]", 'selection = "nearest"', ""]
+             "", "[sensing]", 'selection = "nearest"'] + ([f"range = {sr:.4f}"] if sr else []) + [""]
     f = 0
     for k in range(n):
         ang = 2 * math.pi * k / n
-        x, y = 30.0 * math.cos(ang), 30.0 * math.sin(ang)
+        x, y = RING_M * math.cos(ang), RING_M * math.sin(ang)
         heading = math.atan2(math.sin(ang + math.pi / 2 + rng.uniform(-0.5, 0.5)),
                              math.cos(ang + math.pi / 2 + rng.uniform(-0.5, 0.5)))
         lines += ["[[agents]]", f"id = {k + 1}"]
@@ -376,12 +395,33 @@ def world_started(out: Path) -> bool:
         return False
 
 
-def run_swarm(n: int, ticks: int, work: Path, env: dict, tag: str, profile: float = 0.0) -> dict:
+def mean_contacts(out: Path, n: int, neighbours: int | None) -> float:
+    """Mean number of others each live agent sensed per tick over the run (trajectory.npz)."""
+    import numpy as np
+
+    sr = sensing_range(n, neighbours)
+    with np.load(out / "trajectory.npz") as z:
+        x, y, alive = z["x"], z["y"], z["alive"]
+    total = count = 0
+    for k in range(0, len(x), max(1, len(x) // 200)):
+        a = alive[k].astype(bool)
+        if a.sum() < 2:
+            continue
+        px, py = x[k][a], y[k][a]
+        d = np.hypot(px[:, None] - px[None, :], py[:, None] - py[None, :])
+        sensed = (d <= sr) if sr else np.ones_like(d, dtype=bool)
+        total += int(sensed.sum()) - len(px)
+        count += len(px)
+    return total / count if count else float("nan")
+
+
+def run_swarm(n: int, ticks: int, work: Path, env: dict, tag: str, profile: float = 0.0,
+              neighbours: int | None = None) -> dict:
     """One `swarm up`; profile > 0: attach py-spy for that many seconds once ticking."""
     d = work / f"up-{tag}"
     d.mkdir()
     toml = d / f"bench{n}.toml"
-    toml.write_text(scenario_toml(n))
+    toml.write_text(scenario_toml(n, neighbours))
     out = d / "out"
     tr = Tracked()
     mem, wmem = MemSampler(), MemSampler()
@@ -488,6 +528,10 @@ def run_swarm(n: int, ticks: int, work: Path, env: dict, tag: str, profile: floa
         agent_pids=sorted(int(a["pid"]) for a in agents.values() if a.get("pid")),
         startup_cpu=state.get("startup_cpu"),
     )
+    try:
+        res["contacts"] = mean_contacts(out, n, neighbours)
+    except (OSError, KeyError, ValueError) as e:
+        res["contacts_error"] = str(e)
     if spies:
         res["profile"] = {name: summarize_pyspy(raw, profile) for name, _pid, p, raw in spies if p is not None}
         res["thread_cores"] = state.get("thread_cores")
@@ -592,8 +636,12 @@ def report(results: dict) -> str:
                  f"zenoh {results['env']['zenoh']}; mode {'quick' if results['quick'] else 'full'}, "
                  f"repeat {results['repeat']} (best run shown)")
     lines.append("")
-    head(lines, f"{'N':>3} | {'baseline ticks/s':>16} | {'swarm ticks/s':>13} | {'ratio':>5} | "
-                f"target (>= {TARGET_RATIO}x) met? | all runs: baseline / swarm (ticks/s@cores busy elsewhere)", 110)
+    nb = results.get("neighbours")
+    lines.append("sensing: " + (f"a range under which each agent senses about {nb} others at the start"
+                                if nb else "unlimited (every agent senses every other)")
+                 + "; 'sensed' = others each agent sensed per tick, mean over the run")
+    head(lines, f"{'N':>3} | {'sensed':>6} | {'baseline ticks/s':>16} | {'swarm ticks/s':>13} | {'ratio':>5} | "
+                f"target (>= {TARGET_RATIO}x) met? | all runs: baseline / swarm (ticks/s@cores busy elsewhere)", 118)
     for n, r, b, s in by_size(results):
         ratio = (s["ticks_per_second"] / b["ticks_per_second"]) if (b and s) else None
         r["ratio"] = ratio
@@ -601,7 +649,8 @@ def report(results: dict) -> str:
         def one(x):
             return f"{fmt(x.get('ticks_per_second'))}@{fmt((x.get('cpu') or {}).get('others_cores'), '.1f')}"
         runs = ", ".join(map(one, r["baseline"])) + " / " + ", ".join(map(one, r["swarm"]))
-        lines.append(f"{n:>3} | {fmt(b and b['ticks_per_second']):>16} | {fmt(s and s['ticks_per_second']):>13} | "
+        lines.append(f"{n:>3} | {fmt(s and s.get('contacts'), '.1f'):>6} | "
+                     f"{fmt(b and b['ticks_per_second']):>16} | {fmt(s and s['ticks_per_second']):>13} | "
                      f"{fmt(ratio, '.2f'):>5} | {('yes' if met else 'NO') if met is not None else '-':>24} | {runs}")
     lines.append("")
     if any(r.get("swarm_open") for r in results["by_n"].values()):
@@ -723,6 +772,12 @@ def main(argv: list[str] | None = None) -> int:
                          "(< 0.5 busy cores; default 20, quick 3)")
     ap.add_argument("--profile", action="store_true", help="also profile a 20-agent run with py-spy")
     ap.add_argument("--profile-n", type=int, default=20, help="agents in the --profile run (default 20)")
+    ap.add_argument("--neighbours", type=int, default=None,
+                    help="give the scenario a sensing range under which each agent senses about this many "
+                         "others at the start (default: unlimited sensing); the table shows how many it sensed")
+    ap.add_argument("--floor-handler", choices=("direct", "callback"), default="direct",
+                    help="how the bare clients answer: in their zenoh callback (direct, the default: what "
+                         "agents do) or from the main thread after a queue (callback: what agents did before)")
     ap.add_argument("--json", type=Path, help="write all results to this JSON file")
     ap.add_argument("--keep", action="store_true", help="keep the work directory (logs, runs)")
     ap.add_argument("--access-cost", action="store_true",
@@ -741,9 +796,10 @@ def main(argv: list[str] | None = None) -> int:
 
     rt = tempfile.mkdtemp(prefix="sw", dir="/tmp")  # short: Unix socket paths are limited to 108 bytes
     work = Path(tempfile.mkdtemp(prefix="swarm-bench-"))
-    env = {**os.environ, "SWARM_RUNTIME_DIR": rt, "PYTHONUNBUFFERED": "1"}
+    env = {**os.environ, "SWARM_RUNTIME_DIR": rt, "PYTHONUNBUFFERED": "1", "BENCH_CLIENT_HANDLER": a.floor_handler}
     results: dict = {
-        "quick": a.quick, "repeat": repeat, "sizes": sizes, "swarm_seconds": secs,
+        "quick": a.quick, "repeat": repeat, "sizes": sizes, "swarm_seconds": secs, "neighbours": a.neighbours,
+        "floor_handler": a.floor_handler,
         "env": {"cpus": os.cpu_count(), "python": platform.python_version(),
                 "zenoh": getattr(zenoh, "__version__", None) or _dist_version("eclipse-zenoh"),
                 "platform": platform.platform()},
@@ -767,7 +823,7 @@ def main(argv: list[str] | None = None) -> int:
                 sticks = int(min(40000, max(300, 0.8 * tps * secs)))
                 log(f"[N={n} run {k + 1}/{repeat}] swarm up: {sticks} ticks")
                 q = quiet()
-                s = run_swarm(n, sticks, work, env, f"{n}-{k}")
+                s = run_swarm(n, sticks, work, env, f"{n}-{k}", neighbours=a.neighbours)
                 s["quiet"] = q
                 r["swarm"].append(s)
                 log(f"  -> {fmt(s.get('ticks_per_second'))} ticks/s, first tick {fmt(s.get('first_tick_s'), '.2f')} s"
@@ -781,7 +837,8 @@ def main(argv: list[str] | None = None) -> int:
                     log(f"  -> {fmt(ba.get('ticks_per_second'))} ticks/s {ba.get('error', '')}")
                     log(f"[N={n} run {k + 1}/{repeat}] swarm up, open hub: {sticks} ticks")
                     q = quiet()
-                    o = run_swarm(n, sticks, work, {**env, "SWARM_OPEN_HUB": "1"}, f"{n}-{k}-open")
+                    o = run_swarm(n, sticks, work, {**env, "SWARM_OPEN_HUB": "1"}, f"{n}-{k}-open",
+                                  neighbours=a.neighbours)
                     o["quiet"] = q
                     r.setdefault("swarm_open", []).append(o)
                     log(f"  -> {fmt(o.get('ticks_per_second'))} ticks/s {o.get('error', '')}")
@@ -793,7 +850,7 @@ def main(argv: list[str] | None = None) -> int:
             sticks = int(0.8 * tps * (seconds + 4.0))
             log(f"[profile] swarm up, {n} agents, {sticks} ticks, py-spy for {seconds:g} s")
             quiet()
-            p = run_swarm(n, sticks, work, env, f"profile-{n}", profile=seconds)
+            p = run_swarm(n, sticks, work, env, f"profile-{n}", profile=seconds, neighbours=a.neighbours)
             results["profile"] = {"n": n, "seconds": seconds, "ticks_per_second": p.get("ticks_per_second"),
                                   "thread_cores": p.get("thread_cores"), "profile": p.get("profile"),
                                   "error": p.get("error")}

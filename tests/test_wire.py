@@ -35,6 +35,34 @@ def test_frame_and_command_round_trip():
     assert wire.decode_cmd(wire.encode_cmd(c)) == c
 
 
+def test_frames_encoded_all_at_once_are_the_frames_built_one_by_one():
+    """The world's fast path (encode_sense_rows) sends the bytes of encode_sense for the
+    frames world/sensing.py builds: leaders with the target, followers without, an agent
+    that senses nobody, range-limited sensing."""
+    import numpy as np
+
+    from world.sensing import build_frames, sensing_matrix
+
+    rng = np.random.default_rng(5)
+    n = 9
+    ids = np.arange(10, 10 + n)
+    x, y, g = rng.uniform(-20, 20, n), rng.uniform(-20, 20, n), rng.uniform(-3, 3, n)
+    x[4], y[4] = 500.0, 500.0  # senses nobody
+    lead = np.zeros(n, dtype=bool)
+    lead[[0, 5]] = True
+    hops = rng.integers(-1, 4, n)
+    present = np.ones(n, dtype=bool)
+    present[7] = False
+    target = (1.5, -2.0)
+    rows = [0, 1, 2, 3, 4, 5, 6, 8]
+    s, bearing, rngm = sensing_matrix(x, y, g, present, 15.0, None)
+    got = wire.encode_sense_rows(3, 0.03, rows, ids, g, target[0] - x, target[1] - y, lead, s, bearing, rngm, hops)
+    want = build_frames(3, 0.03, ids, x, y, g, present, rows, lead, target, 15.0, None, hops)
+    assert [wire.decode_sense(b) for b in got] == [want[int(ids[k])] for k in rows]
+    assert got == [wire.encode_sense(want[int(ids[k])]) for k in rows]
+    assert wire.decode_sense(got[4]).contacts == ()
+
+
 def test_join_round_trip():
     req = wire.decode_join_request(wire.encode_join_request(4, 123, "host", {"role": "follower"}))
     assert (req["id"], req["pid"], req["host"], req["spec"]) == (4, 123, "host", {"role": "follower"})

@@ -47,6 +47,7 @@ class WorldCore:
         self.dt = scenario.run.dt
         self.tick = 0
         self.rejected = 0  # non-finite commands refused
+        self._sensing = None  # this tick's sensing matrices, until poses or presence change
 
     @property
     def time(self) -> float:
@@ -69,12 +70,15 @@ class WorldCore:
         sens = self.scenario.sensing
         return build_frames(self.tick, self.time, self.ids, self.x, self.y, self.heading,
                             self.present_mask(), receivers, self.is_leader, self.target,
-                            sens.range, sens.fov, self.hops)
+                            sens.range, sens.fov, self.hops, self.sensing())
 
     def sensing(self):
-        """(S, bearing, range) matrices of the current tick: S[i, j] when i senses j."""
-        sens = self.scenario.sensing
-        return sensing_matrix(self.x, self.y, self.heading, self.present_mask(), sens.range, sens.fov)
+        """(S, bearing, range) matrices of the current tick: S[i, j] when i senses j.
+        Computed once per tick (and again after a drop, join or add); do not modify them."""
+        if self._sensing is None:
+            sens = self.scenario.sensing
+            self._sensing = sensing_matrix(self.x, self.y, self.heading, self.present_mask(), sens.range, sens.fov)
+        return self._sensing
 
     def set_command(self, agent_id: int, u: float, hops: int | None = None) -> bool:
         """Latch agent_id's turn rate for the next step, and the hop count it advertises
@@ -99,6 +103,7 @@ class WorldCore:
 
     def step(self) -> None:
         """Advance every agent in the world by one dt with the latched commands."""
+        self._sensing = None
         u = self.applied()
         moving = ~np.isnan(u)
         nx, ny, ng = step(self.x, self.y, self.heading, self.speed, np.where(moving, u, 0.0), self.dt)
@@ -109,6 +114,7 @@ class WorldCore:
 
     def drop(self, agent_id: int) -> str:
         """An agent's process died: it leaves the world or coasts (scenario on_dropout)."""
+        self._sensing = None
         k = self.index[agent_id]
         self.state[k] = COASTING if self.scenario.run.on_dropout == "coast" else GONE
         self.hops[k] = -1  # nobody relays for a dead agent
@@ -116,6 +122,7 @@ class WorldCore:
 
     def join(self, agent_id: int) -> None:
         """An agent's process (re)joined: controlled again from its current pose."""
+        self._sensing = None
         k = self.index[agent_id]
         if self.state[k] != ACTIVE:
             self.u[k] = 0.0
@@ -124,6 +131,7 @@ class WorldCore:
 
     def add_agent(self, spec) -> None:
         """A new agent (not in the scenario file) enters the run, not yet joined ("gone")."""
+        self._sensing = None
         if spec.id in self.index:
             raise ValueError(f"agent {spec.id} already exists")
         self.scenario = self.scenario.model_copy(update={"agents": [*self.scenario.agents, spec]})

@@ -316,4 +316,11 @@ class Inbox:
         if item is None:
             return False
         self.handle(item, pending)
+        get = self.inbox.get_nowait
+        while pending:  # the commands that came meanwhile, without a clock read each
+            try:
+                item = get()
+            except queue.Empty:
+                break
+            self.handle(item, pending)
         return True

@@ -157,17 +157,14 @@ class World(Inbox, Clock):
             return set(frames)
         self.engine.mark_frames()  # the same numbers, encoded straight from the arrays
         sensed, bearing, rng = c.sensing()
-        sent = set()
         tx, ty = c.target
-        for aid in c.active_ids():
-            k = c.index[aid]
-            js = np.flatnonzero(sensed[k])
-            target = (float(tx - c.x[k]), float(ty - c.y[k])) if c.is_leader[k] else None
-            self.sense_pub[aid].put(wire.encode_sense_arrays(
-                c.tick, c.time, aid, float(c.heading[k]), target, c.ids[js], bearing[k, js],
-                c.heading[js], rng[k, js], c.hops[js]))
-            sent.add(aid)
-        return sent
+        active = c.active_ids()
+        frames = wire.encode_sense_rows(c.tick, c.time, [c.index[aid] for aid in active], c.ids, c.heading,
+                                        tx - c.x, ty - c.y, c.is_leader, sensed, bearing, rng, c.hops)
+        pubs = self.sense_pub
+        for aid, frame in zip(active, frames):
+            pubs[aid].put(frame)
+        return set(active)
 
     def record_and_step(self) -> None:
         self.engine.end_tick(observe=self.publish_truth)

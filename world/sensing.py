@@ -21,29 +21,36 @@ def sensing_matrix(x, y, heading, present, sense_range: float | None, fov: float
 
     present: (N,) bool, agents that are in the world. sense_range (m) or None for
     unlimited; fov: full field of view (rad) centred on the heading, or None.
-    Also returns the bearing (N, N) and range (N, N) matrices.
+    Also returns the bearing (N, N) and range (N, N) matrices. Bearings are computed only
+    for the pairs within range (NaN elsewhere): with a sensing range the arctangents, the
+    costliest part, grow with the pairs sensed rather than with N^2.
     """
     dx = x[None, :] - x[:, None]
     dy = y[None, :] - y[:, None]
     rng = np.hypot(dx, dy)
-    bearing = np.arctan2(dy, dx)
     s = present[:, None] & present[None, :]
     np.fill_diagonal(s, False)
-    if sense_range is not None:
+    if sense_range is None:
+        bearing = np.arctan2(dy, dx)
+    else:
         s &= rng <= sense_range
+        bearing = np.full(rng.shape, np.nan)
+        bearing[s] = np.arctan2(dy[s], dx[s])
     if fov is not None and fov < 2 * np.pi:
-        s &= np.abs(wrap(bearing - heading[:, None])) <= 0.5 * fov
+        i, j = np.nonzero(s)
+        s[i, j] = np.abs(wrap(bearing[i, j] - heading[i])) <= 0.5 * fov
     return s, bearing, rng
 
 
 def build_frames(tick, time, ids, x, y, heading, present, receivers, is_leader, target,
-                 sense_range=None, fov=None, hops=None) -> dict[int, SensorFrame]:
+                 sense_range=None, fov=None, hops=None, matrices=None) -> dict[int, SensorFrame]:
     """One SensorFrame per receiver index (agents that need a frame this tick).
 
     hops: (N,) hop counts the agents last advertised (-1 none); the world relays them
     like a local broadcast that reaches exactly the agents that sense the sender.
+    matrices: this tick's sensing_matrix result if already computed.
     """
-    s, bearing, rng = sensing_matrix(x, y, heading, present, sense_range, fov)
+    s, bearing, rng = matrices or sensing_matrix(x, y, heading, present, sense_range, fov)
     if hops is None:
         hops = np.full(len(ids), -1)
     frames: dict[int, SensorFrame] = {}

@@ -26,6 +26,7 @@ Units: metres, seconds, radians, rad/s. Decoders reject anything malformed with
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import re
@@ -158,6 +159,37 @@ def encode_sense_arrays(tick: int, time: float, agent: int, heading: float,
                            tx, ty, len(ids)) + recs.tobytes()
 
 
+def encode_sense_rows(tick: int, time: float, rows, ids, heading, target_dx, target_dy, is_leader,
+                      sensed, bearing, ranges, hops) -> list[bytes]:
+    """encode_sense_arrays for the agents at indices `rows`, all at once, from the world's
+    arrays: ids, heading, hops, is_leader and the target's offset from each agent
+    (target_dx, target_dy) are (N,); sensed, bearing and ranges (N, N). The same bytes as
+    one encode_sense_arrays per agent, in one numpy pass over every sensed pair."""
+    import numpy as np
+
+    rows = np.asarray(rows, dtype=np.int64)
+    r, j = np.nonzero(sensed[rows])
+    i = rows[r]
+    recs = np.empty(len(j), dtype=np.dtype(CONTACT_FIELDS))
+    recs["id"], recs["bearing"], recs["heading"], recs["range"] = ids[j], bearing[i, j], heading[j], ranges[i, j]
+    recs["hops"] = hops[j]
+    blob = recs.tobytes()
+    ends = np.cumsum(np.bincount(r, minlength=len(rows))).tolist()
+    ids_l, head_l, lead_l = ids.tolist(), heading.tolist(), is_leader.tolist()
+    dx_l, dy_l = target_dx.tolist(), target_dy.tolist()
+    out, start, size, pack, nan = [], 0, CONTACT.size, SENSE_HEAD.pack, math.nan
+    for k, end in zip(rows.tolist(), ends):
+        lead = lead_l[k]
+        out.append(pack(KIND_SENSE, VERSION, int(lead), 0, ids_l[k], tick, time, head_l[k],
+                        dx_l[k] if lead else nan, dy_l[k] if lead else nan, end - start)
+                   + blob[start * size:end * size])
+        start = end
+    return out
+
+
+_contact = functools.partial(tuple.__new__, Contact)  # Contact from a tuple, in C (Contact._make is Python)
+
+
 def decode_sense(buf: bytes) -> SensorFrame:
     f = _check_head(buf, SENSE_HEAD, KIND_SENSE, "sense frame")
     _, _, has_t, _, agent, tick, time, heading, tx, ty, n = f
@@ -166,10 +198,11 @@ def decode_sense(buf: bytes) -> SensorFrame:
     expected = SENSE_HEAD.size + n * CONTACT.size
     if len(buf) != expected:
         raise WireError(f"sense frame: {len(buf)} bytes, expected {expected} for {n} contacts")
-    contacts = tuple(map(Contact._make, CONTACT.iter_unpack(memoryview(buf)[SENSE_HEAD.size:])))
+    contacts = tuple(map(_contact, CONTACT.iter_unpack(memoryview(buf)[SENSE_HEAD.size:])))
     # One finiteness test for all numbers: a NaN or inf anywhere makes the sum non-finite
-    # (so would finite values near 1e308, which are garbage here anyway).
-    total = time + heading + (tx + ty if has_t else 0.0) + sum(c.bearing + c.heading + c.range for c in contacts)
+    # (so would finite values near 1e308, which are garbage here anyway; the ids and hops
+    # summed along are integers, finite by construction).
+    total = time + heading + (tx + ty if has_t else 0.0) + sum(map(sum, contacts))
     if not math.isfinite(total):
         raise WireError("sense frame: non-finite number")
     if tick < 0:
@@ -189,8 +222,17 @@ class Command:
 
 
 def encode_cmd(c: Command) -> bytes:
-    return CMD.pack(KIND_CMD, VERSION, PHASES.index(c.phase), 0, c.agent, c.tick, c.u,
-                    -1 if c.out is None else c.out, -1 if c.hops is None else c.hops, c.key)
+    return encode_cmd_fields(c.agent, c.tick, c.u, c.out, c.phase, c.hops, c.key)
+
+
+_PHASE_CODE = {p: k for k, p in enumerate(PHASES)}
+
+
+def encode_cmd_fields(agent: int, tick: int, u: float, out: int | None, phase: str, hops: int | None,
+                      key: int) -> bytes:
+    """encode_cmd without making a Command first (an agent's path every tick)."""
+    return CMD.pack(KIND_CMD, VERSION, _PHASE_CODE[phase], 0, agent, tick, u,
+                    -1 if out is None else out, -1 if hops is None else hops, key)
 
 
 def decode_cmd(buf: bytes) -> Command:
