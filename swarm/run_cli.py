@@ -135,19 +135,33 @@ def sim(
     duration: DurationOpt = None,
     plots: Annotated[bool, typer.Option(help="render PNG plots")] = True,
     force: ForceOpt = False,
+    batch: Annotated[bool, typer.Option("--batch", help="step all agents as arrays (the batch engine: the "
+                                        "same results, faster for many agents); refuses scenarios with "
+                                        "faults or a follower law of one's own")] = False,
 ) -> None:
     """Run a scenario in one process (the reference engine) and write its results.
 
     Streams recording.mcap into --out as it runs, then writes trajectory.npz, summary.json
-    and PNG plots.
+    and PNG plots. With --batch the batch engine runs it (summary.json says
+    "engine": "sim-batch"; everything else is the same).
 
     Example: swarm sim scenarios/case2.toml --out runs/case2
     """
-    from swarm.sim import run_sim
     from world.recording import EXIT_NO_SPACE, RECORDING_FILE, RecordingError, write_run
 
     s = read_scenario(scenario)
     _check_duration(s, duration, scenario)
+    if batch:
+        from swarm.batch import refusal, run_batch
+
+        why = refusal(s)
+        if why is not None:
+            raise fail(f"swarm sim --batch: {scenario}: {why}; run it without --batch")
+        engine = lambda *a: run_batch([s], *a)[0]  # noqa: E731
+    else:
+        from swarm.sim import run_sim
+
+        engine = lambda *a: run_sim(s, *a)  # noqa: E731
     out = out or default_out(scenario, "sim")
     _claim_out(out, force)
     total = int(round((duration or s.run.duration) / s.run.dt))
@@ -155,7 +169,7 @@ def sim(
     try:
         with _progress_bar(f"sim {scenario.stem}") as prog:
             task = prog.add_task("sim", total=total)
-            result = run_sim(s, duration, lambda k, n: prog.update(task, completed=k), out / RECORDING_FILE)
+            result = engine(duration, lambda k, n: prog.update(task, completed=k), out / RECORDING_FILE)
         wall = time.perf_counter() - t0
         result.extra["wall_time"] = wall
         result.extra["sim_seconds_per_wall_second"] = total * s.run.dt / wall if wall > 0 else None

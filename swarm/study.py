@@ -1,5 +1,7 @@
 """`swarm study`: does the law converge for my kind of swarm? Batch runs of the in-process
-engine, one process per run, rows streamed to CSV as they finish.
+engine on a process pool, rows streamed to CSV as they finish: by default many runs per
+job through the batch engine (swarm/batch_study.py), or one run per job through
+`swarm sim`'s per-agent engine (`run_swarm`, `run_gain`); the rows are the same.
 
 Two studies:
 
@@ -128,6 +130,11 @@ def run_swarm(job: tuple[SwarmSetting, int]) -> dict:
     s = random_swarm(setting, seed)
     cut = cut_off_at_start(s)
     res = run_sim(s)
+    return swarm_row(setting, seed, cut, res, time.perf_counter() - t0)
+
+
+def swarm_row(setting: SwarmSetting, seed: int, cut: bool, res, wall: float) -> dict:
+    """The CSV row of one run's RunResult (either engine's)."""
     summary = res.summary()
     a = res.recorder.arrays()
     counts = [len(k) for k, r in zip(switch_ticks(a["out"], a["alive"]), a["role"]) if r == "follower"]
@@ -136,8 +143,7 @@ def run_swarm(job: tuple[SwarmSetting, int]) -> dict:
     row = SwarmRow(seed, bool(summary["converged"]), cut,
                    max(settle) if settle and None not in settle else math.nan,
                    sum(counts), max(counts, default=0), ";".join(map(str, counts)),
-                   sum(1 for v in agents if v["role"] == "follower" and v["root"] is None),
-                   time.perf_counter() - t0)
+                   sum(1 for v in agents if v["role"] == "follower" and v["root"] is None), wall)
     return {**asdict(setting), **asdict(row)}
 
 
@@ -227,7 +233,10 @@ def run_gain(job: GainJob) -> dict:
     """Worker: the pair's follower settling time (s; nan if it never settles)."""
     from swarm.sim import run_sim
 
-    res = run_sim(pair_scenario(job))
+    return gain_row(job, run_sim(pair_scenario(job)))
+
+
+def gain_row(job: GainJob, res) -> dict:
     a = res.recorder.arrays()
     r = np.hypot(a["x"][:, 1], a["y"][:, 1])
     settle = settling_time(a["t"], r, job.ratio * 20.0, SETTLING_BAND)
@@ -259,20 +268,25 @@ def _quiet_worker() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and ends the pool
 
 
-def run_rows(worker: Callable[[object], dict], jobs: list, jobs_n: int,
+def run_rows(worker: Callable[[object], dict | list[dict]], jobs: list, jobs_n: int,
              on_row: Callable[[dict], None]) -> None:
     """Run `worker` over `jobs` on `jobs_n` spawned processes (1: in this process), calling
-    `on_row` with each row as it finishes. Ctrl-C ends the workers and re-raises
-    KeyboardInterrupt; every row finished before it has been handed to `on_row`."""
+    `on_row` with each row as it finishes (a worker returns a row, or a list of rows for
+    a batch of runs). Ctrl-C ends the workers and re-raises KeyboardInterrupt; every row
+    finished before it has been handed to `on_row`."""
+    def emit(rows: dict | list[dict]) -> None:
+        for row in rows if isinstance(rows, list) else [rows]:
+            on_row(row)
+
     if jobs_n <= 1:
         for j in jobs:
-            on_row(worker(j))
+            emit(worker(j))
         return
     ctx = multiprocessing.get_context("spawn")  # never fork a process that may hold threads
     pool = ctx.Pool(jobs_n, initializer=_quiet_worker)
     try:
-        for row in pool.imap_unordered(worker, jobs):
-            on_row(row)
+        for rows in pool.imap_unordered(worker, jobs):
+            emit(rows)
         pool.close()
     except BaseException:
         pool.terminate()

@@ -54,8 +54,10 @@ def _ints(option: str, text: str, minimum: int) -> list[int]:
     return out
 
 
-def _run(worker, jobs: list, jobs_n: int, csv_path: Path, columns: list[str], label: str) -> tuple[list[dict], bool]:
-    """Run jobs with a progress bar, streaming rows to csv_path; (rows, interrupted)."""
+def _run(worker, jobs: list, jobs_n: int, csv_path: Path, columns: list[str], label: str,
+         total: int) -> tuple[list[dict], bool]:
+    """Run jobs (`total` runs: a job may be a batch of them) with a progress bar, streaming
+    rows to csv_path; (rows, interrupted)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
     from swarm.study import CsvSink, run_rows
@@ -71,13 +73,13 @@ def _run(worker, jobs: list, jobs_n: int, csv_path: Path, columns: list[str], la
         sink(row)
         rows.append(row)
         prog.update(task, completed=len(rows))
-        if not tty and (time.monotonic() - last[0] > 10 or len(rows) == len(jobs)):
+        if not tty and (time.monotonic() - last[0] > 10 or len(rows) == total):
             last[0] = time.monotonic()
-            typer.echo(f"{label}: {len(rows)}/{len(jobs)} runs", err=True)
+            typer.echo(f"{label}: {len(rows)}/{total} runs", err=True)
 
     interrupted = False
     with prog:
-        task = prog.add_task(label, total=len(jobs))
+        task = prog.add_task(label, total=total)
         try:
             run_rows(worker, jobs, jobs_n, on_row)
         except KeyboardInterrupt:
@@ -85,19 +87,20 @@ def _run(worker, jobs: list, jobs_n: int, csv_path: Path, columns: list[str], la
         finally:
             sink.close()
     if interrupted:
-        typer.echo(f"stopped: {len(rows)} of {len(jobs)} runs finished, kept in {csv_path}", err=True)
+        typer.echo(f"stopped: {len(rows)} of {total} runs finished, kept in {csv_path}", err=True)
     return rows, interrupted
 
 
 def _study(kind: str, worker, job_list: list, columns: list[str], summarise: Callable, jobs: int,
-           out: Optional[Path], what: str) -> tuple[Path, list[dict], list[dict], bool]:
-    """Run a study's jobs into out/runs.csv and its summary into out/summary.csv;
-    (out, rows, summary, interrupted)."""
+           out: Optional[Path], what: str, total: int) -> tuple[Path, list[dict], list[dict], bool]:
+    """Run a study's jobs (`total` runs) into out/runs.csv and its summary into
+    out/summary.csv; (out, rows, summary, interrupted)."""
     from swarm.study import write_csv
 
     out = out or Path("runs") / f"study-{kind}-{time.strftime('%Y%m%d-%H%M%S')}"
     typer.echo(f"{what} on {jobs or os.cpu_count()} process(es); rows -> {out / 'runs.csv'}")
-    rows, stopped = _run(worker, job_list, jobs or os.cpu_count() or 1, out / "runs.csv", columns, f"study {kind}")
+    rows, stopped = _run(worker, job_list, jobs or os.cpu_count() or 1, out / "runs.csv", columns, f"study {kind}",
+                         total)
     summary = summarise(rows)
     write_csv(out / "summary.csv", summary)
     return out, rows, summary, stopped
@@ -125,6 +128,9 @@ DtOpt = Annotated[float, typer.Option(help="step (s)", min=1e-4)]
 JobsOpt = Annotated[int, typer.Option("--jobs", "-j", min=0, help="worker processes (0: one per core)")]
 OutOpt = Annotated[Optional[Path], typer.Option("--out", "-o", help="output directory "
                                                 "(default runs/study-<kind>-<time>)")]
+BatchOpt = Annotated[bool, typer.Option("--batch/--per-agent", help="run many runs per worker as arrays (the "
+                                        "batch engine, same rows) or each run through swarm sim's per-agent "
+                                        "engine")]
 
 
 @study_app.command()
@@ -147,6 +153,7 @@ def swarms(
     jobs: JobsOpt = 0,
     out: OutOpt = None,
     plot: Annotated[bool, typer.Option(help="write study.png")] = True,
+    batch: BatchOpt = True,
 ) -> None:
     """Random swarms through the in-process engine: converged fraction, settling, switches.
 
@@ -155,6 +162,9 @@ def swarms(
     Swarms whose followers cannot all reach a leader in the sensing graph at t = 0 (a
     range or field of view cuts them off) are counted apart as `cut_off`, not as failures.
     Writes runs.csv (one row per run, as it finishes), summary.csv and study.png.
+
+    By default each worker runs a batch of seeds at once as arrays (the batch engine,
+    equal to swarm sim's per-agent engine: the same rows); --per-agent runs them one by one.
 
     Example: swarm study swarms --selection sticky,rooted,nearest --seeds 200
     """
@@ -174,10 +184,17 @@ def swarms(
                 for rg in _floats("--range", sensing_range, allow_inf=True) if b < a]
     if not settings:
         raise _fail("--leaders: every setting has as many leaders as agents; a swarm needs a follower")
-    job_list = swarm_jobs(settings, range(seeds))
+    runs = len(settings) * seeds
+    if batch:
+        from swarm.batch_study import run_swarm_chunk, swarm_chunks
+
+        worker, job_list = run_swarm_chunk, swarm_chunks(settings, range(seeds), jobs or os.cpu_count() or 1)
+    else:
+        worker, job_list = run_swarm, swarm_jobs(settings, range(seeds))
     out, rows, summary, stopped = _study(
-        "swarms", run_swarm, job_list, swarm_columns(), summarise_swarms, jobs, out,
-        f"{len(settings)} setting(s) x {seeds} seeds = {len(job_list)} runs of {duration:g} s (dt {dt:g} s)")
+        "swarms", worker, job_list, swarm_columns(), summarise_swarms, jobs, out,
+        f"{len(settings)} setting(s) x {seeds} seeds = {runs} runs of {duration:g} s (dt {dt:g} s), "
+        + (f"{len(job_list)} batches" if batch else "per-agent engine"), runs)
     _table(summary, [("setting", "setting", str), ("runs", "runs", str), ("cut off", "cut_off", str),
                      ("converged", "converged_fraction", _num(".1%")),
                      ("settle med s", "settling_median_s", _num(".0f")),
@@ -205,6 +222,7 @@ def gains(
     jobs: JobsOpt = 0,
     out: OutOpt = None,
     plot: Annotated[bool, typer.Option(help="write gains.png")] = True,
+    batch: BatchOpt = True,
 ) -> None:
     """Where does the follower law settle? A map of (C1, C2) against speed ratio.
 
@@ -216,9 +234,16 @@ def gains(
     """
     from swarm.study import gain_columns, gain_jobs, run_gain, summarise_gains
 
-    job_list = gain_jobs(_floats("--c1", c1), _floats("--c2", c2), _floats("--ratios", ratios), starts, duration, dt)
-    out, rows, summary, stopped = _study("gains", run_gain, job_list, gain_columns(), summarise_gains, jobs, out,
-                                         f"{len(job_list)} runs of {duration:g} s")
+    runs = gain_jobs(_floats("--c1", c1), _floats("--c2", c2), _floats("--ratios", ratios), starts, duration, dt)
+    if batch:
+        from swarm.batch_study import gain_chunks, run_gain_chunk
+
+        worker, job_list = run_gain_chunk, gain_chunks(runs, jobs or os.cpu_count() or 1)
+    else:
+        worker, job_list = run_gain, runs
+    out, rows, summary, stopped = _study("gains", worker, job_list, gain_columns(), summarise_gains, jobs, out,
+                                         f"{len(runs)} runs of {duration:g} s, "
+                                         + (f"{len(job_list)} batches" if batch else "per-agent engine"), len(runs))
     _gain_table(summary)
     if plot and summary:
         from swarm.study_plots import plot_gains

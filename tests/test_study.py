@@ -78,6 +78,19 @@ def test_gain_map_finds_where_the_law_settles():
     assert math.isnan(bad["settling_time"])
 
 
+def test_gain_map_batches_give_the_per_agent_rows():
+    from swarm.batch_study import gain_chunks, run_gain_chunk
+
+    jobs = [GainJob(1.0, c2, q, k, duration=40.0) for c2 in (0.5, 3.0) for q in (0.6, 2.0) for k in range(2)]
+    chunks = gain_chunks(jobs, workers=1)
+    assert [len(c) for c in chunks] == [2, 2, 2, 2]  # four chunks per worker
+    batched = [row for c in chunks for row in run_gain_chunk(c)]
+    nan_free = [{k: "nan" if isinstance(v, float) and math.isnan(v) else v for k, v in r.items()}
+                for r in batched + [run_gain(j) for j in jobs]]
+    assert nan_free[:len(jobs)] == nan_free[len(jobs):]
+    assert any(r["settling_time"] == "nan" for r in nan_free) and any(r["settling_time"] != "nan" for r in nan_free)
+
+
 def test_gains_study_table_and_plot(tmp_path):
     res = invoke("study", "gains", "--c1", "1", "--c2", "0.5,3", "--ratios", "2", "--starts", "1",
                  "--duration", "150", "-j", "1", "--out", tmp_path / "g")
@@ -102,11 +115,12 @@ def test_bad_options_name_the_option(tmp_path, args, message):
 
 
 @pytest.mark.slow
-def test_ctrl_c_keeps_finished_rows_and_leaves_no_worker(tmp_path):
+@pytest.mark.parametrize("engine", ["--batch", "--per-agent"])
+def test_ctrl_c_keeps_finished_rows_and_leaves_no_worker(tmp_path, engine):
     out = tmp_path / "s"
     group = Group(session=True)
     proc = group.start([sys.executable, "-m", "swarm", "study", "swarms", "--seeds", "60", "--n", "6",
-                        "--duration", "60", "-j", "2", "--out", str(out)],
+                        "--duration", "60", "-j", "2", "--out", str(out), engine],
                        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         csv_path = out / "runs.csv"

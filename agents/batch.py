@@ -1,0 +1,143 @@
+"""Many AgentBrains at once: B members (scenarios) x N agents as (B, N) arrays.
+
+`BatchBrains.decide` is AgentBrain.decide for every agent of every member in one call,
+with the same state and the same arithmetic (agents/batch_select.py for the selection
+rules, agents/batch_leader.py for the leaders, agents/batch_maths.py for the bit-exact
+helpers): a batch run equals the per-agent run (tests/test_batch.py).
+
+What a tick's frames hold, batched (`frames` below, built by the world's batch engine,
+world/batch.py; this package never imports it):
+
+    heading (B, N)          every agent's heading (own heading and contacts' headings)
+    hops (B, N)             hop counts the agents advertise in this tick's frames (-1 none)
+    target(b, i)            (tx, ty): target minus own position of agents (b, i) (leaders' frames)
+    ids (B, N), ids_sorted  agent ids; True when ids increase along every row
+    sensed_pairs(j)         (B, N): does agent i sense agent j[b, i] (False where j < 0)
+    bearing_pairs(j)        (B, N): line-of-sight angle from i to j[b, i]
+    matrices(m)             (sensed, range) (|m|, N, N) of members m: the whole frames
+
+Only the built-in "bearing" law is batched (a law of one's own is Python per agent:
+run it per agent). Pure: no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from agents import batch_maths as bm
+from agents.batch_leader import BatchLeaders
+from agents.batch_select import NONE, BatchSticky, select
+
+
+@dataclass
+class BatchDecision:
+    u: np.ndarray  # (B, N) commanded turn rates (rad/s)
+    out: np.ndarray  # (B, N) chosen out-neighbour column, -1 none (leaders, lost followers)
+    hops: np.ndarray  # (B, N) advertised hops, -1 none
+
+
+class BatchBrains:
+    def __init__(self, specs: list[list], gains: list, sensing: list, dt: float, max_hops: int):
+        """specs: per member the AgentSpecs in column order (same N); gains, sensing: per
+        member the scenario's GainsSpec / SensingSpec (one selection rule for all)."""
+        modes = {s.selection for s in sensing}
+        if len(modes) != 1:
+            raise ValueError(f"one selection rule per batch, got {sorted(modes)}")
+        if any(g.law != "bearing" for g in gains):
+            raise ValueError("only the built-in 'bearing' law is batched")
+        self.mode = modes.pop()
+        shape = (len(specs), len(specs[0]))
+        self.max_hops = max_hops
+        self.c1 = np.array([[g.c1] for g in gains], dtype=float)
+        self.c2 = np.array([[g.c2] for g in gains], dtype=float)
+        self.hysteresis = np.array([[s.hysteresis] for s in sensing], dtype=float)
+        self.limit = np.array([[a.max_turn_rate or math.inf for a in row] for row in specs], dtype=float)
+        self.follower = np.array([[a.role == "follower" for a in row] for row in specs], dtype=bool)
+        col = [{a.id: k for k, a in enumerate(row)} for row in specs]
+        self.pinned = np.array([[col[b][a.follow] if a.follow is not None else NONE for a in row]
+                                for b, row in enumerate(specs)], dtype=np.int64)
+        self.leaders = BatchLeaders(specs, dt)
+        self.sticky = BatchSticky(shape, max_hops, max_hops) if self.mode == "sticky" else None
+        self.out = np.full(shape, NONE, dtype=np.int64)  # AgentBrain.out
+        self.last_u = np.zeros(shape)
+        self.hops = np.full(shape, NONE, dtype=np.int64)  # advertised last tick (rooted rule)
+        self.feasible = np.full(shape, NONE, dtype=np.int64)  # rooted rule
+        self.unrooted = np.zeros(shape, dtype=np.int64)
+        self.nonfinite = np.zeros(shape, dtype=np.int64)
+
+    # -- selection ------------------------------------------------------------------------------
+    def _choose(self, frames) -> tuple[np.ndarray, np.ndarray]:
+        """(choice columns, rooted) (B, N) for the followers' rows."""
+        ids = None if frames.ids_sorted else frames.ids
+        if self.sticky is not None:
+            st = self.sticky
+            kept = st.keep(frames.sensed_pairs(st.out), frames.hops)
+            choice, rooted = np.where(kept, st.out, NONE), kept.copy()
+            need = self.follower & ~kept
+            m = np.flatnonzero(need.any(axis=1))
+            if m.size:
+                sensed, rng = frames.matrices(m)
+                c, r = st.choose(m, need[m], sensed, rng, frames.hops[m], None if ids is None else ids[m])
+                choice[m] = np.where(need[m], c, choice[m])
+                rooted[m] = np.where(need[m], r, rooted[m])
+            return choice, rooted
+        choice = np.full(self.out.shape, NONE, dtype=np.int64)
+        need = self.follower.copy()
+        if self.mode == "fixed":  # the pinned out-neighbour while it is sensed
+            pinned = self.follower & (self.pinned >= 0) & frames.sensed_pairs(self.pinned)
+            choice = np.where(pinned, self.pinned, choice)
+            need &= ~pinned
+        m = np.flatnonzero(need.any(axis=1))
+        if m.size:
+            cand, rng = frames.matrices(m)
+            if self.mode == "rooted":
+                cand = cand & self._rooted_candidates(frames.hops[m], m)
+            c = select(cand, rng, None if ids is None else ids[m], self.out[m], self.hysteresis[m])
+            choice[m] = np.where(need[m], c, choice[m])
+        return choice, np.ones(choice.shape, dtype=bool)
+
+    def _rooted_candidates(self, hops: np.ndarray, m: np.ndarray) -> np.ndarray:
+        """selection.select's rooted filter with AgentBrain._below: (|m|, N, N)."""
+        below = np.where(self.hops[m] >= 0, self.hops[m],
+                         np.where(self.unrooted[m] < self.max_hops, self.feasible[m], NONE))[..., None]
+        hj = hops[:, None, :]
+        current = np.arange(hops.shape[1])[None, None, :] == self.out[m][..., None]
+        return (hj >= 0) & ((below < 0) | (hj < below) | current)
+
+    # -- one tick -------------------------------------------------------------------------------
+    def decide(self, tick: int, frames) -> BatchDecision:
+        """AgentBrain.decide for every agent of every member on this tick's frames."""
+        heading, hops_in = frames.heading, frames.hops
+        choice, rooted = self._choose(frames)
+        choice = np.where(self.follower, choice, NONE)
+        track = choice >= 0
+        # the law on every follower with an out-neighbour (bearing_law, term for term)
+        g_i, g_j = heading, bm.take(heading, choice)
+        lam = frames.bearing_pairs(choice)
+        u = self.c1 * bm.wrap(g_j - g_i) + self.c2 * np.sin(lam - g_i)
+        bad = track & ~np.isfinite(u)
+        if bad.any():  # a NaN or inf turn rate: counted, the last one held
+            self.nonfinite += bad
+            u = np.where(bad, self.last_u, u)
+        # nobody (rooted) in sight: loiter the way it last turned
+        lost = np.copysign(self.c2, np.where(self.last_u == 0.0, 1.0, self.last_u))
+        u = bm.saturate(np.where(track, u, lost), self.limit)
+        h_j = bm.take(hops_in, choice)
+        hops = np.where(track & rooted & (h_j >= 0) & (h_j < self.max_hops), h_j + 1, NONE)
+        lead = self.leaders
+        if len(lead.b):
+            lb, li = lead.b, lead.i
+            tx, ty = frames.target(lb, li)
+            u[lb, li] = lead.decide(tick, tx, ty, heading[lb, li])
+            hops[lb, li] = 0
+        self.out = choice
+        self.last_u = u
+        if self.mode == "rooted":  # what AgentBrain._below reads (only the rooted rule does)
+            rooted_now = hops >= 0
+            self.feasible = np.where(rooted_now, hops, self.feasible)
+            self.unrooted = np.where(rooted_now, 0, self.unrooted + 1)
+            self.hops = hops
+        return BatchDecision(u, choice, hops)

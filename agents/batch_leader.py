@@ -1,0 +1,98 @@
+"""Leaders (AgentBrain._leader) for many members at once.
+
+Each leader plans its circle-circle path with agents.leader.plan_cc at its first frame,
+exactly as AgentBrain does (the same call, the same arguments: one plan per leader),
+then every tick commands the path's turn rate averaged over the tick until the path
+ends, and agents.leader.on_orbit_command after. Both are written here over arrays of
+leaders with the same operations in the same order, the `math` functions per element
+(agents/batch_maths.py), so the turn rates equal the per-agent brain's to the bit (with
+SCALAR_MAX leaders or fewer on their orbits, on_orbit_command itself is called: quicker).
+Pure: no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from agents import batch_maths as bm
+from agents.leader import K_HEADING, K_RADIAL, _HOLD_DEADBAND, on_orbit_command, plan_cc
+
+SCALAR_MAX = 8  # leaders on their orbits: up to this many, one on_orbit_command call each
+
+
+class BatchLeaders:
+    """The leaders among (B, N) agents: `where` = (members, columns) of each, and per
+    leader its spec's speed, orbit radius, direction sign and turn-rate limit."""
+
+    def __init__(self, specs: list[list], dt: float):
+        """specs: per member, the scenario's AgentSpecs in column order."""
+        where = [(b, i) for b, row in enumerate(specs) for i, a in enumerate(row) if a.role == "leader"]
+        self.b = np.array([b for b, _ in where], dtype=np.int64)
+        self.i = np.array([i for _, i in where], dtype=np.int64)
+        lead = [specs[b][i] for b, i in where]
+        self.specs = lead
+        self.v = np.array([a.speed for a in lead], dtype=float)
+        self.radius = np.array([a.orbit_radius for a in lead], dtype=float)
+        self.sign = np.array([a.direction_sign for a in lead], dtype=float)
+        self.limit = np.array([a.max_turn_rate or math.inf for a in lead], dtype=float)
+        self.dt = dt
+        self.planned = False
+        self.path_tick = 0
+        self.t1 = self.t2 = self.u1 = self.u2 = np.zeros(len(lead))
+
+    def plan(self, tick: int, px: np.ndarray, py: np.ndarray, heading: np.ndarray) -> None:
+        """plan_cc for every leader from its first frame (own position relative to the target)."""
+        paths = [plan_cc(float(x), float(y), float(g), a.speed, a.orbit_radius, a.direction_sign, a.max_turn_rate)
+                 for x, y, g, a in zip(px.tolist(), py.tolist(), heading.tolist(), self.specs)]
+        self.t1 = np.array([p.t1 for p in paths], dtype=float)
+        self.t2 = np.array([p.t2 for p in paths], dtype=float)
+        self.u1 = np.array([p.u1 for p in paths], dtype=float)
+        self.u2 = np.array([p.u2 for p in paths], dtype=float)
+        self.planned, self.path_tick = True, tick
+
+    def decide(self, tick: int, tx: np.ndarray, ty: np.ndarray, heading: np.ndarray) -> np.ndarray:
+        """Turn rates (L,) of the leaders at `tick`; tx, ty: target minus own position
+        (the frame's `target`), heading: own headings, all (L,)."""
+        px, py = -tx, -ty
+        if not self.planned:
+            self.plan(tick, px, py, heading)
+        dt = self.dt
+        a = (tick - self.path_tick) * dt
+        b = a + dt
+        t12 = self.t1 + self.t2
+        orbit = a >= t12
+        u = np.empty(len(self.v))
+        arc = ~orbit
+        if arc.any():
+            t1, t12a = self.t1[arc], t12[arc]
+            u_orbit = self.sign[arc] * self.v[arc] / self.radius[arc]
+            u[arc] = (self.u1[arc] * _overlap(a, b, 0.0, t1) + self.u2[arc] * _overlap(a, b, t1, t12a)
+                      + u_orbit * _overlap(a, b, t12a, math.inf)) / dt
+        k = np.flatnonzero(orbit)
+        if 0 < len(k) <= SCALAR_MAX:  # a few leaders: the brain's own function is quicker
+            for j, x, y, g in zip(k.tolist(), px[k].tolist(), py[k].tolist(), heading[k].tolist()):
+                spec = self.specs[j]
+                u[j] = on_orbit_command(x, y, g, spec.speed, spec.orbit_radius, spec.direction_sign,
+                                        spec.max_turn_rate)
+        elif len(k):
+            u[k] = on_orbit(px[k], py[k], heading[k], self.v[k], self.radius[k], self.sign[k], self.limit[k])
+        return bm.saturate(u, self.limit)
+
+
+def _overlap(a, b, lo, hi):
+    return np.maximum(0.0, np.minimum(b, hi) - np.maximum(a, lo))
+
+
+def on_orbit(x, y, heading, v, radius, s, limit) -> np.ndarray:
+    """agents.leader.on_orbit_command over arrays of leaders (inputs already checked)."""
+    r = bm.hypot(x, y)
+    theta = bm.atan2(y, x)
+    e = (r - radius) / radius
+    g_d = theta + s * (0.5 * math.pi + bm.atan(K_RADIAL * e))
+    err = bm.wrap(g_d - heading)
+    w0 = v / radius
+    hold = (np.abs(e) <= _HOLD_DEADBAND) & (np.abs(err) <= _HOLD_DEADBAND)
+    u = np.where(hold, s * w0, s * w0 + K_HEADING * w0 * err)
+    return bm.saturate(u, limit)

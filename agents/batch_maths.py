@@ -1,0 +1,62 @@
+"""Array versions of the scalar helpers the brain uses, equal to them to the bit.
+
+The per-agent brain computes with `math` on Python floats; the batch brains
+(agents/batch.py) compute with numpy on (B, N) arrays. Where the two libraries round
+differently the batch side calls the `math` function per element, so that a batch run
+equals the per-agent run instead of drifting from it by rounding:
+
+- `wrap` is swarm.contracts.orbits.wrap (math.remainder, then (-pi, pi]): exact in
+  numpy for |angle| < 1.25 tau (there the remainder subtracts at most one tau, and by
+  Sterbenz's lemma that subtraction is exact); larger angles go through math.remainder.
+- `hypot`, `atan2`, `atan`: numpy's SIMD versions differ from libm's in the last bit on
+  some inputs, so these call `math` per element (leaders only: a few per member).
+- np.sin and math.sin agree (checked in tests/test_batch.py on this machine's numpy).
+
+Pure: no I/O, no state.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+TAU = 2.0 * math.pi
+_FAST = 1.25 * TAU  # below this |angle| the remainder subtracts at most one tau
+
+_hypot = np.frompyfunc(math.hypot, 2, 1)
+_atan2 = np.frompyfunc(math.atan2, 2, 1)
+_atan = np.frompyfunc(math.atan, 1, 1)
+
+
+def wrap(angle) -> np.ndarray:
+    """swarm.contracts.orbits.wrap on an array: the angle in (-pi, pi], the same bits."""
+    a = np.asarray(angle, dtype=float)
+    w = np.where(a > math.pi, a - TAU, np.where(a < -math.pi, a + TAU, a))
+    big = np.abs(a) >= _FAST
+    if big.any():
+        w = np.array(w, dtype=float)
+        w[big] = [math.remainder(v, TAU) if math.isfinite(v) else math.nan for v in a[big].tolist()]
+    return np.where(w <= -math.pi, w + TAU, w)
+
+
+def saturate(u, limit) -> np.ndarray:
+    """max(-limit, min(limit, u)) elementwise; limit inf where the agent has none."""
+    return np.maximum(-limit, np.minimum(limit, u))
+
+
+def hypot(x, y) -> np.ndarray:
+    return _hypot(x, y).astype(float)
+
+
+def atan2(y, x) -> np.ndarray:
+    return _atan2(y, x).astype(float)
+
+
+def atan(x) -> np.ndarray:
+    return _atan(x).astype(float)
+
+
+def take(a: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """a[b, j[b, i]] for (B, N) arrays a and column indices j (clipped: mask the -1s)."""
+    return a[np.arange(a.shape[0])[:, None], np.maximum(j, 0)]
