@@ -71,7 +71,7 @@ class AgentBrain:
             raise ValueError(f"leader {s.id}: sensor frame has no target information")
         px, py = -frame.target[0], -frame.target[1]  # own position relative to the target
         sign = s.direction_sign
-        # Imported here: the planner needs numpy, which follower processes never load.
+        # Imported here: only leaders need the planner (pure Python, no numpy: leaders stay as light as followers).
         from agents.leader import on_orbit_command, plan_cc
 
         if self.cc_path is None:

@@ -26,7 +26,7 @@ without the 1/D blow-up near alpha == beta,
 
     r_B = (|a|^2 / 2 + r_A Pa) / (r_A D - Pb),  Pa = D p2,  Pb = D p1,
 
-which is the form :func:`plan_cc` evaluates (vectorised over candidates).
+which is the form :func:`plan_cc` evaluates (candidate by candidate).
 
 At the tangent point T, n = (o_A - o_B) / (r_A + r_B), T = o_A - r_A n and the heading
 there is gT = atan2(n_x, -n_y).  Arc 1 turns from alpha to gT in the sense
@@ -34,15 +34,14 @@ sigma_A = -sign(r_A) through d1 = (sigma_A (gT - alpha)) mod 2 pi, arc 2 from gT
 in the sense sigma_B = sign(r_B) through d2 = (sigma_B (beta - gT)) mod 2 pi; the
 durations are t1 = |r_A| d1 / v and t2 = |r_B| d2 / v.
 
-Pure functions on plain floats (numpy inside plan_cc only); no I/O, no middleware.
+Pure functions on plain floats, standard library only: no numpy, so that a leader
+process is as light as a follower's; no I/O, no middleware.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-
-import numpy as np
 
 from swarm.contracts.orbits import TAU, wrap
 
@@ -144,14 +143,47 @@ def _check_inputs(v: float, radius: float, direction: int, max_turn_rate: float 
     return int(direction)
 
 
-def _snap(d, r, scene):
-    """True where an arc angle d (rad) of radius r (m) just short of 2 pi is a rounded 0.
+def _snap(d: float, r: float, scene: float) -> bool:
+    """True when an arc angle d (rad) of radius r (m) just short of 2 pi is a rounded 0.
 
     Dropping the gap 2 pi - d moves the end point by about |r| (2 pi - d) (m) and turns
     the end heading by 2 pi - d (rad); both must be negligible for the scene size (m).
+    (Inlined in :func:`_best_cc`'s candidate loop; keep the two in step.)
     """
     gap = TAU - d
-    return (gap < _ANGLE_SNAP) & (np.abs(r) * gap <= _LENGTH_SNAP * scene)
+    return gap < _ANGLE_SNAP and abs(r) * gap <= _LENGTH_SNAP * scene
+
+
+def _linspace(start: float, stop: float, num: int) -> list[float]:
+    """numpy.linspace(start, stop, num) for num >= 2 (endpoint included), value for value.
+
+    numpy computes start + i * step with step = (stop - start) / (num - 1) (or, when the
+    step underflows to 0, start + (i / (num - 1)) (stop - start)), then sets the last
+    value to stop exactly; so does this.
+    """
+    div = num - 1
+    delta = stop - start
+    step = delta / div
+    if step == 0.0:  # numpy's branch for denormal steps (numpy gh-5437)
+        out = [i / div * delta + start for i in range(num)]
+    else:
+        out = [i * step + start for i in range(num)]
+    out[-1] = stop
+    return out
+
+
+def _geomspace(start: float, stop: float, num: int) -> list[float]:
+    """numpy.geomspace(start, stop, num) for 0 < start, stop and num >= 2.
+
+    numpy takes 10 ** linspace(log10(start), log10(stop), num) and then sets both ends
+    exactly to start and stop; so does this.  Inner values can differ from numpy's in the
+    last bits where numpy uses its own SIMD log10 / power (AVX-512 builds): harmless, the
+    grid only seeds the search.
+    """
+    out = [10.0 ** e for e in _linspace(math.log10(start), math.log10(stop), num)]
+    out[0] = start
+    out[-1] = stop
+    return out
 
 
 def _best_cc(px, py, alpha, radius, s, r_min, r_cap, phis, mags, n_best=1, n_ring=0):
@@ -161,75 +193,108 @@ def _best_cc(px, py, alpha, radius, s, r_min, r_cap, phis, mags, n_best=1, n_rin
     first; with n_best > 1 only local minima over the equally spaced first n_ring angles
     (taken as a ring) compete, so the starts for refinement lie in different basins.
 
-    phis: (P,) entry angles (rad); mags: (K,) |r_A| values (m), used with both signs.
-    Per entry angle, boundary candidates are added: |r_A| = r_min, |r_B| = r_min and
-    r_B = s R (arc 2 on the orbit itself).
+    phis: entry angles (rad); mags: |r_A| values (m), used with both signs.  Per entry
+    angle, the candidates are, in this order (ties go to the first): r_A = +mags, -mags,
+    +-r_min (nudged out), then the r_A giving r_B = s R (arc 2 on the orbit itself) and
+    r_B = +-r_min.  The shortest feasible candidate of each entry angle counts; an
+    infeasible one (degenerate, out of [r_min, r_cap], not tangent) is skipped.
+
+    Plain Python, one candidate at a time (the hot loop of plan_cc: everything inlined).
+    It is the numpy planner it replaced (tests/cc_reference.py) operation for operation:
+    divisions by zero, which numpy turned into inf / nan, are guarded instead (such
+    candidates are infeasible either way); math.hypot can differ from numpy's hypot in
+    the last bit, which matters only exactly at the tangency tolerance.
     """
-    phis = np.asarray(phis, dtype=float)[:, None]
-    ca, sa = math.cos(alpha), math.sin(alpha)
-    bx, by = radius * np.cos(phis), radius * np.sin(phis)
-    beta = phis + s * (0.5 * math.pi)
-    cb, sb = np.cos(beta), np.sin(beta)
-    ax, ay = px - bx, py - by
-    pa = ax * sa - ay * ca
-    pb = ax * sb - ay * cb
-    d = 2.0 * np.sin(0.5 * (alpha - beta)) ** 2
-    half_a2 = 0.5 * (ax * ax + ay * ay)
-
+    cos, sin, hypot, atan2 = math.cos, math.sin, math.hypot, math.atan2
+    inf = math.inf
+    ca, sa = cos(alpha), sin(alpha)
+    quarter = s * (0.5 * math.pi)
+    sr = s * radius
     edge = r_min * (1.0 + _BOUNDARY_NUDGE)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        # r_A giving a chosen r_B: r_A = (|a|^2/2 + r_B Pb) / (r_B D - Pa)
-        rb_targets = np.array([s * radius, edge, -edge])[None, :]
-        ra_special = (half_a2 + rb_targets * pb) / (rb_targets * d - pa)
-        ra_grid = np.concatenate([mags, -mags, [edge, -edge]])[None, :]
-        ra_grid = np.broadcast_to(ra_grid, (phis.shape[0], ra_grid.shape[1]))
-        ra = np.concatenate([ra_grid, ra_special], axis=1)
-        den = ra * d - pb
-        rb = (half_a2 + ra * pa) / den
-        # exact r_B = s R for the orbit candidate (o_B is then exactly the target)
-        rb[:, -3] = s * radius
+    neg_edge = -edge
+    grid = [*mags, *[-m for m in mags], edge, neg_edge]
+    j_orbit = len(grid)  # index of the r_B = s R candidate
+    angle_snap, length_snap, min_gap, tangency = _ANGLE_SNAP, _LENGTH_SNAP, _MIN_GAP, _TANGENCY_TOL
 
-        oax, oay = ax + ra * sa, ay - ra * ca
-        obx, oby = -rb * sb, rb * cb
-        dx, dy = oax - obx, oay - oby
-        ssum = ra + rb
-        dist = np.hypot(dx, dy)
-        scale = np.maximum.reduce([np.abs(ra), np.abs(rb), np.sqrt(2.0 * half_a2) + 0.0 * ra,
-                                   np.full_like(ra, radius)])
-        ok = (
-            (d > _D_EPS)
-            & np.isfinite(ra) & np.isfinite(rb)
-            & (np.abs(den) > 1e-300)
-            & (np.abs(ra) >= r_min) & (np.abs(rb) >= r_min)
-            & (np.abs(ra) <= r_cap) & (np.abs(rb) <= r_cap)
-            & (np.abs(ssum) > _MIN_GAP * scale)
-            & (np.abs(dist - np.abs(ssum)) <= _TANGENCY_TOL * scale)
-        )
-        if not ok.any():
-            return None
-        nx, ny = dx / ssum, dy / ssum
-        gt = np.arctan2(nx, -ny)
-        d1 = np.mod(-np.sign(ra) * (gt - alpha), TAU)
-        d2 = np.mod(np.sign(rb) * (beta - gt), TAU)
-    scene = np.maximum(np.sqrt(2.0 * half_a2), radius)
-    d1 = np.where(_snap(d1, ra, scene), 0.0, d1)
-    d2 = np.where(_snap(d2, rb, scene), 0.0, d2)
-    length = np.where(ok, np.abs(ra) * d1 + np.abs(rb) * d2, np.inf)
-    # shortest candidate per entry angle; then the n_best shortest entry angles among the
-    # local minima over the circular grid (the first n_ring angles) and the extra angles
-    k = np.argmin(length, axis=1)
-    rows = np.arange(length.shape[0])
-    per_phi = length[rows, k]
-    eligible = np.isfinite(per_phi)
+    per_phi, best_ra, best_rb = [], [], []
+    for phi in phis:
+        bx, by = radius * cos(phi), radius * sin(phi)
+        beta = phi + quarter
+        cb, sb = cos(beta), sin(beta)
+        ax, ay = px - bx, py - by
+        pa = ax * sa - ay * ca
+        pb = ax * sb - ay * cb
+        h = sin(0.5 * (alpha - beta))
+        d = 2.0 * (h * h)
+        if not d > _D_EPS:  # alpha == beta: no candidate at this entry angle
+            per_phi.append(inf)
+            best_ra.append(0.0)
+            best_rb.append(0.0)
+            continue
+        half_a2 = 0.5 * (ax * ax + ay * ay)
+        norm_a = math.sqrt(2.0 * half_a2)
+        scene = max(norm_a, radius)  # also the size floor of each candidate's scale
+        snap_len = length_snap * scene
+        # r_A giving a chosen r_B: r_A = (|a|^2/2 + r_B Pb) / (r_B D - Pa); nan (rejected
+        # below) where the denominator vanishes
+        ras = grid.copy()
+        for rbt in (sr, edge, neg_edge):
+            den0 = rbt * d - pa
+            ras.append((half_a2 + rbt * pb) / den0 if den0 != 0.0 else math.nan)
+
+        best, bra, brb = inf, 0.0, 0.0
+        j = -1
+        for ra in ras:
+            j += 1
+            den = ra * d - pb
+            if not abs(den) > 1e-300:
+                continue
+            # exact r_B = s R for the orbit candidate (o_B is then exactly the target)
+            rb = sr if j == j_orbit else (half_a2 + ra * pa) / den
+            ara = abs(ra)
+            arb = abs(rb)
+            # the bounds also reject inf / nan (r_cap is finite)
+            if not (r_min <= ara <= r_cap and r_min <= arb <= r_cap):
+                continue
+            ssum = ra + rb
+            scale = ara if ara > scene else scene  # max(|r_A|, |r_B|, |a|, R)
+            if arb > scale:
+                scale = arb
+            if not abs(ssum) > min_gap * scale:
+                continue
+            dx = ax + ra * sa + rb * sb          # o_A - o_B
+            dy = ay - ra * ca - rb * cb
+            if not abs(hypot(dx, dy) - abs(ssum)) <= tangency * scale:
+                continue
+            gt = atan2(dx / ssum, -(dy / ssum))
+            # arc senses -sign(r_A), sign(r_B): r_A, r_B are nonzero here (|r| >= r_min)
+            d1 = (alpha - gt if ra > 0.0 else gt - alpha) % TAU
+            d2 = (beta - gt if rb > 0.0 else gt - beta) % TAU
+            gap = TAU - d1
+            if gap < angle_snap and ara * gap <= snap_len:
+                d1 = 0.0
+            gap = TAU - d2
+            if gap < angle_snap and arb * gap <= snap_len:
+                d2 = 0.0
+            length = ara * d1 + arb * d2
+            if length < best:
+                best, bra, brb = length, ra, rb
+        per_phi.append(best)
+        best_ra.append(bra)
+        best_rb.append(brb)
+
+    # the n_best shortest entry angles among the local minima over the circular grid (the
+    # first n_ring angles) and the extra angles; a stable sort keeps ties in grid order
+    eligible = [length < inf for length in per_phi]
     if n_best > 1 and n_ring >= 3:
-        ring = per_phi[:n_ring]
-        eligible[:n_ring] &= (ring <= np.roll(ring, 1)) & (ring <= np.roll(ring, -1))
-    order = [i for i in np.argsort(np.where(eligible, per_phi, np.inf), kind="stable")[:n_best]
-             if eligible[i]]
+        for i in range(n_ring):
+            if eligible[i] and not (per_phi[i] <= per_phi[i - 1 if i else n_ring - 1]
+                                    and per_phi[i] <= per_phi[(i + 1) % n_ring]):
+                eligible[i] = False
+    order = sorted((i for i, ok in enumerate(eligible) if ok), key=per_phi.__getitem__)[:n_best]
     if not order:
         return None
-    return [(float(per_phi[i]), float(ra[i, k[i]]), float(rb[i, k[i]]), float(phis[i, 0]))
-            for i in order]
+    return [(per_phi[i], best_ra[i], best_rb[i], phis[i]) for i in order]
 
 
 def _single_arc_phi(px, py, alpha, radius, s):
@@ -300,8 +365,9 @@ def plan_cc(x: float, y: float, heading: float, v: float, radius: float, directi
     coarse = None
     n_phi, n_mag, top = max(int(n_entry), 4), 24, 100.0
     for _ in range(4):  # widen until something is feasible
-        phis = np.concatenate([np.arange(n_phi) * (TAU / n_phi), extra])
-        mags = r_min * np.geomspace(1.0, max(2.0, top * big / r_min), n_mag)
+        step = TAU / n_phi
+        phis = [i * step for i in range(n_phi)] + extra
+        mags = [r_min * g for g in _geomspace(1.0, max(2.0, top * big / r_min), n_mag)]
         coarse = _best_cc(x, y, alpha, radius, s, r_min, r_cap, phis, mags,
                           n_best=_N_STARTS, n_ring=n_phi)
         if coarse is not None:
@@ -318,9 +384,9 @@ def plan_cc(x: float, y: float, heading: float, v: float, radius: float, directi
         cur, h, ratio = start, TAU / n_phi, ratio0
         for _ in range(3):
             _, ra_cur, _, phi_cur = cur
-            phis = phi_cur + np.linspace(-h, h, 21)
-            mags = np.abs(ra_cur) * np.geomspace(1.0 / ratio, ratio, 15)
-            mags = mags[mags >= r_min]
+            phis = [phi_cur + e for e in _linspace(-h, h, 21)]
+            mags = [m for m in (abs(ra_cur) * g for g in _geomspace(1.0 / ratio, ratio, 15))
+                    if m >= r_min]
             cand = _best_cc(x, y, alpha, radius, s, r_min, r_cap, phis, mags)
             if cand is not None and cand[0][0] < cur[0]:
                 cur = cand[0]

@@ -2,11 +2,18 @@
 
 from __future__ import annotations
 
+import json
 import math
+import os
+import platform
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+import cc_reference
 from agents.leader import (
     CCPath,
     cc_coefficients,
@@ -16,6 +23,8 @@ from agents.leader import (
 )
 from swarm.contracts.orbits import wrap
 from world.kinematics import step
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def arc_step(x, y, g, v, u, t):
@@ -219,6 +228,99 @@ def test_plan_cc_one_arc_when_circle_touches_orbit():
     _check_path(path, x, y, heading, v, radius, s, None)
     # bounded by going straight-ish onto the orbit; certainly less than a quarter orbit
     assert path.length < 0.5 * math.pi * radius
+
+
+# --- the pure-Python planner against the numpy one it replaced (issue 12) -----------------
+
+
+def _port_cases(n, seed):
+    """Seeded plan_cc arguments: random poses, radii, speeds, directions and turn-rate limits
+    (none, exactly the orbit's own rate, or in between), a sixth of them just off the orbit."""
+    rng = np.random.default_rng(seed)
+    cases = []
+    for i in range(n):
+        radius, v = float(rng.uniform(0.5, 80.0)), float(rng.uniform(0.1, 15.0))
+        direction = int(rng.choice([1, -1]))
+        theta = float(rng.uniform(-math.pi, math.pi))
+        if i % 6 == 5:
+            dist = radius * (1 + float(rng.choice([1, -1])) * 10 ** float(rng.uniform(-8, -2)))
+            heading = theta + direction * HALF_PI + float(rng.uniform(-0.1, 0.1))
+        else:
+            dist = radius * float(rng.uniform(0.0, 5.0))
+            heading = float(rng.uniform(-3 * math.pi, 3 * math.pi))
+        max_rate = [None, v / radius, v / (radius * float(rng.uniform(0.05, 1.0)))][i % 3]
+        cases.append((dist * math.cos(theta), dist * math.sin(theta), heading, v, radius, direction,
+                      max_rate))
+    return cases
+
+
+def _path_close(p: CCPath, q: CCPath, rel: float) -> bool:
+    def close(a, b):
+        return abs(a - b) <= rel * max(abs(a), abs(b)) + 1e-300
+    return (all(close(a, b) for a, b in [(p.t1, q.t1), (p.t2, q.t2), (p.r_a, q.r_a), (p.r_b, q.r_b),
+                                         (p.length, q.length), (p.entry[0], q.entry[0]),
+                                         (p.entry[1], q.entry[1])])
+            and abs(wrap(p.entry[2] - q.entry[2])) <= rel * math.pi)
+
+
+def test_plan_cc_port_matches_numpy_reference():
+    """The pure-Python planner plans the numpy planner's paths (tests/cc_reference.py).
+
+    numpy's AVX-512 log10 / power / arctan2 kernels round some last bits differently from
+    libm (math), which can tip the refinement grid's middle |r_A| just below / above r_min
+    and so pick r_min instead of the nudged r_min (1 + 1e-9): then the paths differ by
+    ~1e-9 relative (a few percent of cases on such a machine), their lengths by less.
+    Without those kernels the two are bit-for-bit equal (next test).
+    """
+    cases = _port_cases(300, 2024)
+    identical = within = 0
+    for c in cases:
+        want, got = cc_reference.plan_cc(*c), plan_cc(*c)
+        if got == want:
+            identical += 1
+            continue
+        assert got.length == pytest.approx(want.length, rel=1e-9, abs=1e-12), c
+        if _path_close(got, want, 1e-9):
+            within += 1
+        else:  # a different boundary candidate: still a valid, equally short path
+            assert _path_close(got, want, 1e-6), c
+            _check_path(got, *c)
+    print(f"plan_cc port vs numpy reference: {len(cases)} paths, {identical} identical, "
+          f"{within} more within 1e-9, {len(cases) - identical - within} beyond (lengths within 1e-9)")
+    assert identical + within >= 0.9 * len(cases)
+
+
+# numpy's own x86-64-v4 (AVX-512) kernels off: log10, power and arctan2 then come from libm
+_NO_AVX512 = "X86_V4 AVX512_ICL AVX512_SPR AVX512_SKX AVX512_CLX AVX512_CNL"
+_BIT_EXACT = """
+import json, math, sys
+sys.path.insert(0, "tests")
+import cc_reference
+from agents.leader import plan_cc
+cases = json.loads(sys.argv[1])
+print(sum(cc_reference.plan_cc(*c) != plan_cc(*c) for c in cases))
+"""
+
+
+@pytest.mark.skipif(platform.machine().lower() not in ("x86_64", "amd64"),
+                    reason="checked where numpy's non-AVX-512 float64 kernels are libm's")
+def test_plan_cc_port_bit_exact_without_avx512_numpy():
+    """Same algorithm, same float operations: with numpy's AVX-512 kernels disabled the port
+    and the numpy reference give identical paths, to the last bit."""
+    cases = _port_cases(120, 99)
+    env = dict(os.environ, NPY_DISABLE_CPU_FEATURES=_NO_AVX512, PYTHONWARNINGS="ignore")
+    p = subprocess.run([sys.executable, "-c", _BIT_EXACT, json.dumps(cases)], capture_output=True,
+                       text=True, timeout=120, cwd=ROOT, env=env)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert p.stdout.split()[-1] == "0"
+
+
+def test_importing_the_leader_does_not_load_numpy():
+    """Leader processes stay as light as followers: agents.leader is numpy-free."""
+    code = "import sys, agents.leader; sys.exit('numpy' in sys.modules)"
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                       cwd=ROOT)
+    assert p.returncode == 0, p.stderr[-2000:] or "agents.leader imported numpy"
 
 
 # --- degenerate cases -------------------------------------------------------------------
