@@ -36,12 +36,15 @@ from agents.joining import log as _log
 from agents.world_link import EXIT_WORLD_SILENT, NEW_WORLD, WorldLink
 from swarm.contracts import credentials, wire
 from swarm.contracts.laws import LawError, check_trusted, trusted_laws
-from swarm.contracts.lifeline import tie_to_launcher
-from swarm.contracts.transport import open_client
+from swarm.contracts.lifeline import LAUNCHER_PID_ENV, tie_to_launcher
+from swarm.contracts.transport import CONNECT_TIMEOUT_MS, open_client
 
 STATUS_PERIOD = 0.2  # s of wall time between periodic status messages
 NONFINITE_NOTE_S = 5.0  # at most one log line per this many s about non-finite law outputs
 WORLD_GRACE = 10.0  # s an agent waits for a world that stopped answering (--world-grace)
+# Started by `swarm up`, an agent waits longer for its connection: hundreds of agents starting
+# at once on two cores (and the world admitting them) took more than the 10 s of a lone one.
+LAUNCHED_CONNECT_TIMEOUT_MS = 60_000
 EXIT_OK, EXIT_CRASH = 0, 1  # and EXIT_REFUSED = 3 (agents/joining.py), 4 and 5 (agents/world_link.py)
 
 
@@ -76,7 +79,7 @@ class AgentNode:
         self.spec = self.conf.agent
         self.key = reply["key"]  # checked by wire.decode_join_reply
         if self.brain.is_leader:
-            import agents.leader  # noqa: F401  (load numpy and the planner before the first frame)
+            import agents.leader  # noqa: F401  (load the planner before the first frame)
         self.inbox: queue.SimpleQueue = queue.SimpleQueue()
         self.commands = 0
         self.garbage = 0
@@ -306,8 +309,10 @@ def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: b
     except credentials.CredentialsError as e:
         _log(f"swarm agent {agent_id}: {e}")
         return EXIT_REFUSED
+    launched = bool(os.environ.get(LAUNCHER_PID_ENV))
     try:
-        session = open_client(connect, creds=creds, user=user)
+        session = open_client(connect, LAUNCHED_CONNECT_TIMEOUT_MS if launched else CONNECT_TIMEOUT_MS,
+                              creds=creds, user=user)
     except Exception as e:
         _log(f"swarm agent {agent_id}: cannot connect to {connect} as {user} of run {creds.run}: {e} "
              "(no world there, or it refused these credentials)")
