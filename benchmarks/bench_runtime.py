@@ -347,28 +347,56 @@ LEADERS = [(28.0, 28.0), (40.0, 40.0)]  # (speed m/s, orbit radius m): omega = v
 RING_M = 30.0  # the generated scenario's agents start on a ring of this radius
 
 
-def sensing_range(n: int, neighbours: int | None) -> float | None:
-    """A sensing range under which each agent on the starting ring senses about `neighbours`
-    others (half on each side); None (unlimited) when that is everyone anyway."""
+_RANGES: dict[tuple[int, int, int], float | None] = {}
+
+
+def sensing_range(n: int, neighbours: int | None, ticks: int = 1500) -> float | None:
+    """A sensing range under which each agent of the n-agent ring senses about `neighbours`
+    others, on average over the first `ticks` ticks of the run (the swarm spreads out from
+    the ring: early frames carry more, later ones fewer); None (unlimited) when that is
+    everyone anyway. Found with the batch engine (the same trajectories as `swarm up`):
+    scaled by sqrt(wanted / sensed) (sensed grows with the area in range) until within 10%."""
     if neighbours is None or neighbours >= n - 1:
         return None
-    half = (neighbours + 1) // 2
-    return 2 * RING_M * math.sin(math.pi * (half + 0.5) / n)  # halfway to the next one out
+    if (n, neighbours, ticks) in _RANGES:
+        return _RANGES[(n, neighbours, ticks)]
+    import tomllib
+
+    import numpy as np
+
+    from swarm.batch import run_batch
+    from swarm.contracts.scenario import parse_scenario
+
+    r = 2 * RING_M * math.sin(math.pi * ((neighbours + 1) // 2 + 0.5) / n)  # that many at the start
+    for _ in range(8):
+        s = parse_scenario(tomllib.loads(scenario_toml(n, sense_range=r)))
+        a = run_batch([s], ticks * DT)[0].recorder.arrays()
+        x, y = a["x"][::10], a["y"][::10]
+        d = np.hypot(x[:, :, None] - x[:, None, :], y[:, :, None] - y[:, None, :])
+        sensed = ((d <= r).sum(axis=2) - 1).mean()
+        if abs(sensed - neighbours) <= 0.1 * neighbours:
+            break
+        r *= math.sqrt(neighbours / max(sensed, 0.1))
+    _RANGES[(n, neighbours, ticks)] = r
+    return r
 
 
-def scenario_toml(n: int, neighbours: int | None = None) -> str:
-    """n agents on a 30 m ring around the target: 1-2 leaders, the rest nearest-selection
-    followers; with `neighbours`, a sensing range under which each senses about that many."""
+def scenario_toml(n: int, neighbours: int | None = None, leaders: int | None = None,
+                  selection: str = "nearest", dt: float = DT, duration: float = 60.0,
+                  sense_range: float | None = None, ticks: int = 1500) -> str:
+    """n agents on a 30 m ring around the target: 1-2 leaders (or `leaders`, evenly
+    spaced), the rest followers with `selection`; with `neighbours`, a sensing range under
+    which each senses about that many others over the first `ticks` ticks (or `sense_range`)."""
     rng = random.Random(n)
-    sr = sensing_range(n, neighbours)
-    n_leaders = 1 if n < 4 else 2
-    leader_slots = {0: 0} if n_leaders == 1 else {0: 0, n // 2: 1}
+    sr = sense_range if sense_range is not None else sensing_range(n, neighbours, ticks)
+    n_leaders = leaders or (1 if n < 4 else 2)
+    leader_slots = {round(k * n / n_leaders): k % 2 for k in range(n_leaders)}
     lines = [f'name = "bench-{n}"',
              f'description = "benchmarks/bench_runtime.py: {n} agents on a ring, {n_leaders} leader(s)"',
-             "", "[run]", f"dt = {DT}", "duration = 60.0", 'clock = "lockstep"', "seed = 1",
+             "", "[run]", f"dt = {dt}", f"duration = {duration}", 'clock = "lockstep"', "seed = 1",
              "", "[target]", "x = 0.0", "y = 0.0",
              "", "[gains]", "c1 = 1.0", "c2 = 0.5",
-             "", "[sensing]", 'selection = "nearest"'] + ([f"range = {sr:.4f}"] if sr else []) + [""]
+             "", "[sensing]", f'selection = "{selection}"'] + ([f"range = {sr:.4f}"] if sr else []) + [""]
     f = 0
     for k in range(n):
         ang = 2 * math.pi * k / n
@@ -395,11 +423,11 @@ def world_started(out: Path) -> bool:
         return False
 
 
-def mean_contacts(out: Path, n: int, neighbours: int | None) -> float:
-    """Mean number of others each live agent sensed per tick over the run (trajectory.npz)."""
+def mean_contacts(out: Path, sr: float | None) -> float:
+    """Mean number of others each live agent sensed per tick over the run (trajectory.npz),
+    with sensing range `sr` (None: unlimited)."""
     import numpy as np
 
-    sr = sensing_range(n, neighbours)
     with np.load(out / "trajectory.npz") as z:
         x, y, alive = z["x"], z["y"], z["alive"]
     total = count = 0
@@ -421,7 +449,7 @@ def run_swarm(n: int, ticks: int, work: Path, env: dict, tag: str, profile: floa
     d = work / f"up-{tag}"
     d.mkdir()
     toml = d / f"bench{n}.toml"
-    toml.write_text(scenario_toml(n, neighbours))
+    toml.write_text(scenario_toml(n, neighbours, ticks=ticks))
     out = d / "out"
     tr = Tracked()
     mem, wmem = MemSampler(), MemSampler()
@@ -529,7 +557,7 @@ def run_swarm(n: int, ticks: int, work: Path, env: dict, tag: str, profile: floa
         startup_cpu=state.get("startup_cpu"),
     )
     try:
-        res["contacts"] = mean_contacts(out, n, neighbours)
+        res["contacts"] = mean_contacts(out, sensing_range(n, neighbours, ticks))
     except (OSError, KeyError, ValueError) as e:
         res["contacts_error"] = str(e)
     if spies:
