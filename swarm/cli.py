@@ -6,6 +6,7 @@ own module and added here with its `register(app)`; failures are one message and
     live_cli     runs, agents, graph, watch     (read a live run)
     control_cli  kill, spawn, pause, resume     (act on a live run)
     access_cli   credentials                    (hand an identity to another machine)
+    host_cli     host                           (agents of a run on this machine, via its router)
     study_cli    study swarms, study gains      (batch studies)
 """
 
@@ -13,7 +14,7 @@ from __future__ import annotations
 
 import typer
 
-from swarm import access_cli, control_cli, live_cli, offline_cli, run_cli
+from swarm import access_cli, control_cli, host_cli, live_cli, offline_cli, run_cli
 from swarm.study_cli import study_app
 
 app = typer.Typer(
@@ -23,7 +24,7 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 
-for group in (run_cli, offline_cli, live_cli, control_cli, access_cli):
+for group in (run_cli, offline_cli, live_cli, control_cli, access_cli, host_cli):
     group.register(app)
 app.add_typer(study_app, name="study")
 

@@ -96,6 +96,13 @@ def test_credentials_readable_by_others_or_foreign_are_refused(rtdir):
     ('{"v": 1, "run": "r", "endpoint": "e"}', "neither a secret nor a user and password"),
     ('{"v": 1, "run": "r", "endpoint": "e", "user": "agent-1", "password": "p", "pid": -1}', "pid:"),
     ('{"v": 1, "run": "r", "endpoint": "e", "user": "agent-1", "password": "p", "open_hub": 1}', "open_hub:"),
+    ('{"v": 1, "run": "r", "endpoint": "e", "user": "host", "password": "p", "host": "a/b", "agents": {"1": "p"}}',
+     "host: host name"),
+    ('{"v": 1, "run": "r", "endpoint": "e", "user": "host", "password": "p", "host": "a", "agents": {"01": "p"}}',
+     "agents: expected"),
+    ('{"v": 1, "run": "r", "endpoint": "e", "user": "host", "password": "p", "host": "a", "agents": []}',
+     "agents: expected"),
+    ('{"v": 1, "run": "r", "endpoint": "e", "user": "host", "password": "p", "host": "a"}', "both host and agents"),
 ])
 def test_malformed_credentials_name_the_file_and_field(tmp_path, text, message):
     path = tmp_path / "bad.cred"
@@ -117,6 +124,42 @@ def test_an_exported_identity_holds_that_identity_only(rtdir):
         exp.identity("operator")
     back = C.parse(json.dumps(doc))
     assert back.identity("agent-3") == own.identity("agent-3")
+
+
+def test_an_agent_hosts_file_holds_the_host_and_its_agents_only(rtdir):
+    own = C.new_credentials("r1", "tls/10.0.0.5:7447", pid=1, tls_ca="PEM", ids=(1, 2, 3, 4), added_ids=(5, 8))
+    h = own.export_host("a", [3, 1, 3])
+    doc = h.to_json()
+    assert "secret" not in doc and "pid" not in doc and doc["user"] == "host" and doc["host"] == "a"
+    assert doc["agents"] == {"1": own.identity("agent-1")[1], "3": own.identity("agent-3")[1]}
+    assert doc["tls_ca"] == "PEM" and doc["ids"] == [1, 2, 3, 4]
+    back = C.parse(json.dumps(doc))
+    assert back == h and back.host_agents() == (1, 3)
+    assert back.identity("host") == own.identity("host") and back.identity("agent-3") == own.identity("agent-3")
+    for user in ("agent-2", "operator", "world"):
+        with pytest.raises(C.CredentialsError, match="are for host 'a' and agents 1, 3 of run r1"):
+            back.identity(user)
+    one = back.export("agent-3")  # what `swarm host` gives agent 3's process: agent 3 only
+    assert one.to_json().keys() == {"v", "run", "endpoint", "user", "password", "tls_ca", "ids", "added_ids"}
+    assert one.identity("agent-3") == own.identity("agent-3") and one.host_agents() is None
+    with pytest.raises(C.CredentialsError, match="agent 9 is not in scenario"):
+        own.export_host("a", [9])
+    with pytest.raises(C.CredentialsError, match="host name"):
+        own.export_host("a b", [1])
+    with pytest.raises(C.CredentialsError, match="at least one agent"):
+        own.export_host("a", [])
+
+
+@pytest.mark.parametrize("text,ids", [("3", (3,)), ("3,4,5", (3, 4, 5)), ("3-5", (3, 4, 5)),
+                                      ("1-3, 7,2", (1, 2, 3, 7))])
+def test_agent_ids_as_written_on_the_command_line(text, ids):
+    assert C.parse_ids(text) == ids
+
+
+@pytest.mark.parametrize("text", ["", "a", "5-3", "-1", "1-", "1,,2"])
+def test_agent_ids_that_are_not(text):
+    with pytest.raises(C.CredentialsError, match="agent ids"):
+        C.parse_ids(text)
 
 
 def test_find_prefers_the_given_file_then_the_environment_then_the_run_file(rtdir, tmp_path, monkeypatch):
@@ -173,6 +216,31 @@ def test_the_operator_reads_and_asks_but_forges_nothing():
 def test_user_dictionary_has_every_identity_once():
     lines = access.user_dictionary("00" * 32, "r1", [1, 2]).splitlines()
     assert [line.split(":")[0] for line in lines] == ["operator", "agent-1", "agent-2"]
+    lines = access.user_dictionary("00" * 32, "r1", [1, 2], host=True).splitlines()
+    assert [line.split(":")[0] for line in lines] == ["operator", "agent-1", "agent-2", "host"]
+
+
+def test_the_host_may_do_what_any_agent_may_and_nothing_else():
+    acl = access.access_control("r1", [1, 2], host=True)
+    by_subject = {}
+    for pol in acl["policies"]:
+        for subject in pol["subjects"]:
+            by_subject.setdefault(subject, set()).update(pol["rules"])
+    agents = by_subject["agent-1"] | by_subject["agent-2"]
+    assert by_subject["host"] == agents  # the union of the agents' rules (egress included)
+    assert not by_subject["host"] & {r["id"] for r in access.operator_rules("r1")}
+
+
+def test_a_host_router_confines_its_agents_and_lets_its_hub_through():
+    acl = access.host_router_access("r1", [3, 4], "abc123")
+    subjects = {s["id"]: s for s in acl["subjects"]}
+    assert set(subjects) == {"agent-3", "agent-4", "hub"} and subjects["hub"] == {"id": "hub", "zids": ["abc123"]}
+    assert acl["default_permission"] == "deny"
+    rules = {r["id"]: r for r in acl["rules"]}
+    up = [p for p in acl["policies"] if p["subjects"] == ["hub"]]
+    assert [p["rules"] for p in up] == [["upstream"]]
+    assert rules["upstream"]["key_exprs"] == ["swarm/r1/**"] and rules["upstream"]["flows"] == ["ingress", "egress"]
+    assert access.host_dictionary([("agent-3", "p3"), ("agent-4", "p4")]) == "agent-3:p3\nagent-4:p4\n"
 
 
 def test_only_built_in_or_trusted_laws(monkeypatch):
@@ -217,13 +285,27 @@ def test_swarm_credentials_exports_one_identity_or_says_why_not(rtdir, tmp_path,
     assert (doc["user"], doc["endpoint"], "secret" in doc) == ("agent-2", "tcp/10.0.0.5:7447", False)
     assert stat.S_IMODE(out.stat().st_mode) == 0o600
     assert _cli("credentials", "--agent", "2", "--endpoint", "tcp/h:1", "-o", out).exit_code == 2  # exists
-    for args, what in [((), "give one of --agent ID or --operator"),
+    for args, what in [((), "give one of --agent ID, --operator or --host NAME --agents IDS"),
                        (("--agent", "1", "--operator"), "give one of"),
+                       (("--host", "a", "--agent", "1"), "give one of"),
+                       (("--host", "a"), "--host NAME goes with --agents IDS"),
+                       (("--agents", "1-2", "--operator"), "--host NAME goes with --agents IDS"),
+                       (("--host", "a", "--agents", "1-99", "--endpoint", "tcp/h:1"), "agent 11 is not in scenario"),
+                       (("--host", "a b", "--agents", "1", "--endpoint", "tcp/h:1"), "host name"),
+                       (("--host", "a", "--agents", "x", "--endpoint", "tcp/h:1"), "agent ids"),
+                       (("--host", "a", "--agents", "1-2"), "from this machine only: give --endpoint"),
                        (("--agent", "99", "--endpoint", "tcp/h:1"), "agent 99 is not in scenario of run r1"),
                        (("--operator", "--run", "a/b"), "run id"),
                        (("--operator", "--run", "r9"), "no credentials for run r9")]:
         res = _cli("credentials", *args)
         assert res.exit_code == 2 and what in res.output and "Traceback" not in res.output, (args, res.output)
+    res = _cli("credentials", "--host", "a", "--agents", "1-2,4", "--endpoint", "tls/10.0.0.5:7447",
+               "-o", tmp_path / "a.cred")
+    assert res.exit_code == 0, res.output
+    assert "host a with agents 1, 2, 4 of run r1" in res.output and "swarm host --credentials a.cred" in res.output
+    doc = json.loads((tmp_path / "a.cred").read_text())
+    assert (doc["user"], doc["host"], sorted(doc["agents"]), "secret" in doc) == ("host", "a", ["1", "2", "4"], False)
+    assert stat.S_IMODE((tmp_path / "a.cred").stat().st_mode) == 0o600
     # $SWARM_CREDENTIALS (an exported file) does not change which file is exported from
     monkeypatch.setenv("SWARM_CREDENTIALS", str(out))
     res = _cli("credentials", "--operator", "--endpoint", "tcp/h:1", "-o", tmp_path / "op.cred")

@@ -15,11 +15,18 @@ here runs per message in Python. Default: deny. Allowed, on the ingress of the h
   resume, fault done, agent exit), put on any agent's `ctl`. It cannot put commands,
   frames, truth, events or control notices, and declares no queryable or token.
 
+- `host` (the router of an agent host, `swarm host`): what any agent of the run may do,
+  the union of every `agent-<k>` rule. zenoh judges a message by the link it came in
+  on, and the agents behind a host router all come in on that router's one link, so the
+  hub cannot confine them one by one: their host router does (`host_router_access`,
+  the same per-agent rules, checked on its own agents' links).
+
 Everything the hub sends to a client (egress) is allowed: a client only receives what
 its allowed declarations and queries asked for.
 
 The rules must name every identity before the hub opens, so an agent added at run time
-takes an id from the range the scenario reserves (`Scenario.added_id_range`).
+takes an id from the range the scenario reserves (`Scenario.added_id_range`), and the
+`host` identity exists in every run, whether or not a host ever connects.
 """
 
 from __future__ import annotations
@@ -27,7 +34,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from swarm.contracts import wire
-from swarm.contracts.credentials import OPERATOR, agent_user, password_for
+from swarm.contracts.credentials import HOST, OPERATOR, agent_user, password_for
 
 ALL_MESSAGES = ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
                 "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"]
@@ -69,8 +76,10 @@ def operator_rules(run: str) -> list[dict]:
     ]
 
 
-def access_control(run: str, agent_ids: Iterable[int]) -> dict:
-    """zenoh's `access_control` section for run `run` whose agents may take `agent_ids`."""
+def access_control(run: str, agent_ids: Iterable[int], host: bool = False, operator: bool = True) -> dict:
+    """zenoh's `access_control` section for run `run` whose agents may take `agent_ids`; with
+    `host`, a `host` identity allowed what any of those agents is (the hub of a run that
+    may have agent hosts); without `operator`, no operator (a host router)."""
     rules, subjects, policies = [], [], []
     ids = list(agent_ids)
     for aid in ids:
@@ -78,14 +87,34 @@ def access_control(run: str, agent_ids: Iterable[int]) -> dict:
         rules += rs
         subjects.append({"id": agent_user(aid), "usernames": [agent_user(aid)]})
         policies.append({"rules": [r["id"] for r in rs], "subjects": [agent_user(aid)]})
-    op = operator_rules(run)
-    rules += op
-    subjects.append({"id": OPERATOR, "usernames": [OPERATOR]})
-    policies.append({"rules": [r["id"] for r in op], "subjects": [OPERATOR]})
+    users = [agent_user(a) for a in ids]
+    if host:
+        subjects.append({"id": HOST, "usernames": [HOST]})
+        policies.append({"rules": [r["id"] for r in rules], "subjects": [HOST]})  # every agent's rules
+        users.append(HOST)
+    if operator:
+        op = operator_rules(run)
+        rules += op
+        subjects.append({"id": OPERATOR, "usernames": [OPERATOR]})
+        policies.append({"rules": [r["id"] for r in op], "subjects": [OPERATOR]})
+        users.insert(0, OPERATOR)
     rules.append(_rule("egress", ALL_MESSAGES, [f"{wire.run_prefix(run)}/**"], flow="egress"))
-    policies.append({"rules": ["egress"], "subjects": [OPERATOR] + [agent_user(a) for a in ids]})
+    policies.append({"rules": ["egress"], "subjects": users})
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
             "policies": policies}
+
+
+def host_router_access(run: str, agent_ids: Iterable[int], hub_zid: str) -> dict:
+    """zenoh's `access_control` section for the router of an agent host (`swarm host`): its
+    own agents (`agent_ids`) confined by the same rules as at the hub, and its upstream link
+    to the run's hub (known by its zenoh id: the hub does not authenticate to the host)
+    let through both ways for anything of the run. Default deny: nothing else gets in."""
+    acl = access_control(run, agent_ids, operator=False)
+    acl["rules"].append({"id": "upstream", "permission": "allow", "flows": ["ingress", "egress"],
+                         "messages": ALL_MESSAGES, "key_exprs": [f"{wire.run_prefix(run)}/**"]})
+    acl["subjects"].append({"id": "hub", "zids": [str(hub_zid)]})
+    acl["policies"].append({"rules": ["upstream"], "subjects": ["hub"]})
+    return acl
 
 
 def size_filters(run: str) -> list[dict]:
@@ -102,7 +131,12 @@ def size_filters(run: str) -> list[dict]:
     ]
 
 
-def user_dictionary(secret: str, run: str, agent_ids: Iterable[int]) -> str:
+def user_dictionary(secret: str, run: str, agent_ids: Iterable[int], host: bool = False) -> str:
     """The hub's `dictionary_file` content: one `user:password` line per identity."""
-    users = [OPERATOR] + [agent_user(a) for a in agent_ids]
+    users = [OPERATOR] + [agent_user(a) for a in agent_ids] + ([HOST] if host else [])
     return "".join(f"{u}:{password_for(secret, run, u)}\n" for u in users)
+
+
+def host_dictionary(passwords: Iterable[tuple[str, str]]) -> str:
+    """A host router's `dictionary_file` content: its own agents' `user:password` lines."""
+    return "".join(f"{u}:{p}\n" for u, p in passwords)

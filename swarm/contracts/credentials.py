@@ -3,12 +3,15 @@ carry them.
 
 Every run has a random secret. Each process that connects has an identity (a zenoh
 username) with a password derived from that secret: `operator` (the launcher and the
-CLI), `agent-<id>` (one per agent) and `world` (the hub itself). The world writes the
+CLI), `agent-<id>` (one per agent), `host` (the router of an agent host: `swarm host`)
+and `world` (the hub itself). The world writes the
 secret and the endpoint to `<runtime dir>/<run>.cred` (mode 0600, in a 0700 directory
 owned by the user). Local processes of that user derive any identity from it. For
 another machine, `swarm credentials` exports a file that holds one identity's
 password only (and the run's TLS certificate authority, if the run uses TLS): an
-agent on that machine can then act as itself and nothing else.
+agent on that machine can then act as itself and nothing else. A file for an agent host
+(`swarm credentials --host NAME --agents 3-5`) holds the `host` identity and the
+identities of the agents it runs, and nothing else.
 
 This module only builds, checks, reads and writes those files; zenoh's configuration
 from them is swarm/contracts/transport.py and swarm/contracts/access.py.
@@ -20,6 +23,7 @@ import hashlib
 import hmac
 import json
 import os
+import re
 import secrets
 import stat
 import tempfile
@@ -33,6 +37,8 @@ ENV_RUNTIME_DIR = "SWARM_RUNTIME_DIR"
 SUFFIX = ".cred"
 OPERATOR = "operator"
 WORLD = "world"
+HOST = "host"  # the router of an agent host (swarm/host.py)
+_HOST_NAME = re.compile(r"^[A-Za-z0-9_.-]{1,32}$")
 
 
 class CredentialsError(Exception):
@@ -41,6 +47,28 @@ class CredentialsError(Exception):
 
 def agent_user(agent_id: int) -> str:
     return f"agent-{int(agent_id)}"
+
+
+def check_host_name(name: str) -> str:
+    """A host's name (a label: file and socket names, logs): 1-32 of A-Z a-z 0-9 _ . -"""
+    if not isinstance(name, str) or not _HOST_NAME.match(name):
+        raise CredentialsError(f"host name {name!r}: expected 1 to 32 of A-Z a-z 0-9 _ . -")
+    return name
+
+
+def parse_ids(text: str) -> tuple[int, ...]:
+    """Agent ids written as `3,4,5`, `3-5` or `1-3,7` (sorted, each once)."""
+    out: set[int] = set()
+    for part in text.replace(" ", "").split(","):
+        lo, sep, hi = part.partition("-")
+        try:
+            a, b = int(lo), int(hi) if sep else int(lo)
+        except ValueError:
+            raise CredentialsError(f"agent ids {text!r}: expected e.g. 3,4,5 or 3-5") from None
+        if a < 0 or b < a or b - a > 100000:
+            raise CredentialsError(f"agent ids {text!r}: {part!r} is not a range of ids")
+        out.update(range(a, b + 1))
+    return tuple(sorted(out))
 
 
 def password_for(secret: str, run: str, user: str) -> str:
@@ -63,6 +91,8 @@ class Credentials:
     hub_is_open: bool = False  # the hub checks nothing (SWARM_OPEN_HUB): connect without an identity
     ids: tuple[int, ...] | None = None  # the scenario's agent ids
     added_ids: tuple[int, int] | None = None  # first and last id an added agent may take
+    host: str | None = None  # an agent host's file: the host's name (`user` is then `host`)
+    agents: tuple[tuple[int, str], ...] | None = None  # ...and its agents' (id, password)
     path: Path | None = field(default=None, compare=False)
 
     def check_agent(self, agent_id: int) -> None:
@@ -82,13 +112,35 @@ class Credentials:
             return user, password_for(self.secret, self.run, user)
         if self.user == user and self.password is not None:
             return user, self.password
+        for aid, password in self.agents or ():
+            if agent_user(aid) == user:
+                return user, password
         where = f" in {self.path}" if self.path else ""
-        raise CredentialsError(f"the credentials{where} are for {self.user!r} of run {self.run}, not {user!r}")
+        held = repr(self.user) if not self.agents else \
+            f"host {self.host!r} and agents {', '.join(str(a) for a, _ in self.agents)}"
+        raise CredentialsError(f"the credentials{where} are for {held} of run {self.run}, not {user!r}")
 
     def export(self, user: str) -> "Credentials":
         """A copy that holds only `user`'s password (for another machine; no pid either)."""
         u, p = self.identity(user)
-        return replace(self, secret=None, user=u, password=p, pid=None, path=None)
+        return replace(self, secret=None, user=u, password=p, pid=None, path=None, host=None, agents=None)
+
+    def export_host(self, name: str, agent_ids) -> "Credentials":
+        """A copy for agent host `name` running `agent_ids`: the `host` identity (the host
+        router's, at the hub) and those agents' identities, nothing else (no secret, no pid)."""
+        ids = tuple(sorted(set(agent_ids)))
+        if not ids:
+            raise CredentialsError("an agent host needs at least one agent id")
+        for aid in ids:
+            self.check_agent(aid)
+        agents = tuple((aid, self.identity(agent_user(aid))[1]) for aid in ids)
+        u, p = self.identity(HOST)
+        return replace(self, secret=None, user=u, password=p, pid=None, path=None, host=check_host_name(name),
+                       agents=agents)
+
+    def host_agents(self) -> tuple[int, ...] | None:
+        """The agent ids an agent host's file holds identities for (None: not such a file)."""
+        return None if self.agents is None else tuple(a for a, _ in self.agents)
 
     def to_json(self) -> dict:
         d = {"v": 1, "run": self.run, "endpoint": self.endpoint}
@@ -101,6 +153,10 @@ class Credentials:
             d["ids"] = list(self.ids)
         if self.added_ids is not None:
             d["added_ids"] = list(self.added_ids)
+        if self.host is not None:
+            d["host"] = self.host
+        if self.agents is not None:
+            d["agents"] = {str(a): p for a, p in self.agents}
         return d
 
 
@@ -154,9 +210,24 @@ def parse(text: str, path: Path | None = None) -> Credentials:
     if added is not None and not (isinstance(added, list) and len(added) == 2
                                   and all(type(i) is int for i in added)):
         raise CredentialsError(f"{where}: added_ids: expected [first, last]")
+    host = text_field("host")
+    if host is not None:
+        try:
+            check_host_name(host)
+        except CredentialsError as e:
+            raise CredentialsError(f"{where}: host: {e}") from None
+    agents = d.get("agents")
+    if agents is not None:
+        if not (isinstance(agents, dict) and agents and all(
+                isinstance(k, str) and k.isascii() and k.isdigit() and k == str(int(k)) and isinstance(v, str) and v
+                for k, v in agents.items())):
+            raise CredentialsError(f"{where}: agents: expected {{\"<id>\": \"<password>\", ...}}")
+        agents = tuple(sorted((int(k), v) for k, v in agents.items()))
+    if (host is None) != (agents is None):
+        raise CredentialsError(f"{where}: an agent host's file has both host and agents")
     return Credentials(run, text_field("endpoint", optional=False), secret, user, password, pid,
                        text_field("tls_ca"), hub_is_open, None if ids is None else tuple(ids),
-                       None if added is None else (added[0], added[1]), path)
+                       None if added is None else (added[0], added[1]), host, agents, path)
 
 
 def read(path: Path) -> Credentials:
