@@ -7,11 +7,13 @@ ground truth. It publishes its status (role, out-neighbour, path to a leader and
 leader phase, counters) on change and a few times per second.
 
 A sensor frame is answered in the zenoh callback that delivers it (decode, decide,
-publish, under one lock), with no hand-over to another thread: that hand-over cost as much
-CPU per tick as all the rest (benchmarks/bare_client.py --handler direct vs callback). An
-exception there (a follower law that raises) is handed to the main thread, which ends the
-process with its traceback. Everything else only enqueues, and the main thread handles it:
-status (on change and a few times per second), queries, control, the world's token. When the world stops
+publish, under one lock), with no hand-over to another thread: that hand-over cost as
+much CPU per tick as all the rest (benchmarks/bare_client.py --handler direct vs
+callback). Frames that queued up while the process was stalled are each answered, in
+order; the world keeps the newest. An exception there (a follower law that raises) is
+handed to the main thread, which ends the process with its traceback. Everything else
+only enqueues, and the main thread handles it: status (on change, at most every 50 ms,
+and a few times per second), queries, control, the world's token. When the world stops
 answering it waits up to --world-grace s for it (agents/world_link.py). Started by
 `swarm up`, it also stops when the launcher dies (swarm/contracts/lifeline.py). Exit codes:
 0 the run ended, 1 crashed (an exception, e.g. in a follower law: the traceback is the last
@@ -40,6 +42,8 @@ from swarm.contracts.lifeline import LAUNCHER_PID_ENV, tie_to_launcher
 from swarm.contracts.transport import CONNECT_TIMEOUT_MS, open_client
 
 STATUS_PERIOD = 0.2  # s of wall time between periodic status messages
+STATUS_MIN_GAP = 0.05  # s: a change is published at once, but not more often than this (the
+# rest wait for the next periodic one): a follower switching every tick sent one per tick
 NONFINITE_NOTE_S = 5.0  # at most one log line per this many s about non-finite law outputs
 WORLD_GRACE = 10.0  # s an agent waits for a world that stopped answering (--world-grace)
 # Started by `swarm up`, an agent waits longer for its connection: hundreds of agents starting
@@ -179,7 +183,8 @@ class AgentNode:
                 if not self.answering:
                     return
                 frame = self.decode_frame(payload)
-                if frame is not None and self.on_sense(frame):
+                if (frame is not None and self.on_sense(frame)
+                        and time.monotonic() - self.status_sent >= STATUS_MIN_GAP):
                     self.inbox.put(("status", None))
         except BaseException as e:  # noqa: BLE001 (re-raised in the main thread)
             self.answering = False

@@ -37,7 +37,7 @@ from world.engine import Engine  # noqa: E402
 
 
 def measure(n: int, neighbours: int | None, ticks: int) -> dict:
-    s = parse_scenario(tomllib.loads(scenario_toml(n, neighbours)))
+    s = parse_scenario(tomllib.loads(scenario_toml(n, neighbours, ticks=ticks + 50)))
     eng = Engine(s, ticks + 100)
     brains = {a.id: AgentBrain(a, s.gains, s.sensing, s.run.dt, n) for a in s.agents}
     world_s = agents_s = 0.0
