@@ -6,9 +6,17 @@ from __future__ import annotations
 import copy
 import json
 import math
+import signal
 from pathlib import Path
 
 import pytest
+
+# Tests Ctrl-C the processes they start (swarm up, watch, graph --watch, study). A shell
+# without job control starts `cmd &` with SIGINT ignored, and an ignored signal stays
+# ignored in every child: run that way, the suite would fail those tests for the shell's
+# sake. The children get the default disposition back from this process.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 # One leader (agents[0], id 1) and two followers in a fixed chain 2 -> 1, 3 -> 2.
 BASE = {
