@@ -362,8 +362,6 @@ def sensing_range(n: int, neighbours: int | None, ticks: int = 1500) -> float | 
         return _RANGES[(n, neighbours, ticks)]
     import tomllib
 
-    import numpy as np
-
     from swarm.batch import run_batch
     from swarm.contracts.scenario import parse_scenario
 
@@ -371,9 +369,7 @@ def sensing_range(n: int, neighbours: int | None, ticks: int = 1500) -> float | 
     for _ in range(8):
         s = parse_scenario(tomllib.loads(scenario_toml(n, sense_range=r)))
         a = run_batch([s], ticks * DT)[0].recorder.arrays()
-        x, y = a["x"][::10], a["y"][::10]
-        d = np.hypot(x[:, :, None] - x[:, None, :], y[:, :, None] - y[:, None, :])
-        sensed = ((d <= r).sum(axis=2) - 1).mean()
+        sensed = mean_sensed(a["x"], a["y"], a["alive"], r)
         if abs(sensed - neighbours) <= 0.1 * neighbours:
             break
         r *= math.sqrt(neighbours / max(sensed, 0.1))
@@ -429,7 +425,14 @@ def mean_contacts(out: Path, sr: float | None) -> float:
     import numpy as np
 
     with np.load(out / "trajectory.npz") as z:
-        x, y, alive = z["x"], z["y"], z["alive"]
+        return mean_sensed(z["x"], z["y"], z["alive"], sr)
+
+
+def mean_sensed(x, y, alive, sr: float | None) -> float:
+    """Mean number of others each live agent senses per tick, over about 200 of the rows of
+    recorded (ticks, N) arrays, with sensing range `sr` (None: unlimited)."""
+    import numpy as np
+
     total = count = 0
     for k in range(0, len(x), max(1, len(x) // 200)):
         a = alive[k].astype(bool)

@@ -73,24 +73,6 @@ def _say(msg: str) -> None:
     print(msg, flush=True)
 
 
-def refuses(endpoint: str) -> bool:
-    """Nothing listens on the world's endpoint any more (a `tls/` one probed as plain tcp)."""
-    if endpoint.startswith("tls/"):
-        endpoint = "tcp/" + endpoint[4:]
-    return endpoint_refuses(endpoint)
-
-
-def _in_use(sock: Path) -> bool:
-    s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    try:
-        s.connect(str(sock))
-        return True
-    except OSError:
-        return False
-    finally:
-        s.close()
-
-
 @dataclass
 class Host:
     cfg: HostConfig
@@ -139,7 +121,7 @@ class Host:
                             "another --name", EXIT_USAGE)
         sock = socket_path(self.local)
         if sock is not None and sock.exists():
-            if _in_use(sock):
+            if not endpoint_refuses(self.local):
                 raise HostError(f"{self.local} is in use", EXIT_USAGE)
             sock.unlink()  # left by a host that was killed
         credentials.write_private(d / "pid", f"{os.getpid()}\n".encode())
@@ -297,7 +279,7 @@ class Host:
                 except wire.WireError:
                     pass
             elif str(value).endswith("DELETE") and not (self.world_gone or self.world_ended) \
-                    and self.router is not None and refuses(self.upstream):
+                    and self.router is not None and endpoint_refuses(self.upstream):
                 self.world_gone = True
                 self._close_router()
                 self.say(f"host {self.name}: the world of run {self.creds.run} is gone ({self.upstream} "

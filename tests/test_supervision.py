@@ -232,9 +232,11 @@ def test_endpoint_refuses(tmp_path):
     s.bind(("127.0.0.1", 0))
     port = s.getsockname()[1]
     assert endpoint_refuses(f"tcp/127.0.0.1:{port}")  # bound, not listening
+    assert endpoint_refuses(f"tls/127.0.0.1:{port}")  # TLS over the same TCP port
     s.listen(1)
     try:
         assert not endpoint_refuses(f"tcp/127.0.0.1:{port}")
+        assert not endpoint_refuses(f"tls/127.0.0.1:{port}")
     finally:
         s.close()
     assert not endpoint_refuses("udp/127.0.0.1:1") and not endpoint_refuses("tcp/nonsense")

@@ -57,16 +57,16 @@ def exit_status(code: int) -> str:
 
 
 def endpoint_refuses(endpoint: str, timeout: float = 0.5) -> bool:
-    """True when a connection to `endpoint` (tcp/HOST:PORT or unixsock-stream/PATH) is
-    refused or its socket file is gone; False when it connects, times out or cannot be
-    parsed (nothing proves the world is gone)."""
+    """True when a connection to `endpoint` (tcp/HOST:PORT, tls/HOST:PORT, probed as the TCP
+    listener under it, or unixsock-stream/PATH) is refused or its socket file is gone;
+    False when it connects, times out or cannot be parsed (nothing proves the world is gone)."""
     kind, _, rest = endpoint.partition("/")
     rest = rest.split("#")[0].split("?")[0]
     try:
         if kind == "unixsock-stream":
             s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
             addr: object = rest
-        elif kind == "tcp":
+        elif kind in ("tcp", "tls"):
             host, _, port = rest.rpartition(":")
             host = host.strip("[]")
             fam = socket.AF_INET6 if ":" in host else socket.AF_INET
