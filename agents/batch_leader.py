@@ -1,6 +1,6 @@
 """Leaders (AgentBrain._leader) for many members at once.
 
-Each leader plans its circle-circle path with agents.leader.plan_cc at its first frame,
+Each leader plans its circle-circle path with agents.cc_plan.plan_cc at its first frame,
 exactly as AgentBrain does (the same call, the same arguments: one plan per leader),
 then every tick commands the path's turn rate averaged over the tick until the path
 ends, and agents.leader.on_orbit_command after. Both are written here over arrays of
@@ -17,7 +17,8 @@ import math
 import numpy as np
 
 from agents import batch_maths as bm
-from agents.leader import K_HEADING, K_RADIAL, _HOLD_DEADBAND, on_orbit_command, plan_cc
+from agents.cc_plan import plan_cc
+from agents.leader import K_HEADING, K_RADIAL, _HOLD_DEADBAND, on_orbit_command
 
 SCALAR_MAX = 8  # leaders on their orbits: up to this many, one on_orbit_command call each
 

@@ -52,7 +52,7 @@ class AgentBrain:
         self.dt = dt
         self.is_leader = spec.role == "leader"
         self.law = None if self.is_leader else make_follower_law(gains.law, gains.c1, gains.c2)
-        self.cc_path = None  # agents.leader.CCPath once planned
+        self.cc_path = None  # agents.cc_plan.CCPath once planned
         self.path_tick = 0
         self.out: int | None = None
         self.last_u = 0.0
@@ -72,7 +72,8 @@ class AgentBrain:
         px, py = -frame.target[0], -frame.target[1]  # own position relative to the target
         sign = s.direction_sign
         # Imported here: only leaders need the planner (pure Python, no numpy: leaders stay as light as followers).
-        from agents.leader import on_orbit_command, plan_cc
+        from agents.cc_plan import plan_cc
+        from agents.leader import on_orbit_command
 
         if self.cc_path is None:
             self.cc_path = plan_cc(px, py, frame.heading, s.speed, s.orbit_radius, sign, s.max_turn_rate)

@@ -47,12 +47,13 @@ def credentials(
     from dataclasses import replace
 
     from swarm.contracts import credentials as C
+    from swarm.contracts.identities import OPERATOR, CredentialsError, agent_user
 
     if sum((agent is not None, operator, host is not None)) != 1:
         raise fail("give one of --agent ID, --operator or --host NAME --agents IDS", EXIT_USAGE)
     if (host is None) != (agents is None):
         raise fail("--host NAME goes with --agents IDS (the agents that host runs, e.g. 3-5)", EXIT_USAGE)
-    user = C.OPERATOR if operator else C.agent_user(agent) if agent is not None else f"host-{host}"
+    user = OPERATOR if operator else agent_user(agent) if agent is not None else f"host-{host}"
     try:
         own = C.find_local(run)  # the run's own file ($SWARM_CREDENTIALS is for connecting, not this)
         if host is not None:
@@ -61,7 +62,7 @@ def credentials(
             if agent is not None:
                 own.check_agent(agent)
             exported = own.export(user)
-    except C.CredentialsError as e:
+    except CredentialsError as e:
         raise fail(str(e), EXIT_USAGE) from None
     if endpoint is None and _local_only(own.endpoint):
         raise fail(f"run {own.run} is reached at {own.endpoint} from this machine only: give --endpoint, the "

@@ -15,7 +15,8 @@ import math
 import time
 from typing import Sequence
 
-from swarm.study import GainJob, SwarmSetting, cut_off_at_start, gain_row, pair_scenario, random_swarm, swarm_row
+from swarm.study import SwarmSetting, cut_off_at_start, random_swarm, swarm_row
+from swarm.study_gains import GainJob, gain_row, pair_scenario
 
 MAX_MEMBERS = 64  # runs per batch, at most: beyond this the per-tick overhead is already paid
 CHUNKS_PER_WORKER = 4  # at least this many chunks per worker when there are enough runs

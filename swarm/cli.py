@@ -1,7 +1,8 @@
 """The `swarm` command line: the root typer app, made of small command groups, each in its
 own module and added here with its `register(app)`; failures are one message and an exit code.
 
-    run_cli      up, sim, world, agent          (run a scenario)
+    up_cli       up                             (run a scenario as processes)
+    run_cli      sim, world, agent              (run a scenario, or a part of one)
     offline_cli  check, schema, plot            (no running swarm needed)
     live_cli     runs, agents, graph, watch     (read a live run)
     control_cli  kill, spawn, pause, resume     (act on a live run)
@@ -14,7 +15,7 @@ from __future__ import annotations
 
 import typer
 
-from swarm import access_cli, control_cli, host_cli, live_cli, offline_cli, run_cli
+from swarm import access_cli, control_cli, host_cli, live_cli, offline_cli, run_cli, up_cli
 from swarm.study_cli import study_app
 
 app = typer.Typer(
@@ -24,7 +25,7 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 
-for group in (run_cli, offline_cli, live_cli, control_cli, access_cli, host_cli):
+for group in (up_cli, run_cli, offline_cli, live_cli, control_cli, access_cli, host_cli):
     group.register(app)
 app.add_typer(study_app, name="study")
 

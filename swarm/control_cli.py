@@ -18,7 +18,8 @@ from typing import Annotated, Optional
 
 import typer
 
-from swarm.contracts.credentials import ENV_CREDENTIALS, CredentialsError, agent_user
+from swarm.contracts.credentials import ENV_CREDENTIALS
+from swarm.contracts.identities import CredentialsError, agent_user
 from swarm.contracts.laws import ENV_TRUSTED_LAWS, with_trusted_laws
 from swarm.live_cli import EXIT_USAGE, ConnectOpt, CredentialsOpt, RunOpt, TrustLawOpt, attached, fail
 from swarm.procs import wait_until
@@ -154,7 +155,8 @@ def spawn(
     """
     from pydantic import ValidationError
 
-    from swarm.contracts.scenario import AgentSpec, format_validation_error
+    from swarm.contracts.scenario import format_validation_error
+    from swarm.contracts.scenario_tables import AgentSpec
     from swarm.contracts.transport import runtime_dir
 
     given = {k: v for k, v in dict(x=x, y=y, heading=heading, speed=speed, role=role, orbit_radius=orbit_radius,

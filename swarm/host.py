@@ -11,9 +11,8 @@ router's link, not the agents behind it, so `host` may do what any agent may) an
 host router's own rules (its agents confined as at the hub; its upstream link, the hub
 known by its zenoh id, let through).
 
-In order: find the credentials (from `swarm credentials --host`, or the local run's own),
-learn the hub's zenoh id (a short client session), open the router on a private Unix
-socket, wait until the world's token is seen through it, give each agent a file with its
+In order: set up (swarm/host_setup.py: the credentials, the hub's zenoh id, the router
+on a private Unix socket, linked to the world), give each agent a file with its
 own identity only and start them (one process group; they die with the host, even if it
 is killed), then supervise: one line per exit; a world gone (no end notice, its token
 vanished, its endpoint refusing) closes the router, so the agents' endpoint refuses too
@@ -27,7 +26,6 @@ import os
 import queue
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -35,24 +33,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from swarm.contracts import access, credentials, wire
-from swarm.contracts.credentials import HOST, CredentialsError, agent_user
+from swarm.contracts import credentials, wire
+from swarm.contracts.identities import agent_user
 from swarm.contracts.laws import ENV_TRUSTED_LAWS, with_trusted_laws
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV, endpoint_refuses, exit_status
-from swarm.contracts.transport import client_tls, host_router_config, open_client, socket_path
-from swarm.procs import Group, wait_until
+from swarm.host_setup import EXIT_FAILED, HostError, HostSetup
+from swarm.procs import Group
 from swarm.supervision import AgentExitReport, agent_exit
 
-EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_AGENT_FAILED = 0, 1, 2, 4
+EXIT_OK, EXIT_AGENT_FAILED = 0, 4  # and EXIT_FAILED = 1, EXIT_USAGE = 2 (swarm/host_setup.py)
 WORLD_GONE_CODES = (4, 5)  # agent exits: the world vanished, or stopped answering past the grace
-
-
-class HostError(Exception):
-    """The host cannot start; one line, and the exit code."""
-
-    def __init__(self, message: str, code: int = EXIT_FAILED):
-        super().__init__(message)
-        self.code = code
 
 
 @dataclass
@@ -74,7 +64,7 @@ def _say(msg: str) -> None:
 
 
 @dataclass
-class Host:
+class Host(HostSetup):
     cfg: HostConfig
     say: Callable[[str], None] = _say
     creds: credentials.Credentials | None = None
@@ -94,113 +84,7 @@ class Host:
     world_ended: bool = False  # the world's end notice came (only the world may send one)
     events: queue.SimpleQueue = field(default_factory=queue.SimpleQueue)
 
-    # -- setting up ------------------------------------------------------------------------------
-    def prepare(self) -> None:
-        """Credentials, agent ids, name, endpoints, directories; HostError says what is wrong."""
-        c = self.cfg
-        try:
-            creds = credentials.find(c.run, c.connect, c.creds_file)
-            ids = c.agents or creds.host_agents() or creds.ids
-            if not ids:
-                raise CredentialsError("no agents to run: give --agents (e.g. 3,4,5 or 3-5)")
-            for aid in ids:
-                creds.check_agent(aid)
-                creds.identity(agent_user(aid))
-            if not creds.hub_is_open:
-                creds.identity(HOST)
-            self.name = credentials.check_host_name(c.name or creds.host or _host_name())
-            d = credentials.private_dir(credentials.runtime_dir() / f"{creds.run}-host-{self.name}")
-        except CredentialsError as e:
-            raise HostError(str(e), EXIT_USAGE) from None
-        self.creds, self.ids = creds, tuple(ids)
-        self.upstream = c.connect or creds.endpoint
-        self.local = c.listen or f"unixsock-stream/{d / 'router.sock'}"
-        other = _pid_in(d / "pid")
-        if other is not None and other != os.getpid() and credentials.pid_alive(other):
-            raise HostError(f"host {self.name} of run {creds.run} is already running here (pid {other}); give "
-                            "another --name", EXIT_USAGE)
-        sock = socket_path(self.local)
-        if sock is not None and sock.exists():
-            if not endpoint_refuses(self.local):
-                raise HostError(f"{self.local} is in use", EXIT_USAGE)
-            sock.unlink()  # left by a host that was killed
-        credentials.write_private(d / "pid", f"{os.getpid()}\n".encode())
-        self.dir = d  # ours from here on (removed at the end)
-        self.logs = c.logs or Path("runs") / f"{creds.run}-host-{self.name}"
-        try:
-            self.logs.mkdir(parents=True, exist_ok=True)
-        except OSError as e:
-            raise HostError(f"cannot create the log directory {self.logs}: {e.strerror or e}", EXIT_USAGE) from None
-
-    def probe_hub(self) -> str:
-        """The hub's zenoh id, from a short client session as `host` (retried for cfg.wait s
-        until the world answers); the host router lets its upstream link in by that id."""
-        creds, run = self.creds, self.creds.run
-        found: list[str] = []
-        last = ["no answer"]
-
-        def attempt() -> bool:
-            if self.stop_signal is not None:
-                return True
-            try:
-                ses = open_client(self.upstream, timeout_ms=1000, creds=creds, user=HOST)
-            except Exception as e:  # not up yet, or refused
-                last[0] = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-                return False
-            try:
-                zids = [str(z) for z in ses.info.routers_zid()]
-                world = any(r.ok is not None for r in ses.liveliness().get(wire.world_alive_key(run), timeout=1.0))
-                if zids and world:
-                    found.append(zids[0])
-                    return True
-                last[0] = f"no world of run {run} there"
-                return False
-            finally:
-                ses.close()
-
-        wait_until(attempt, self.cfg.wait, 0.2)
-        if self.stop_signal is not None:
-            raise HostError("stopped", 128 + self.stop_signal)
-        if not found:
-            raise HostError(f"cannot reach the world of run {run} at {self.upstream} as {HOST!r} within "
-                            f"{self.cfg.wait:g} s ({last[0]}; no world there, or it refused these credentials)")
-        return found[0]
-
-    def open_router(self) -> None:
-        import zenoh
-
-        creds, run = self.creds, self.creds.run
-        tls = client_tls(creds) if self.upstream.startswith("tls/") else None
-        if creds.hub_is_open:  # the hub checks nothing: nor does its host
-            cfg = host_router_config(self.local, self.upstream, run, tls=tls)
-            self.router = _open(zenoh, cfg, self.local)
-        else:
-            users = self.dir / "users"  # read once by zenoh at open, then removed
-            credentials.write_private(users, access.host_dictionary(
-                creds.identity(agent_user(a)) for a in self.ids).encode())
-            try:
-                cfg = host_router_config(self.local, self.upstream, run, creds.identity(HOST), users,
-                                         access.host_router_access(run, self.ids, self.hub_zid), tls)
-                self.router = _open(zenoh, cfg, self.local)
-            finally:
-                users.unlink(missing_ok=True)
-        put = self.events.put
-        self.router.liveliness().declare_subscriber(wire.world_alive_key(run), lambda s: put(("alive", s.kind)),
-                                                    history=True)
-        self.router.declare_subscriber(wire.world_control_key(run), lambda s: put(("control", s.payload.to_bytes())))
-
-        def linked() -> bool:
-            if self.stop_signal is not None:
-                return True
-            return any(r.ok is not None for r in
-                       self.router.liveliness().get(wire.world_alive_key(run), timeout=0.5))
-
-        if not wait_until(linked, self.cfg.wait, 0.1):
-            raise HostError(f"the host router reached no world of run {run} at {self.upstream} within "
-                            f"{self.cfg.wait:g} s (did the world restart meanwhile?)")
-        if self.stop_signal is not None:
-            raise HostError("stopped", 128 + self.stop_signal)
-
+    # -- the agents (after HostSetup: credentials, router) ----------------------------------------
     def agent_file(self, aid: int) -> Path:
         """Agent `aid`'s own identity (nothing else), for dialling this host's router."""
         from dataclasses import replace
@@ -320,28 +204,6 @@ class Host:
 
     def _on_signal(self, signum, _frame) -> None:
         self.stop_signal = signum
-
-
-def _pid_in(path: Path) -> int | None:
-    try:
-        return int(path.read_text().strip())
-    except (OSError, ValueError):
-        return None
-
-
-def _host_name() -> str:
-    """This machine's host name as a host name of ours (first label, other characters as -)."""
-    import re
-
-    name = re.sub(r"[^A-Za-z0-9_.-]", "-", socket.gethostname().split(".")[0])[:32]
-    return name or "host"
-
-
-def _open(zenoh, cfg, local: str):
-    try:
-        return zenoh.open(cfg)
-    except Exception as e:
-        raise HostError(f"cannot open the host router on {local}: {str(e).strip().splitlines()[0]}") from None
 
 
 def run_host(cfg: HostConfig, say: Callable[[str], None] = _say) -> int:

@@ -46,7 +46,8 @@ def host(
     Example: swarm host --credentials host-a.cred (a file written on the world's machine by
     `swarm credentials --host a --agents 3-5 --endpoint tls/10.0.0.5:7447 -o host-a.cred`)
     """
-    from swarm.contracts.credentials import CredentialsError, parse_ids
+    from swarm.contracts.credentials import parse_ids
+    from swarm.contracts.identities import CredentialsError
     from swarm.host import HostConfig, run_host
 
     try:

@@ -16,7 +16,6 @@ launcher's pid (swarm/contracts/lifeline.py) and stop by themselves if it dies.
 
 from __future__ import annotations
 
-import math
 import os
 import signal
 import subprocess
@@ -30,11 +29,11 @@ from typing import Callable
 from swarm.contracts import credentials, wire
 from swarm.contracts.laws import ENV_TRUSTED_LAWS, with_trusted_laws
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV
-from swarm.contracts.orbits import expected_radius, root_of
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.transport import default_endpoint, dial_endpoint, open_client
 from swarm.procs import Group, wait_until
 from swarm.supervision import AgentExitReport, agent_exit, send_report, world_failure
+from swarm.up_progress import truth_progress
 
 EXIT_WORLD_FAILED = 1
 
@@ -169,33 +168,8 @@ class Launcher:
             self.started = True
 
     def progress(self) -> dict | None:
-        """Figures for the progress line from the latest ground truth."""
-        buf = self.latest_truth
-        if buf is None:
-            return None
-        try:
-            tick, t, recs = wire.decode_truth(buf)
-        except wire.WireError:
-            return None
-        s = self.cfg.scenario
-        known = set(s.ids)  # agents added at run time (swarm spawn) have no spec here: skipped
-        recs = [r for r in recs if int(r["id"]) in known]
-        leaders = {a.id for a in s.agents if a.role == "leader"}
-        alive = {int(r["id"]) for r in recs if r["state"] == 0}
-        out = {int(r["id"]): (int(r["out"]) if r["out"] >= 0 else None) for r in recs}
-        errs = {}
-        for r in recs:
-            aid = int(r["id"])
-            if aid not in alive:
-                continue
-            root, _ = root_of(aid, out, leaders & alive)
-            if root is None:
-                errs[aid] = None
-                continue
-            L, me = s.agent(root), s.agent(aid)
-            R = expected_radius(me.speed, L.speed, L.orbit_radius)
-            errs[aid] = abs(math.hypot(r["x"] - s.target.x, r["y"] - s.target.y) - R) / R
-        return {"tick": tick, "time": t, "errors": errs, "dropped": sorted(set(out) - alive)}
+        """Figures for the progress line from the latest ground truth (swarm/up_progress.py)."""
+        return truth_progress(self.latest_truth, self.cfg.scenario)
 
     # -- the run -------------------------------------------------------------------------------
     def run(self, show: Callable[[dict | None, float], None]) -> int:

@@ -16,8 +16,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from swarm.contracts import credentials, wire
-from swarm.contracts.credentials import Credentials, CredentialsError
-from swarm.contracts.transport import QUERY_TIMEOUT, open_client, query_statuses, runtime_dir, socket_path
+from swarm.contracts.credentials import Credentials
+from swarm.contracts.identities import OPERATOR, CredentialsError
+from swarm.contracts.transport import QUERY_TIMEOUT, dial_endpoint, open_client, query_statuses, runtime_dir, socket_path
 
 
 class NoRun(Exception):
@@ -64,9 +65,9 @@ def candidates(connect: str | None = None, creds_file: Path | None = None) -> li
     or the local runs (on `connect` only, if given)."""
     given = credentials.read(creds_file) if creds_file is not None else credentials.from_environment()
     if given is not None:
-        given.identity(credentials.OPERATOR)  # a file of one agent's cannot run the live commands
+        given.identity(OPERATOR)  # a file of one agent's cannot run the live commands
         return [RunRef(given.run, connect or given.endpoint, given)]
-    dial = None if connect is None else credentials.dial_endpoint(connect)
+    dial = None if connect is None else dial_endpoint(connect)
     return [RunRef(c.run, c.endpoint, c) for c in credentials.local_runs() if dial is None or c.endpoint == dial]
 
 

@@ -57,7 +57,7 @@ def _one_line(e: BaseException | str) -> str:
 def attached(connect: str | None, run: str | None, creds: Path | None = None) -> Iterator:
     """A LiveRun on the run picked by --connect/--run; any failure to reach it (or its world
     ending mid-command) becomes one line on stderr and exit 1."""
-    from swarm.contracts.credentials import CredentialsError
+    from swarm.contracts.identities import CredentialsError
     from swarm.contracts.wire import WireError
     from swarm.live import LiveRun, NoRun, resolve
 

@@ -1,9 +1,8 @@
-"""Commands that run a scenario (`swarm sim / world / up / agent`): the options they share
-are declared once, below, as `Annotated` types."""
+"""Commands that run a scenario (`swarm sim / world / agent`, and `swarm up` in
+swarm/up_cli.py): the options they share are declared once, below, as `Annotated` types."""
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from pathlib import Path
@@ -11,20 +10,18 @@ from typing import Annotated, Optional
 
 import typer
 
-from swarm.offline_cli import ScenarioArg, export_results, fail, read_scenario, render_run_plots
+from swarm.offline_cli import ScenarioArg, fail, read_scenario, render_run_plots
 from swarm.live_cli import CredentialsOpt, TrustLawOpt
 
 
-def _out_option(help: str):
+def out_option(help: str):
     return Annotated[Optional[Path], typer.Option("--out", "-o", help=help)]
 
 
-SimOutOpt = _out_option("output directory (default runs/<scenario>-sim-<time>-<random>); one that "
-                        "already holds results is refused unless --force")
-UpOutOpt = _out_option("output directory (default runs/<run id>); one that already holds results is "
-                       "refused unless --force")
-WorldOutOpt = _out_option("where to write the results (default: nowhere); one that already holds "
-                          "results is refused unless --force")
+SimOutOpt = out_option("output directory (default runs/<scenario>-sim-<time>-<random>); one that "
+                       "already holds results is refused unless --force")
+WorldOutOpt = out_option("where to write the results (default: nowhere); one that already holds "
+                         "results is refused unless --force")
 ForceOpt = Annotated[bool, typer.Option("--force", help="replace the results already in --out")]
 DurationOpt = Annotated[Optional[float], typer.Option(help="simulated seconds (default: the "
                                                       "scenario's run.duration)", min=0.0)]
@@ -41,7 +38,7 @@ def default_out(scenario_path: Path, kind: str) -> Path:
     return Path("runs") / f"{scenario_path.stem}-{kind}-{time.strftime('%Y%m%d-%H%M%S')}-{secrets.token_hex(3)}"
 
 
-def _claim_out(out: Path, force: bool) -> None:
+def claim_out(out: Path, force: bool) -> None:
     from swarm.results import OutDirError, claim_out_dir
 
     try:
@@ -50,7 +47,7 @@ def _claim_out(out: Path, force: bool) -> None:
         raise fail(str(e), 2) from None
 
 
-def _check_duration(s, duration: float | None, path: Path) -> None:
+def check_duration(s, duration: float | None, path: Path) -> None:
     """--duration goes through the scenario's own checks (finite, at least one step, a
     recording that fits in memory): one line naming the option, exit 2."""
     if duration is None:
@@ -64,26 +61,10 @@ def _check_duration(s, duration: float | None, path: Path) -> None:
         raise fail(" ".join(line.strip() for line in str(e).splitlines())) from None
 
 
-PROGRESS_AGENTS = 12  # more agents than this: the progress line sums them up
-
-
-def progress_errors(p: dict) -> str:
-    """The progress line's radial errors: one per agent for a small swarm; for a large one
-    the median, the worst and how many have no leader to follow ("-" per agent)."""
-    errs, dropped = p["errors"], p["dropped"]
-    if len(errs) + len(dropped) <= PROGRESS_AGENTS:
-        text = " ".join(f"{i}:{'-' if e is None else f'{100 * e:.1f}%'}" for i, e in sorted(errs.items()))
-        return f"radial error {text}" + (f"  dropped {dropped}" if dropped else "")
-    rooted = sorted((e, i) for i, e in errs.items() if e is not None)
-    text = (f"radial error median {100 * rooted[len(rooted) // 2][0]:.1f}%, worst {100 * rooted[-1][0]:.1f}% "
-            f"(agent {rooted[-1][1]})" if rooted else "radial error -")
-    return (f"{text}; {len(errs) - len(rooted)} of {len(errs)} live agents without a leader"
-            + (f"; {len(dropped)} dropped" if dropped else ""))
-
-
-def _check_runtime_dir() -> None:
+def check_runtime_dir() -> None:
     """The runtime dir (sockets, credentials) must be the user's own: one line, exit 2."""
-    from swarm.contracts.credentials import CredentialsError, runtime_dir
+    from swarm.contracts.identities import CredentialsError
+    from swarm.contracts.runtime_dir import runtime_dir
 
     try:
         runtime_dir()
@@ -91,12 +72,12 @@ def _check_runtime_dir() -> None:
         raise fail(f"swarm: {e}") from None
 
 
-def _check_clock(clock: str | None) -> None:
+def check_clock(clock: str | None) -> None:
     if clock is not None and clock not in ("lockstep", "realtime"):
         raise fail(f"--clock must be lockstep or realtime, not {clock!r}")
 
 
-def _new_run_id(scenario_path: Path) -> str:
+def new_run_id(scenario_path: Path) -> str:
     import re
     import secrets
 
@@ -111,7 +92,7 @@ def _progress_bar(label: str):
                     TimeRemainingColumn(), transient=True, disable=not sys.stderr.isatty())
 
 
-def _print_summary(summary: dict, out: Path) -> None:
+def print_summary(summary: dict, out: Path) -> None:
     typer.echo(f"converged: {summary['converged']}  ticks: {summary['ticks']}  "
                f"sim time: {summary['sim_time']:.2f} s  selection: {summary.get('selection', '-')}  "
                f"switches: {summary.get('switches', '-')}")
@@ -150,7 +131,7 @@ def sim(
     from world.recording import EXIT_NO_SPACE, RECORDING_FILE, RecordingError, write_run
 
     s = read_scenario(scenario)
-    _check_duration(s, duration, scenario)
+    check_duration(s, duration, scenario)
     if batch:
         from swarm.batch import refusal, run_batch
 
@@ -163,7 +144,7 @@ def sim(
 
         engine = lambda *a: run_sim(s, *a)  # noqa: E731
     out = out or default_out(scenario, "sim")
-    _claim_out(out, force)
+    claim_out(out, force)
     total = int(round((duration or s.run.duration) / s.run.dt))
     t0 = time.perf_counter()
     try:
@@ -176,7 +157,7 @@ def sim(
         summary = write_run(result, out)
     except RecordingError as e:
         raise fail(f"swarm sim: {e}", EXIT_NO_SPACE) from None
-    _print_summary(summary, out)
+    print_summary(summary, out)
     typer.echo(f"speed: {total * s.run.dt / wall:.1f} simulated s per wall s ({total / wall:.0f} ticks/s)")
     if plots:
         render_run_plots(out)
@@ -205,128 +186,27 @@ def world(
     """
     from swarm.contracts.transport import default_endpoint
     from swarm.contracts.wire import WireError, check_run_id
-    from world.process import WorldConfig, run_world
+    from world.main import run_world
+    from world.process import WorldConfig
 
     s = read_scenario(scenario)
-    _check_duration(s, duration, scenario)
-    _check_runtime_dir()
-    run = run or _new_run_id(scenario)
+    check_duration(s, duration, scenario)
+    check_runtime_dir()
+    run = run or new_run_id(scenario)
     try:
         check_run_id(run)
     except WireError as e:
         raise fail(str(e)) from None
     clock = clock or s.run.clock
-    _check_clock(clock)
+    check_clock(clock)
     listen = listen or default_endpoint(run)
     if out is not None:
-        _claim_out(out, force)
+        claim_out(out, force)
     typer.echo(f"run {run} on {listen}; " + (f"results in {out}" if out else "no results kept (no --out)"), err=True)
     code = run_world(WorldConfig(s, run, listen, out, clock, time_scale, duration, join_timeout))
     if plots and out is not None and code in (0, 130, 143) and (out / "trajectory.npz").exists():
         render_run_plots(out)
     raise typer.Exit(code)
-
-
-def up(
-    scenario: ScenarioArg,
-    out: UpOutOpt = None,
-    duration: DurationOpt = None,
-    clock: ClockOpt = None,
-    time_scale: TimeScaleOpt = 1.0,
-    listen: Annotated[Optional[str], typer.Option(help="endpoint of the run (default: a Unix socket in "
-                                                  "$SWARM_RUNTIME_DIR or /tmp/swarm-<uid>)")] = None,
-    plots: EndPlotsOpt = True,
-    force: ForceOpt = False,
-    world_grace: Annotated[float, typer.Option(help="s the agents wait for a world that stopped answering "
-                                               "(a stalled, not a vanished, world)", min=0.0)] = 10.0,
-) -> None:
-    """Run a scenario as a distributed system: a world process and one OS process per agent.
-
-    Prints the endpoint and run id (so another terminal can attach), live progress, and a
-    summary; writes summary.json, trajectory.npz, plots and logs/ into --out. Ctrl-C stops
-    cleanly: results written, no process left behind, exit 130 (143 for SIGTERM).
-
-    Example: swarm up scenarios/case2.toml --out runs/case2
-    """
-    from swarm.launcher import Launcher, UpConfig
-
-    s = read_scenario(scenario)
-    _check_clock(clock)
-    _check_duration(s, duration, scenario)
-    _check_runtime_dir()
-    run_id = _new_run_id(scenario)
-    out = out or Path("runs") / run_id
-    _claim_out(out, force)
-    launcher = Launcher(UpConfig(scenario, s, out, run_id, listen, duration, clock, time_scale,
-                                 world_grace=world_grace))
-    typer.echo(f"run {run_id}  endpoint {launcher.endpoint}  agents {len(s.agents)}  "
-               f"clock {clock or s.run.clock}")
-    typer.echo(f"attach from another terminal: swarm agent --id N --connect {launcher.dial} --run {run_id}"
-               + ("" if launcher.dial.startswith("unixsock") else
-                  "; from another machine: swarm credentials --agent N (README, \"Agents on other machines\")"))
-    total = int(round((duration or s.run.duration) / s.run.dt))
-    tty = sys.stdout.isatty()
-    state = {"last": 0.0, "tick": 0, "wall": 0.0}
-
-    def show(p, wall):
-        if p is None or (p["tick"] == state["tick"] and state["wall"] > 0):
-            return
-        now = time.monotonic()
-        if not tty and now - state["last"] < 1.0 and p["tick"] < total - 1:
-            return
-        rate = (p["tick"] - state["tick"]) / max(wall - state["wall"], 1e-9)
-        state.update(last=now, tick=p["tick"], wall=wall)
-        line = f"t={p['time']:7.2f}s tick {p['tick']}/{total} {rate:6.0f} ticks/s  " + progress_errors(p)
-        if tty:
-            typer.echo("\r\033[K" + line[:200], nl=False)
-        else:
-            typer.echo(line)
-
-    code = launcher.run(show)
-    if tty:
-        typer.echo("")
-    code = _up_outcome(launcher, code, out)
-    try:  # a world that died before writing its results: rebuild them from its recording
-        export_results(out)
-    except typer.Exit:
-        pass  # said why in one line; the exit code stays the run's
-    summary_path = out / "summary.json"
-    if summary_path.exists():
-        summary = json.loads(summary_path.read_text())
-        _print_summary(summary, out)
-        if plots:
-            render_run_plots(out)
-    for r in launcher.exits if launcher.failure is None else []:
-        typer.echo(f"  {r.line()}" + ("" if r.sent else "  (not in summary.json: the world did not hear of it)"))
-    raise typer.Exit(code)
-
-
-EXIT_AGENT_FAILED = 4  # swarm up's exit codes: README, "What `swarm up` watches" (5: the world's own)
-
-
-def _up_outcome(launcher, code: int, out: Path) -> int:
-    """Say how the run ended (one line) and return `swarm up`'s exit code."""
-    from world.clock import EXIT_DESERTED
-    err = dict(err=True, fg=typer.colors.RED)
-    if launcher.stop_signal is not None:
-        typer.echo(f"stopped by signal {launcher.stop_signal}; partial results in {out}")
-        return 128 + launcher.stop_signal
-    if launcher.failure is not None:  # an agent could not start (said live), or no world to reach
-        typer.secho(f"swarm up: {launcher.failure}; the run is stopped", **err)
-        return EXIT_AGENT_FAILED if launcher.exits else 1
-    if code not in (0, EXIT_DESERTED):
-        from world.recording import EXIT_NO_SPACE
-
-        typer.secho(f"swarm up: {launcher.world_failure()} (see {out / 'logs' / 'world.log'})", **err)
-        return EXIT_NO_SPACE if code == EXIT_NO_SPACE else 1
-    crashed = launcher.crashed()
-    if crashed:
-        typer.secho(f"swarm up: {len(crashed)} agent process(es) failed: {crashed[0].line()}", **err)
-        return EXIT_AGENT_FAILED
-    if code == EXIT_DESERTED:
-        typer.secho("swarm up: the run ended early: no agent process was left", **err)
-        return EXIT_DESERTED
-    return 0
 
 
 def agent(
@@ -359,8 +239,7 @@ def agent(
 
 
 def register(app: typer.Typer) -> None:
-    """Add the run commands to the main app."""
-    app.command("up")(up)
+    """Add the run commands to the main app (`swarm up`: swarm/up_cli.py)."""
     app.command("sim")(sim)
     app.command("world")(world)
     app.command("agent")(agent)

@@ -5,37 +5,29 @@ job through the batch engine (swarm/batch_study.py), or one run per job through
 
 Two studies:
 
-- **swarms**: random swarms drawn from a few options (agents, leaders, area, speeds,
-  sensing range and field of view, selection rule, gains), one run per (setting, seed).
-  A swarm depends only on (seed, n, leaders, area, speeds, omega), so every selection
-  rule and sensing range of one study meets the same swarms.
-- **gains**: one follower behind a leader that is already on its orbit (omega = 1 rad/s,
-  R_L = v_L), for a grid of (C1, C2) and follower/out-neighbour speed ratios, a few random
-  starts each: where does the law settle, and how fast?
+- **swarms** (here): random swarms drawn from a few options (agents, leaders, area,
+  speeds, sensing range and field of view, selection rule, gains), one run per (setting,
+  seed). A swarm depends only on (seed, n, leaders, area, speeds, omega), so every
+  selection rule and sensing range of one study meets the same swarms.
+- **gains** (swarm/study_gains.py): one follower behind a leader that is already on its
+  orbit, for a grid of (C1, C2) and speed ratios: where does the law settle, and how fast?
 
 Generation, the workers and the summaries are pure functions of their arguments;
-`run_rows` runs jobs on a process pool, `CsvSink` and `write_csv` write the tables.
+swarm/study_pool.py runs jobs on a process pool and writes the tables.
 """
 
 from __future__ import annotations
 
-import csv
-import itertools
 import math
-import multiprocessing
-import signal
 import statistics
 import time
 from dataclasses import asdict, dataclass, fields
-from pathlib import Path
-from typing import Callable, Iterable
+from typing import Iterable
 
 import numpy as np
 
 from swarm.contracts.scenario import Scenario, parse_scenario
-from world.metrics import SETTLING_BAND, settling_time, switch_ticks
-
-# -- swarms ------------------------------------------------------------------------------
+from world.metrics import switch_ticks
 
 
 @dataclass(frozen=True)
@@ -193,131 +185,3 @@ def summarise_swarms(rows: list[dict]) -> list[dict]:
 
 def is_true(v) -> bool:
     return v is True or str(v) == "True"
-
-
-# -- gains ---------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class GainJob:
-    c1: float
-    c2: float
-    ratio: float  # follower speed / leader speed
-    start: int  # which random start (seeded)
-    duration: float = 300.0
-    dt: float = 0.05
-
-
-def pair_scenario(job: GainJob) -> Scenario:
-    """A leader on its orbit (R = v_L = 20 m, omega = 1 rad/s, ccw, starting on it) and one
-    follower at a random pose within 3 R of the target."""
-    rng = np.random.default_rng([job.start, 7919])
-    v_l = 20.0
-    r = rng.uniform(0.2, 3.0) * v_l
-    phi = rng.uniform(-math.pi, math.pi)
-    return parse_scenario({
-        "name": "pair",
-        "run": {"dt": job.dt, "duration": job.duration},
-        "gains": {"c1": job.c1, "c2": job.c2},
-        "sensing": {"selection": "fixed"},
-        "agents": [
-            {"id": 1, "role": "leader", "x": v_l, "y": 0.0, "heading": math.pi / 2, "speed": v_l,
-             "orbit_radius": v_l},
-            {"id": 2, "role": "follower", "x": r * math.cos(phi), "y": r * math.sin(phi),
-             "heading": float(rng.uniform(-math.pi, math.pi)), "speed": job.ratio * v_l, "follow": 1},
-        ],
-    }, "gain pair")
-
-
-def run_gain(job: GainJob) -> dict:
-    """Worker: the pair's follower settling time (s; nan if it never settles)."""
-    from swarm.sim import run_sim
-
-    return gain_row(job, run_sim(pair_scenario(job)))
-
-
-def gain_row(job: GainJob, res) -> dict:
-    a = res.recorder.arrays()
-    r = np.hypot(a["x"][:, 1], a["y"][:, 1])
-    settle = settling_time(a["t"], r, job.ratio * 20.0, SETTLING_BAND)
-    return {**asdict(job), "settling_time": math.nan if settle is None else settle}
-
-
-def gain_jobs(c1s, c2s, ratios, starts: int, duration: float, dt: float) -> list[GainJob]:
-    return [GainJob(a, b, q, k, duration, dt) for a, b, q, k in itertools.product(c1s, c2s, ratios, range(starts))]
-
-
-def gain_columns() -> list[str]:
-    return [f.name for f in fields(GainJob)] + ["settling_time"]
-
-
-def summarise_gains(rows: list[dict]) -> list[dict]:
-    """Worst settling time over the starts, per (c1, c2, ratio); nan: some start never settled."""
-    groups: dict[tuple, list[float]] = {}
-    for r in rows:
-        groups.setdefault((float(r["c1"]), float(r["c2"]), float(r["ratio"])), []).append(float(r["settling_time"]))
-    return [{"c1": k[0], "c2": k[1], "ratio": k[2], "starts": len(v),
-             "worst_settling_s": max(v) if all(math.isfinite(x) for x in v) else math.nan}
-            for k, v in sorted(groups.items())]
-
-
-# -- running -------------------------------------------------------------------------------
-
-
-def _quiet_worker() -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and ends the pool
-
-
-def run_rows(worker: Callable[[object], dict | list[dict]], jobs: list, jobs_n: int,
-             on_row: Callable[[dict], None]) -> None:
-    """Run `worker` over `jobs` on `jobs_n` spawned processes (1: in this process), calling
-    `on_row` with each row as it finishes (a worker returns a row, or a list of rows for
-    a batch of runs). Ctrl-C ends the workers and re-raises KeyboardInterrupt; every row
-    finished before it has been handed to `on_row`."""
-    def emit(rows: dict | list[dict]) -> None:
-        for row in rows if isinstance(rows, list) else [rows]:
-            on_row(row)
-
-    if jobs_n <= 1:
-        for j in jobs:
-            emit(worker(j))
-        return
-    ctx = multiprocessing.get_context("spawn")  # never fork a process that may hold threads
-    pool = ctx.Pool(jobs_n, initializer=_quiet_worker)
-    try:
-        for rows in pool.imap_unordered(worker, jobs):
-            emit(rows)
-        pool.close()
-    except BaseException:
-        pool.terminate()
-        raise
-    finally:
-        pool.join()
-
-
-class CsvSink:
-    """Rows appended to a CSV file as they arrive (flushed: a stop loses no finished row)."""
-
-    def __init__(self, path: Path, columns: list[str]):
-        path.parent.mkdir(parents=True, exist_ok=True)
-        self.f = path.open("w", newline="")
-        self.w = csv.DictWriter(self.f, fieldnames=columns, extrasaction="ignore")
-        self.w.writeheader()
-        self.f.flush()
-
-    def __call__(self, row: dict) -> None:
-        self.w.writerow(row)
-        self.f.flush()
-
-    def close(self) -> None:
-        self.f.close()
-
-
-def write_csv(path: Path, rows: list[dict]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="") as f:
-        if not rows:
-            return
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)

@@ -1,5 +1,6 @@
-"""`swarm study swarms|gains`: the batch studies of swarm/study.py as commands, with a
-progress bar, a printed table, CSV files and a plot; Ctrl-C keeps every finished row."""
+"""`swarm study swarms|gains`: the batch studies of swarm/study.py and swarm/study_gains.py
+as commands, with a progress bar, a printed table, CSV files and a plot; Ctrl-C keeps
+every finished row."""
 
 from __future__ import annotations
 
@@ -60,7 +61,7 @@ def _run(worker, jobs: list, jobs_n: int, csv_path: Path, columns: list[str], la
     rows to csv_path; (rows, interrupted)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-    from swarm.study import CsvSink, run_rows
+    from swarm.study_pool import CsvSink, run_rows
 
     rows: list[dict] = []
     sink = CsvSink(csv_path, columns)
@@ -95,7 +96,7 @@ def _study(kind: str, worker, job_list: list, columns: list[str], summarise: Cal
            out: Optional[Path], what: str, total: int) -> tuple[Path, list[dict], list[dict], bool]:
     """Run a study's jobs (`total` runs) into out/runs.csv and its summary into
     out/summary.csv; (out, rows, summary, interrupted)."""
-    from swarm.study import write_csv
+    from swarm.study_pool import write_csv
 
     out = out or Path("runs") / f"study-{kind}-{time.strftime('%Y%m%d-%H%M%S')}"
     typer.echo(f"{what} on {jobs or os.cpu_count()} process(es); rows -> {out / 'runs.csv'}")
@@ -232,7 +233,7 @@ def gains(
 
     Example: swarm study gains --c1 0.5,1,2 --c2 0.2,0.5,1 --starts 3
     """
-    from swarm.study import gain_columns, gain_jobs, run_gain, summarise_gains
+    from swarm.study_gains import gain_columns, gain_jobs, run_gain, summarise_gains
 
     runs = gain_jobs(_floats("--c1", c1), _floats("--c2", c2), _floats("--ratios", ratios), starts, duration, dt)
     if batch:

@@ -21,7 +21,7 @@ import pytest
 
 from runtime_helpers import SCENARIOS, Runtime, UpRun, open_session, run_credentials, swarm_cmd, wait_for
 from swarm.contracts import credentials, wire
-from swarm.contracts.credentials import agent_user
+from swarm.contracts.identities import agent_user
 from swarm.contracts.transport import open_client, query_statuses
 
 pytestmark = pytest.mark.slow

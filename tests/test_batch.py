@@ -95,6 +95,7 @@ def _with(s, **sensing):
     ("fixed (case2-fixed)", lambda: load_scenario(SCENARIOS / "case2-fixed.toml")),
     ("turn-rate limits (turtlebot)", lambda: load_scenario(SCENARIOS / "turtlebot.toml")),
 ])
+@pytest.mark.slow  # a whole run in-process
 def test_every_rule_equals_swarm_sim(name, make):
     s = make()
     ref, (got,) = run_sim(s, duration=8.0), run_batch([s], duration=8.0)
@@ -127,6 +128,7 @@ def test_equal_ranges_go_to_the_lowest_id_whatever_the_order(base, selection):
     assert got.events[0]["to"] == 3
 
 
+@pytest.mark.slow  # a whole run in-process
 def test_many_seeds_in_one_batch_equal_each_seed_alone():
     # 12 leaders: more than batch_leader.SCALAR_MAX, so the array orbit hold runs
     setting = SwarmSetting(n=8, leaders=2, range=55.0, duration=12.0)
@@ -175,6 +177,7 @@ def invoke(*args):
     return CliRunner().invoke(app, [str(a) for a in args])
 
 
+@pytest.mark.slow  # a whole run in-process
 def test_sim_batch_writes_what_sim_writes(tmp_path):
     common = (SCENARIOS / "case2.toml", "--duration", "5", "--no-plots")
     assert invoke("sim", *common, "--out", tmp_path / "a").exit_code == 0
@@ -199,6 +202,7 @@ def test_sim_batch_refuses_a_scenario_with_faults(tmp_path):
     assert not (tmp_path / "x").exists()
 
 
+@pytest.mark.slow  # a whole run in-process
 def test_study_batch_rows_equal_per_agent_rows(tmp_path):
     args = ("study", "swarms", "--seeds", "3", "--n", "6", "--range", "inf,50", "--duration", "10", "-j", "1",
             "--no-plot")

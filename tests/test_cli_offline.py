@@ -76,6 +76,7 @@ def test_shipped_scenario_converges_under_sim(path, shipped_run):
         assert z["t"][-1] == pytest.approx(s.run.duration)
 
 
+@pytest.mark.slow  # a whole run in-process
 def test_turtlebot_follower_ends_at_one_metre(shipped_run):
     path = next(p for p in SCENARIOS if p.stem == "turtlebot")
     res, out = shipped_run(path)
@@ -246,7 +247,7 @@ def test_check_shows_the_added_agents(base, write_toml):
 
 
 def test_progress_line_sums_up_a_large_swarm():
-    from swarm.run_cli import progress_errors
+    from swarm.up_progress import progress_errors
 
     small = {"errors": {1: 0.0, 2: None, 3: 0.25}, "dropped": [4]}
     assert progress_errors(small) == "radial error 1:0.0% 2:- 3:25.0%  dropped [4]"

@@ -14,17 +14,21 @@ import numpy as np
 import pytest
 
 import cc_reference
-from agents.leader import (
+from agents.cc_plan import (
     CCPath,
     cc_coefficients,
     cc_radius_b,
-    on_orbit_command,
     plan_cc,
 )
+from agents.leader import on_orbit_command
 from swarm.contracts.orbits import wrap
 from world.kinematics import step
 
 ROOT = Path(__file__).resolve().parents[1]
+
+# Sample sizes: the fast tier checks a sample, the long tier the whole of it.
+SAMPLE = pytest.mark.parametrize("n", [pytest.param(80, id="sample"),
+                                       pytest.param(None, id="all", marks=pytest.mark.slow)])
 
 
 def arc_step(x, y, g, v, u, t):
@@ -191,10 +195,11 @@ def test_plan_cc_random_poses(limited):
         _check_path(path, x, y, heading, v, radius, direction, max_rate)
 
 
-def test_plan_cc_near_orbit_poses():
+@SAMPLE
+def test_plan_cc_near_orbit_poses(n):
     """Starts just off the orbit (beyond the on-orbit tolerance), nearly tangent either way."""
     rng = np.random.default_rng(11)
-    for i in range(400):
+    for i in range(n or 400):
         radius, v = rng.uniform(0.5, 80.0), rng.uniform(0.1, 15.0)
         direction = int(rng.choice([1, -1]))
         dist = radius * (1 + rng.choice([1, -1]) * 10 ** rng.uniform(-8, -2))
@@ -207,10 +212,11 @@ def test_plan_cc_near_orbit_poses():
         _check_path(path, x, y, heading, v, radius, direction, max_rate)
 
 
-def test_plan_cc_is_reasonably_short():
+@SAMPLE
+def test_plan_cc_is_reasonably_short(n):
     """The coarse default grid is within 1 % of a 10x finer entry grid."""
     rng = np.random.default_rng(7)
-    for _ in range(60):
+    for _ in range(n // 5 if n else 60):
         radius, v = rng.uniform(1, 20), rng.uniform(0.5, 5)
         direction = int(rng.choice([1, -1]))
         dist, theta, heading = radius * rng.uniform(0.1, 5), rng.uniform(-3, 3), rng.uniform(-3, 3)
@@ -263,7 +269,8 @@ def _path_close(p: CCPath, q: CCPath, rel: float) -> bool:
             and abs(wrap(p.entry[2] - q.entry[2])) <= rel * math.pi)
 
 
-def test_plan_cc_port_matches_numpy_reference():
+@SAMPLE
+def test_plan_cc_port_matches_numpy_reference(n):
     """The pure-Python planner plans the numpy planner's paths (tests/cc_reference.py).
 
     numpy's AVX-512 log10 / power / arctan2 kernels round some last bits differently from
@@ -272,7 +279,7 @@ def test_plan_cc_port_matches_numpy_reference():
     ~1e-9 relative (a few percent of cases on such a machine), their lengths by less.
     Without those kernels the two are bit-for-bit equal (next test).
     """
-    cases = _port_cases(300, 2024)
+    cases = _port_cases(n or 300, 2024)
     identical = within = 0
     for c in cases:
         want, got = cc_reference.plan_cc(*c), plan_cc(*c)
@@ -296,7 +303,7 @@ _BIT_EXACT = """
 import json, math, sys
 sys.path.insert(0, "tests")
 import cc_reference
-from agents.leader import plan_cc
+from agents.cc_plan import plan_cc
 cases = json.loads(sys.argv[1])
 print(sum(cc_reference.plan_cc(*c) != plan_cc(*c) for c in cases))
 """
@@ -304,6 +311,7 @@ print(sum(cc_reference.plan_cc(*c) != plan_cc(*c) for c in cases))
 
 @pytest.mark.skipif(platform.machine().lower() not in ("x86_64", "amd64"),
                     reason="checked where numpy's non-AVX-512 float64 kernels are libm's")
+@pytest.mark.slow  # a Python process of its own
 def test_plan_cc_port_bit_exact_without_avx512_numpy():
     """Same algorithm, same float operations: with numpy's AVX-512 kernels disabled the port
     and the numpy reference give identical paths, to the last bit."""
@@ -315,6 +323,7 @@ def test_plan_cc_port_bit_exact_without_avx512_numpy():
     assert p.stdout.split()[-1] == "0"
 
 
+@pytest.mark.slow  # a Python process of its own
 def test_importing_the_leader_does_not_load_numpy():
     """Leader processes stay as light as followers: agents.leader is numpy-free."""
     code = "import sys, agents.leader; sys.exit('numpy' in sys.modules)"

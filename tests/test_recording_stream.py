@@ -16,7 +16,8 @@ import pytest
 from typer.testing import CliRunner
 
 from swarm.cli import app
-from swarm.contracts.scenario import AgentSpec, load_scenario
+from swarm.contracts.scenario import load_scenario
+from swarm.contracts.scenario_tables import AgentSpec
 from swarm.results import OutDirError, claim_out_dir, needs_export
 from swarm.sim import run_sim
 from world.recording import EXIT_NO_SPACE, Recorder, StreamRecorder, recover_run, write_run
@@ -49,6 +50,7 @@ def test_tick_round_trip_and_bad_length():
         decode_tick(data[:-1])
 
 
+@pytest.mark.slow  # a whole run in-process
 def test_streamed_run_equals_the_memory_run(tmp_path):
     """The first faults of faults.toml (25 s): the arrays read back from recording.mcap are
     the arrays a memory recording holds, bit for bit, and the events are all in the file."""
@@ -85,6 +87,7 @@ def test_added_agents_are_columns_of_their_own(tmp_path):
     assert b["ids"].tolist()[-1] == 99 and np.isnan(b["x"][:3, -1]).all() and b["x"][3, -1] == 3 + n
 
 
+@pytest.mark.slow  # a whole run in-process
 def test_a_file_cut_short_reads_up_to_its_tear(tmp_path, monkeypatch):
     """What a SIGKILL leaves: no footer, a torn last chunk. Every complete chunk is read,
     the rows are a prefix of the run, and recover_run makes a valid run directory."""

@@ -117,7 +117,7 @@ def test_world_info_reports_expected_radius_through_the_chosen_graph():
 
 
 def test_agent_answers_its_frames_with_commands_and_counts_garbage():
-    from agents.process import AgentNode
+    from agents.node import AgentNode
 
     world, _ = open_world()
     reply = claim(world, 2)
@@ -173,7 +173,7 @@ def test_added_agents_take_reserved_ids_up_to_the_cap():
 def test_join_claims_are_rate_limited_per_agent_with_one_event_and_a_count():
     """A burst of claims on one agent's key, then one per s: that agent's flood does not
     use up another agent's claims."""
-    from world.inbox import JOIN_BURST
+    from world.joins import JOIN_BURST
 
     world, _ = open_world()
     events = []
@@ -210,7 +210,7 @@ def test_a_law_from_the_join_reply_is_not_imported_unless_trusted(tmp_path, monk
     import pytest
 
     from agents.joining import EXIT_REFUSED, AgentExit
-    from agents.process import AgentNode
+    from agents.node import AgentNode
 
     marker = tmp_path / "imported"
     (tmp_path / "evil_law.py").write_text(

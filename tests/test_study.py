@@ -16,7 +16,8 @@ from typer.testing import CliRunner
 
 from swarm.cli import app
 from swarm.procs import Group, wait_until
-from swarm.study import GainJob, SwarmSetting, cut_off_at_start, random_swarm, run_gain, summarise_swarms
+from swarm.study import SwarmSetting, cut_off_at_start, random_swarm, summarise_swarms
+from swarm.study_gains import GainJob, run_gain
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -30,6 +31,7 @@ def rows(path: Path) -> list[dict]:
         return list(csv.DictReader(f))
 
 
+@pytest.mark.slow  # a whole run in-process
 def test_swarms_study_compares_rules_on_the_same_swarms(tmp_path):
     res = invoke("study", "swarms", "--seeds", "2", "--n", "6", "--selection", "sticky,nearest",
                  "--duration", "20", "-j", "1", "--out", tmp_path / "s")
@@ -69,6 +71,7 @@ def test_cut_off_swarms_are_reported_apart():
     assert line["switches_median"] == 0.5
 
 
+@pytest.mark.slow  # a whole run in-process
 def test_gain_map_finds_where_the_law_settles():
     # README, "Which gains converge": C2 = omega/2 settles a follower twice as fast as its
     # leader; C2 = 3 omega makes it oscillate about its orbit for ever.
@@ -78,6 +81,7 @@ def test_gain_map_finds_where_the_law_settles():
     assert math.isnan(bad["settling_time"])
 
 
+@pytest.mark.slow  # a whole run in-process
 def test_gain_map_batches_give_the_per_agent_rows():
     from swarm.batch_study import gain_chunks, run_gain_chunk
 
@@ -91,6 +95,7 @@ def test_gain_map_batches_give_the_per_agent_rows():
     assert any(r["settling_time"] == "nan" for r in nan_free) and any(r["settling_time"] != "nan" for r in nan_free)
 
 
+@pytest.mark.slow  # a whole run in-process
 def test_gains_study_table_and_plot(tmp_path):
     res = invoke("study", "gains", "--c1", "1", "--c2", "0.5,3", "--ratios", "2", "--starts", "1",
                  "--duration", "150", "-j", "1", "--out", tmp_path / "g")

@@ -126,7 +126,7 @@ def test_non_finite_law_output_is_counted_and_held(tmp_path, monkeypatch):
 
 
 def test_agent_status_carries_the_non_finite_count():
-    from agents.process import AgentNode
+    from agents.node import AgentNode
     from test_shells import claim
 
     world, _ = open_world()

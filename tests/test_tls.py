@@ -163,16 +163,19 @@ def test_the_ca_can_be_given_inline_as_base64(hub, certs):
         c.close()
 
 
+@pytest.mark.slow  # waits out a connect timeout (REFUSE_MS)
 def test_a_client_trusting_another_runs_ca_is_refused(hub, certs):
     _, ep = hub
     assert_refused(ep, tls.client_tls_settings(certs[1].ca))
 
 
+@pytest.mark.slow  # waits out a connect timeout (REFUSE_MS)
 def test_plain_tcp_to_the_tls_port_is_refused(hub):
     _, ep = hub
     assert_refused(ep.replace("tls/", "tcp/", 1), {})
 
 
+@pytest.mark.slow  # waits out a connect timeout (REFUSE_MS)
 def test_a_host_missing_from_the_certificate_is_refused_unless_names_are_not_verified(certs):
     files, _ = certs  # names 127.0.0.1 and localhost, not 127.0.0.2
     try:
@@ -189,6 +192,7 @@ def test_a_host_missing_from_the_certificate_is_refused_unless_names_are_not_ver
         h.close()
 
 
+@pytest.mark.slow  # waits out a connect timeout (REFUSE_MS)
 def test_username_and_password_over_tls(certs, tmp_path):
     files, _ = certs
     users = tmp_path / "users.txt"

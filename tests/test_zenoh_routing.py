@@ -21,6 +21,9 @@ import pytest
 
 from swarm.contracts import access
 
+# Long tier: each test waits out zenoh's connect and query timeouts to show what is refused.
+pytestmark = pytest.mark.slow
+
 RUN = "r"
 
 

@@ -20,7 +20,7 @@ from collections import deque
 import numpy as np
 
 from swarm.contracts.frames import SensorFrame
-from swarm.contracts.scenario import PROCESS_FAULTS, FaultSpec
+from swarm.contracts.scenario_tables import PROCESS_FAULTS, FaultSpec
 
 _SENSE, _CMD, _NOISE = 1, 2, 3
 

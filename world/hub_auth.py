@@ -15,9 +15,10 @@ from dataclasses import replace
 import sys
 
 from swarm.contracts import credentials
-from swarm.contracts.credentials import CredentialsError
+from swarm.contracts.identities import CredentialsError
+from swarm.contracts.runtime_dir import pid_alive
 from swarm.contracts.scenario import Scenario
-from swarm.contracts.transport import HubAuth, dial_endpoint, open_hub_requested
+from swarm.contracts.transport import HubAuth, dial_endpoint, open_hub_requested, runtime_dir
 
 
 def run_auth(run: str, listen: str, scenario: Scenario) -> HubAuth | None:
@@ -27,14 +28,14 @@ def run_auth(run: str, listen: str, scenario: Scenario) -> HubAuth | None:
     that run's secret (not its TLS authority, which is made anew)."""
     path = credentials.run_file(run)
     old = credentials.read(path) if path.exists() else None
-    if old is not None and old.pid is not None and old.pid != os.getpid() and credentials.pid_alive(old.pid):
+    if old is not None and old.pid is not None and old.pid != os.getpid() and pid_alive(old.pid):
         raise CredentialsError(f"run {run} is already running (world pid {old.pid})")
     tls_settings, ca = None, None
     if listen.startswith("tls/"):
         from swarm.contracts import tls
 
         try:
-            tls_settings, ca = tls.run_hub_settings(credentials.runtime_dir(), run, listen)
+            tls_settings, ca = tls.run_hub_settings(runtime_dir(), run, listen)
         except ValueError as e:
             raise CredentialsError(f"{listen}: {e}") from None
     open_hub = open_hub_requested()
@@ -59,7 +60,7 @@ def forget_run(run: str, listen: str) -> None:
     """The run has ended: its credentials (and certificates) go with it; those of another
     world with the same run id (refused by `run_auth`) stay."""
     try:
-        d = credentials.runtime_dir()
+        d = runtime_dir()
         path = d / f"{run}{credentials.SUFFIX}"
         if path.exists() and credentials.read(path).pid not in (None, os.getpid()):
             return

@@ -1,10 +1,10 @@
 """The world's inbox: what it does with each message that reaches it.
 
 Commands (admission by claim key, stale or duplicate ticks, fault-plan losses),
-liveliness (join and drop), join queries (admission, new agents from `swarm spawn`),
-info queries (the live view) and admin queries (pause, resume, fault done, agent exit).
-zenoh callbacks only enqueue; these run on the world's main thread. A mixin of `World`
-(world/process.py), whose state it reads and changes.
+liveliness (join and drop), info queries (the live view) and admin queries (pause,
+resume, fault done, agent exit); join queries are world/joins.py's. zenoh callbacks only
+enqueue; these run on the world's main thread. A mixin of `World` (world/process.py),
+whose state it reads and changes.
 
 After the world itself has stalled (SIGSTOP, a starved CPU: more than STALL_S s without
 reaching its inbox), every agent's link has timed out on the agent's side and comes back
@@ -21,37 +21,14 @@ import sys
 import time
 
 from swarm.contracts import wire
-from swarm.contracts.brain_config import BrainConf
 from swarm.contracts.lifeline import exit_status
 from world.core import ACTIVE
 from world.engine import LOST, REFUSED
 from world.report import run_info
-from world.roster import AgentBook, admit, new_agent_spec
 
 STALL_S = 0.8  # s the world's main thread may go without reaching its inbox (the link lease is 1 s)
 REJOIN_WAIT = 2.0  # s a token lost just after a stall of the world has to come back
-# Join claims are limited per agent id (the hub lets agent k claim on its own key only, so
-# one agent cannot use up another's): a burst, then a claim per s. Keys of ids the run
-# cannot have (only an open hub lets those through) share one bucket.
-JOIN_BURST, JOIN_RATE = 5, 1.0
-STRANGER_BURST, STRANGER_RATE = 40, 20.0
 INBOX_MAX = 100_000  # messages waiting for the main thread; commands and queries past it are dropped
-
-
-class TokenBucket:
-    """At most `rate` per s on average, and `burst` at once."""
-
-    def __init__(self, rate: float, burst: float):
-        self.rate, self.burst, self.level, self.at = rate, burst, burst, None
-
-    def take(self, now: float) -> bool:
-        if self.at is not None:
-            self.level = min(self.burst, self.level + (now - self.at) * self.rate)
-        self.at = now
-        if self.level < 1.0:
-            return False
-        self.level -= 1.0
-        return True
 
 
 class Inbox:
@@ -159,58 +136,6 @@ class Inbox:
                 del self.lost_after_stall[aid]
                 self._drop(aid, pending, f"liveliness token lost (not back {REJOIN_WAIT:g} s after the world's stall)")
 
-    def _join_allowed(self, key: str) -> bool:
-        try:
-            kid = wire.agent_of_key(key)
-        except wire.WireError:
-            kid = None
-        if kid is None or (kid not in self.book and kid not in self.cfg.scenario.added_id_range):
-            kid = None
-        if kid not in self.join_buckets:
-            self.join_buckets[kid] = (TokenBucket(JOIN_RATE, JOIN_BURST) if kid is not None
-                                      else TokenBucket(STRANGER_RATE, STRANGER_BURST))
-        return self.join_buckets[kid].take(time.monotonic())
-
-    def _on_join(self, query) -> None:
-        if not self._join_allowed(str(query.key_expr)):
-            self.limited("join_rate", f"join claims faster than {JOIN_BURST} at once and {JOIN_RATE:g} per s "
-                         "on one agent's key: claim refused")
-            query.reply(str(query.key_expr), wire.encode_join_reply(False, error="too many join claims; retry later"))
-            return
-        try:
-            req = wire.decode_join_request(query.payload.to_bytes() if query.payload else b"")
-            aid = req["id"]
-            if wire.agent_of_key(str(query.key_expr)) != aid:
-                raise wire.WireError(f"a claim of agent {aid} on another agent's join key")
-            if aid not in self.core.index:
-                if req.get("spec") is None:
-                    raise wire.WireError(f"agent {aid} is not in scenario {self.cfg.scenario.name!r} "
-                                         f"(ids: {', '.join(map(str, self.core.scenario.ids))}); "
-                                         "a new agent needs a spec (swarm spawn --role --x --y ...)")
-                self._check_addable(aid)
-                self.add_agent(aid, req["spec"])
-            key = admit(self.core, self.book[aid], req, time.monotonic())
-            x, y, h = self.core.pose(aid)
-            reply = wire.encode_join_reply(True, run=self.cfg.run, agent=aid, tick=self.core.tick, key=key,
-                                           clock=self.cfg.clock, pose=[x, y, h],
-                                           brain=BrainConf.from_scenario(self.core.scenario, aid).to_json())
-        except wire.WireError as e:
-            reply = wire.encode_join_reply(False, error=str(e))
-        query.reply(str(query.key_expr), reply)
-
-    def _check_addable(self, aid: int) -> None:
-        """A new agent takes an id of the range the hub's access rules were made for, and
-        only as many join the run as the scenario allows (run.max_added_agents)."""
-        s = self.cfg.scenario
-        if len(self.book) - len(s.ids) >= s.added_agents_cap:
-            self.limited("added_agents", f"{s.added_agents_cap} agents added already (run.max_added_agents): "
-                         f"agent {aid} refused")
-            raise wire.WireError(f"agent {aid}: this run has added {s.added_agents_cap} agents already, "
-                                 "its limit (run.max_added_agents)")
-        ids = s.added_id_range
-        if aid not in ids:
-            raise wire.WireError(f"agent {aid}: agents added to this run take ids {ids.start}..{ids.stop - 1}")
-
     def _note_inbox_dropped(self) -> None:
         """Messages the zenoh callbacks dropped because the inbox was full (counted there)."""
         first = "inbox" not in self.over_limit
@@ -232,15 +157,6 @@ class Inbox:
         self.over_limit[what] = self.over_limit.get(what, 0) + 1
         if self.over_limit[what] == 1:
             self.event("limit", None, reason, limit=what)
-
-    def add_agent(self, aid: int, spec: dict) -> None:
-        """A new agent joins the run with its own spec (`swarm spawn`); raises WireError."""
-        a = new_agent_spec(aid, spec, self.core)
-        self.engine.add_agent(a)
-        self.book[aid] = AgentBook()
-        self.sense_pub[aid] = self.session.declare_publisher(wire.agent_key(self.cfg.run, aid, "sense"),
-                                                             express=True)
-        self.event("add", aid, f"new {a.role} at ({a.x:g}, {a.y:g}) m, {a.speed:g} m/s")
 
     def info(self, sensing: bool = False) -> dict:
         """The world's view of the run, for the CLI (`swarm agents`, `graph`, `watch`)."""

@@ -7,15 +7,15 @@ and records the tick. At the end (or on SIGTERM/SIGINT) it writes trajectory.npz
 and summary.json into its output directory, announces the end and closes.
 
 All zenoh callbacks only put (kind, ...) tuples on one inbox queue; everything else
-happens on the main thread. `World` is assembled from three parts: this module (state,
-keys, publishing, results), `world/inbox.py` (what each message does) and
-`world/clock.py` (how ticks are paced).
+happens on the main thread. `World` is assembled from four parts: this module (state,
+keys, publishing, results), `world/inbox.py` (what each message does), `world/joins.py`
+(join queries) and `world/clock.py` (how ticks are paced); `world/main.py` runs it
+from start to end.
 """
 
 from __future__ import annotations
 
 import queue
-import signal
 import sys
 import time
 from dataclasses import dataclass, field
@@ -24,26 +24,16 @@ from pathlib import Path
 import numpy as np
 
 from swarm.contracts import wire
-from swarm.contracts.credentials import CredentialsError
 from swarm.contracts.scenario import Scenario
-from swarm.contracts.transport import HubAuth, open_hub, query_statuses, socket_path
+from swarm.contracts.transport import HubAuth, open_hub, query_statuses
 from world.clock import Clock
 from world.engine import Engine
-from world.hub_auth import forget_run, run_auth
-from world.inbox import Inbox, TokenBucket
-from world.recording import EXIT_NO_SPACE, RECORDING_FILE, RecordingError, write_run
+from world.inbox import Inbox
+from world.joins import Joins, TokenBucket
+from world.recording import RECORDING_FILE, RecordingError, write_run
 from world.roster import AgentBook, agent_figures
 
 TRUTH_PERIOD = 0.02  # s of wall time between ground-truth messages (observers, not the recording)
-
-
-class Stop(BaseException):
-    """Raised on the main thread by SIGTERM/SIGINT (a BaseException, so that no
-    `except Exception` around publishing can swallow it)."""
-
-    def __init__(self, signum: int):
-        super().__init__(signum)
-        self.signum = signum
 
 
 @dataclass
@@ -62,7 +52,7 @@ class WorldConfig:
 
 
 @dataclass
-class World(Inbox, Clock):
+class World(Inbox, Joins, Clock):
     cfg: WorldConfig
     inbox: queue.SimpleQueue = field(default_factory=queue.SimpleQueue)
 
@@ -84,7 +74,7 @@ class World(Inbox, Clock):
         self.book = {i: AgentBook() for i in s.ids}
         self.garbage = 0  # malformed or foreign messages on keys the world listens to
         self.over_limit: dict[str, int] = {}  # how often each limit refused something (world/inbox.py)
-        self.join_buckets: dict[int | None, TokenBucket] = {}  # join claims per agent id (world/inbox.py)
+        self.join_buckets: dict[int | None, TokenBucket] = {}  # join claims per agent id (world/joins.py)
         self.ignored = 0
         self.deadline = self.cfg.deadline or s.run.lockstep_deadline
         self.stopped_by: int | None = None
@@ -226,107 +216,3 @@ class World(Inbox, Clock):
             "wall_time": wall, "ticks_per_second": (c.tick / wall) if wall else None,
         }, agent_extra)
         return write_run(result, self.cfg.out_dir)
-
-
-def _raise_stop(signum, _frame):
-    # One Stop only: a second Ctrl-C (or a SIGTERM after it) must not interrupt the
-    # writing of the results that the first one started.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    raise Stop(signum)
-
-
-def run_world(cfg: WorldConfig) -> int:
-    """Run a world to the end; exit code 0 when the run completed, 128+signal when stopped,
-    EXIT_NO_SPACE when the recording or the results could not be written."""
-    # Stop (SIGTERM/SIGINT) from the first moment: the run's credentials, once written,
-    # must go with it however early it is stopped.
-    old = {sig: signal.signal(sig, _raise_stop) for sig in (signal.SIGTERM, signal.SIGINT)}
-    try:
-        try:
-            cfg.auth = run_auth(cfg.run, cfg.listen, cfg.scenario)
-        except (CredentialsError, OSError) as e:
-            print(f"swarm world: {e if isinstance(e, CredentialsError) else f'cannot write the run credentials: {e}'}",
-                  file=sys.stderr)
-            return 2
-        return _run_world(cfg)
-    except Stop as s:  # before the world listened: nothing recorded
-        return 128 + s.signum
-    finally:
-        forget_run(cfg.run, cfg.listen)
-        for sig, h in old.items():
-            signal.signal(sig, h)
-
-
-def _run_world(cfg: WorldConfig) -> int:
-    sock = socket_path(cfg.listen)
-    if sock is not None and sock.exists():
-        # A stale socket from a crashed run blocks listening; a live one belongs to a run.
-        import socket as so
-
-        s = so.socket(so.AF_UNIX, so.SOCK_STREAM)
-        try:
-            s.connect(str(sock))
-            s.close()
-            print(f"swarm world: {cfg.listen} is in use by another run", file=sys.stderr)
-            return 2
-        except OSError:
-            sock.unlink(missing_ok=True)
-    try:
-        world = World(cfg)
-    except RecordingError as e:
-        print(f"swarm world: {e}", file=sys.stderr)
-        return EXIT_NO_SPACE
-    code = 0  # SIGTERM/SIGINT raise Stop here (run_world installed the handlers)
-    try:
-        try:
-            world._open()
-        except Stop as s:  # stopped before it listened: nothing to record
-            world.discard_recording()
-            return 128 + s.signum
-        except Exception as e:  # zenoh.ZError: endpoint unusable
-            world.discard_recording()
-            print(f"swarm world: cannot listen on {cfg.listen}: {e}", file=sys.stderr)
-            return 2
-        if cfg.progress:
-            print(f"[world] run {cfg.run} listening on {cfg.listen}", file=sys.stderr, flush=True)
-        try:
-            code = world.run()
-        except Stop as s:
-            world.stopped_by = s.signum
-            code = 128 + s.signum
-        except TimeoutError as e:
-            print(f"swarm world: {e}", file=sys.stderr)
-            code = 3
-        except RecordingError as e:  # disk full mid-run: what reached the disk stays readable
-            print(f"swarm world: {e}; stopping the run", file=sys.stderr)
-            world.stopped_by = -1
-            code = EXIT_NO_SPACE
-        except Exception:  # a bug: say so, but still write what was recorded and close cleanly
-            import traceback
-
-            traceback.print_exc()
-            print("swarm world: internal error; results so far are written", file=sys.stderr)
-            world.stopped_by = -1
-            code = 1
-        # Results are written even when stopped: nothing recorded is lost.
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        try:
-            world.finish()
-        except RecordingError as e:
-            if code != EXIT_NO_SPACE:
-                print(f"swarm world: {e}", file=sys.stderr)
-            code = EXIT_NO_SPACE
-        except Exception:  # a bug in writing the results: say so, and still close (end notice)
-            import traceback
-
-            traceback.print_exc()
-            print(f"swarm world: internal error writing the results; recording.mcap in {cfg.out_dir} "
-                  "keeps the run (swarm export)", file=sys.stderr)
-            code = 1
-        world._close()
-    finally:
-        if sock is not None:
-            sock.unlink(missing_ok=True)
-    return code

@@ -43,7 +43,8 @@ def new_agent_spec(aid: int, spec, core: WorldCore):
     """The AgentSpec of an agent added at run time (`swarm spawn`); WireError names the field."""
     from pydantic import ValidationError
 
-    from swarm.contracts.scenario import AgentSpec, format_validation_error
+    from swarm.contracts.scenario import format_validation_error
+    from swarm.contracts.scenario_tables import AgentSpec
 
     if aid in core.index:
         raise wire.WireError(f"agent {aid} already exists")

@@ -31,7 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from swarm.contracts.scenario import AgentSpec, Scenario
+from swarm.contracts.scenario import Scenario
+from swarm.contracts.scenario_tables import AgentSpec
 
 RECORDING_FILE = "recording.mcap"
 TICK_ENCODING = "swarm-tick-v1"

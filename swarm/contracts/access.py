@@ -34,7 +34,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from swarm.contracts import wire
-from swarm.contracts.credentials import HOST, OPERATOR, agent_user, password_for
+from swarm.contracts.identities import HOST, OPERATOR, agent_user, password_for
 
 ALL_MESSAGES = ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
                 "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"]

@@ -1,59 +1,33 @@
-"""Who may talk to a run: its secret, the identities derived from it, and the files that
-carry them.
+"""A run's credentials: what a process needs to connect, and the files that carry it.
 
-Every run has a random secret. Each process that connects has an identity (a zenoh
-username) with a password derived from that secret: `operator` (the launcher and the
-CLI), `agent-<id>` (one per agent), `host` (the router of an agent host: `swarm host`)
-and `world` (the hub itself). The world writes the
-secret and the endpoint to `<runtime dir>/<run>.cred` (mode 0600, in a 0700 directory
-owned by the user). Local processes of that user derive any identity from it. For
-another machine, `swarm credentials` exports a file that holds one identity's
+Every run has a random secret; each identity's password is derived from it
+(swarm/contracts/identities.py). The world writes the secret and the endpoint to
+`<runtime dir>/<run>.cred` (mode 0600, in a 0700 directory owned by the user:
+swarm/contracts/runtime_dir.py). Local processes of that user derive any identity from
+it. For another machine, `swarm credentials` exports a file that holds one identity's
 password only (and the run's TLS certificate authority, if the run uses TLS): an
 agent on that machine can then act as itself and nothing else. A file for an agent host
 (`swarm credentials --host NAME --agents 3-5`) holds the `host` identity and the
 identities of the agents it runs, and nothing else.
 
-This module only builds, checks, reads and writes those files; zenoh's configuration
-from them is swarm/contracts/transport.py and swarm/contracts/access.py.
+This module only builds, checks, reads, writes and finds those files; zenoh's
+configuration from them is swarm/contracts/transport.py and swarm/contracts/access.py.
 """
 
 from __future__ import annotations
 
-import hashlib
-import hmac
 import json
 import os
-import re
 import secrets
-import stat
-import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from swarm.contracts import wire
+from swarm.contracts.identities import HOST, CredentialsError, agent_user, check_host_name, password_for
+from swarm.contracts.runtime_dir import dial_endpoint, pid_alive, read_private, runtime_dir, write_private
 
 ENV_CREDENTIALS = "SWARM_CREDENTIALS"  # path of a credentials file (remote agents, CI)
-ENV_RUNTIME_DIR = "SWARM_RUNTIME_DIR"
 SUFFIX = ".cred"
-OPERATOR = "operator"
-WORLD = "world"
-HOST = "host"  # the router of an agent host (swarm/host.py)
-_HOST_NAME = re.compile(r"^[A-Za-z0-9_.-]{1,32}$")
-
-
-class CredentialsError(Exception):
-    """A credentials file or the runtime directory cannot be used; the message is one line."""
-
-
-def agent_user(agent_id: int) -> str:
-    return f"agent-{int(agent_id)}"
-
-
-def check_host_name(name: str) -> str:
-    """A host's name (a label: file and socket names, logs): 1-32 of A-Z a-z 0-9 _ . -"""
-    if not isinstance(name, str) or not _HOST_NAME.match(name):
-        raise CredentialsError(f"host name {name!r}: expected 1 to 32 of A-Z a-z 0-9 _ . -")
-    return name
 
 
 def parse_ids(text: str) -> tuple[int, ...]:
@@ -69,11 +43,6 @@ def parse_ids(text: str) -> tuple[int, ...]:
             raise CredentialsError(f"agent ids {text!r}: {part!r} is not a range of ids")
         out.update(range(a, b + 1))
     return tuple(sorted(out))
-
-
-def password_for(secret: str, run: str, user: str) -> str:
-    """The password of `user` in run `run` (HMAC-SHA256 of the run's secret; 128 bits)."""
-    return hmac.new(bytes.fromhex(secret), f"{run}/{user}".encode(), hashlib.sha256).hexdigest()[:32]
 
 
 @dataclass(frozen=True)
@@ -233,50 +202,11 @@ def parse(text: str, path: Path | None = None) -> Credentials:
 def read(path: Path) -> Credentials:
     """A credentials file; it must be the user's own and readable by nobody else."""
     path = Path(path)
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW)
-    except FileNotFoundError:
-        raise CredentialsError(f"{path}: no such credentials file") from None
-    except OSError as e:
-        raise CredentialsError(f"{path}: cannot open: {e.strerror or e}") from None
-    try:
-        st = os.fstat(fd)
-        if not stat.S_ISREG(st.st_mode):
-            raise CredentialsError(f"{path}: not a regular file")
-        if st.st_uid != os.getuid():
-            raise CredentialsError(f"{path}: owned by uid {st.st_uid}, not by you (uid {os.getuid()}); "
-                                   "refusing to use it")
-        if st.st_mode & 0o077:
-            raise CredentialsError(f"{path}: readable by others (mode {stat.S_IMODE(st.st_mode):04o}); "
-                                   f"run `chmod 600 {path}`")
-        with os.fdopen(fd, "rb", closefd=False) as f:
-            data = f.read(1 << 20)
-    finally:
-        os.close(fd)
+    data = read_private(path)
     try:
         return parse(data.decode("utf-8"), path)
     except UnicodeDecodeError:
         raise CredentialsError(f"{path}: not a credentials file (not UTF-8)") from None
-
-
-def write_private(path: Path, data: bytes) -> None:
-    """Write `data` to `path` (mode 0600 whatever the umask), atomically (temporary + rename)."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
-    try:
-        try:
-            os.fchmod(fd, 0o600)
-            with os.fdopen(fd, "wb", closefd=False) as f:
-                f.write(data)
-                f.flush()
-                os.fsync(fd)
-        finally:
-            os.close(fd)
-        os.replace(tmp, path)
-    except BaseException:  # nothing half-written stays behind (it may hold a password)
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def write(creds: Credentials, path: Path) -> Path:
@@ -284,53 +214,11 @@ def write(creds: Credentials, path: Path) -> Path:
     return Path(path)
 
 
-def private_dir(path: Path) -> Path:
-    """`path` as a directory only its user can change: created 0700 if missing (whatever the
-    umask); refused with one line if another user owns it or others may write to it (they
-    could replace a socket or a credentials file). Files in it are 0600 anyway."""
-    path = Path(path)
-    try:
-        os.mkdir(path, 0o700)
-        os.chmod(path, 0o700)
-    except FileExistsError:
-        pass
-    except OSError as e:
-        raise CredentialsError(f"cannot create the runtime directory {path}: {e.strerror or e}") from None
-    st = os.lstat(path)
-    if not stat.S_ISDIR(st.st_mode):
-        raise CredentialsError(f"the runtime directory {path} is not a directory")
-    if st.st_uid != os.getuid():
-        raise CredentialsError(f"the runtime directory {path} belongs to uid {st.st_uid}, not to you "
-                               f"(uid {os.getuid()}); set {ENV_RUNTIME_DIR} to a directory of your own")
-    if st.st_mode & 0o022:
-        raise CredentialsError(f"the runtime directory {path} is writable by others (mode "
-                               f"{stat.S_IMODE(st.st_mode):04o}); run `chmod 700 {path}` or set {ENV_RUNTIME_DIR}")
-    return path
-
-
-def runtime_dir() -> Path:
-    """Where local runs keep their sockets and credentials ($SWARM_RUNTIME_DIR or
-    /tmp/swarm-<uid>), checked private to the user."""
-    return private_dir(Path(os.environ.get(ENV_RUNTIME_DIR) or Path(tempfile.gettempdir()) / f"swarm-{os.getuid()}"))
-
-
 def run_file(run: str) -> Path:
     try:
         return runtime_dir() / f"{wire.check_run_id(run)}{SUFFIX}"
     except wire.WireError as e:
         raise CredentialsError(str(e)) from None
-
-
-def dial_endpoint(listen: str) -> str:
-    """Where a process on the world's own machine connects to reach `listen`: a wildcard
-    listen address (`tcp/0.0.0.0:P`, `tls/[::]:P`) is dialled on 127.0.0.1 (also a name
-    the run's TLS certificate carries); anything else as it is."""
-    proto, sep, rest = listen.partition("/")
-    if proto in ("tcp", "tls") and sep:
-        for wildcard in ("0.0.0.0:", "[::]:"):
-            if rest.startswith(wildcard):
-                return f"{proto}/127.0.0.1:{rest[len(wildcard):]}"
-    return listen
 
 
 def local_runs() -> list[Credentials]:
@@ -344,16 +232,6 @@ def local_runs() -> list[Credentials]:
         if c.secret is not None and (c.pid is None or pid_alive(c.pid)):
             out.append(c)
     return out
-
-
-def pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def from_environment() -> Credentials | None:

@@ -1,213 +1,38 @@
 """Scenario files: TOML read into strict, frozen pydantic models.
 
-The field names here are the contract between users, tools and every process of a
-run. Units: metres, seconds, radians, m/s and rad/s throughout.
-
-`load_scenario(path)` is the one entry point; every problem with a file comes out of
-it as a `ScenarioError` whose message names the file and the field. That includes values
-that validate one by one but cannot run together: more agents than the wire carries, ids
-past its largest id, a recording too large for memory (see `Scenario._limits`).
+`Scenario` is a whole file: its tables (swarm/contracts/scenario_tables.py, each checked
+on its own) and what must hold across them. `load_scenario(path)` is the one entry point;
+every problem with a file comes out of it as a `ScenarioError` whose message names the
+file and the field. That includes values that validate one by one but cannot run
+together: more agents than the wire carries, ids past its largest id, a recording too
+large for memory (see `Scenario._limits`).
 """
 
 from __future__ import annotations
 
-import math
 import re
 import tomllib
 from pathlib import Path
-from typing import Annotated, Literal
 
-from pydantic import (
-    BaseModel,
-    ConfigDict,
-    Field,
-    ValidationError,
-    field_validator,
-    model_validator,
+from pydantic import Field, ValidationError, field_validator, model_validator
+
+from swarm.contracts.scenario_tables import (
+    MAX_AGENT_TICKS,
+    RECORDING_LIMIT,
+    AgentSpec,
+    FaultSpec,
+    GainsSpec,
+    RunSpec,
+    SensingSpec,
+    Strict,
+    TargetSpec,
 )
-
 from swarm.contracts.wire import MAX_AGENT_ID, MAX_AGENTS
 
-PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-AgentId = Annotated[int, Field(ge=0, le=MAX_AGENT_ID)]
-
-MAX_SEED = 2**63 - 1  # fits a signed 64-bit integer wherever the seed is stored
 MAX_SCENARIO_BYTES = 32 << 20  # a 10,000-agent scenario is about 1.5 MB
-# Trajectory arrays cost about 40 bytes per agent and tick: 2e8 agent-ticks is about 8 GB.
-MAX_AGENT_TICKS = 200_000_000
-_RECORDING_LIMIT = "2e8 agent-ticks (about 8 GB)"
 
 
-class _Strict(BaseModel):
-    # strict: a TOML string "1.5" or a boolean is not a number; integers are fine for floats.
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
-
-
-class RunSpec(_Strict):
-    """[run]: how the world steps."""
-
-    dt: PositiveFloat = Field(0.01, description="world step (s)")
-    duration: PositiveFloat = Field(60.0, description="simulated time to run (s)")
-    clock: Literal["lockstep", "realtime"] = Field(
-        "lockstep", description="lockstep: step when every agent answered; realtime: wall clock"
-    )
-    seed: Annotated[int, Field(ge=0, le=MAX_SEED)] = Field(
-        0, description="seed for every random choice of the run (0 .. 2**63 - 1)")
-    on_dropout: Literal["leave", "coast"] = Field(
-        "leave",
-        description="what the world does with a dead agent: leave the world, or coast uncontrolled",
-    )
-    lockstep_deadline: PositiveFloat = Field(
-        0.5,
-        description="lockstep: wall seconds to wait for a live agent's command before holding its last one",
-    )
-    max_added_agents: Annotated[int, Field(ge=0, le=MAX_AGENTS)] | None = Field(
-        None,
-        description="agents that may be added while the run goes (swarm spawn of a new id); "
-                    "default 4 x the scenario's agents",
-    )
-
-    @model_validator(mode="after")
-    def _steps(self) -> "RunSpec":
-        steps = self.duration / self.dt
-        if not math.isfinite(steps) or steps > MAX_AGENT_TICKS:
-            # even one agent would be too many for the recording (the scenario checks agents x ticks)
-            raise ValueError(f"duration: {self.duration:g} s at dt = {self.dt:g} s is {steps:.3g} steps, more "
-                             f"than the recording limit of {_RECORDING_LIMIT}; use a shorter run.duration "
-                             f"or a larger run.dt")
-        if self.ticks == 0:
-            raise ValueError(f"duration: {self.duration:g} s is shorter than one step (dt = {self.dt:g} s)")
-        return self
-
-    @property
-    def ticks(self) -> int:
-        """Number of world steps in the run."""
-        return int(round(self.duration / self.dt))
-
-
-class TargetSpec(_Strict):
-    """[target]: the stationary target (m)."""
-
-    x: Finite = 0.0
-    y: Finite = 0.0
-
-
-class GainsSpec(_Strict):
-    """[gains]: the follower law and its gains."""
-
-    c1: PositiveFloat = Field(description="gain on the heading difference wrap(g_j - g_i) (1/s)")
-    c2: PositiveFloat = Field(description="gain on sin(lambda_ij - g_i) (rad/s)")
-    law: str = Field(
-        "bearing",
-        description="follower law: a registered name, or 'module:function' (see swarm/contracts/laws.py)",
-    )
-
-
-    @field_validator("law")
-    @classmethod
-    def _law_resolves(cls, name: str) -> str:
-        from swarm.contracts.laws import LawError, check_law
-
-        try:
-            check_law(name)
-        except LawError as e:
-            raise ValueError(str(e)) from None
-        except Exception as e:  # importing the module ran its code, and that failed
-            raise ValueError(f"follower law {name!r}: cannot import it: {type(e).__name__}: {e}") from None
-        return name
-
-
-class SensingSpec(_Strict):
-    """[sensing]: who senses whom, and how followers pick their out-neighbour."""
-
-    range: PositiveFloat | None = Field(None, description="sensing range (m); unlimited if absent")
-    fov: Annotated[float, Field(gt=0, le=2 * math.pi)] | None = Field(
-        None, description="full field of view (rad) centred on the heading; 2*pi or absent = all round"
-    )
-    selection: Literal["sticky", "nearest", "fixed", "rooted"] = Field(
-        "sticky",
-        description="sticky (default): the nearest sensed agent once it has a path to a leader, "
-                    "kept until it is lost (finitely many switches, loop-free); nearest: the "
-                    "paper's rule, re-chosen every tick (can form follower-only cycles); fixed: "
-                    "the agent named by each follower's `follow`; rooted: the nearest sensed "
-                    "agent that advertises a path to a leader, re-chosen every tick",
-    )
-    hysteresis: Annotated[float, Field(ge=0, lt=1)] = Field(
-        0.0,
-        description="nearest, fixed, rooted: switch to a new nearest agent only if it is this "
-                    "fraction closer than the current one (sticky ignores it)",
-    )
-
-
-class AgentSpec(_Strict):
-    """[[agents]]: one unicycle."""
-
-    id: Annotated[AgentId, Field(description="agent id (fits the int32 wire fields)")]
-    role: Literal["leader", "follower"]
-    x: Finite
-    y: Finite
-    heading: Finite = Field(description="initial heading (rad)")
-    speed: PositiveFloat = Field(description="constant forward speed (m/s)")
-    orbit_radius: PositiveFloat | None = Field(None, description="leaders: orbit radius (m)")
-    direction: Literal["ccw", "cw"] = Field("ccw", description="leaders: orbit direction")
-    follow: AgentId | None = Field(None, description="followers: fixed out-neighbour id")
-    max_turn_rate: PositiveFloat | None = Field(None, description="turn-rate limit (rad/s)")
-
-    @model_validator(mode="after")
-    def _role_fields(self) -> "AgentSpec":
-        if self.role == "leader":
-            if self.orbit_radius is None:
-                raise ValueError("orbit_radius: a leader needs an orbit radius (m)")
-            if self.follow is not None:
-                raise ValueError("follow: a leader has no out-neighbour; remove `follow`")
-            if self.max_turn_rate is not None and self.orbit_radius < self.speed / self.max_turn_rate:
-                raise ValueError(
-                    f"orbit_radius: {self.orbit_radius} m is not reachable: speed / max_turn_rate = "
-                    f"{self.speed / self.max_turn_rate:.6g} m"
-                )
-        else:
-            if self.orbit_radius is not None:
-                raise ValueError("orbit_radius: only leaders have one; a follower's radius follows from its speed")
-        return self
-
-    @property
-    def direction_sign(self) -> int:
-        """+1 for counter-clockwise, -1 for clockwise."""
-        return 1 if self.direction == "ccw" else -1
-
-
-FAULT_KINDS = ("kill", "restart", "freeze", "thaw", "partition", "loss", "delay", "noise")
-PROCESS_FAULTS = ("kill", "restart", "freeze", "thaw")
-
-
-class FaultSpec(_Strict):
-    """[[faults]]: one scripted fault, at a simulated time."""
-
-    at: Annotated[float, Field(ge=0, allow_inf_nan=False)] = Field(description="simulated time (s)")
-    kind: Literal["kill", "restart", "freeze", "thaw", "partition", "loss", "delay", "noise"]
-    agent: AgentId | None = Field(None, description="agent id; loss/delay/noise without it hit every agent")
-    duration: PositiveFloat | None = Field(None, description="partition/loss/delay/noise: how long (s)")
-    probability: Annotated[float, Field(ge=0, le=1)] | None = Field(None, description="loss: per message")
-    what: Literal["sense", "cmd", "both"] = Field("both", description="loss: which messages")
-    delay: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = Field(
-        None, description="delay: added latency of sensor frames (s of simulated time)")
-    std: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = Field(
-        None, description="noise: standard deviation on sensed bearings and headings (rad)")
-
-    @model_validator(mode="after")
-    def _fields(self) -> "FaultSpec":
-        if self.kind in PROCESS_FAULTS + ("partition",) and self.agent is None:
-            raise ValueError(f"agent: a {self.kind} fault needs an agent id")
-        if self.kind in ("partition", "loss", "delay", "noise") and self.duration is None:
-            raise ValueError(f"duration: a {self.kind} fault needs a duration (s)")
-        needs = {"loss": "probability", "delay": "delay", "noise": "std"}.get(self.kind)
-        if needs and getattr(self, needs) is None:
-            raise ValueError(f"{needs}: a {self.kind} fault needs it")
-        return self
-
-
-class Scenario(_Strict):
+class Scenario(Strict):
     """A whole scenario file."""
 
     name: str = Field("", description="free-text name")
@@ -289,7 +114,7 @@ class Scenario(_Strict):
             raise ValueError(
                 f"run.duration: the recording would hold {ticks} ticks x {n + cap} agents ({n} + {cap} that "
                 f"may be added{default}) = {ticks * (n + cap):.3g} agent-ticks, more than the limit of "
-                f"{_RECORDING_LIMIT}; use a shorter run.duration or a larger run.dt"
+                f"{RECORDING_LIMIT}; use a shorter run.duration or a larger run.dt"
                 + (", or set run.max_added_agents lower" if cap else ""))
         return self
 

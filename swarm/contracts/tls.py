@@ -22,7 +22,9 @@ import socket
 from dataclasses import dataclass
 from pathlib import Path
 
-from swarm.contracts.credentials import Credentials, CredentialsError, private_dir, write_private
+from swarm.contracts.credentials import Credentials
+from swarm.contracts.identities import CredentialsError
+from swarm.contracts.runtime_dir import private_dir, write_private
 
 VALID_DAYS = 30
 TLS = "transport/link/tls"

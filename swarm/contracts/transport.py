@@ -15,9 +15,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from swarm.contracts import access, wire
-from swarm.contracts.credentials import OPERATOR, WORLD, Credentials, write_private
-from swarm.contracts.credentials import dial_endpoint as dial_endpoint  # re-exported
-from swarm.contracts.credentials import runtime_dir as runtime_dir  # re-exported: the one place it is decided
+from swarm.contracts.credentials import Credentials
+from swarm.contracts.identities import OPERATOR, WORLD
+from swarm.contracts.runtime_dir import dial_endpoint as dial_endpoint  # re-exported
+from swarm.contracts.runtime_dir import runtime_dir as runtime_dir  # re-exported: the one place it is decided
+from swarm.contracts.runtime_dir import write_private
 
 LEASE_MS = 1000  # a frozen (SIGSTOP) process is dropped after ~0.95 s
 CONNECT_TIMEOUT_MS = 10000

@@ -1,0 +1,105 @@
+"""Joining a run: what the world does with a join query, and the limits on claims.
+
+A claim of an agent id is admitted by the roster (world/roster.py: the id's owner and its
+claim key), and the reply carries the agent's configuration; an id the scenario does not
+have joins as a new agent (`swarm spawn`) with the spec it sends, if the run may still
+add one and the id is in the range the hub's access rules were made for. Claims are
+limited per agent id by a token bucket, so one agent's flood does not use up another's.
+zenoh callbacks only enqueue; these run on the world's main thread. A mixin of `World`
+(world/process.py), whose state it reads and changes.
+"""
+
+from __future__ import annotations
+
+import time
+
+from swarm.contracts import wire
+from swarm.contracts.brain_config import BrainConf
+from world.roster import AgentBook, admit, new_agent_spec
+
+# Join claims are limited per agent id (the hub lets agent k claim on its own key only, so
+# one agent cannot use up another's): a burst, then a claim per s. Keys of ids the run
+# cannot have (only an open hub lets those through) share one bucket.
+JOIN_BURST, JOIN_RATE = 5, 1.0
+STRANGER_BURST, STRANGER_RATE = 40, 20.0
+
+
+class TokenBucket:
+    """At most `rate` per s on average, and `burst` at once."""
+
+    def __init__(self, rate: float, burst: float):
+        self.rate, self.burst, self.level, self.at = rate, burst, burst, None
+
+    def take(self, now: float) -> bool:
+        if self.at is not None:
+            self.level = min(self.burst, self.level + (now - self.at) * self.rate)
+        self.at = now
+        if self.level < 1.0:
+            return False
+        self.level -= 1.0
+        return True
+
+
+class Joins:
+    """Join queries and new agents (a mixin: the state is World's)."""
+
+    def _join_allowed(self, key: str) -> bool:
+        try:
+            kid = wire.agent_of_key(key)
+        except wire.WireError:
+            kid = None
+        if kid is None or (kid not in self.book and kid not in self.cfg.scenario.added_id_range):
+            kid = None
+        if kid not in self.join_buckets:
+            self.join_buckets[kid] = (TokenBucket(JOIN_RATE, JOIN_BURST) if kid is not None
+                                      else TokenBucket(STRANGER_RATE, STRANGER_BURST))
+        return self.join_buckets[kid].take(time.monotonic())
+
+    def _on_join(self, query) -> None:
+        if not self._join_allowed(str(query.key_expr)):
+            self.limited("join_rate", f"join claims faster than {JOIN_BURST} at once and {JOIN_RATE:g} per s "
+                         "on one agent's key: claim refused")
+            query.reply(str(query.key_expr), wire.encode_join_reply(False, error="too many join claims; retry later"))
+            return
+        try:
+            req = wire.decode_join_request(query.payload.to_bytes() if query.payload else b"")
+            aid = req["id"]
+            if wire.agent_of_key(str(query.key_expr)) != aid:
+                raise wire.WireError(f"a claim of agent {aid} on another agent's join key")
+            if aid not in self.core.index:
+                if req.get("spec") is None:
+                    raise wire.WireError(f"agent {aid} is not in scenario {self.cfg.scenario.name!r} "
+                                         f"(ids: {', '.join(map(str, self.core.scenario.ids))}); "
+                                         "a new agent needs a spec (swarm spawn --role --x --y ...)")
+                self._check_addable(aid)
+                self.add_agent(aid, req["spec"])
+            key = admit(self.core, self.book[aid], req, time.monotonic())
+            x, y, h = self.core.pose(aid)
+            reply = wire.encode_join_reply(True, run=self.cfg.run, agent=aid, tick=self.core.tick, key=key,
+                                           clock=self.cfg.clock, pose=[x, y, h],
+                                           brain=BrainConf.from_scenario(self.core.scenario, aid).to_json())
+        except wire.WireError as e:
+            reply = wire.encode_join_reply(False, error=str(e))
+        query.reply(str(query.key_expr), reply)
+
+    def _check_addable(self, aid: int) -> None:
+        """A new agent takes an id of the range the hub's access rules were made for, and
+        only as many join the run as the scenario allows (run.max_added_agents)."""
+        s = self.cfg.scenario
+        if len(self.book) - len(s.ids) >= s.added_agents_cap:
+            self.limited("added_agents", f"{s.added_agents_cap} agents added already (run.max_added_agents): "
+                         f"agent {aid} refused")
+            raise wire.WireError(f"agent {aid}: this run has added {s.added_agents_cap} agents already, "
+                                 "its limit (run.max_added_agents)")
+        ids = s.added_id_range
+        if aid not in ids:
+            raise wire.WireError(f"agent {aid}: agents added to this run take ids {ids.start}..{ids.stop - 1}")
+
+    def add_agent(self, aid: int, spec: dict) -> None:
+        """A new agent joins the run with its own spec (`swarm spawn`); raises WireError."""
+        a = new_agent_spec(aid, spec, self.core)
+        self.engine.add_agent(a)
+        self.book[aid] = AgentBook()
+        self.sense_pub[aid] = self.session.declare_publisher(wire.agent_key(self.cfg.run, aid, "sense"),
+                                                             express=True)
+        self.event("add", aid, f"new {a.role} at ({a.x:g}, {a.y:g}) m, {a.speed:g} m/s")
