@@ -1,5 +1,6 @@
-"""Shared fixtures: a small valid scenario as a dict, a TOML writer for it, and `rt` (a
-private runtime for the multi-process tests)."""
+"""Shared fixtures: a small valid scenario as a dict, a TOML writer for it, `rt` (a
+private runtime for the multi-process tests) and `shipped_sim` (each shipped scenario run
+once by `swarm sim`, for every test that checks it or compares with it)."""
 
 from __future__ import annotations
 
@@ -79,6 +80,28 @@ def write_toml(tmp_path):
         return p
 
     return write
+
+
+@pytest.fixture(scope="session")
+def shipped_sim(tmp_path_factory):
+    """shipped_sim(name) -> (CLI result, out dir): scenarios/<name>.toml run in full by
+    `swarm sim --no-plots` in this process, once per session (the convergence checks and
+    the `swarm up` equivalence tests share it)."""
+    from typer.testing import CliRunner
+
+    from swarm.cli import app
+
+    scenarios = Path(__file__).resolve().parent.parent / "scenarios"
+    cache: dict[str, tuple] = {}
+
+    def run(name: str):
+        if name not in cache:
+            out = tmp_path_factory.mktemp(f"sim-{name}")
+            res = CliRunner().invoke(app, ["sim", str(scenarios / f"{name}.toml"), "--out", str(out), "--no-plots"])
+            cache[name] = (res, out)
+        return cache[name]
+
+    return run
 
 
 @pytest.fixture

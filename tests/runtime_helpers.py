@@ -511,6 +511,19 @@ def run_sim(tracker: ProcessTracker, scenario: Path | str, out: Path, *extra, ti
     return load_trajectory(out), json.loads((Path(out) / "summary.json").read_text())
 
 
+def sim_results(out: Path) -> tuple[dict[str, np.ndarray], dict]:
+    """(trajectory arrays, summary) of a finished `swarm sim` in `out`."""
+    return load_trajectory(out), json.loads((Path(out) / "summary.json").read_text())
+
+
+def first_ticks(traj: dict[str, np.ndarray], summary: dict, ticks: int) -> tuple[dict, dict]:
+    """A whole run cut to its first `ticks` ticks: the rows 0..ticks of every per-tick array,
+    and the events of those ticks (a run is the same whatever its duration, up to its end)."""
+    rows = len(traj["t"])
+    cut = {k: v[:ticks + 1] if v.ndim and v.shape[0] == rows else v for k, v in traj.items()}
+    return cut, {**summary, "events": [e for e in summary["events"] if e.get("tick", 0) <= ticks]}
+
+
 def replay_events(events: list[dict], ids, rows: int) -> tuple[np.ndarray, np.ndarray]:
     """The (out, alive) arrays a recording must hold given its events.
 

@@ -22,18 +22,11 @@ def invoke(*args: str):
     return CliRunner().invoke(app, [str(a) for a in args])
 
 
-@pytest.fixture(scope="module")
-def shipped_run(tmp_path_factory):
-    """shipped_run(path) -> (CLI result, out dir): each shipped scenario simulated once, in full."""
-    cache: dict[Path, tuple] = {}
-
-    def run(path: Path):
-        if path not in cache:
-            out = tmp_path_factory.mktemp(path.stem)
-            cache[path] = (invoke("sim", path, "--out", out, "--no-plots"), out)
-        return cache[path]
-
-    return run
+@pytest.fixture
+def shipped_run(shipped_sim):
+    """shipped_run(path) -> (CLI result, out dir): each shipped scenario simulated once, in
+    full (shared with the runtime tests: conftest.shipped_sim)."""
+    return lambda path: shipped_sim(path.stem)
 
 
 def test_scenarios_found():

@@ -27,7 +27,7 @@ import psutil
 import pytest
 
 from runtime_helpers import (SCENARIOS, agent_info, check_time_column, events_of, open_hub, open_session,
-                             replay_events, run_sim, start_up, swarm_cmd, wait_for)
+                             replay_events, run_sim, sim_results, start_up, swarm_cmd, wait_for)
 from malformed import (
     ADMIN_BAD,
     BAD_JSON,
@@ -102,7 +102,7 @@ def _stop(up, sig=signal.SIGINT, timeout=60.0) -> int:
 
 
 # --- 1. scenarios/faults.toml: one fault of each kind -------------------------------------------
-def test_faults_toml_through_up(rt, tmp_path):
+def test_faults_toml_through_up(rt, tmp_path, shipped_sim):
     up = start_up(rt.tracker, SCENARIOS / "faults.toml", tmp_path / "run", "--clock", "lockstep")
     t0 = time.monotonic()
     summ, traj = up.results(240)
@@ -155,7 +155,9 @@ def test_faults_toml_through_up(rt, tmp_path):
     assert by_kind["loss"]["commands_missed"] > 0, by_kind["loss"]
 
     # One engine: every fault kind means the same in `swarm sim`, so the runs are equal.
-    sim_traj, sim_summ = run_sim(rt.tracker, SCENARIOS / "faults.toml", tmp_path / "sim")
+    res, sim_out = shipped_sim("faults")  # the session's run of faults.toml (conftest)
+    assert res.exit_code == 0, res.output[-3000:]
+    sim_traj, sim_summ = sim_results(sim_out)
     dist = max(np.max(np.abs(traj["x"] - sim_traj["x"])), np.max(np.abs(traj["y"] - sim_traj["y"])))
     print(f"  swarm up vs swarm sim: max |dx|, |dy| = {dist:.3g} m")
     assert dist < 1e-9

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from runtime_helpers import (SCENARIOS, Runtime, agent_cmd, check_time_column, events_of, observe_world,
-                             replay_events, run_sim, start_up)
+                             first_ticks, replay_events, run_sim, sim_results, start_up)
 from swarm.contracts.scenario import load_scenario
 
 pytestmark = pytest.mark.slow
@@ -31,11 +31,13 @@ EQUIV_DURATION = {"case1": 150.0}
 
 
 @pytest.fixture(scope="module")
-def lockstep_runs(tmp_path_factory):
+def lockstep_runs(tmp_path_factory, shipped_sim):
     """get(name) -> the scenario run (full duration unless EQUIV_DURATION says) by `swarm sim`
     and `swarm up --clock lockstep`.
 
-    Each pair runs once per module (the case2 run serves equivalence and convergence).
+    Each pair runs once per module (the case2 run serves equivalence and convergence); the
+    sim is the session's whole run of the scenario (conftest.shipped_sim), cut to the
+    duration of the `swarm up` run.
     """
     base = tmp_path_factory.mktemp("lockstep")
     cache: dict[str, dict] = {}
@@ -46,7 +48,11 @@ def lockstep_runs(tmp_path_factory):
             scen = SCENARIOS / f"{name}.toml"
             d = EQUIV_DURATION.get(name)
             extra = ("--duration", str(d)) if d else ()
-            sim_traj, sim_summary = run_sim(r.tracker, scen, base / f"{name}-sim", *extra)
+            res, sim_out = shipped_sim(name)
+            assert res.exit_code == 0, res.output[-3000:]
+            sim_traj, sim_summary = sim_results(sim_out)
+            if d:
+                sim_traj, sim_summary = first_ticks(sim_traj, sim_summary, round(d / load_scenario(scen).run.dt))
             up = start_up(r.tracker, scen, base / f"{name}-up", "--clock", "lockstep", *extra, name=f"up-{name}")
             t0 = time.monotonic()
             rc = up.launcher.wait(240)
@@ -216,7 +222,10 @@ def _stop_up(rt: Runtime, out_dir, sig: int, expected: int) -> float:
     return stop_s
 
 
-@pytest.mark.parametrize("attempt", range(10))
+# Six stops at whatever moment each run has reached (with SIGTERM below, seven): the race
+# the world's signal handling had (test_world_honours_sigterm_while_publishing) showed
+# in about one stop in ten, and that test now pins it deterministically.
+@pytest.mark.parametrize("attempt", range(6))
 def test_ctrl_c_leaves_no_process(rt, tmp_path, attempt):
     _stop_up(rt, tmp_path, signal.SIGINT, 130)
 
