@@ -1,0 +1,32 @@
+"""swarm: an agent-per-process runtime for bearing-based circumnavigation over zenoh.
+
+`import swarm` is the Python API (swarm/api.py, README "Python API"): `swarm.load`,
+`swarm.from_dict`, `swarm.Builder`, `swarm.simulate`, `swarm.open_run`, `swarm.up`,
+`swarm.Results`... Every name is imported on first use (module `__getattr__`), so
+`import swarm.contracts.wire` in an agent process still costs nothing more than it did.
+"""
+
+_EXPORTS = {
+    "api": ("Builder", "OutDirError", "Record", "Results", "RunReadError", "Scenario", "ScenarioError", "Summary",
+            "AgentTrack", "open_run", "simulate", "up"),
+    "api_scenario": ("from_dict", "load", "to_toml"),
+    "api_up": ("LiveState", "UpError", "UpRun"),
+}
+_WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str):
+    module = _WHERE.get(name)
+    if module is None:
+        raise AttributeError(f"module 'swarm' has no attribute {name!r}")
+    from importlib import import_module
+
+    value = getattr(import_module(f"swarm.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_WHERE))
