@@ -3,7 +3,7 @@ own module and added here with its `register(app)`; failures are one message and
 
     up_cli       up                             (run a scenario as processes)
     run_cli      sim, world, agent              (run a scenario, or a part of one)
-    offline_cli  check, schema, plot            (no running swarm needed)
+    offline_cli  check, schema; plot, export    (no running swarm needed; plot_cli.py)
     live_cli     runs, agents, graph, watch     (read a live run)
     control_cli  kill, spawn, pause, resume     (act on a live run)
     access_cli   credentials                    (hand an identity to another machine)

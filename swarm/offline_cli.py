@@ -1,5 +1,6 @@
-"""Commands that need no running swarm (`swarm check / schema / plot`), and the small helpers
-every scenario command shares (the scenario argument, reading it, failing, the plots)."""
+"""Commands that need no running swarm (`swarm check / schema`; `plot / export` live in
+plot_cli.py), and the small helpers every scenario command shares (the scenario argument,
+reading it, failing, the plots, rebuilding results from a recording)."""
 
 from __future__ import annotations
 
@@ -27,12 +28,12 @@ def read_scenario(path: Path) -> Scenario:
         raise fail(str(e), 2) from None
 
 
-def render_run_plots(out: Path) -> None:
-    """The PNG plots of the run in `out`, their names printed; a plotting failure exits 1."""
+def render_run_plots(out: Path, formats: tuple[str, ...] = ("png",)) -> None:
+    """The figures of the run in `out` in `formats`, their names printed; a plotting failure exits 1."""
     from swarm.plots import PlotError, render_plots
 
     try:
-        files = render_plots(out)
+        files = render_plots(out, formats=formats)
     except PlotError as e:
         raise fail(str(e), 1) from None
     typer.echo("plots: " + ", ".join(p.name for p in files))
@@ -51,8 +52,12 @@ def check(scenario: ScenarioArg) -> None:
     ids = s.added_id_range
     typer.echo(f"  added agents: up to {s.added_agents_cap}"
                + (f" (ids {ids.start}..{ids.stop - 1})" if ids else " (run.max_added_agents = 0)"))
-    typer.echo(f"  target: ({s.target.x}, {s.target.y}) m; gains: law={s.gains.law}, "
-               f"c1={s.gains.c1}, c2={s.gains.c2}")
+    typer.echo(f"  target: ({s.target.x}, {s.target.y}) m; gains: c1={s.gains.c1}, c2={s.gains.c2}")
+    from swarm.contracts.laws import follower_law_name
+
+    follower = follower_law_name(s.gains.law, s.law.follower)[1]
+    params = ", ".join(f"{k}={v:g}" for k, v in s.law.params.items())
+    typer.echo(f"  laws: follower={follower}, leader={s.law.leader}" + (f"; params: {params}" if params else ""))
     sens = s.sensing
     typer.echo(f"  sensing: range={'unlimited' if sens.range is None else f'{sens.range} m'}, "
                f"fov={'all round' if sens.fov is None else f'{sens.fov} rad'}, "
@@ -105,9 +110,6 @@ def schema() -> None:
     typer.echo(json.dumps(scenario_json_schema(), indent=2))
 
 
-RunDirArg = Annotated[Path, typer.Argument(help="a run directory written by swarm sim / swarm up")]
-
-
 def export_results(run_dir: Path) -> bool:
     """trajectory.npz and summary.json from the run's recording.mcap when they are missing
     (the world died before its end); one line says what was recovered. False: nothing to do."""
@@ -128,44 +130,11 @@ def export_results(run_dir: Path) -> bool:
     return True
 
 
-def plot(run_dir: RunDirArg) -> None:
-    """Re-render the PNG plots of a run from its trajectory.npz and summary.json.
-
-    A run whose world died before writing them is first rebuilt from its recording.mcap
-    (as `swarm export` does).
-
-    Example: swarm plot runs/case2
-    """
-    if not run_dir.is_dir():
-        raise fail(f"{run_dir}: not a directory", 2)
-    export_results(run_dir)
-    render_run_plots(run_dir)
-
-
-def export(
-    run_dir: RunDirArg,
-    plots: Annotated[bool, typer.Option(help="render PNG plots too")] = True,
-) -> None:
-    """Rebuild trajectory.npz and summary.json of a run from its recording.mcap.
-
-    Results already written are kept. For a run whose world was killed: everything that reached the disk (all but the last
-    second at most) becomes a valid run directory; the summary says "complete": false.
-
-    Example: swarm export runs/case2-1a2b3c
-    """
-    if not run_dir.is_dir():
-        raise fail(f"{run_dir}: not a directory", 2)
-    if not export_results(run_dir):
-        if not (run_dir / "recording.mcap").is_file():
-            raise fail(f"{run_dir}: no recording.mcap to export from", 1)
-        typer.echo(f"{run_dir}: trajectory.npz and summary.json are already there; nothing to recover")
-    if plots:
-        render_run_plots(run_dir)
-
-
 def register(app: typer.Typer) -> None:
     """Add the offline commands to the main app."""
+    from swarm import plot_cli
+
     app.command("check")(check)
     app.command("schema")(schema)
-    app.command("plot")(plot)
-    app.command("export")(export)
+    app.command("plot")(plot_cli.plot)
+    app.command("export")(plot_cli.export)

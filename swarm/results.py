@@ -14,6 +14,15 @@ from pathlib import Path
 from world.recording import RECORDING_FILE, RESULT_FILES, SUMMARY_FILE, TRAJECTORY_FILE
 
 PLOT_NAMES = ("trajectories.png", "distance.png", "control.png", "graph.png", "overview.png", "neighbours.png")
+PLOT_SUFFIXES = (".png", ".pdf", ".svg")  # `swarm plot --format`
+DERIVED_NAMES = ("animation.gif",)  # `swarm plot --animate`; `swarm export --csv` writes csv/agent-<id>.csv
+
+
+def derived_files(out: Path) -> list[Path]:
+    """The files made from a run's results that `out` holds: figures in every format,
+    the animation, the per-agent CSVs."""
+    names = [Path(n).with_suffix(s).name for n in PLOT_NAMES for s in PLOT_SUFFIXES] + list(DERIVED_NAMES)
+    return [out / n for n in names if (out / n).exists()] + sorted((out / "csv").glob("agent-*.csv"))
 
 
 class OutDirError(Exception):
@@ -35,8 +44,10 @@ def claim_out_dir(out: Path, force: bool) -> None:
                           "choose another directory, or pass --force to replace them")
     try:
         out.mkdir(parents=True, exist_ok=True)
-        for name in (*held, *PLOT_NAMES):
+        for name in held:
             (out / name).unlink(missing_ok=True)
+        for path in derived_files(out):  # never an old run's figures next to a new run's data
+            path.unlink(missing_ok=True)
         if force:  # a crash's cause is read from the log's last line: never the old run's
             for log in (out / "logs").glob("*.log"):
                 log.unlink()

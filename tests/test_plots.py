@@ -124,6 +124,7 @@ def assert_pngs(run_dir: Path, paths: list[Path]) -> None:
         assert data[:8] == PNG_MAGIC, name
 
 
+@pytest.mark.slow  # a whole run in-process
 def test_render_writes_every_png(tmp_path: Path) -> None:
     run_dir = make_run(tmp_path / "run")
     assert not list(run_dir.glob("*.png"))
@@ -222,3 +223,211 @@ def test_bad_summary_raises(tmp_path: Path) -> None:
     (run_dir / "summary.json").write_text("{not json")
     with pytest.raises(PlotError, match="summary.json"):
         render_plots(run_dir)
+
+
+# -- figures fit for a paper: formats, colours, the control range, labels, CSV, animation ------------
+
+PDF_MAGIC = b"%PDF"
+ALL_FORMATS = ("png", "pdf", "svg")
+
+
+def assert_valid_figure(path: Path) -> None:
+    """A whole file of its format: PNG magic, PDF header and trailer, SVG parsing as XML."""
+    import xml.etree.ElementTree as ET
+
+    data = path.read_bytes()
+    assert len(data) > 1000, path.name
+    if path.suffix == ".png":
+        assert data[:8] == PNG_MAGIC, path.name
+    elif path.suffix == ".pdf":
+        assert data.startswith(PDF_MAGIC) and b"%%EOF" in data[-64:], path.name
+    else:
+        assert ET.fromstring(data).tag == "{http://www.w3.org/2000/svg}svg", path.name
+
+
+def regroup(run_dir: Path, n_leaders: int) -> Path:
+    """Make every follower follow leader (k mod n_leaders): one tree per leader."""
+    path = run_dir / "trajectory.npz"
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    ids, alive = arrays["ids"], arrays["alive"]
+    for j in range(n_leaders, len(ids)):
+        arrays["out"][:, j] = np.where(alive[:, j], ids[j % n_leaders], -1)
+    np.savez(path, **arrays)
+    summary = json.loads((run_dir / "summary.json").read_text())
+    for j in range(n_leaders, len(ids)):
+        summary["agents"][str(int(ids[j]))]["out_neighbour"] = int(ids[j % n_leaders])
+    (run_dir / "summary.json").write_text(json.dumps(summary))
+    return run_dir
+
+
+def test_save_figure_writes_every_format(tmp_path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    from swarm.plots.render import save_figure
+
+    fig, ax = plt.subplots(figsize=(2, 2))
+    ax.plot([0, 1], [0, 1], label="L1")
+    ax.set_title("tiny")
+    paths = save_figure(fig, tmp_path / "tiny.png", ALL_FORMATS)
+    assert [p.name for p in paths] == ["tiny.png", "tiny.pdf", "tiny.svg"]
+    for p in paths:
+        assert_valid_figure(p)
+    assert not list(tmp_path.glob(".*.tmp"))  # written to a temporary name, then renamed
+    assert not plt.fignum_exists(fig.number)
+
+
+def test_unknown_format_is_refused() -> None:
+    from swarm.plots import check_formats
+
+    assert check_formats(["PDF", "png", "pdf"]) == ("pdf", "png")
+    with pytest.raises(ValueError, match="'jpg'.*png, pdf, svg"):
+        check_formats(["png", "jpg"])
+    with pytest.raises(ValueError, match="no format"):
+        check_formats([])
+
+
+def test_every_agent_has_its_own_colour_and_leaders_are_marked(tmp_path: Path) -> None:
+    from swarm.plots.palette import agent_looks, palette
+
+    for n in (6, 9, 18, 30, 54):
+        cols = [tuple(c) for c in palette(n)]
+        assert len(set(cols)) == n, n
+        assert not [c for c in cols if abs(c[0] - c[1]) < 0.02 and abs(c[1] - c[2]) < 0.02]  # no grey: "dead"
+    assert len({tuple(c) for c in palette(80)}) == 54  # cycled past the 54 colours
+    run = load_run(regroup(make_run(tmp_path / "run", ticks=20, n_leaders=3, n_followers=27, drop=None), 3))
+    looks = agent_looks(run)
+    assert len({tuple(c) for c in looks.colours}) == 30
+    assert looks.labels[:4] == ["L1", "L2", "L3", "4"]
+    assert looks.width(0) > looks.width(3)
+    assert [tr.root for tr in looks.trees] == [1, 2, 3]
+    assert sorted(j for tr in looks.trees for j in tr.columns) == list(range(30))
+
+
+def test_control_range_clips_the_leaders_start_on_case2(tmp_path: Path) -> None:
+    """Case 2's leaders start at their 10 rad/s limit; the followers turn at about 1 rad/s.
+    The y-range comes from the followers and leaves the spike out, marked as clipped."""
+    from swarm.contracts.scenario import load_scenario
+    from swarm.plots.clipping import clip_text, control_range
+    from swarm.plots.palette import agent_looks
+    from swarm.sim import run_sim
+    from world.recording import write_run
+
+    scenario = load_scenario(Path(__file__).resolve().parent.parent / "scenarios" / "case2.toml")
+    write_run(run_sim(scenario, duration=3.0), tmp_path)
+    run = load_run(tmp_path)
+    rng = control_range(run)
+    u = np.where(run.alive, run.u, np.nan)
+    assert np.nanmax(u) >= 9.9  # the spike is there...
+    assert rng.hi < 5.0  # ...and out of the range
+    followers = u[:, run.followers()]
+    assert rng.lo <= np.nanmin(followers) and np.nanmax(followers) <= rng.hi  # every follower sample in view
+    assert rng.lo <= 0.0 <= rng.hi
+    spike = rng.clipped[0]
+    assert run.is_leader(spike.column) and spike.value >= 9.9 and spike.t == 0.0
+    assert {c.column for c in rng.clipped} <= set(run.leaders())
+    assert clip_text(rng.clipped, agent_looks(run)).startswith("clipped: 10 rad/s at t=0 (L6)")
+
+
+def test_labels_and_markers_are_kept_apart() -> None:
+    from swarm.plots.placement import spread_1d, stack_offsets
+
+    want = np.array([0.50, 0.50, 0.51, 0.10, 0.98, 0.99])
+    got = spread_1d(want, 0.05, lo=0.0, hi=1.0)
+    order = np.argsort(want, kind="stable")
+    assert np.all(np.diff(got[order]) >= 0.05 - 1e-12)  # apart, order kept
+    assert got.min() >= 0.0 and got.max() <= 1.0 + 1e-12
+    assert abs(got[3] - 0.10) < 1e-12  # a label with room stays where it is
+    off = stack_offsets(np.zeros(8), np.zeros(8), sep=4.0, step=7.0, levels=6)
+    pos = off + 0.0
+    assert len({(round(a, 6), round(b, 6)) for a, b in pos}) == 8  # no two markers on the same spot
+    assert off[:, 1].max() == 5 * 7.0 and off[:, 0].max() == 4.0  # a second column after six
+
+
+def test_export_csv_matches_the_trajectory(tmp_path: Path) -> None:
+    import csv
+
+    from swarm.run_csv import COLUMNS, csv_name, write_agent_csvs
+
+    run_dir = make_run(tmp_path / "run", ticks=40, drop=(1, 20))
+    paths = write_agent_csvs(run_dir)
+    run = load_run(run_dir)
+    assert [p.name for p in paths] == [csv_name(a) for a in run.ids]
+    for j, path in enumerate(paths):
+        with path.open(newline="") as fh:
+            rows = list(csv.reader(fh))
+        assert tuple(rows[0]) == COLUMNS
+        assert len(rows) - 1 == run.n_rows
+        table = np.array([[float(v) for v in r] for r in rows[1:]])
+        col = {name: table[:, k] for k, name in enumerate(COLUMNS)}
+        np.testing.assert_allclose(col["t"], run.t, rtol=1e-9)
+        np.testing.assert_allclose(col["x"], run.x[:, j], rtol=1e-8)
+        np.testing.assert_allclose(col["u"], run.u[:, j], rtol=1e-8)  # NaN where u is NaN
+        assert (col["out"] == run.out[:, j]).all() and (col["alive"] == run.alive[:, j]).all()
+        r = np.hypot(run.x[:, j] - run.target[0], run.y[:, j] - run.target[1])
+        np.testing.assert_allclose(col["radial_error"], r - col["expected_radius"], rtol=1e-7, atol=1e-7)
+
+
+def test_cli_refuses_a_bad_format_and_exports_csv(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from swarm.cli import app
+
+    run_dir = make_run(tmp_path / "run", ticks=20)
+    res = CliRunner().invoke(app, ["plot", str(run_dir), "--format", "png,jpg"])
+    assert res.exit_code == 2 and "--format" in res.stderr and "'jpg'" in res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1 and "Traceback" not in res.output
+    assert not list(run_dir.glob("*.png"))  # refused before any work
+    res = CliRunner().invoke(app, ["export", str(run_dir), "--csv", "--no-plots"])
+    assert res.exit_code == 0, res.output
+    assert len(list((run_dir / "csv").glob("agent-*.csv"))) == 3
+
+
+@pytest.mark.slow  # renders every figure three times: the long tier
+def test_render_writes_every_format(tmp_path: Path) -> None:
+    run_dir = make_run(tmp_path / "run", ticks=200)
+    paths = render_plots(run_dir, formats=ALL_FORMATS)
+    assert paths == [run_dir / Path(n).with_suffix("." + f).name for n in EXPECTED_PNGS for f in ALL_FORMATS]
+    for p in paths:
+        assert_valid_figure(p)
+
+
+@pytest.mark.slow  # draws two panels of a 30-agent run: the long tier
+def test_a_large_swarm_is_drawn_by_tree_in_the_same_colours(tmp_path: Path) -> None:
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import to_rgba
+
+    from swarm.plots.context import make_context
+    from swarm.plots.graph import panel_graph
+    from swarm.plots.render import figure
+    from swarm.plots.trajectories import panel_trajectories
+
+    run_dir = regroup(make_run(tmp_path / "run", ticks=100, n_leaders=3, n_followers=27, drop=None), 3)
+    ctx = make_context(load_run(run_dir))
+    fig = figure("distance.png", ctx, "")
+    titles = [ax.get_title() for ax in fig.axes if ax.get_visible()]
+    assert titles == ["tree of L1", "tree of L2", "tree of L3"]  # small multiples, a panel per tree
+    plt.close(fig)
+    fig, (a, b) = plt.subplots(1, 2, figsize=(12, 6), layout="constrained")
+    panel_graph(a, ctx)
+    panel_trajectories(b, ctx)
+    nodes = [tuple(c.get_facecolor()[0]) for c in a.collections if len(c.get_offsets()) == 1]
+    node_colours = {to_rgba(c) for c in nodes}
+    line_colours = {to_rgba(line.get_color()) for line in b.lines if line.get_linestyle() == "-"}
+    for colour in ctx.looks.colours:
+        assert to_rgba(colour) in node_colours and to_rgba(colour) in line_colours
+    plt.close(fig)
+
+
+@pytest.mark.slow  # encodes a GIF: the long tier
+def test_animation_writes_a_gif_of_several_frames(tmp_path: Path) -> None:
+    from swarm.plots import ANIMATION_FILE, render_animation
+    from swarm.plots.animate import gif_frames
+
+    run_dir = make_run(tmp_path / "run", ticks=300, drop=(1, 150))  # 3 s
+    seen = []
+    path = render_animation(run_dir, max_frames=8, progress=lambda i, n: seen.append((i, n)))
+    assert path == run_dir / ANIMATION_FILE
+    assert path.read_bytes()[:6] in (b"GIF87a", b"GIF89a")
+    assert gif_frames(path) == 8
+    assert seen[-1] == (8, 8) and len(seen) == 8

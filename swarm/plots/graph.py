@@ -10,16 +10,25 @@ from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
+from matplotlib.colors import to_rgb
 from matplotlib.lines import Line2D
 from matplotlib.patches import FancyArrowPatch
 
-from swarm.plots.style import DEAD_COLOUR, FLAG_COLOUR, role_colour, role_handles, size_for
-from world.run_reader import RunData, final_graph, switch_count, switch_counts
+from swarm.plots.context import Ctx
+from swarm.plots.style import DEAD_COLOUR, FLAG_COLOUR, size_for
+from world.run_reader import final_graph, switch_count, switch_counts
 
 MAX_LISTED = 12  # ids listed in the graph's 'no path to a leader' note
 
 
-def panel_graph(ax: Axes, run: RunData, colours: list[Any]) -> None:
+def text_colour(face: Any) -> str:
+    """Black or white, whichever reads better on `face`."""
+    r, g, b = to_rgb(face)
+    return "k" if 0.299 * r + 0.587 * g + 0.114 * b > 0.5 else "white"
+
+
+def panel_graph(ax: Axes, ctx: Ctx) -> None:
+    run, looks = ctx.run, ctx.looks
     n = run.n_agents
     edges, dead, orphans = final_graph(run)
     # nodes on a circle, first agent at the top, clockwise in scenario order
@@ -39,12 +48,14 @@ def panel_graph(ax: Axes, run: RunData, colours: list[Any]) -> None:
         ))
     for j, a in enumerate(run.ids):
         a = int(a)
-        face = DEAD_COLOUR if a in dead else colours[j]
+        face = DEAD_COLOUR if a in dead else looks.colours[j]
         flagged = a in orphans
+        if looks.leader[j]:  # a leader: a black ring round its node
+            ax.scatter(*pos[a], s=node_s * 1.55, c="white", edgecolors="k", linewidths=2.2, zorder=2.9)
         ax.scatter(*pos[a], s=node_s, c=[face], edgecolors=FLAG_COLOUR if flagged else "k",
                    linewidths=2.5 if flagged else 0.8, zorder=3)
-        ax.text(*pos[a], str(a), ha="center", va="center", fontsize=fs, zorder=4,
-                color="white" if (run.is_leader(j) and a not in dead) else "k")
+        ax.text(*pos[a], looks.labels[j], ha="center", va="center", fontsize=fs * (0.9 if looks.leader[j] else 1.0),
+                zorder=4, color=text_colour(face), fontweight="bold" if looks.leader[j] else "normal")
     ax.set_aspect("equal")
     ax.set_xlim(-1.3, 1.3)
     ax.set_ylim(-1.3, 1.3)
@@ -54,7 +65,10 @@ def panel_graph(ax: Axes, run: RunData, colours: list[Any]) -> None:
         s.set_visible(False)
     n_sw = switch_count(run)
     ax.set_title(f"(a) final communication graph, after {n_sw} switch{'es' if n_sw != 1 else ''}")
-    handles = role_handles(run, ls="", marker="o", ms=9, mec="k")
+    handles = [Line2D([], [], ls="", marker="o", ms=9, mfc="0.85", mec="k", label="follower (id)")]
+    if run.leaders():
+        handles.insert(0, Line2D([], [], ls="", marker="o", ms=9, mfc="0.85", mec="k", mew=2.2,
+                                 label="leader (L + id, ringed)"))
     if dead:
         handles.append(Line2D([], [], ls="", marker="o", ms=9, mfc=DEAD_COLOUR, mec="k", label="dead"))
     if orphans:
@@ -72,10 +86,11 @@ def panel_graph(ax: Axes, run: RunData, colours: list[Any]) -> None:
                 transform=ax.transAxes, ha="right", va="bottom", fontsize=7, color=FLAG_COLOUR)
 
 
-def panel_neighbours(ax: Axes, run: RunData, colours: list[Any]) -> None:
-    """One row per follower: bars coloured by the out-neighbour it followed over time,
-    labelled with that id where the bar is wide enough; hatched red: none (loitering);
-    grey: not alive."""
+def panel_neighbours(ax: Axes, ctx: Ctx) -> None:
+    """One row per follower: bars in the colour of the out-neighbour it followed over time,
+    labelled with that agent's label where the bar is wide enough; hatched red: none
+    (loitering); grey: not alive."""
+    run, looks = ctx.run, ctx.looks
     followers = run.followers()
     index = run.column_of()
     t = run.t
@@ -95,25 +110,27 @@ def panel_neighbours(ax: Axes, run: RunData, colours: list[Any]) -> None:
             elif o == -1:
                 kw = dict(facecolor="white", edgecolor=FLAG_COLOUR, hatch="////", lw=0.0)
             else:
-                kw = dict(color=colours[index[o]] if o in index else "0.3", ec="k", lw=0.3)
+                kw = dict(color=looks.colours[index[o]] if o in index else "0.3", ec="k", lw=0.3)
             ax.barh(row, x1 - x0, left=x0, height=0.7, **kw)
             if o >= 0 and (x1 - x0) > 0.04 * span:
-                ax.text(0.5 * (x0 + x1), row, str(o), ha="center", va="center", fontsize=fs)
-    ax.set_yticks(range(len(followers)), [str(int(run.ids[j])) for j in followers], fontsize=fs)
-    ax.set_ylim(len(followers) - 0.5, -0.5)
+                face = looks.colours[index[o]] if o in index else "0.3"
+                ax.text(0.5 * (x0 + x1), row, looks.labels[index[o]] if o in index else str(o), ha="center",
+                        va="center", fontsize=fs, color=text_colour(face))
+    ax.set_yticks(range(len(followers)), [looks.labels[j] for j in followers], fontsize=fs)
+    for tick, j in zip(ax.get_yticklabels(), followers):
+        tick.set_bbox(dict(boxstyle="round,pad=0.15", fc=looks.colours[j], ec="none", alpha=0.55))
+    ax.set_ylim(max(len(followers), 1) - 0.5, -0.5)
     ax.set_xlim(float(t[0]), t_end)
     ax.set_xlabel("t (s)")
     ax.set_ylabel("follower")
     counts = switch_counts(run)
     ax.set_title(f"out-neighbour of each follower over time ({sum(counts)} switches)")
     ax.grid(True, axis="x", lw=0.3, alpha=0.5)
-    handles = [Line2D([], [], ls="", marker="s", ms=8, mfc=role_colour(True), mec="k",
-                      label="a leader (bar text: its id)"),
-               Line2D([], [], ls="", marker="s", ms=8, mfc=role_colour(False), mec="k", label="a follower"),
+    handles = [Line2D([], [], ls="", marker="s", ms=8, mfc="0.85", mec="k",
+                      label="bar: the out-neighbour followed (its colour and label; L = a leader)"),
                Line2D([], [], ls="", marker="s", ms=8, mfc="white", mec=FLAG_COLOUR, label="none (loitering)"),
                Line2D([], [], ls="", marker="s", ms=8, mfc=DEAD_COLOUR, mec="none", label="not alive")]
-    ax.legend(handles=handles, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.18 - 0.5 / max(len(followers), 1)),
-              ncol=4, framealpha=0.8)
+    ax.figure.legend(handles=handles, fontsize=7, loc="outside lower center", ncol=3, framealpha=0.8)
     ax.annotate("switches", (1.0, 1.0), xycoords="axes fraction", xytext=(3, 2), textcoords="offset points",
                 va="bottom", fontsize=fs, color="0.3")
     for k, j in enumerate(followers):

@@ -1,25 +1,37 @@
-"""`render_plots`: read a run directory and write its PNGs (see `PLOT_FILES`) next to
-the data, one figure per panel plus the paper-like 2x2 overview."""
+"""`render_plots`: read a run directory and write its figures (see `PLOT_FILES`) next to
+the data, in PNG, PDF and/or SVG: one figure per panel plus the paper-like 2x2 overview.
+Above `GROUP_ABOVE` agents distance and control become small multiples, a panel per tree
+(groups.py); the overview keeps the paper's four panels."""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, Iterable
 
 import matplotlib.pyplot as plt
+from matplotlib.figure import Figure
 
+from swarm.plots.context import GROUP_ABOVE, Ctx, grouped, make_context
 from swarm.plots.graph import panel_graph, panel_neighbours
-from swarm.plots.style import DPI, MAX_POINTS, agent_colours, decimation_rows
+from swarm.plots.groups import grouped_control, grouped_distance
+from swarm.plots.style import DPI, MAX_POINTS
 from swarm.plots.timeseries import panel_control, panel_distance
+from swarm.plots.trajectories import figure_size as trajectories_size
 from swarm.plots.trajectories import panel_trajectories
 from swarm.results import PLOT_NAMES
-from world.run_reader import RunData, load_run, run_events
+from world.run_reader import RunData, load_run
 
-#: Files written by `render_plots`, in the order they are returned.
+#: Files written by `render_plots` (as PNG), in the order they are returned.
 PLOT_FILES = PLOT_NAMES  # the list lives with the rest of a run directory's layout (swarm/results.py)
+
+#: The formats `render_plots` can write, by file suffix.
+FORMATS = ("png", "pdf", "svg")
 
 #: The panels of overview.png, row by row (the paper's (a)-(d)).
 OVERVIEW = ("graph.png", "trajectories.png", "distance.png", "control.png")
+
+#: PDF: TrueType fonts embedded (editable, accepted by publishers), not Type 3.
+RC = {"pdf.fonttype": 42, "svg.fonttype": "path"}
 
 
 def title_suffix(run: RunData) -> str:
@@ -34,45 +46,82 @@ def title_suffix(run: RunData) -> str:
     return f" ({', '.join(parts)})" if parts else ""
 
 
-def _save(fig: Any, path: Path) -> None:
-    """Save to a temporary name, then rename: a PNG is whole or absent."""
-    tmp = path.with_name(f".{path.name}.tmp")
+def save_figure(fig: Figure, path: Path, formats: Iterable[str]) -> list[Path]:
+    """Save `fig` as `path` with each format's suffix, each to a temporary name then
+    renamed (a file is whole or absent); close the figure. Returns the files written."""
+    written = []
     try:
-        fig.savefig(tmp, dpi=DPI, format="png")
-        tmp.replace(path)
+        for fmt in formats:
+            out = path.with_suffix("." + fmt)
+            tmp = out.with_name(f".{out.name}.tmp")
+            try:
+                fig.savefig(tmp, dpi=DPI, format=fmt)
+                tmp.replace(out)
+            finally:
+                tmp.unlink(missing_ok=True)
+            written.append(out)
     finally:
-        tmp.unlink(missing_ok=True)
         plt.close(fig)
+    return written
 
 
-def render_plots(run_dir: Path, max_points: int = MAX_POINTS) -> list[Path]:
-    """Write the run's PNG plots into `run_dir`; return their paths (see `PLOT_FILES`)."""
-    run_dir = Path(run_dir)
-    run = load_run(run_dir)
-    max_points = max(16, int(max_points))
-    rows = decimation_rows(run, max_points)
-    colours = agent_colours(run)
-    events = run_events(run)
-    suffix = title_suffix(run)
-    n_f = len(run.followers())
+def check_formats(formats: Iterable[str]) -> tuple[str, ...]:
+    """The formats, lower-cased, in order, once each; ValueError naming an unknown one."""
+    out: list[str] = []
+    for f in formats:
+        f = f.strip().lower().lstrip(".")
+        if f not in FORMATS:
+            raise ValueError(f"unknown format {f!r} (choose from {', '.join(FORMATS)})")
+        if f not in out:
+            out.append(f)
+    if not out:
+        raise ValueError(f"no format given (choose from {', '.join(FORMATS)})")
+    return tuple(out)
+
+
+def one_panel(size: tuple[float, float], draw: Callable[[Any], None], suffix: str) -> Figure:
+    fig, ax = plt.subplots(figsize=size, layout="constrained")
+    draw(ax)
+    ax.set_title(ax.get_title() + suffix)
+    return fig
+
+
+def figure(name: str, ctx: Ctx, suffix: str) -> Figure:
+    """The figure of the file `name` (one of PLOT_FILES)."""
+    n_f = len(ctx.run.followers())
+    big = ctx.run.n_agents > GROUP_ABOVE
+    if name == "overview.png":
+        fig, axs = plt.subplots(2, 2, figsize=(15 if big else 14, 12.5), layout="constrained")
+        panel_graph(axs[0, 0], ctx)
+        panel_trajectories(axs[0, 1], ctx, tree_legend=False)  # (a) names the colours
+        panel_distance(axs[1, 0], ctx)
+        panel_control(axs[1, 1], ctx)
+        fig.suptitle("Run overview" + suffix)
+        return fig
+    if name == "distance.png" and grouped(ctx):
+        return grouped_distance(ctx, suffix)
+    if name == "control.png" and grouped(ctx):
+        return grouped_control(ctx, suffix)
     panels = {  # file -> (figure size, what draws the panel)
-        "trajectories.png": ((7.5, 7), lambda ax: panel_trajectories(ax, run, rows, colours)),
-        "distance.png": ((9, 5), lambda ax: panel_distance(ax, run, rows, colours, events)),
-        "control.png": ((9, 5), lambda ax: panel_control(ax, run, colours, events, max_points)),
-        "graph.png": ((7, 7), lambda ax: panel_graph(ax, run, colours)),
-        "neighbours.png": ((10, 1.9 + 0.35 * max(n_f, 1)), lambda ax: panel_neighbours(ax, run, colours)),
+        "trajectories.png": (trajectories_size(ctx), lambda ax: panel_trajectories(ax, ctx)),
+        "distance.png": ((9, 5.5), lambda ax: panel_distance(ax, ctx)),
+        "control.png": ((9, 5.5), lambda ax: panel_control(ax, ctx)),
+        "graph.png": ((7, 7), lambda ax: panel_graph(ax, ctx)),
+        "neighbours.png": ((10, 1.9 + 0.35 * max(n_f, 1)), lambda ax: panel_neighbours(ax, ctx)),
     }
-    paths = [run_dir / name for name in PLOT_FILES]
-    for path in paths:
-        if path.name == "overview.png":
-            fig, axs = plt.subplots(2, 2, figsize=(14, 12), layout="constrained")
-            for ax, (_, draw) in zip(axs.flat, (panels[k] for k in OVERVIEW)):
-                draw(ax)
-            fig.suptitle("Run overview" + suffix)
-        else:
-            size, draw = panels[path.name]
-            fig, ax = plt.subplots(figsize=size, layout="constrained")
-            draw(ax)
-            ax.set_title(ax.get_title() + suffix)
-        _save(fig, path)
+    size, draw = panels[name]
+    return one_panel(size, draw, suffix)
+
+
+def render_plots(run_dir: Path, max_points: int = MAX_POINTS, formats: Iterable[str] = ("png",)) -> list[Path]:
+    """Write the run's figures into `run_dir` in each of `formats` (png, pdf, svg); return
+    their paths: `PLOT_FILES` in order, each in the formats in the order given."""
+    formats = check_formats(formats)
+    run_dir = Path(run_dir)
+    ctx = make_context(load_run(run_dir), max_points)
+    suffix = title_suffix(ctx.run)
+    paths: list[Path] = []
+    with plt.rc_context(RC):
+        for name in PLOT_FILES:
+            paths += save_figure(figure(name, ctx, suffix), run_dir / name, formats)
     return paths

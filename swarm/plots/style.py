@@ -1,8 +1,6 @@
-"""What every panel shares: colours, sizes, the legend of the roles, and how long runs
-are thinned for drawing (row decimation for lines, min/max envelope for spiky inputs).
-
-Leaders are drawn in blues, followers in yellows/oranges (the paper's colours), dead
-agents in grey.
+"""What every panel shares: fixed colours and sizes, the key legend under an axes, and
+how long runs are thinned for drawing (row decimation for lines, min/max envelope for
+spiky inputs). Each agent's own colour, label and width: palette.py. Dead agents: grey.
 """
 
 from __future__ import annotations
@@ -11,10 +9,10 @@ import math
 import warnings
 from typing import Any
 
-import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.lines import Line2D
+from matplotlib.transforms import offset_copy
 
 from world.run_reader import RunData
 
@@ -27,6 +25,7 @@ TARGET_COLOUR = "red"
 EXPECTED_COLOUR = "0.35"  # dashed expected orbits / radii
 EVENT_COLOURS = {"drop": "tab:red", "rejoin": "tab:green", "fault": "tab:purple", "kill": "tab:purple"}
 DPI = 120
+KEY_DROP_PT = 34.0  # the key legend's top, this far under the axes (below tick labels and x label)
 
 
 def size_for(n: int, small: float, large: float) -> float:
@@ -35,38 +34,13 @@ def size_for(n: int, small: float, large: float) -> float:
     return small + (large - small) * f
 
 
-def agent_colours(run: RunData) -> list[Any]:
-    """Leaders in shades of blue, followers in shades of yellow/orange."""
-    leaders = run.leaders()
-    followers = run.followers()
-    colours: list[Any] = [None] * run.n_agents
-    blues = plt.get_cmap("Blues")
-    oranges = plt.get_cmap("YlOrBr")
-    for rank, j in enumerate(leaders):
-        colours[j] = blues(0.85 - 0.35 * (rank / max(1, len(leaders) - 1)))
-    for rank, j in enumerate(followers):
-        colours[j] = oranges(0.35 + 0.35 * (rank / max(1, len(followers) - 1)))
-    return colours
-
-
-def role_colour(leader: bool) -> Any:
-    """The one colour a role stands for in legends."""
-    return plt.get_cmap("Blues")(0.8) if leader else plt.get_cmap("YlOrBr")(0.5)
-
-
-def role_handles(run: RunData, **style: Any) -> list[Line2D]:
-    """Legend entries "leader" / "follower" for the roles present in the run, drawn with
-    `style` (default: a line); the role colour goes in as `color` or, with a marker, `mfc`."""
-    roles = {str(r) for r in run.role}
-    style = style or {"lw": 1.5}
-    key = "mfc" if "marker" in style else "color"
-    return [Line2D([], [], **{key: role_colour(role == "leader")}, **style, label=role)
-            for role in ("leader", "follower") if role in roles]
-
-
-def role_legend(ax: Axes, run: RunData, extra: list[Line2D]) -> None:
-    """The top-right legend of the line panels: the roles as lines, then `extra`."""
-    ax.legend(handles=role_handles(run) + extra, fontsize=7, loc="upper right", framealpha=0.8)
+def key_legend(ax: Axes, handles: list[Line2D], ncol: int | None = None, **kw: Any) -> None:
+    """The legend of what the marks mean, under the axes (clear of lines and labels)."""
+    if not handles:
+        return
+    below = offset_copy(ax.transAxes, fig=ax.figure, y=-KEY_DROP_PT, units="points")  # under the x label
+    ax.legend(handles=handles, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=below,
+              ncol=ncol or min(len(handles), 4), framealpha=0.8, **kw)
 
 
 def decimation_rows(run: RunData, max_points: int) -> np.ndarray:
