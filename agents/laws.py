@@ -1,27 +1,32 @@
-"""Follower guidance laws, looked up by name.
+"""Follower guidance laws, and how an agent gets the law it runs (README, "Writing a law").
 
-A follower law is a pure function of the follower's own measurements:
+A law is a function of one Observation (swarm/contracts/observation.py):
 
-    law(g_i, g_j, lambda_ij, c1, c2) -> u_i
+    law(obs) -> u_i   turn rate (rad/s); the agent saturates it at its max_turn_rate
 
-    g_i        own heading (rad)
-    g_j        heading of the out-neighbour j (rad)
-    lambda_ij  line-of-sight angle from i to j, world frame (rad)
-    c1, c2     the scenario's [gains]
-    returns    turn rate u_i (rad/s); the agent saturates it at its max_turn_rate
+A follower law sees its own heading, speed and limit, every contact it senses and the one
+chosen as its out-neighbour (`obs.out`, None while it has nobody to follow: the law
+decides what to do then, `loiter` is the built-in answer), the gains, `obs.params` and a
+dict `obs.state` of its own. The paper's law is `bearing`, registered as "bearing":
 
-No range and no target position enter a follower law. A scenario names its law in
-`[gains] law = "bearing"` (the paper's law, the default) or `"package.module:function"`
-for a law of your own with the signature above; names resolve in swarm/contracts/laws.py.
+    u_i = C1 wrap(g_j - g_i) + C2 sin(lambda_ij - g_i)
+
+No range and no target position enter it. The older signature,
+law(g_i, g_j, lambda_ij, c1, c2) named in `[gains] law`, still works: `make_follower_law`
+binds it, and the agent loiters for it. Names resolve in swarm/contracts/laws.py.
 """
 
 from __future__ import annotations
 
 import math
+from types import MappingProxyType
 from typing import Callable
 
-from swarm.contracts.laws import LawError, resolve_law
+from swarm.contracts.laws import FOLLOWER, GAINS, LEADER, LawError, follower_law_name, resolve_law
+from swarm.contracts.observation import Observation
 from swarm.contracts.orbits import wrap
+
+Law = Callable[[Observation], float]
 
 
 def bearing_law(g_i: float, g_j: float, lambda_ij: float, c1: float, c2: float) -> float:
@@ -29,13 +34,63 @@ def bearing_law(g_i: float, g_j: float, lambda_ij: float, c1: float, c2: float) 
     return c1 * wrap(g_j - g_i) + c2 * math.sin(lambda_ij - g_i)
 
 
-def make_follower_law(name: str, c1: float, c2: float) -> Callable[[float, float, float], float]:
-    """Check the gains once and return u(g_i, g_j, lambda_ij) with them bound."""
+def loiter(obs: Observation) -> float:
+    """Nobody (rooted) in sight: a circle of radius v / C2, turning the way it last turned,
+    until somebody shows up: neither a spin nor bolting off in a line."""
+    return math.copysign(obs.c2, obs.last_u or 1.0)
+
+
+def bearing(obs: Observation) -> float:
+    """The paper's law on an observation ("bearing", the default follower law); loiters
+    while there is no out-neighbour."""
+    j = obs.out
+    if j is None:
+        return loiter(obs)
+    return bearing_law(obs.heading, j.heading, j.bearing, obs.c1, obs.c2)
+
+
+def _check_gains(c1: float, c2: float) -> None:
     if not (math.isfinite(c1) and math.isfinite(c2)):
         raise LawError(f"gains must be finite, got c1={c1}, c2={c2}")
-    law = resolve_law(name)
+
+
+def make_follower_law(name: str, c1: float, c2: float) -> Callable[[float, float, float], float]:
+    """A law of the older signature: check the gains once and return u(g_i, g_j, lambda_ij)
+    with them bound."""
+    _check_gains(c1, c2)
+    law = resolve_law(name, GAINS)
 
     def u(g_i: float, g_j: float, lambda_ij: float) -> float:
         return float(law(g_i, g_j, lambda_ij, c1, c2))
 
     return u
+
+
+def _older(name: str, c1: float, c2: float) -> Law:
+    """law(obs) around a law of the older signature; it loiters while out is None."""
+    u = make_follower_law(name, c1, c2)
+
+    def law(obs: Observation) -> float:
+        j = obs.out
+        if j is None:
+            return loiter(obs)
+        return u(obs.heading, j.heading, j.bearing)
+
+    return law
+
+
+def agent_law(role: str, gains, law) -> Law:
+    """The law(obs) an agent of `role` runs: gains, a GainsSpec/GainsConf; law, a
+    LawSpec/LawConf (None: the built-in laws)."""
+    _check_gains(gains.c1, gains.c2)
+    if role == "leader":
+        return resolve_law("cc" if law is None else law.leader, LEADER)
+    kind, name = follower_law_name(gains.law, "bearing" if law is None else law.follower)
+    if kind == GAINS:
+        return _older(name, gains.c1, gains.c2)
+    return resolve_law(name, FOLLOWER)
+
+
+def law_params(law) -> MappingProxyType:
+    """obs.params: the [law.params] numbers, read-only."""
+    return MappingProxyType({} if law is None else dict(law.params))

@@ -1,10 +1,12 @@
-"""Leader guidance: a circle-circle (CC) path onto a circular orbit, then orbit hold.
+"""Leader guidance: a circle-circle (CC) path onto a circular orbit, then orbit hold;
+`cc_law` is both as a leader law on an Observation ("cc", the default leader law).
 
 The leader is a unicycle  x' = v cos g,  y' = v sin g,  g' = u  (speed v in m/s,
 turn rate u in rad/s, heading g in rad, counter-clockwise positive).  It reaches the
 circular orbit of radius R (m) around a target, flown in direction s = +1 (ccw) or
 s = -1 (cw), along the two tangent arcs of :func:`agents.cc_plan.plan_cc` (Lemma 1 of
-Rao 2024), and then holds that orbit with :func:`on_orbit_command`, here.
+Rao 2024), and then holds that orbit with :func:`on_orbit_command`, here.  `cc_law` plans
+the path on its first call and keeps it in `obs.state`.
 
 Pure functions on plain floats, standard library only: no numpy, so that a leader
 process is as light as a follower's; no I/O, no middleware.
@@ -14,7 +16,8 @@ from __future__ import annotations
 
 import math
 
-from agents.cc_plan import check_inputs
+from agents.cc_plan import check_inputs, plan_cc
+from swarm.contracts.observation import Observation
 from swarm.contracts.orbits import wrap
 
 #: Orbit-hold gains (dimensionless): desired heading leans atan(K_RADIAL (r - R)/R)
@@ -55,3 +58,35 @@ def on_orbit_command(x: float, y: float, heading: float, v: float, radius: float
     if max_turn_rate is not None:
         u = max(-max_turn_rate, min(max_turn_rate, u))
     return u
+
+
+def _overlap(a: float, b: float, lo: float, hi: float) -> float:
+    return max(0.0, min(b, hi) - max(a, lo))
+
+
+def cc_law(obs: Observation) -> float:
+    """The built-in leader law ("cc"): the CC path planned from the first observation, flown
+    arc by arc, then orbit hold (rad/s, before the agent's own saturation).
+
+    obs.state keeps "cc_path" (an agents.cc_plan.CCPath), "path_tick" (the tick it was
+    planned at) and "phase" ("arc1" | "arc2" | "orbit", the phase the agent reports). The
+    tick on which an arc ends gets the time-weighted average of the turn rates over it:
+    the switch between arcs rarely falls on a tick.
+    """
+    st = obs.state
+    px, py = -obs.target[0], -obs.target[1]  # own position relative to the target
+    sign = obs.direction
+    p = st.get("cc_path")
+    if p is None:
+        p = st["cc_path"] = plan_cc(px, py, obs.heading, obs.speed, obs.orbit_radius, sign, obs.max_turn_rate)
+        st["path_tick"] = obs.tick
+    a = (obs.tick - st["path_tick"]) * obs.dt
+    b = a + obs.dt
+    t12 = p.t1 + p.t2
+    if a >= t12:
+        st["phase"] = "orbit"
+        return on_orbit_command(px, py, obs.heading, obs.speed, obs.orbit_radius, sign, obs.max_turn_rate)
+    u_orbit = sign * obs.speed / obs.orbit_radius
+    st["phase"] = "arc1" if a < p.t1 else "arc2"
+    return (p.u1 * _overlap(a, b, 0.0, p.t1) + p.u2 * _overlap(a, b, p.t1, t12)
+            + u_orbit * _overlap(a, b, t12, math.inf)) / obs.dt

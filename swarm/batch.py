@@ -10,9 +10,10 @@ reasons, and the same summary, "engine" excepted ("sim-batch").
 
 What it runs: the built-in "bearing" law, every selection rule, sensing range and field
 of view, turn-rate limits, leaders' CC paths and orbit hold. What it refuses (`refusal`
-says why, and `run_batch` raises BatchRefused): scripted faults, follower laws of one's
-own. One batch needs one dt, one tick count, one number of agents and one selection
-rule (`batch_key`); gains, sensing range and field of view may differ per member.
+says why, and `run_batch` raises BatchRefused): scripted faults, follower or leader laws of
+one's own (a law is Python per agent: `swarm sim` runs it). One batch needs one dt, one
+tick count, one number of agents and one selection rule (`batch_key`); gains, sensing
+range and field of view may differ per member.
 """
 
 from __future__ import annotations
@@ -38,8 +39,12 @@ def refusal(s: Scenario) -> str | None:
     """Why the batch engine cannot run `s` exactly as `swarm sim` does, or None."""
     if s.faults:
         return "it has scripted faults ([[faults]]): the batch engine has no fault plan"
-    if s.gains.law != "bearing":
-        return f"its follower law is {s.gains.law!r}: only the built-in 'bearing' law is batched"
+    if s.gains.law != "bearing" or s.law.follower != "bearing":
+        name = s.gains.law if s.gains.law != "bearing" else s.law.follower
+        return f"its follower law is {name!r}: only the built-in 'bearing' law is batched"
+    if s.law.leader != "cc":
+        return (f"its leader law is {s.law.leader!r}: only the built-in 'cc' law (CC path, then orbit hold) "
+                "is batched")
     return None
 
 

@@ -32,7 +32,7 @@ def run_sim(scenario: Scenario, duration: float | None = None,
     n = len(scenario.agents)
 
     def brain(a):
-        return AgentBrain(a, scenario.gains, scenario.sensing, dt, n)
+        return AgentBrain(a, scenario.gains, scenario.sensing, dt, n, scenario.law)
 
     brains = {a.id: brain(a) for a in scenario.agents}
     frozen: set[int] = set()  # frozen processes: dropped, brain kept for the thaw

@@ -48,11 +48,14 @@ def _value(v) -> str:
         return str(v)
     if isinstance(v, str):
         return json.dumps(v)
+    if isinstance(v, dict):  # an inline table, e.g. [law] params = {k = 1.0}
+        return "{" + ", ".join(f"{k} = {_value(vv)}" for k, vv in v.items()) + "}"
     raise TypeError(f"cannot write {v!r} as TOML here")
 
 
 def to_toml(data: dict) -> str:
-    """Serialise the shapes a scenario uses: scalars, tables of scalars, [[agents]]."""
+    """Serialise the shapes a scenario uses: scalars, tables of scalars (and of inline tables),
+    [[agents]]."""
     lines = [f"{k} = {_value(v)}" for k, v in data.items() if not isinstance(v, (dict, list))]
     for k, v in data.items():
         if isinstance(v, dict):

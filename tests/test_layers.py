@@ -1,7 +1,7 @@
 """The layers of the tree (README, "How it is built"), checked on every import statement,
 at module level or inside functions:
 
-    swarm.contracts   scenario, laws, frames, wire, brain_config, transport: imports none of the others
+    swarm.contracts   scenario, laws, observation, frames, wire, brain_config, transport: imports none of the others
     world             physics, sensors, the engine, the world process: world + contracts
     agents            laws, selection, the brain, the agent process: agents + contracts
     swarm (the rest)  the shells and tools (sim, launcher, CLI, plots, study): anything

@@ -49,10 +49,15 @@ def law(g_i, g_j, lam, c1, c2):
 
 
 def _law_scenario(rt, tmp_path, base, module: str, source: str):
-    (tmp_path / f"{module}.py").write_text(source)
-    rt.env["PYTHONPATH"] = os.pathsep.join(p for p in (str(tmp_path), rt.env.get("PYTHONPATH")) if p)
+    """The law module next to its scenario, in neither the processes' working directory nor
+    PYTHONPATH: the world imports it from the scenario's directory, and the agents from
+    $SWARM_LAW_PATH, which `swarm up` sets."""
+    where = tmp_path / "scenario"
+    where.mkdir()
+    (where / f"{module}.py").write_text(source)
+    assert str(where) not in rt.env.get("PYTHONPATH", "")
     base["gains"]["law"] = f"{module}:law"
-    path = tmp_path / f"{module}.toml"
+    path = where / f"{module}.toml"
     path.write_text(to_toml(base))
     return path
 

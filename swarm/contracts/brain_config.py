@@ -1,7 +1,7 @@
-"""What one agent process needs to know about its run: its own spec, the gains, the
-selection rule, dt. Plain dataclasses (no pydantic: agent processes stay small and start
-fast), built from the scenario by the world and sent in the join reply as JSON, and
-checked again on arrival, since it comes off the network.
+"""What one agent process needs to know about its run: its own spec, the gains, its laws
+and their parameters, the selection rule, dt. Plain dataclasses (no pydantic: agent
+processes stay small and start fast), built from the scenario by the world and sent in
+the join reply as JSON, and checked again on arrival, since it comes off the network.
 
 `AgentBrain` takes these or the scenario's pydantic models alike (same attribute names).
 """
@@ -9,7 +9,9 @@ checked again on arrival, since it comes off the network.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
+
+from swarm.contracts.laws import MAX_LAW_PARAMS, follower_law_name
 
 
 @dataclass(frozen=True, slots=True)
@@ -35,6 +37,13 @@ class GainsConf:
 
 
 @dataclass(frozen=True, slots=True)
+class LawConf:
+    follower: str = "bearing"
+    leader: str = "cc"
+    params: dict = field(default_factory=dict)  # name -> finite number
+
+
+@dataclass(frozen=True, slots=True)
 class SensingConf:
     selection: str  # "sticky" | "nearest" | "fixed" | "rooted"
     hysteresis: float
@@ -47,6 +56,13 @@ class BrainConf:
     sensing: SensingConf
     dt: float  # s
     n_agents: int  # agents in the scenario: caps hop counts
+    law: LawConf = LawConf()
+
+    def law_names(self) -> list[str]:
+        """The laws this agent imports: its leader law, or the follower law it runs."""
+        if self.agent.role == "leader":
+            return [self.law.leader]
+        return [follower_law_name(self.gains.law, self.law.follower)[1]]
 
     def to_json(self) -> dict:
         return asdict(self)
@@ -57,7 +73,8 @@ class BrainConf:
         g, s = scenario.gains, scenario.sensing
         return cls(AgentConf(a.id, a.role, a.speed, a.orbit_radius, a.direction, a.follow, a.max_turn_rate),
                    GainsConf(g.c1, g.c2, g.law), SensingConf(s.selection, s.hysteresis),
-                   scenario.run.dt, len(scenario.agents))
+                   scenario.run.dt, len(scenario.agents),
+                   LawConf(scenario.law.follower, scenario.law.leader, dict(scenario.law.params)))
 
     @classmethod
     def from_json(cls, d: dict) -> "BrainConf":
@@ -101,4 +118,25 @@ class BrainConf:
         return cls(agent, GainsConf(num(g, "c1", "gains"), num(g, "c2", "gains"), law),
                    SensingConf(choice(s, "selection", "sensing", ("sticky", "nearest", "fixed", "rooted")),
                                num(s, "hysteresis", "sensing")),
-                   num(d, "dt", "brain", positive=True), integer(d, "n_agents", "brain"))
+                   num(d, "dt", "brain", positive=True), integer(d, "n_agents", "brain"), _law_conf(d.get("law")))
+
+
+def _law_conf(d) -> LawConf:
+    """The `law` object of a join reply (absent: the built-in laws); ValueError names the field."""
+    if d is None:
+        return LawConf()
+    if not isinstance(d, dict):
+        raise ValueError("law: expected an object")
+    names, default = [], LawConf()
+    for key in ("follower", "leader"):
+        v = d.get(key, getattr(default, key))
+        if not isinstance(v, str):
+            raise ValueError(f"law.{key}: expected a string")
+        names.append(v)
+    params = d.get("params", {})
+    if not isinstance(params, dict) or len(params) > MAX_LAW_PARAMS:
+        raise ValueError(f"law.params: expected an object of at most {MAX_LAW_PARAMS} numbers")
+    for k, v in params.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ValueError(f"law.params.{k}: expected a finite number")
+    return LawConf(names[0], names[1], {k: float(v) for k, v in params.items()})

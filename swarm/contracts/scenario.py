@@ -22,6 +22,7 @@ from swarm.contracts.scenario_tables import (
     AgentSpec,
     FaultSpec,
     GainsSpec,
+    LawSpec,
     RunSpec,
     SensingSpec,
     Strict,
@@ -40,6 +41,8 @@ class Scenario(Strict):
     run: RunSpec = RunSpec()
     target: TargetSpec = TargetSpec()
     gains: GainsSpec
+    # built unvalidated: checking the built-in laws here would import agent code with this module
+    law: LawSpec = LawSpec.model_construct()
     sensing: SensingSpec = SensingSpec()
     agents: list[AgentSpec] = Field(min_length=1)
     faults: list[FaultSpec] = Field(default_factory=list, description="scripted faults, by time")
@@ -95,6 +98,15 @@ class Scenario(Strict):
         return self
 
     @model_validator(mode="after")
+    def _one_follower_law(self) -> "Scenario":
+        if self.gains.law != "bearing" and self.law.follower != "bearing":
+            raise ValueError(
+                f"law.follower: the follower law is named twice ([gains] law = {self.gains.law!r}, the "
+                f"older (g_i, g_j, lambda_ij, c1, c2) signature, and [law] follower = {self.law.follower!r}): "
+                "keep one")
+        return self
+
+    @model_validator(mode="after")
     def _limits(self) -> "Scenario":
         """What the wire and the recording can hold, counting the agents that may be added."""
         n, cap = len(self.agents), self.added_agents_cap
@@ -123,6 +135,11 @@ class Scenario(Strict):
             if a.id == agent_id:
                 return a
         raise KeyError(agent_id)
+
+    @property
+    def law_names(self) -> list[str]:
+        """Every law the scenario's agents may import (what `swarm up` tells them to trust)."""
+        return list(dict.fromkeys([self.gains.law, self.law.follower, self.law.leader]))
 
     @property
     def ids(self) -> list[int]:
@@ -182,10 +199,11 @@ def format_validation_error(source: str, err: ValidationError) -> str:
 _TOO_DEEP = "nested too deeply (arrays or tables inside one another)"
 
 
-def parse_scenario(data: dict, source: str = "<scenario>") -> Scenario:
-    """Validate an already-parsed TOML document."""
+def parse_scenario(data: dict, source: str = "<scenario>", law_dirs: tuple = ()) -> Scenario:
+    """Validate an already-parsed TOML document; law modules are also looked for in
+    `law_dirs` (appended to sys.path when a law is imported)."""
     try:
-        return Scenario.model_validate(data)
+        return Scenario.model_validate(data, context={"law_dirs": tuple(str(d) for d in law_dirs)})
     except ValidationError as err:
         raise ScenarioError(format_validation_error(source, err)) from None
     except RecursionError:
@@ -195,7 +213,8 @@ def parse_scenario(data: dict, source: str = "<scenario>") -> Scenario:
 
 
 def load_scenario(path: str | Path) -> Scenario:
-    """Read and validate a scenario file; raise ScenarioError naming file and field."""
+    """Read and validate a scenario file; raise ScenarioError naming file and field. The
+    file's directory is on the import path of its laws ("module:function")."""
     p = Path(path)
     try:
         with open(p, "rb") as f:
@@ -221,7 +240,7 @@ def load_scenario(path: str | Path) -> Scenario:
         raise ScenarioError(f"{p}: {_TOO_DEEP}") from None
     except MemoryError:
         raise ScenarioError(f"{p}: too large to read") from None
-    return parse_scenario(data, str(p))
+    return parse_scenario(data, str(p), (p.resolve().parent,))
 
 
 def scenario_json_schema() -> dict:

@@ -1,5 +1,5 @@
 """The tables of a scenario file, each a strict, frozen pydantic model checked on its own:
-[run], [target], [gains], [sensing], [[agents]] and [[faults]].
+[run], [target], [gains], [law], [sensing], [[agents]] and [[faults]].
 
 The field names here are the contract between users, tools and every process of a
 run. Units: metres, seconds, radians, m/s and rad/s throughout. What holds across
@@ -12,8 +12,9 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
+from swarm.contracts.laws import MAX_LAW_PARAMS
 from swarm.contracts.wire import MAX_AGENT_ID, MAX_AGENTS
 
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -80,29 +81,62 @@ class TargetSpec(Strict):
     y: Finite = 0.0
 
 
+def check_law_field(name: str, kind: str, info: ValidationInfo) -> str:
+    """A law named in the scenario, imported and checked for its signature. The validation
+    context may give "law_dirs" (the scenario file's directory: load_scenario) and
+    "check_laws": False (a scenario read back from a recording: nothing imported)."""
+    from swarm.contracts.laws import LawError, check_law
+
+    ctx = info.context or {}
+    if not ctx.get("check_laws", True):
+        return name
+    try:
+        check_law(name, kind, ctx.get("law_dirs", ()))
+    except LawError as e:
+        raise ValueError(str(e)) from None
+    except Exception as e:  # importing the module ran its code, and that failed
+        what = "leader law" if kind == "leader" else "follower law"
+        raise ValueError(f"{what} {name!r}: cannot import it: {type(e).__name__}: {e}") from None
+    return name
+
+
 class GainsSpec(Strict):
-    """[gains]: the follower law and its gains."""
+    """[gains]: the follower law's gains (and, in older scenarios, the follower law)."""
 
     c1: PositiveFloat = Field(description="gain on the heading difference wrap(g_j - g_i) (1/s)")
     c2: PositiveFloat = Field(description="gain on sin(lambda_ij - g_i) (rad/s)")
     law: str = Field(
         "bearing",
-        description="follower law: a registered name, or 'module:function' (see swarm/contracts/laws.py)",
+        description="follower law of the older signature (g_i, g_j, lambda_ij, c1, c2): a registered "
+                    "name, or 'module:function'; anything but 'bearing' replaces [law] follower "
+                    "(see swarm/contracts/laws.py)",
     )
-
 
     @field_validator("law")
     @classmethod
-    def _law_resolves(cls, name: str) -> str:
-        from swarm.contracts.laws import LawError, check_law
+    def _law_resolves(cls, name: str, info: ValidationInfo) -> str:
+        return check_law_field(name, "gains", info)
 
-        try:
-            check_law(name)
-        except LawError as e:
-            raise ValueError(str(e)) from None
-        except Exception as e:  # importing the module ran its code, and that failed
-            raise ValueError(f"follower law {name!r}: cannot import it: {type(e).__name__}: {e}") from None
-        return name
+
+class LawSpec(Strict):
+    """[law]: the guidance laws, each law(obs) -> u (README, "Writing a law"), and their
+    parameters."""
+
+    follower: str = Field("bearing", description="follower law: 'bearing' (the paper's) or 'module:function'")
+    leader: str = Field("cc", description="leader law: 'cc' (CC path, then orbit hold) or 'module:function'")
+    params: dict[str, Finite] = Field(
+        default_factory=dict, max_length=MAX_LAW_PARAMS,
+        description="[law.params]: numbers handed to the laws as obs.params")
+
+    @field_validator("follower")
+    @classmethod
+    def _follower_resolves(cls, name: str, info: ValidationInfo) -> str:
+        return check_law_field(name, "follower", info)
+
+    @field_validator("leader")
+    @classmethod
+    def _leader_resolves(cls, name: str, info: ValidationInfo) -> str:
+        return check_law_field(name, "leader", info)
 
 
 class SensingSpec(Strict):
