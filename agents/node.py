@@ -32,6 +32,7 @@ from agents.joining import log as _log
 from agents.world_link import NEW_WORLD, WorldLink
 from swarm.contracts import wire
 from swarm.contracts.laws import LawError, check_trusted, trusted_laws
+from swarm.contracts.transport import answer
 
 STATUS_PERIOD = 0.2  # s of wall time between periodic status messages
 STATUS_MIN_GAP = 0.05  # s: a change is published at once, but not more often than this (the
@@ -61,7 +62,8 @@ class AgentNode:
         except (ValueError, AttributeError, TypeError) as e:
             raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: unusable join reply: {e}") from None
         try:
-            check_trusted(self.conf.gains.law, trusted_laws() if trusted is None else trusted)
+            for name in self.conf.law_names():
+                check_trusted(name, trusted_laws() if trusted is None else trusted)
         except LawError as e:
             raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: {e}") from None
         try:
@@ -90,7 +92,7 @@ class AgentNode:
         from agents.brain import AgentBrain
 
         c = self.conf
-        return AgentBrain(c.agent, c.gains, c.sensing, c.dt, c.n_agents)
+        return AgentBrain(c.agent, c.gains, c.sensing, c.dt, c.n_agents, c.law)
 
     def open(self) -> None:
         ses, run, put = self.session, self.run, self.inbox.put
@@ -130,7 +132,7 @@ class AgentNode:
         }
 
     def nonfinite(self) -> int:
-        """Ticks on which the follower law returned NaN or inf (its last turn rate held)."""
+        """Ticks on which the law returned NaN or inf (its last turn rate held)."""
         return self.nonfinite_before + self.brain.nonfinite
 
     def status_key(self) -> tuple:
@@ -188,7 +190,7 @@ class AgentNode:
         d = brain.decide(frame)
         if brain.nonfinite != bad and time.monotonic() - self.nonfinite_noted > NONFINITE_NOTE_S:
             self.nonfinite_noted = time.monotonic()
-            _log(f"[agent {self.id}] tick {frame.tick}: the follower law {self.conf.gains.law!r} returned "
+            _log(f"[agent {self.id}] tick {frame.tick}: the law {self.conf.law_names()[0]!r} returned "
                  f"{brain.last_nonfinite}; the last turn rate is held ({self.nonfinite()} so far)")
         self.cmd_pub.put(wire.encode_cmd_fields(self.id, frame.tick, d.u, d.out, d.phase, d.hops, self.key))
         self.commands += 1
@@ -259,7 +261,7 @@ class AgentNode:
                 elif kind == "query":
                     with self.lock:
                         status = wire.encode_status(self.status())
-                    item[1].reply(wire.agent_key(self.run, self.id, "status"), status)
+                    answer(item[1], wire.agent_key(self.run, self.id, "status"), status)
                 elif kind == "ctl":
                     self.on_ctl(item[1])
                 elif kind == "control":

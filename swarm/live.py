@@ -6,19 +6,34 @@ Finding a run: every run has a credentials file (swarm/contracts/credentials.py)
 CLI connects as the run's operator with it. With --credentials FILE (or
 $SWARM_CREDENTIALS), that file's run; otherwise the local runs in the runtime dir
 ($SWARM_RUNTIME_DIR or /tmp/swarm-<uid>), those on --connect EP if given. With --run
-ID, that run; otherwise the only one found.
+ID, that run; otherwise the only one found. --run and --connect default to $SWARM_RUN and
+$SWARM_CONNECT (swarm/live_cli.py), so a user with several runs can export one.
+
+Queries end as soon as what was asked for has answered (the world's one reply; every live
+agent's status), never waiting for the query's timeout: a queryable's final answer can
+come late (its process still holds the query), and only a world or an agent that does not
+answer costs the timeout. A world that stops answering has ended only when its endpoint
+refuses connections, it sent its end notice, or it failed several reads in a row over
+several seconds (`Patience`): one timeout under load is not the end of a run.
 """
 
 from __future__ import annotations
 
 import socket as so
+import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterable
 
 from swarm.contracts import credentials, wire
 from swarm.contracts.credentials import Credentials
 from swarm.contracts.identities import OPERATOR, CredentialsError
-from swarm.contracts.transport import QUERY_TIMEOUT, dial_endpoint, open_client, query_statuses, runtime_dir, socket_path
+from swarm.contracts.lifeline import endpoint_refuses
+from swarm.contracts.transport import (QUERY_TIMEOUT, dial_endpoint, open_client, query_statuses, runtime_dir,
+                                      socket_path)
+
+ENDED_FAILURES = 3  # failed reads in a row, ...
+ENDED_SILENT_S = 5.0  # ... over at least this long, before a world that is still there counts as ended
 
 
 class NoRun(Exception):
@@ -107,8 +122,16 @@ def resolve(connect: str | None = None, run: str | None = None, creds_file: Path
                     "--credentials FILE from `swarm credentials`)")
     if len(found) > 1:
         raise NoRun(f"{len(found)} runs found ({', '.join(f'{r.run} on {r.endpoint}' for r in found)}); "
-                    "pick one with --run")
+                    "pick one with --run (or export SWARM_RUN=ID)")
     return found[0]
+
+
+def _first_reply(replies):
+    """The first successful reply of a get (consolidation NONE: delivered as it arrives), or None."""
+    for r in replies:
+        if r.ok is not None:
+            return r.ok
+    return None
 
 
 class LiveRun:
@@ -117,6 +140,8 @@ class LiveRun:
     def __init__(self, ref: RunRef):
         self.ref = ref
         self.session = None
+        self.end_notice = False  # the world said the run ended (once `watch_end()` listens)
+        self._end_sub = None
 
     def __enter__(self) -> "LiveRun":
         try:
@@ -129,11 +154,18 @@ class LiveRun:
         if self.session is not None:
             self.session.close()
 
+    def _get(self, selector: str, payload: bytes | None = None):
+        """A get whose replies come as they arrive (not held back until the query ends)."""
+        import zenoh
+
+        return self.session.get(selector, payload=payload, timeout=QUERY_TIMEOUT,
+                                consolidation=zenoh.ConsolidationMode.NONE)
+
     def _get_one(self, selector: str, decode, payload: bytes | None = None) -> dict:
-        for r in self.session.get(selector, payload=payload, timeout=QUERY_TIMEOUT):
-            if r.ok is not None:
-                return decode(r.ok.payload.to_bytes())
-        raise NoRun(f"the world of run {self.ref.run} did not answer (it may have ended)")
+        ok = _first_reply(self._get(selector, payload))  # the world's reply ends it, not the timeout
+        if ok is None:
+            raise NoRun(f"the world of run {self.ref.run} did not answer (it may have ended)")
+        return decode(ok.payload.to_bytes())
 
     def world_alive(self) -> bool:
         replies = self.session.liveliness().get(wire.world_alive_key(self.ref.run), timeout=0.5)
@@ -144,9 +176,12 @@ class LiveRun:
         sel = wire.world_info_key(self.ref.run) + ("?sensing=1" if sensing else "")
         return self._get_one(sel, wire.decode_info)
 
-    def statuses(self) -> dict[int, dict]:
-        """Each live agent's own status (its chosen out-neighbour, hops, phase, pid...)."""
-        return query_statuses(self.session, self.ref.run)
+    def statuses(self, expected: Iterable[int] | None = None) -> dict[int, dict]:
+        """Each live agent's own status (its chosen out-neighbour, hops, phase, pid...), from
+        one query to every agent's status queryable (malformed replies skipped). It ends once
+        every agent of `expected` (e.g. the live ones of the world's info) has answered, or
+        at the query's timeout (an agent that does not answer; `expected` None: always)."""
+        return query_statuses(self.session, self.ref.run, QUERY_TIMEOUT, expected)
 
     def admin(self, cmd: str, by: str = "swarm cli") -> dict:
         rep = self._get_one(wire.world_admin_key(self.ref.run), wire.decode_admin_reply,
@@ -159,3 +194,45 @@ class LiveRun:
         """Ask agent `agent_id` over zenoh to take a signal (KILL, TERM or STOP)."""
         self.session.put(wire.agent_key(self.ref.run, agent_id, "ctl"),
                          wire.encode_ctl(signal_name))
+
+    def watch_end(self) -> None:
+        """From now on, note the world's end notice (`end_notice`)."""
+        if self._end_sub is None:
+            def on_control(sample) -> None:
+                try:
+                    if isinstance(wire.decode_control(sample.payload.to_bytes()), int):
+                        self.end_notice = True
+                except wire.WireError:
+                    pass
+
+            self._end_sub = self.session.declare_subscriber(wire.world_control_key(self.ref.run), on_control)
+
+    def gone(self) -> bool:
+        """Whether the world has ended for sure: it sent its end notice, or its endpoint
+        refuses connections (a loaded or stalled world still accepts them)."""
+        return self.end_notice or endpoint_refuses(self.ref.endpoint, timeout=0.3)
+
+
+class Patience:
+    """When a world that failed a read has ended (`swarm graph --watch`, `swarm watch`): at
+    once when it is gone (`LiveRun.gone`), otherwise after ENDED_FAILURES failed reads in a
+    row over at least ENDED_SILENT_S s. A loaded world that misses a query, or a stalled one
+    whose link dropped for a moment, is read again."""
+
+    def __init__(self, live: LiveRun):
+        self.live = live
+        self.failures = 0
+        self.since: float | None = None  # monotonic s of the first failure in a row
+        live.watch_end()
+
+    def answered(self) -> None:
+        self.failures, self.since = 0, None
+
+    def ended(self) -> bool:
+        """After a failed read: True when the world has ended."""
+        now = time.monotonic()
+        self.failures += 1
+        self.since = now if self.since is None else self.since
+        if self.live.gone():
+            return True
+        return self.failures >= ENDED_FAILURES and now - self.since >= ENDED_SILENT_S

@@ -31,8 +31,15 @@ class FakeQuery:
     def payload(self):
         return None if self.payload_bytes is None else _Bytes(self.payload_bytes)
 
+    dropped: bool = False
+
     def reply(self, key: str, payload: bytes) -> None:
+        assert not self.dropped, "a reply to a query already finished"
         self.replies.append((key, bytes(payload)))
+
+    def drop(self) -> None:
+        """Finish the query (transport.answer does, right after its reply)."""
+        self.dropped = True
 
 
 class _Bytes:

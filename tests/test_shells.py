@@ -38,6 +38,7 @@ def claim(world, aid: int, on: int | None = None) -> dict:
     world._on_join(q)
     ((reply_key, payload),) = q.replies
     assert reply_key == key
+    assert q.dropped, "the join query was answered but not finished (its asker waits out its timeout)"
     return wire.decode_join_reply(payload)
 
 

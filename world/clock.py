@@ -19,6 +19,7 @@ import time
 
 from swarm.contracts import wire
 from swarm.contracts.lifeline import tie_to_launcher
+from swarm.contracts.transport import answer
 from world.core import ACTIVE
 from world.faults import fault_event
 
@@ -148,7 +149,7 @@ class Clock:
             if self.paused:
                 t_pause = time.monotonic()
                 for q in self.pause_waiters:
-                    q.reply(wire.world_admin_key(self.cfg.run),
+                    answer(q, wire.world_admin_key(self.cfg.run),
                             wire.encode_admin_reply(True, paused=True, tick=self.core.tick))
                 self.pause_waiters.clear()
                 while self.paused:

@@ -22,6 +22,7 @@ import time
 
 from swarm.contracts import wire
 from swarm.contracts.lifeline import exit_status
+from swarm.contracts.transport import answer
 from world.core import ACTIVE
 from world.engine import LOST, REFUSED
 from world.report import run_info
@@ -173,7 +174,7 @@ class Inbox:
         params = str(query.parameters) if query.parameters is not None else ""
         sensing = any(p.split("=", 1)[0] == "sensing" and p.split("=", 1)[-1] not in ("0", "false")
                       for p in params.split(";") if p)
-        query.reply(wire.world_info_key(self.cfg.run), wire.encode_info(self.info(sensing)))
+        answer(query, wire.world_info_key(self.cfg.run), wire.encode_info(self.info(sensing)))
 
     def _on_admin(self, query) -> None:
         """pause / resume the world clock; fault done and agent exit (from the launcher)."""
@@ -182,11 +183,11 @@ class Inbox:
             cmd = req["cmd"]
             if cmd == "fault_done":
                 self.faults_done.add(req["index"])
-                query.reply(wire.world_admin_key(self.cfg.run), wire.encode_admin_reply(True))
+                answer(query, wire.world_admin_key(self.cfg.run), wire.encode_admin_reply(True))
                 return
             if cmd == "agent_exit":
                 self._on_agent_exit(req)
-                query.reply(wire.world_admin_key(self.cfg.run), wire.encode_admin_reply(True))
+                answer(query, wire.world_admin_key(self.cfg.run), wire.encode_admin_reply(True))
                 return
             if (cmd == "pause") != self.paused:
                 self.paused = cmd == "pause"
@@ -198,7 +199,7 @@ class Inbox:
         except wire.WireError as e:
             self.garbage += 1
             reply = wire.encode_admin_reply(False, error=str(e))
-        query.reply(wire.world_admin_key(self.cfg.run), reply)
+        answer(query, wire.world_admin_key(self.cfg.run), reply)
 
     def _on_agent_exit(self, req: dict) -> None:
         """The launcher saw an agent process it started exit by itself: a `crash` event (a

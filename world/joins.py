@@ -15,6 +15,7 @@ import time
 
 from swarm.contracts import wire
 from swarm.contracts.brain_config import BrainConf
+from swarm.contracts.transport import answer
 from world.roster import AgentBook, admit, new_agent_spec
 
 # Join claims are limited per agent id (the hub lets agent k claim on its own key only, so
@@ -59,7 +60,7 @@ class Joins:
         if not self._join_allowed(str(query.key_expr)):
             self.limited("join_rate", f"join claims faster than {JOIN_BURST} at once and {JOIN_RATE:g} per s "
                          "on one agent's key: claim refused")
-            query.reply(str(query.key_expr), wire.encode_join_reply(False, error="too many join claims; retry later"))
+            answer(query, str(query.key_expr), wire.encode_join_reply(False, error="too many join claims; retry later"))
             return
         try:
             req = wire.decode_join_request(query.payload.to_bytes() if query.payload else b"")
@@ -80,7 +81,7 @@ class Joins:
                                            brain=BrainConf.from_scenario(self.core.scenario, aid).to_json())
         except wire.WireError as e:
             reply = wire.encode_join_reply(False, error=str(e))
-        query.reply(str(query.key_expr), reply)
+        answer(query, str(query.key_expr), reply)
 
     def _check_addable(self, aid: int) -> None:
         """A new agent takes an id of the range the hub's access rules were made for, and

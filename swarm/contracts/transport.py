@@ -186,10 +186,30 @@ def socket_path(endpoint: str) -> Path | None:
 QUERY_TIMEOUT = 1.0  # s
 
 
-def query_statuses(session, run: str, timeout: float = QUERY_TIMEOUT) -> dict[int, dict]:
-    """Each live agent's own status, from its status queryable (malformed replies skipped)."""
+def answer(query, key: str, payload: bytes) -> None:
+    """Reply to a zenoh query and finish it at once. zenoh ends a query (its asker stops
+    waiting) only when the last reference to the Query object goes; one kept by a loop
+    variable or a batch list made askers wait out their own timeout (swarm pause: 1.1 s)."""
+    try:
+        query.reply(key, payload)
+    finally:
+        query.drop()
+
+
+def query_statuses(session, run: str, timeout: float = QUERY_TIMEOUT, expected=None) -> dict[int, dict]:
+    """Each live agent's own status, from one query to every agent's status queryable
+    (malformed replies skipped). It ends once every agent of `expected` (e.g. the live ones
+    of the world's info) has answered, or at the query's timeout (`expected` None: always)."""
+    want = None if expected is None else set(expected)
     out: dict[int, dict] = {}
-    for r in session.get(wire.agent_key(run, "*", "status"), timeout=timeout):
+    if want is not None and not want:
+        return out
+    import zenoh
+
+    # No consolidation: zenoh's default holds every reply until the query ends (its timeout)
+    replies = session.get(wire.agent_key(run, "*", "status"), timeout=timeout,
+                          consolidation=zenoh.ConsolidationMode.NONE)
+    for r in replies:
         if r.ok is None:
             continue
         try:
@@ -199,4 +219,6 @@ def query_statuses(session, run: str, timeout: float = QUERY_TIMEOUT) -> dict[in
             continue
         if st["id"] == aid:
             out[aid] = st
+        if want is not None and want <= out.keys():
+            break
     return out
