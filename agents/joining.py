@@ -10,6 +10,7 @@ import sys
 from swarm.contracts import wire
 
 EXIT_REFUSED = 3
+EXIT_NO_WORLD = 6  # no world to join: nothing listens on the endpoint, or no world of the run answers
 
 
 class AgentExit(BaseException):  # also raised by signal handlers: never swallowed by `except Exception`
@@ -37,4 +38,4 @@ def claim(session, run: str, agent_id: int, timeout: float = 5.0, spec: dict | N
         if not rep["ok"]:
             raise AgentExit(EXIT_REFUSED, f"agent {agent_id} refused: {rep['error']}")
         return rep
-    raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: no world answered on run {run!r}")
+    raise AgentExit(EXIT_NO_WORLD, f"agent {agent_id}: no world of run {run!r} answered its join query")

@@ -6,33 +6,39 @@ the id is needed), and hands the session to its `AgentNode` (agents/node.py), wh
 answers each of its own sensor frames with a command. Started by `swarm up`, it also
 stops when the launcher dies (swarm/contracts/lifeline.py). Exit codes: 0 the run ended,
 1 crashed (an exception, e.g. in a follower law: the traceback is the last thing in its
-output), 3 refused (id live, unknown, no world, unusable configuration), 4 the world
-vanished, 5 the world did not answer within the grace, 128+signal when stopped by a
-signal.
+output), 3 refused (id live, unknown, no usable credentials, unusable configuration),
+4 the world vanished, 5 the world did not answer within the grace, 6 no world to join
+(started before its world: nothing listens on the endpoint, or no world of the run answers),
+128+signal when stopped by a signal. Before it has joined, every way of ending is one line
+on stderr (a signal while it connects included), never a traceback.
 """
 
 from __future__ import annotations
 
 import os
+import re
 import signal
 import sys
+import time
 from pathlib import Path
 
-from agents.joining import EXIT_REFUSED, AgentExit, claim
+from agents.joining import EXIT_NO_WORLD, EXIT_REFUSED, AgentExit, claim
 from agents.joining import log as _log
 from agents.node import AgentNode
 from agents.world_link import EXIT_WORLD_SILENT
 from swarm.contracts import credentials
 from swarm.contracts.identities import CredentialsError, agent_user
 from swarm.contracts.laws import trusted_laws
-from swarm.contracts.lifeline import LAUNCHER_PID_ENV, tie_to_launcher
+from swarm.contracts.lifeline import LAUNCHER_PID_ENV, endpoint_refuses, tie_to_launcher
 from swarm.contracts.transport import CONNECT_TIMEOUT_MS, open_client
 
 WORLD_GRACE = 10.0  # s an agent waits for a world that stopped answering (--world-grace)
 # Started by `swarm up`, an agent waits longer for its connection: hundreds of agents starting
 # at once on two cores (and the world admitting them) took more than the 10 s of a lone one.
 LAUNCHED_CONNECT_TIMEOUT_MS = 60_000
-EXIT_CRASH = 1  # and EXIT_OK = 0 (agents/node.py), EXIT_REFUSED = 3 (agents/joining.py), 4 and 5 (world_link.py)
+EXIT_CRASH = 1  # and EXIT_OK = 0 (agents/node.py), EXIT_REFUSED = 3 and EXIT_NO_WORLD = 6 (agents/joining.py),
+# 4 and 5 (world_link.py)
+_RUST_SOURCE = re.compile(r"\s+at /\S+?\.rs:\d+\.?")  # zenoh errors name their source line: not for users
 
 
 def _raise_exit(signum, _frame):
@@ -49,24 +55,13 @@ def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: b
     signal.signal(signal.SIGINT, _raise_exit)
     try:
         tie_to_launcher()  # started by `swarm up`: SIGTERM when the launcher dies
-    except AgentExit as e:
+        opened = _connect(agent_id, connect, run, creds_file)
+    except AgentExit as e:  # a signal before the session is open
+        _log(f"swarm agent {agent_id}: stopped by {signal.Signals(e.code - 128).name} while connecting to {connect}")
         return e.code
-    user = agent_user(agent_id)
-    try:
-        creds = credentials.find(run, connect, creds_file)
-        creds.check_agent(agent_id)
-        creds.identity(user)
-    except CredentialsError as e:
-        _log(f"swarm agent {agent_id}: {e}")
-        return EXIT_REFUSED
-    launched = bool(os.environ.get(LAUNCHER_PID_ENV))
-    try:
-        session = open_client(connect, LAUNCHED_CONNECT_TIMEOUT_MS if launched else CONNECT_TIMEOUT_MS,
-                              creds=creds, user=user)
-    except Exception as e:
-        _log(f"swarm agent {agent_id}: cannot connect to {connect} as {user} of run {creds.run}: {e} "
-             "(no world there, or it refused these credentials)")
-        return EXIT_REFUSED
+    if isinstance(opened, int):
+        return opened
+    session, creds = opened
     code = EXIT_CRASH
     try:
         run = run or creds.run
@@ -87,6 +82,38 @@ def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: b
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         _close(session, code)
     return code
+
+
+def _connect(agent_id: int, connect: str, run: str | None, creds_file: Path | None):
+    """(session, credentials) of agent `agent_id` on `connect`, or the exit code, said in one
+    line: EXIT_NO_WORLD when nothing listens there (started before its world, which it waits
+    for as long as a connection may take), EXIT_REFUSED when there are no usable credentials
+    or what listens there refuses the session."""
+    t_end = time.monotonic() + CONNECT_TIMEOUT_MS / 1000  # a world starting meanwhile is waited for
+    while endpoint_refuses(connect):  # no socket file, or a refused connection: no world (yet)
+        if time.monotonic() > t_end:
+            _log(f"swarm agent {agent_id}: no world at {connect}: nothing listened there for "
+                 f"{CONNECT_TIMEOUT_MS / 1000:g} s (start the run first: swarm up, or swarm world)")
+            return EXIT_NO_WORLD
+        time.sleep(0.1)
+    user = agent_user(agent_id)
+    try:
+        creds = credentials.find(run, connect, creds_file)
+        creds.check_agent(agent_id)
+        creds.identity(user)
+    except CredentialsError as e:
+        _log(f"swarm agent {agent_id}: {e}")
+        return EXIT_REFUSED
+    launched = bool(os.environ.get(LAUNCHER_PID_ENV))
+    try:
+        session = open_client(connect, LAUNCHED_CONNECT_TIMEOUT_MS if launched else CONNECT_TIMEOUT_MS,
+                              creds=creds, user=user)
+    except Exception as e:
+        why = " ".join(_RUST_SOURCE.sub("", str(e)).split())
+        _log(f"swarm agent {agent_id}: cannot connect to {connect} as {user} of run {creds.run}: {why} "
+             "(something listens there, but it refused these credentials or is not this run's world)")
+        return EXIT_REFUSED
+    return session, creds
 
 
 def _close(session, code: int) -> None:

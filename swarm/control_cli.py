@@ -21,7 +21,7 @@ import typer
 from swarm.contracts.credentials import ENV_CREDENTIALS
 from swarm.contracts.identities import CredentialsError, agent_user
 from swarm.contracts.laws import ENV_TRUSTED_LAWS, with_trusted_laws
-from swarm.live_cli import EXIT_USAGE, ConnectOpt, CredentialsOpt, RunOpt, TrustLawOpt, attached, fail
+from swarm.live_cli import EXIT_USAGE, ConnectOpt, CredentialsOpt, LiveRunOpt, TrustLawOpt, attached, fail
 from swarm.procs import wait_until
 
 SPAWN_DEADLINE = 10.0  # s for a spawned agent to show up alive in the world's info
@@ -52,7 +52,7 @@ def kill(
     agent_id: Annotated[int, typer.Argument(metavar="ID", help="the agent's id", show_default=False)],
     signal: Annotated[str, typer.Option("--signal", "-s", help="KILL | TERM | STOP | CONT")] = "KILL",
     connect: ConnectOpt = None,
-    run: RunOpt = None,
+    run: LiveRunOpt = None,
     credentials: CredentialsOpt = None,
 ) -> None:
     """Send a signal (default KILL) to an agent's process.
@@ -72,7 +72,7 @@ def kill(
         if a is None:
             raise fail(f"agent {agent_id} is not in run {info['run']} "
                        f"(ids: {', '.join(sorted(info['agents'], key=int))})")
-        st = live.statuses().get(agent_id) if a["alive"] else None
+        st = live.statuses({agent_id}).get(agent_id) if a["alive"] else None
         pid = (st or a).get("pid")
         host = (st or a).get("host")
         if pid is None:
@@ -141,7 +141,7 @@ def spawn(
     max_turn_rate: Annotated[Optional[float], typer.Option(help="new agent: turn-rate limit (rad/s)",
                                                            show_default=False)] = None,
     connect: ConnectOpt = None,
-    run: RunOpt = None,
+    run: LiveRunOpt = None,
     credentials: CredentialsOpt = None,
     trust_law: TrustLawOpt = None,
 ) -> None:
@@ -235,7 +235,7 @@ def _clock(connect: str | None, run: str | None, credentials: Path | None, cmd: 
         typer.echo(f"run {live.ref.run} {done} at tick {rep.get('tick')}")
 
 
-def pause(connect: ConnectOpt = None, run: RunOpt = None, credentials: CredentialsOpt = None) -> None:
+def pause(connect: ConnectOpt = None, run: LiveRunOpt = None, credentials: CredentialsOpt = None) -> None:
     """Pause the world's clock and print the tick it stopped at.
 
     Agents stay connected; no tick happens until `swarm resume`.
@@ -245,7 +245,7 @@ def pause(connect: ConnectOpt = None, run: RunOpt = None, credentials: Credentia
     _clock(connect, run, credentials, "pause", "paused")
 
 
-def resume(connect: ConnectOpt = None, run: RunOpt = None, credentials: CredentialsOpt = None) -> None:
+def resume(connect: ConnectOpt = None, run: LiveRunOpt = None, credentials: CredentialsOpt = None) -> None:
     """Resume the world's clock after `swarm pause` and print the tick.
 
     Example: swarm resume --run case2-1a2b3c

@@ -1,5 +1,7 @@
-"""Read-only live commands (`swarm runs / agents / graph / watch`), and what every live command
-shares: the --connect/--run/--json options, attaching to a run, failing with one line.
+"""Read-only live commands (`swarm runs / agents / graph`; `swarm watch` is swarm/watch_cli.py's),
+and what every live command shares: the --connect/--run/--json options (defaults:
+$SWARM_CONNECT, $SWARM_RUN), attaching to a run, failing with one line, and reading a run
+again until it has really ended.
 
 Every command talks to a running swarm over zenoh only (`swarm.live`), so it works the
 same from another terminal or another machine (`--connect tcp/HOST:PORT`). A command
@@ -21,16 +23,21 @@ from typing import Annotated, Iterator, Optional
 import typer
 
 from swarm.live_data import graph_key, graph_of, snapshot
-from swarm.live_views import agents_table, graph_dot, graph_renderable, header, runs_table, watch_frame
+from swarm.live_views import agents_table, graph_dot, graph_renderable, header, runs_table
 
 EXIT_NO_RUN = 1
 EXIT_USAGE = 2
-WORLD_GONE_EXIT = 3.0  # s: `watch` without a terminal exits this long after the world ended
+
+ENV_RUN = "SWARM_RUN"  # the live commands' default --run
+ENV_CONNECT = "SWARM_CONNECT"  # the live commands' default --connect
 
 ConnectOpt = Annotated[Optional[str], typer.Option(
-    "--connect", help="endpoint of the run, e.g. tcp/HOST:7447 or unixsock-stream/PATH "
-    "(default: local runs in $SWARM_RUNTIME_DIR or /tmp/swarm-<uid>)", show_default=False)]
-RunOpt = Annotated[Optional[str], typer.Option(
+    "--connect", envvar=ENV_CONNECT, help="endpoint of the run, e.g. tcp/HOST:7447 or unixsock-stream/PATH "
+    "(default: $SWARM_CONNECT, else local runs in $SWARM_RUNTIME_DIR or /tmp/swarm-<uid>)", show_default=False)]
+LiveRunOpt = Annotated[Optional[str], typer.Option(
+    "--run", envvar=ENV_RUN, help="run id (default: $SWARM_RUN, else the only live run found; several runs "
+    "up: `export SWARM_RUN=ID` once)", show_default=False)]
+RunOpt = Annotated[Optional[str], typer.Option(  # commands that are not live ones: no default from the environment
     "--run", help="run id (default: the only live run found)", show_default=False)]
 JsonOpt = Annotated[bool, typer.Option("--json", help="machine-readable JSON (see docs/cli.md)")]
 CredentialsOpt = Annotated[Optional[Path], typer.Option(
@@ -72,7 +79,22 @@ def attached(connect: str | None, run: str | None, creds: Path | None = None) ->
         raise fail(f"cannot talk to the run: {_one_line(e)}") from None
 
 
-def _console(err: bool = False):
+def read_again(patience, read):
+    """`read()`, or None after a failure while the world has not ended (`swarm.live.Patience`:
+    read again next time); NoRun once it has."""
+    from swarm.live import NoRun
+
+    try:
+        value = read()
+    except NoRun:
+        if patience.ended():
+            raise
+        return None
+    patience.answered()
+    return value
+
+
+def console(err: bool = False):
     from rich.console import Console
 
     stream = sys.stderr if err else sys.stdout
@@ -85,7 +107,7 @@ def _dumps(obj) -> str:
 
 def runs(
     connect: ConnectOpt = None,
-    run: RunOpt = None,
+    run: LiveRunOpt = None,
     credentials: CredentialsOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
@@ -126,12 +148,12 @@ def runs(
                    f"no swarm is running: looked at {where} (start one with `swarm up SCENARIO`, "
                    "or pass --connect ENDPOINT)")
     if not as_json:
-        _console().print(runs_table(docs))
+        console().print(runs_table(docs))
 
 
 def agents(
     connect: ConnectOpt = None,
-    run: RunOpt = None,
+    run: LiveRunOpt = None,
     credentials: CredentialsOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
@@ -152,14 +174,14 @@ def agents(
                            "paused": info.get("paused"), "tick": info.get("tick"), "ticks": info.get("ticks"),
                            "time": info.get("time"), "agents": snap["agents"]}))
         return
-    con = _console()
+    con = console()
     con.print(header(info), highlight=False)
     con.print(agents_table(snap["agents"]))
 
 
 def graph(
     connect: ConnectOpt = None,
-    run: RunOpt = None,
+    run: LiveRunOpt = None,
     credentials: CredentialsOpt = None,
     as_json: JsonOpt = False,
     dot: Annotated[bool, typer.Option("--dot", help="Graphviz DOT (pipe into `dot -Tpng`)")] = False,
@@ -186,7 +208,7 @@ def graph(
         elif dot:
             typer.echo(("" if first else "\n") + graph_dot(g))
         else:
-            con = _console()
+            con = console()
             if watch and not first:
                 con.print()
             con.print(graph_renderable(g))
@@ -196,7 +218,12 @@ def graph(
         if not watch:
             show(g, True)
             return
-        from swarm.live import NoRun
+        from swarm.live import NoRun, Patience
+
+        patience = Patience(live)
+
+        def again(g: dict) -> dict:  # the graph now, or the last one while the world does not answer
+            return read_again(patience, lambda: graph_of(snapshot(live, sensing), sensing)) or g
 
         tty = sys.stdout.isatty() and not (as_json or dot)
         key = None
@@ -204,11 +231,11 @@ def graph(
             if tty:
                 from rich.live import Live
 
-                with Live(graph_renderable(g), console=_console(), auto_refresh=False) as view:
+                with Live(graph_renderable(g), console=console(), auto_refresh=False) as view:
                     key = graph_key(g)
                     while True:
                         time.sleep(0.25)
-                        g = graph_of(snapshot(live, sensing), sensing)
+                        g = again(g)
                         if graph_key(g) != key:
                             key = graph_key(g)
                             view.update(graph_renderable(g), refresh=True)
@@ -219,75 +246,11 @@ def graph(
                     show(g, first)
                     first = False
                 time.sleep(0.25)
-                g = graph_of(snapshot(live, sensing), sensing)
+                g = again(g)
         except KeyboardInterrupt:
             raise typer.Exit(0) from None
         except NoRun:
             typer.secho(f"the world of run {live.ref.run} ended", err=True)
-            raise typer.Exit(0) from None
-
-
-def watch(
-    connect: ConnectOpt = None,
-    run: RunOpt = None,
-    credentials: CredentialsOpt = None,
-    rate: Annotated[float, typer.Option(help="refreshes per second", min=0.2, max=30.0)] = 4.0,
-) -> None:
-    """A live terminal view: a top-down picture of the run beside the agents table.
-
-    The picture shows the target (+), the leaders' orbits and followers' expected orbits
-    (dashed), the agents as arrows of their headings coloured by role (leader blue,
-    follower yellow, unrooted red, dead grey x) with their ids, and out-neighbour edges.
-
-    Ctrl-C exits (0). When the world ends the last picture stays, marked "world ended";
-    without a terminal (stdout piped) a frame is printed per refresh and the command exits
-    a few seconds after the world ended.
-
-    Example: swarm watch --rate 10
-    """
-    from swarm.live import NoRun
-
-    period = 1.0 / rate
-    tty = sys.stdout.isatty()
-    con = _console()
-    with attached(connect, run, credentials) as live:
-        snap = snapshot(live)
-        ended_at: float | None = None
-
-        def refresh() -> None:
-            """A new snapshot, or note when the world ended (the last picture stays)."""
-            nonlocal snap, ended_at
-            if ended_at is None:
-                try:
-                    snap = snapshot(live)
-                except NoRun:
-                    ended_at = time.monotonic()
-
-        try:
-            if tty:
-                from rich.live import Live
-
-                def frame():
-                    w, h = con.size
-                    return watch_frame(snap, ended_at is not None, w, h - 1)
-
-                with Live(frame(), console=con, auto_refresh=False, redirect_stderr=False) as view:
-                    while True:
-                        time.sleep(period)
-                        refresh()
-                        view.update(frame(), refresh=True)
-            shown = None
-            while True:
-                now = (snap["info"].get("tick"), ended_at is not None)
-                if now != shown:  # a new frame only when something moved (not while paused)
-                    shown = now
-                    con.print(watch_frame(snap, ended_at is not None, con.width, 30))
-                    con.print()
-                if ended_at is not None and time.monotonic() - ended_at > WORLD_GONE_EXIT:
-                    return
-                time.sleep(period)
-                refresh()
-        except KeyboardInterrupt:
             raise typer.Exit(0) from None
 
 
@@ -296,4 +259,6 @@ def register(app: typer.Typer) -> None:
     app.command("runs")(runs)
     app.command("agents")(agents)
     app.command("graph")(graph)
-    app.command("watch")(watch)
+    from swarm import watch_cli  # (it builds on this module)
+
+    app.command("watch")(watch_cli.watch)

@@ -39,9 +39,10 @@ def merge_agents(info: dict, statuses: dict[int, dict]) -> list[dict]:
 
 
 def snapshot(live, sensing: bool = False) -> dict:
-    """{"info": world info, "agents": merged rows} read now (statuses right after info)."""
+    """{"info": world info, "agents": merged rows} read now (statuses right after info, ending
+    once every agent live in the info has answered)."""
     info = live.info(sensing=sensing)
-    statuses = live.statuses()
+    statuses = live.statuses(int(a["id"]) for a in info.get("agents", {}).values() if a.get("alive"))
     return {"info": info, "agents": merge_agents(info, statuses)}
 
 

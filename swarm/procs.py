@@ -7,6 +7,8 @@ benchmark all start, signal, stop and wait for processes through this module.
   it (pgid == its pid; a new session with `session=True`), later ones join it. The group
   can be signalled as a whole and stopped (SIGTERM, SIGKILL after a grace period, every
   child reaped, and a last SIGKILL for whatever else joined it, e.g. grandchildren).
+- `Reaper`: a thread that reaps a group's members (not its leader) as they exit, so a
+  child killed from outside is no zombie while its parent is busy.
 
 While a member is unreaped, even as a zombie, it is in the group and the group id cannot
 be given to anyone else, so a signal to the group reaches only what was started in it; once
@@ -87,6 +89,12 @@ class Group:
             return None
         return info.si_status if info.si_code == os.CLD_EXITED else -info.si_status
 
+    def reap_exited(self) -> list[subprocess.Popen]:
+        """Reap the members, other than the leader, that have exited since the last call (no
+        zombie of theirs stays); returns them. Safe from another thread than the one that
+        starts them (`Reaper`)."""
+        return [p for p in self.members[1:] if p.returncode is None and p.poll() is not None]
+
     def running(self) -> list[subprocess.Popen]:
         """The members that have not exited."""
         return [p for p in self.members if self.exit_code(p) is None]
@@ -140,6 +148,29 @@ class Group:
     def stop(self, grace: float = 3.0, timeout: float = 5.0) -> None:
         """SIGTERM to the group, SIGKILL if a member still runs `grace` s later, then reap."""
         stop_groups([self], grace, timeout)
+
+
+class Reaper:
+    """A thread that reaps a group's exited members (`Group.reap_exited`, never the leader)
+    every `interval` s, however long its owner's own loop is busy (e.g. in a query waiting
+    for its timeout): a member that exits is reaped within `interval` s. `stop()` ends it."""
+
+    def __init__(self, group: Group, interval: float = 0.05):
+        import threading
+
+        self.group = group
+        self.interval = interval
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="reaper", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.interval):
+            self.group.reap_exited()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=1.0)
 
 
 def stop_groups(groups: Iterable[Group], grace: float = 3.0, timeout: float = 5.0) -> None:

@@ -2,32 +2,72 @@
 
 Each live agent's radial error: its distance to the target against the radius expected
 from its path to a leader (swarm/contracts/orbits.py), or none without a path; then the
-line's text, agent by agent for a small swarm, summed up (median, worst, how many have no
-leader) for a large one. Agents added at run time have no spec here and are skipped.
+line's text, agent by agent for a small swarm, summed up for a large one: how many agents
+are settled (radial error within the settling band, 2%), how many are not and the worst
+few of those, how many have no leader, which (or how many) dropped. Agents added at run time (`swarm spawn`) count
+once the launcher knows their spec (`AddedSpec`, from the world's info).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 from swarm.contracts import wire
 from swarm.contracts.orbits import expected_radius, root_of
 from swarm.contracts.scenario import Scenario
 
 PROGRESS_AGENTS = 12  # more agents than this: the progress line sums them up
+WORST_SHOWN = 3  # unsettled agents named on a summed-up line
 
 
-def truth_progress(buf: bytes | None, s: Scenario) -> dict | None:
-    """Figures for the progress line from a ground-truth message (None: none, or unreadable)."""
+@dataclass(frozen=True)
+class AddedSpec:
+    """What the progress line needs of an agent added at run time (the world's info has it)."""
+
+    id: int
+    role: str
+    speed: float
+    orbit_radius: float | None = None
+
+
+def added_spec(row: dict) -> AddedSpec | None:
+    """An `AddedSpec` from one agent's row of the world's info (None if it lacks a field)."""
+    try:
+        return AddedSpec(int(row["id"]), str(row["role"]), float(row["speed"]),
+                         None if row.get("orbit_radius") is None else float(row["orbit_radius"]))
+    except (KeyError, TypeError, ValueError):
+        return None
+
+
+def added_specs(session, run: str, ids: set[int]) -> dict[int, AddedSpec]:
+    """The specs of agents `ids`, added at run time, from the world's info (those it knows;
+    none if it does not answer now)."""
+    import zenoh
+
+    try:
+        for r in session.get(wire.world_info_key(run), timeout=1.0, consolidation=zenoh.ConsolidationMode.NONE):
+            if r.ok is not None:
+                rows = wire.decode_info(r.ok.payload.to_bytes()).get("agents", {})
+                found = {i: added_spec(rows[str(i)]) for i in ids if str(i) in rows}
+                return {i: a for i, a in found.items() if a is not None}
+    except Exception:  # the world ended meanwhile, or its info is malformed: asked again next time
+        pass
+    return {}
+
+
+def truth_progress(buf: bytes | None, s: Scenario, added: dict[int, AddedSpec] | None = None) -> dict | None:
+    """Figures for the progress line from a ground-truth message (None: none, or unreadable).
+    `added`: the specs of agents added at run time; one not (yet) known is left out."""
     if buf is None:
         return None
     try:
         tick, t, recs = wire.decode_truth(buf)
     except wire.WireError:
         return None
-    known = set(s.ids)  # agents added at run time (swarm spawn) have no spec here: skipped
-    recs = [r for r in recs if int(r["id"]) in known]
-    leaders = {a.id for a in s.agents if a.role == "leader"}
+    spec = {a.id: a for a in s.agents} | dict(added or {})
+    recs = [r for r in recs if int(r["id"]) in spec]
+    leaders = {i for i, a in spec.items() if a.role == "leader"}
     alive = {int(r["id"]) for r in recs if r["state"] == 0}
     out = {int(r["id"]): (int(r["out"]) if r["out"] >= 0 else None) for r in recs}
     errs = {}
@@ -39,21 +79,36 @@ def truth_progress(buf: bytes | None, s: Scenario) -> dict | None:
         if root is None:
             errs[aid] = None
             continue
-        L, me = s.agent(root), s.agent(aid)
+        L, me = spec[root], spec[aid]
         R = expected_radius(me.speed, L.speed, L.orbit_radius)
         errs[aid] = abs(math.hypot(r["x"] - s.target.x, r["y"] - s.target.y) - R) / R
     return {"tick": tick, "time": t, "errors": errs, "dropped": sorted(set(out) - alive)}
 
 
+def _pct(e: float) -> str:
+    """A relative error as a short percentage: 0.4%, 12%, 480%."""
+    p = 100 * e
+    return f"{p:.1f}%" if p < 10 else f"{p:.0f}%"
+
+
 def progress_errors(p: dict) -> str:
     """The progress line's radial errors: one per agent for a small swarm; for a large one
-    the median, the worst and how many have no leader to follow ("-" per agent)."""
+    how many are settled, the worst few of the others, how many have no leader to follow
+    and how many dropped."""
+    from world.metrics import SETTLING_BAND  # (numpy: not at import, for the other commands' sake)
+
     errs, dropped = p["errors"], p["dropped"]
+    gone = f"dropped {', '.join(map(str, dropped))}" if dropped else ""
     if len(errs) + len(dropped) <= PROGRESS_AGENTS:
-        text = " ".join(f"{i}:{'-' if e is None else f'{100 * e:.1f}%'}" for i, e in sorted(errs.items()))
-        return f"radial error {text}" + (f"  dropped {dropped}" if dropped else "")
-    rooted = sorted((e, i) for i, e in errs.items() if e is not None)
-    text = (f"radial error median {100 * rooted[len(rooted) // 2][0]:.1f}%, worst {100 * rooted[-1][0]:.1f}% "
-            f"(agent {rooted[-1][1]})" if rooted else "radial error -")
-    return (f"{text}; {len(errs) - len(rooted)} of {len(errs)} live agents without a leader"
-            + (f"; {len(dropped)} dropped" if dropped else ""))
+        text = " ".join(f"{i}:{'-' if e is None else _pct(e)}" for i, e in sorted(errs.items()))
+        return f"radial error {text}" + (f"  {gone}" if gone else "")
+    rooted = [(e, i) for i, e in errs.items() if e is not None]
+    off = sorted(((e, i) for e, i in rooted if not e <= SETTLING_BAND), key=lambda x: (-x[0], x[1]))
+    text = f"{len(errs)} live: {len(rooted) - len(off)} settled"
+    if off:
+        text += f", {len(off)} not (worst {' '.join(f'{i}:{_pct(e)}' for e, i in off[:WORST_SHOWN])})"
+    if len(rooted) < len(errs):
+        text += f", {len(errs) - len(rooted)} without a leader"
+    if dropped:
+        text += "; " + (gone if len(dropped) <= WORST_SHOWN else f"{len(dropped)} dropped")
+    return text

@@ -498,6 +498,32 @@ def start_ticking(tracker: ProcessTracker, out: Path, duration: float,
     return up, pids, info
 
 
+def ring_scenario(path: Path, n: int, leaders: int = 2, clock: str = "realtime", dt: float = 0.05,
+                  duration: float = 600.0) -> Path:
+    """Write a scenario of `n` agents on a spiral round the target (the first `leaders` of them
+    leaders) to `path`: for runs larger than the shipped scenarios."""
+    import math
+
+    lines = [f'name = "ring{n}"', "[run]", f"dt = {dt}", f"duration = {duration}", f'clock = "{clock}"', "seed = 1",
+             "[target]", "x = 0.0", "y = 0.0", "[gains]", "c1 = 1.0", "c2 = 0.5"]
+    for i in range(1, n + 1):
+        a, r, v = 2 * math.pi * i / n, 30.0 + 2 * i, 20.0 + (i % 7) * 3
+        lines += ["[[agents]]", f"id = {i}", f'role = "{"leader" if i <= leaders else "follower"}"',
+                  f"x = {r * math.cos(a):.3f}", f"y = {r * math.sin(a):.3f}", f"speed = {v}", f"heading = {a + 1.57:.3f}"]
+        if i <= leaders:
+            lines += [f"orbit_radius = {v}", 'direction = "ccw"']
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def reaped(pid: int) -> bool:
+    """Whether process `pid` is gone for good: exited and reaped by its parent (no zombie)."""
+    try:
+        return psutil.Process(pid).status() == psutil.STATUS_DEAD
+    except psutil.NoSuchProcess:
+        return True
+
+
 def load_trajectory(out: Path) -> dict[str, np.ndarray]:
     with np.load(Path(out) / "trajectory.npz", allow_pickle=False) as z:
         return {k: z[k] for k in z.files}
@@ -509,6 +535,20 @@ def run_sim(tracker: ProcessTracker, scenario: Path | str, out: Path, *extra, ti
     rc = p.wait(timeout)
     assert rc == 0, f"swarm sim exited {rc}:\n{p.text()[-3000:]}"
     return load_trajectory(out), json.loads((Path(out) / "summary.json").read_text())
+
+
+def still_running(started: list[tuple[int, float]]) -> list:
+    """The processes of `started` ((pid, create time) pairs) still running: not exited, not
+    a zombie, and not another process that got the same pid since."""
+    alive = []
+    for pid, ct in started:
+        try:
+            p = psutil.Process(pid)
+            if abs(p.create_time() - ct) < 0.01 and p.status() != psutil.STATUS_ZOMBIE:
+                alive.append(p)
+        except psutil.NoSuchProcess:
+            pass
+    return alive
 
 
 def sim_results(out: Path) -> tuple[dict[str, np.ndarray], dict]:

@@ -243,9 +243,14 @@ def test_progress_line_sums_up_a_large_swarm():
     from swarm.up_progress import progress_errors
 
     small = {"errors": {1: 0.0, 2: None, 3: 0.25}, "dropped": [4]}
-    assert progress_errors(small) == "radial error 1:0.0% 2:- 3:25.0%  dropped [4]"
+    assert progress_errors(small) == "radial error 1:0.0% 2:- 3:25%  dropped 4"
     big = {"errors": {i: (None if i % 4 == 0 else i / 1000) for i in range(1, 201)}, "dropped": [201, 202]}
     line = progress_errors(big)
-    assert line == ("radial error median 10.1%, worst 19.9% (agent 199); 50 of 200 live agents without a leader; "
-                    "2 dropped"), line
-    assert progress_errors({"errors": {i: None for i in range(20)}, "dropped": []}).startswith("radial error -;")
+    # settled: within the 2% band (errors 0.1% .. 2.0%: agents 1..20 less the 5 without a leader)
+    assert line == ("200 live: 15 settled, 135 not (worst 199:20% 198:20% 197:20%), 50 without a leader; "
+                    "dropped 201, 202"), line
+    many_dropped = progress_errors({**big, "dropped": list(range(201, 231))})
+    assert many_dropped.endswith("; 30 dropped") and len(many_dropped) < 110, many_dropped
+    assert progress_errors({"errors": {i: None for i in range(20)}, "dropped": []}) == \
+        "20 live: 0 settled, 20 without a leader"
+    assert progress_errors({"errors": {i: 0.001 for i in range(30)}, "dropped": []}) == "30 live: 30 settled"

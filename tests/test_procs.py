@@ -174,3 +174,28 @@ def test_an_empty_group_is_not_alive_and_stops_at_once():
     assert not g.alive() and not g.signal(signal.SIGTERM) and g.running() == []
     g.stop()
     g.kill()
+
+
+def test_the_reaper_reaps_members_as_they_exit_but_not_the_leader(groups):
+    """A member killed from outside is no zombie while its owner is busy elsewhere (the
+    launcher in a zenoh query): the Reaper thread reaps it; the leader waits for `reap()`."""
+    from swarm.procs import Reaper
+
+    g = groups()
+    leader = g.start(["sleep", "30"])
+    member = g.start(["sleep", "30"])
+    reaper = Reaper(g, interval=0.02)
+    try:
+        os.kill(member.pid, signal.SIGKILL)
+        os.kill(leader.pid, signal.SIGKILL)
+        t0 = time.monotonic()
+        assert wait_until(lambda: not os.path.exists(f"/proc/{member.pid}"), 1.0, 0.005), "member left a zombie"
+        took = time.monotonic() - t0
+        assert member.returncode == -signal.SIGKILL and reaped(member)
+        time.sleep(0.05)  # a few rounds of the reaper
+        assert leader.returncode is None and os.path.exists(f"/proc/{leader.pid}"), "the leader was reaped"
+        assert g.exit_code(leader) == -signal.SIGKILL
+        assert g.reap_exited() == []  # nothing new
+    finally:
+        reaper.stop()
+    print(f"\n[timing] member reaped {took * 1000:.0f} ms after its SIGKILL")
