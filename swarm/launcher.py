@@ -1,11 +1,12 @@
 """`swarm up`: start a world and one OS process per agent, supervise, show progress.
 
 All children run in one process group that the launcher owns (a `swarm.procs.Group`, led
-by the world, which is not reaped until the end, so the group outlives any agent). The
-world writes the results; the launcher watches the run over zenoh like any observer would
-(ground truth and events), prints progress, and on Ctrl-C/SIGTERM stops the world first
-(so the results are written), then the agents, then anything left in the group.
-Each child's output goes to `<out>/logs/`.
+by the world, which is not reaped until the end, so the group outlives any agent; the
+agents are reaped as they exit, by a `swarm.procs.Reaper` thread). The world writes the
+results; the launcher watches the run over zenoh like any observer would (ground truth and
+events), prints progress, and on Ctrl-C/SIGTERM stops the world first with the signal it
+got (so the results are written, and say which signal), then the agents, then anything
+left in the group. Each child's output goes to `<out>/logs/`.
 
 It supervises: an agent process that exits by itself is reported live, sent to the world
 (an `agent_exit` admin request: the world records a `crash` or `exit` event, see
@@ -27,13 +28,13 @@ from pathlib import Path
 from typing import Callable
 
 from swarm.contracts import credentials, wire
-from swarm.contracts.laws import ENV_TRUSTED_LAWS, with_trusted_laws
+from swarm.contracts.laws import ENV_LAW_PATH, ENV_TRUSTED_LAWS, with_law_path, with_trusted_laws
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.transport import default_endpoint, dial_endpoint, open_client
-from swarm.procs import Group, wait_until
+from swarm.procs import Group, Reaper, wait_until
 from swarm.supervision import AgentExitReport, agent_exit, send_report, world_failure
-from swarm.up_progress import truth_progress
+from swarm.up_progress import AddedSpec, added_specs, truth_progress
 
 EXIT_WORLD_FAILED = 1
 
@@ -55,6 +56,7 @@ class UpConfig:
     time_scale: float = 1.0  # realtime clock: simulated s per wall s
     join_timeout: float = 60.0
     world_grace: float = 10.0  # s agents wait for a world that stopped answering
+    foxglove: tuple[str, int] | None = None  # (host, port): the world serves a live view (--foxglove)
 
 
 class Launcher:
@@ -76,18 +78,22 @@ class Launcher:
         self.dropped_notices = 0  # malformed control notices ignored
         self.dropped_noted = 0.0
         self.started = False  # the world's `start` event was seen (every agent joined)
+        self.listening = False  # the world listens (and so handles SIGINT/SIGTERM as a stop)
         self.procs: list[tuple[int, subprocess.Popen]] = []  # every agent process started
         self.seen_exit: set[int] = set()  # pids whose exit was handled
         self.scripted: set[int] = set()  # pids signalled for a scripted fault
         self.exits: list[AgentExitReport] = []
         self.failure: str | None = None  # one line: why the run could not start
+        self.added: dict[int, AddedSpec] = {}  # agents added at run time (`swarm spawn`), for the progress line
+        self.unknown_added: set[int] = set()  # added agents whose spec is still to be asked for
 
     # -- processes --------------------------------------------------------------------------
     def _spawn(self, args: list[str], log_name: str) -> subprocess.Popen:
         log = open(self.logs / log_name, "ab")
         env = {**os.environ, LAUNCHER_PID_ENV: str(os.getpid()),  # children stop when we die
-               # the law of our own scenario is the one law our agents may import
-               ENV_TRUSTED_LAWS: with_trusted_laws([self.cfg.scenario.gains.law]),
+               # the laws of our own scenario are the laws our agents may import, from its directory too
+               ENV_TRUSTED_LAWS: with_trusted_laws(self.cfg.scenario.law_names),
+               ENV_LAW_PATH: with_law_path([self.cfg.scenario_path.resolve().parent]),
                # our agents use our run's own credentials, whatever the shell says
                credentials.ENV_CREDENTIALS: str(credentials.run_file(self.cfg.run))}
         try:
@@ -104,6 +110,8 @@ class Launcher:
             args += ["--duration", str(c.duration)]
         if c.clock is not None:
             args += ["--clock", c.clock]
+        if c.foxglove is not None:
+            args += ["--foxglove", "--foxglove-host", c.foxglove[0], "--foxglove-port", str(c.foxglove[1])]
         self.world = self._spawn(args, "world.log")
 
     def start_agent(self, agent_id: int) -> subprocess.Popen:
@@ -121,8 +129,10 @@ class Launcher:
     def stop_all(self, grace: float = 10.0) -> None:
         """World first (it writes the results), then agents, then the whole group."""
         if self.world is not None and self.world_exit_code() is None:
+            # the user's signal (summary.json says it); SIGTERM to a world not listening (no handlers yet)
+            sig = self.stop_signal if self.stop_signal and self.listening else signal.SIGTERM
             try:
-                os.kill(self.world.pid, signal.SIGTERM)
+                os.kill(self.world.pid, sig)
             except ProcessLookupError:
                 pass
             wait_until(lambda: self.world_exit_code() is not None, grace, 0.02)
@@ -166,10 +176,16 @@ class Launcher:
             self.events.append(ev)
         if ev["kind"] == "start":
             self.started = True
+        elif ev["kind"] == "add" and isinstance(ev.get("agent"), int):
+            self.unknown_added.add(ev["agent"])
 
-    def progress(self) -> dict | None:
-        """Figures for the progress line from the latest ground truth (swarm/up_progress.py)."""
-        return truth_progress(self.latest_truth, self.cfg.scenario)
+    def progress(self, session=None) -> dict | None:
+        """Figures for the progress line from the latest ground truth (swarm/up_progress.py),
+        agents added at run time included once the world's info has told their spec."""
+        if self.unknown_added and session is not None:
+            self.added.update(added_specs(session, self.cfg.run, set(self.unknown_added)))
+            self.unknown_added -= set(self.added)
+        return truth_progress(self.latest_truth, self.cfg.scenario, self.added)
 
     # -- the run -------------------------------------------------------------------------------
     def run(self, show: Callable[[dict | None, float], None]) -> int:
@@ -177,10 +193,12 @@ class Launcher:
         self.logs.mkdir(parents=True, exist_ok=True)
         handlers = {sig: signal.signal(sig, self._on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
         session = None
+        reaper = Reaper(self.group)  # a child killed from outside (`swarm kill`) is no zombie meanwhile
         try:
             self.start_world()
             session = self.connect()  # agents start once the world listens
             if session is not None:
+                self.listening = True
                 self._subs = [session.declare_subscriber(wire.truth_key(self.cfg.run), self._on_truth),
                               session.declare_subscriber(wire.events_key(self.cfg.run), self._on_event),
                               session.declare_subscriber(wire.world_control_key(self.cfg.run),
@@ -200,10 +218,11 @@ class Launcher:
                     if self.supervise(session):
                         break
                     time.sleep(0.05 if self.cfg.scenario.faults else 0.25)
-                show(self.progress(), time.monotonic() - t0)
+                show(self.progress(session), time.monotonic() - t0)
             if self.stop_signal is None and not self.failed:
                 self.supervise(None)  # exits just before the world ended (the world has ended)
         finally:
+            reaper.stop()
             if session is not None:
                 session.close()
             self.stop_all()

@@ -29,6 +29,11 @@ ClockOpt = Annotated[Optional[str], typer.Option(help="lockstep | realtime (defa
 TimeScaleOpt = Annotated[float, typer.Option("--time-scale", "--speed", help="realtime clock: simulated "
                                              "seconds per wall second", min=1e-6)]
 EndPlotsOpt = Annotated[bool, typer.Option(help="render PNG plots at the end")]
+FoxgloveOpt = Annotated[bool, typer.Option("--foxglove", help="serve the run live to the Foxglove app "
+                                           "(WebSocket, ws://HOST:PORT; README, \"Live view in Foxglove\")")]
+FoxglovePortOpt = Annotated[int, typer.Option("--foxglove-port", help="--foxglove: the port", min=1, max=65535)]
+FoxgloveHostOpt = Annotated[str, typer.Option("--foxglove-host", help="--foxglove: the address to bind "
+                                              "(0.0.0.0: every interface, anyone who can reach it sees the run)")]
 
 
 def default_out(scenario_path: Path, kind: str) -> Path:
@@ -75,6 +80,20 @@ def check_runtime_dir() -> None:
 def check_clock(clock: str | None) -> None:
     if clock is not None and clock not in ("lockstep", "realtime"):
         raise fail(f"--clock must be lockstep or realtime, not {clock!r}")
+
+
+def check_foxglove(host: str, port: int) -> None:
+    """The --foxglove port must be free to bind: one line naming the option, exit 2 (the
+    world checks again when it binds, world/live_view.py)."""
+    import socket
+
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+        with socket.socket(infos[0][0], socket.SOCK_STREAM) as so:
+            so.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            so.bind(infos[0][4])
+    except OSError as e:
+        raise fail(f"--foxglove: cannot serve on {host}:{port}: {e.strerror or e}") from None
 
 
 def new_run_id(scenario_path: Path) -> str:
@@ -177,15 +196,20 @@ def world(
                                                           "within this many s (default: wait)")] = None,
     plots: EndPlotsOpt = True,
     force: ForceOpt = False,
+    foxglove: FoxgloveOpt = False,
+    foxglove_port: FoxglovePortOpt = 8765,
+    foxglove_host: FoxgloveHostOpt = "127.0.0.1",
 ) -> None:
     """Run the world of a scenario by hand: the hub, physics, sensors and the recording.
 
     Agents join with `swarm agent --id N --connect ENDPOINT` from any terminal or machine.
+    With --out, the end prints the summary table `swarm up` prints.
 
     Example: swarm world scenarios/case2.toml --listen tcp/0.0.0.0:7447 --out runs/case2
     """
     from swarm.contracts.transport import default_endpoint
     from swarm.contracts.wire import WireError, check_run_id
+    from world.clock import EXIT_DESERTED
     from world.main import run_world
     from world.process import WorldConfig
 
@@ -200,10 +224,20 @@ def world(
     clock = clock or s.run.clock
     check_clock(clock)
     listen = listen or default_endpoint(run)
+    if foxglove:
+        if out is None:
+            raise fail("--foxglove needs --out: the live view serves the run's recording as it is written")
+        check_foxglove(foxglove_host, foxglove_port)
     if out is not None:
         claim_out(out, force)
     typer.echo(f"run {run} on {listen}; " + (f"results in {out}" if out else "no results kept (no --out)"), err=True)
-    code = run_world(WorldConfig(s, run, listen, out, clock, time_scale, duration, join_timeout))
+    code = run_world(WorldConfig(s, run, listen, out, clock, time_scale, duration, join_timeout,
+                                 foxglove=(foxglove_host, foxglove_port) if foxglove else None))
+    summary = out / "summary.json" if out is not None else None
+    if summary is not None and code in (0, 130, 143, EXIT_DESERTED) and summary.exists():
+        import json
+
+        print_summary(json.loads(summary.read_text()), out)  # the table `swarm up` prints
     if plots and out is not None and code in (0, 130, 143) and (out / "trajectory.npz").exists():
         render_run_plots(out)
     raise typer.Exit(code)
@@ -228,7 +262,8 @@ def agent(
     machines").
 
     Exit codes: 0 the run ended, 1 crashed (e.g. an exception in its law), 3 refused,
-    4 the world vanished, 5 the world did not answer within --world-grace, 130/143 stopped.
+    4 the world vanished, 5 the world did not answer within --world-grace, 6 no world to
+    join (nothing listened on --connect for 10 s), 130/143 stopped.
 
     Example: swarm agent --id 3 --connect tcp/10.0.0.5:7447 --credentials agent-3.cred
     """

@@ -18,10 +18,14 @@ from swarm.run_cli import (
     ClockOpt,
     DurationOpt,
     EndPlotsOpt,
+    FoxgloveHostOpt,
+    FoxgloveOpt,
+    FoxglovePortOpt,
     ForceOpt,
     TimeScaleOpt,
     check_clock,
     check_duration,
+    check_foxglove,
     check_runtime_dir,
     claim_out,
     new_run_id,
@@ -46,6 +50,9 @@ def up(
     force: ForceOpt = False,
     world_grace: Annotated[float, typer.Option(help="s the agents wait for a world that stopped answering "
                                                "(a stalled, not a vanished, world)", min=0.0)] = 10.0,
+    foxglove: FoxgloveOpt = False,
+    foxglove_port: FoxglovePortOpt = 8765,
+    foxglove_host: FoxgloveHostOpt = "127.0.0.1",
 ) -> None:
     """Run a scenario as a distributed system: a world process and one OS process per agent.
 
@@ -61,16 +68,22 @@ def up(
     check_clock(clock)
     check_duration(s, duration, scenario)
     check_runtime_dir()
+    live = (foxglove_host, foxglove_port) if foxglove else None
+    if live is not None:
+        check_foxglove(*live)
     run_id = new_run_id(scenario)
     out = out or Path("runs") / run_id
     claim_out(out, force)
     launcher = Launcher(UpConfig(scenario, s, out, run_id, listen, duration, clock, time_scale,
-                                 world_grace=world_grace))
+                                 world_grace=world_grace, foxglove=live))
     typer.echo(f"run {run_id}  endpoint {launcher.endpoint}  agents {len(s.agents)}  "
                f"clock {clock or s.run.clock}")
-    typer.echo(f"attach from another terminal: swarm agent --id N --connect {launcher.dial} --run {run_id}"
-               + ("" if launcher.dial.startswith("unixsock") else
-                  "; from another machine: swarm credentials --agent N (README, \"Agents on other machines\")"))
+    for line in attach_hints(run_id, launcher.dial, s):
+        typer.echo(line)
+    if live is not None:
+        from world.live_view import open_hint
+
+        typer.echo(open_hint(*live))
     total = int(round((duration or s.run.duration) / s.run.dt))
     tty = sys.stdout.isatty()
     state = {"last": 0.0, "tick": 0, "wall": 0.0}
@@ -84,8 +97,10 @@ def up(
         rate = (p["tick"] - state["tick"]) / max(wall - state["wall"], 1e-9)
         state.update(last=now, tick=p["tick"], wall=wall)
         line = f"t={p['time']:7.2f}s tick {p['tick']}/{total} {rate:6.0f} ticks/s  " + progress_errors(p)
-        if tty:
-            typer.echo("\r\033[K" + line[:200], nl=False)
+        if tty:  # one terminal row: a wrapped line would not be cleared by the next one
+            import shutil
+
+            typer.echo("\r\033[K" + line[:max(20, shutil.get_terminal_size().columns - 1)], nl=False)
         else:
             typer.echo(line)
 
@@ -106,6 +121,27 @@ def up(
     for r in launcher.exits if launcher.failure is None else []:
         typer.echo(f"  {r.line()}" + ("" if r.sent else "  (not in summary.json: the world did not hear of it)"))
     raise typer.Exit(code)
+
+
+def attach_hints(run_id: str, dial: str, s) -> list[str]:
+    """What to type in another terminal: watch the run (with --run when other runs are up,
+    so the command cannot pick the wrong one), and add an agent by hand."""
+    from swarm.contracts.credentials import local_runs
+
+    try:
+        others = any(c.run != run_id for c in local_runs())
+    except Exception:  # an unreadable runtime dir: swarm up says so itself
+        others = True
+    pick = f" --run {run_id}" if others else ""
+    ids = s.added_id_range
+    lines = [f"watch it from another terminal: swarm watch{pick}  (table: swarm agents{pick}; graph: "
+             f"swarm graph{pick}" + (f"; or export SWARM_RUN={run_id} once" if others else "") + ")",
+             f"add an agent by hand: swarm spawn --id N{pick} (a new id, {ids.start}..{ids.stop - 1}, with "
+             "--x --y --heading --speed)"]
+    if not dial.startswith("unixsock"):
+        lines.append(f"from another machine: swarm credentials --agent N{pick}, there swarm agent --id N --connect {dial} "
+                     "--credentials FILE (README, \"Agents on other machines\")")
+    return lines
 
 
 EXIT_AGENT_FAILED = 4  # swarm up's exit codes: README, "What `swarm up` watches" (5: the world's own)

@@ -6,9 +6,9 @@ of a crashed run is removed (a live one belongs to another run: refused); the `W
 (world/process.py) listens, runs its ticks and writes its results, which are written
 even when it is stopped, after a disk-full error or a bug, so nothing recorded is lost.
 Exit codes: 0 the run completed, 128+signal stopped, 2 cannot listen (the endpoint in
-use or unusable) or write the credentials, 3 agents did not join in time, 1 an internal
-error, EXIT_NO_SPACE the recording or the results could not be written, EXIT_DESERTED
-(world/clock.py) no agent was left.
+use or unusable, or the --foxglove port in use) or write the credentials, 3 agents did
+not join in time, 1 an internal error, EXIT_NO_SPACE the recording or the results could
+not be written, EXIT_DESERTED (world/clock.py) no agent was left.
 """
 
 from __future__ import annotations
@@ -82,6 +82,7 @@ def _run_world(cfg: WorldConfig) -> int:
         print(f"swarm world: {e}", file=sys.stderr)
         return EXIT_NO_SPACE
     code = 0  # SIGTERM/SIGINT raise Stop here (run_world installed the handlers)
+    live = None  # the --foxglove server (world/live_view.py)
     try:
         try:
             world._open()
@@ -92,6 +93,18 @@ def _run_world(cfg: WorldConfig) -> int:
             world.discard_recording()
             print(f"swarm world: cannot listen on {cfg.listen}: {e}", file=sys.stderr)
             return 2
+        if cfg.foxglove is not None:
+            from world.live_view import LiveViewError, open_hint, start_live_view
+
+            try:
+                live = start_live_view(world.engine.rec.writer, cfg.run, *cfg.foxglove)
+            except LiveViewError as e:
+                world.discard_recording()
+                world._close()
+                print(f"swarm world: {e}", file=sys.stderr)
+                return 2
+            if cfg.progress:
+                print(f"[world] {open_hint(*cfg.foxglove)}", file=sys.stderr, flush=True)
         if cfg.progress:
             print(f"[world] run {cfg.run} listening on {cfg.listen}", file=sys.stderr, flush=True)
         try:
@@ -131,6 +144,8 @@ def _run_world(cfg: WorldConfig) -> int:
             code = 1
         world._close()
     finally:
+        if live is not None:
+            live.stop()
         if sock is not None:
             sock.unlink(missing_ok=True)
     return code

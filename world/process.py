@@ -49,6 +49,7 @@ class WorldConfig:
     deadline: float | None = None  # lockstep deadline override (s)
     progress: bool = True
     auth: HubAuth | None = None  # who may connect and do what (None: an open hub)
+    foxglove: tuple[str, int] | None = None  # (host, port) to serve the live view on (world/live_view.py)
 
 
 @dataclass

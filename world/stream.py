@@ -9,10 +9,16 @@ with foxglove-sdk and read back with the `mcap` package. Its channels:
   and summary.json are rebuilt from these rows.
 - `/swarm/scene`  foxglove.SceneUpdate at most 10 times per simulated second: agents as
   arrows (leaders red, followers blue), out-neighbour edges as lines, the target as a
-  sphere; what Foxglove draws in its 3D panel.
+  sphere, the expected orbits as circles; what Foxglove draws in its 3D panel.
+- `/swarm/trails` foxglove.SceneUpdate, about once per 2.5 simulated s: each agent's path.
+- `/swarm/agents` JSON with each scene update: per agent pose, turn rate u, out-neighbour,
+  root, expected radius and radial error (to plot). The three: world/scene.py.
 - `/swarm/events` JSON, one message per event (join, drop, switch, fault, ...).
 - `/swarm/run`    JSON: first `{"scenario": ..., "ticks": ...}`, then `{"add_agent": spec}`
   for each agent added at run time, so that a recording is readable on its own.
+
+`swarm up --foxglove` serves the same channels (but `/swarm/ticks`) live over Foxglove's
+WebSocket protocol: world/live_view.py attaches a server to this writer's context.
 
 Log times are simulated time in nanoseconds. A chunk is written every FLUSH_PERIOD s of
 wall time (and only then: no size limit, so every write, and every write error, happens
@@ -24,7 +30,6 @@ kept but the chunk being filled.
 from __future__ import annotations
 
 import json
-import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,6 +38,7 @@ import numpy as np
 
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.scenario_tables import AgentSpec
+from world.scene import SceneBuilder
 
 RECORDING_FILE = "recording.mcap"
 TICK_ENCODING = "swarm-tick-v1"
@@ -92,9 +98,11 @@ class StreamWriter:
         self.run_ch = foxglove.Channel("/swarm/run", schema={"title": "swarm.Run", "type": "object"},
                                        context=self.ctx)
         self.scene_ch = SceneUpdateChannel("/swarm/scene", context=self.ctx)
+        self.agents_ch = foxglove.Channel("/swarm/agents", schema={"title": "swarm.Agents", "type": "object"},
+                                          context=self.ctx)
+        self.trails_ch = SceneUpdateChannel("/swarm/trails", context=self.ctx)
         self.scene_every = max(1, int(round(1.0 / (SCENE_RATE * scenario.run.dt))))
-        self.target = (scenario.target.x, scenario.target.y)
-        self.leader = np.array([a.role == "leader" for a in scenario.agents])
+        self.scene = SceneBuilder(scenario, 1.0 / (self.scene_every * scenario.run.dt))
         self.last_flush = time.monotonic()
         self.closed = False
         self.failed = False  # a write failed: the file ends at the last good flush
@@ -105,7 +113,7 @@ class StreamWriter:
         return max(0, int(round(t * 1e9)))
 
     def add_agent(self, spec: AgentSpec, t: float) -> None:
-        self.leader = np.append(self.leader, spec.role == "leader")
+        self.scene.add_agent(spec)
         self.run_ch.log({"add_agent": spec.model_dump(mode="json")}, log_time=self._ns(t))
 
     def event(self, ev: dict) -> None:
@@ -115,10 +123,18 @@ class StreamWriter:
         ns = self._ns(t)
         self.ticks_ch.log(encode_tick(tick, t, ids, x, y, heading, u, out, alive, missed), log_time=ns)
         if tick % self.scene_every == 0:
-            self.scene_ch.log(self._scene(ns, ids, x, y, heading, out, alive), log_time=ns)
+            self._scene(tick, t, ns, ids, x, y, heading, u, out, alive)
         now = time.monotonic()
         if now - self.last_flush >= FLUSH_PERIOD:
             self.flush()
+
+    def _scene(self, tick, t, ns, ids, x, y, heading, u, out, alive) -> None:
+        numbers = self.scene.numbers(tick, t, ids, x, y, heading, u, out, alive)
+        self.agents_ch.log(numbers, log_time=ns)
+        self.scene_ch.log(self.scene.scene(ns, ids, x, y, out, heading, alive, numbers), log_time=ns)
+        trails = self.scene.trails_update(ns, ids, x, y, alive)
+        if trails is not None:
+            self.trails_ch.log(trails, log_time=ns)
 
     def flush(self) -> None:
         self.last_flush = time.monotonic()
@@ -145,37 +161,6 @@ class StreamWriter:
         except Exception:
             pass
         raise RecordingError(f"cannot write {self.path}: I/O error (disk full or file too large?)")
-
-    def _scene(self, ns, ids, x, y, heading, out, alive):
-        from foxglove.messages import (ArrowPrimitive, Color, LinePrimitive, LinePrimitiveLineType, Point3, Pose,
-                                       Quaternion, SceneEntity, SceneUpdate, SpherePrimitive, Timestamp, Vector3)
-
-        ts = Timestamp(sec=ns // 10**9, nsec=ns % 10**9)
-        red, blue, grey = Color(r=0.85, g=0.15, b=0.15, a=1.0), Color(r=0.15, g=0.35, b=0.85, a=1.0), \
-            Color(r=0.4, g=0.4, b=0.4, a=0.8)
-        col = {int(i): k for k, i in enumerate(ids)}
-        arrows, points = [], []
-        for k in range(len(ids)):
-            if not alive[k]:
-                continue
-            h = float(heading[k])
-            arrows.append(ArrowPrimitive(
-                pose=Pose(position=Vector3(x=float(x[k]), y=float(y[k]), z=0.0),
-                          orientation=Quaternion(x=0.0, y=0.0, z=math.sin(h / 2), w=math.cos(h / 2))),
-                shaft_length=3.0, shaft_diameter=0.6, head_length=1.5, head_diameter=1.5,
-                color=red if self.leader[k] else blue))
-            j = col.get(int(out[k]))
-            if j is not None:
-                points += [Point3(x=float(x[k]), y=float(y[k]), z=0.0), Point3(x=float(x[j]), y=float(y[j]), z=0.0)]
-        tx, ty = self.target
-        target = SpherePrimitive(pose=Pose(position=Vector3(x=tx, y=ty, z=0.0),
-                                           orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
-                                 size=Vector3(x=2.0, y=2.0, z=2.0), color=Color(r=0.1, g=0.1, b=0.1, a=1.0))
-        return SceneUpdate(entities=[
-            SceneEntity(timestamp=ts, frame_id="world", id="agents", arrows=arrows),
-            SceneEntity(timestamp=ts, frame_id="world", id="edges", lines=[LinePrimitive(
-                type=LinePrimitiveLineType.LineList, thickness=0.3, points=points, color=grey)]),
-            SceneEntity(timestamp=ts, frame_id="world", id="target", spheres=[target])])
 
 
 def _plain(o):
@@ -235,7 +220,9 @@ def read_recording(path: Path) -> Recording:
                 elif topic == "/swarm/run":
                     msg = json.loads(r.data)
                     if "scenario" in msg:
-                        rec = Recording(Scenario.model_validate(msg["scenario"]), int(msg["ticks"]))
+                        # read back, its laws are names: nothing is imported
+                        scen = Scenario.model_validate(msg["scenario"], context={"check_laws": False})
+                        rec = Recording(scen, int(msg["ticks"]))
                     elif "add_agent" in msg:
                         added.append(msg["add_agent"])
             elif footer and rec is not None:

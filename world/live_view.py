@@ -1,0 +1,46 @@
+"""The live view: with `--foxglove`, the world serves its run over Foxglove's WebSocket
+protocol (foxglove-sdk's server), so the Foxglove app can watch it as it goes.
+
+The server is attached to the context of the run's recording writer (world/stream.py), so
+it serves exactly the recording's channels, as they are logged, with nothing logged twice:
+`/swarm/scene`, `/swarm/trails`, `/swarm/agents`, `/swarm/events` and `/swarm/run`. Only
+`/swarm/ticks` (every tick, in the project's own binary encoding, which Foxglove cannot
+draw) is left out. Without --foxglove this module is not imported and nothing runs.
+"""
+
+from __future__ import annotations
+
+DEFAULT_HOST = "127.0.0.1"
+DEFAULT_PORT = 8765
+LIVE_TOPICS = ("/swarm/scene", "/swarm/trails", "/swarm/agents", "/swarm/events", "/swarm/run")
+
+
+class LiveViewError(Exception):
+    """The live view cannot be served (the port is in use, the host unusable)."""
+
+
+def _serve(channel) -> bool:
+    return channel.topic != "/swarm/ticks"
+
+
+def start_live_view(writer, run: str, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT):
+    """Serve `writer`'s channels (a world/stream.py StreamWriter) on ws://host:port; returns
+    the server (`.stop()` ends it). Raises LiveViewError with one line on failure."""
+    import foxglove
+
+    try:
+        return foxglove.start_server(name=f"swarm {run}", host=host, port=port, context=writer.ctx,
+                                     channel_filter=_serve)
+    except Exception as e:  # foxglove reports a bind failure as RuntimeError
+        why = str(e).removeprefix("FoxgloveError: ")
+        raise LiveViewError(f"--foxglove: cannot serve on {host}:{port}: {why}") from None
+
+
+def live_url(host: str, port: int) -> str:
+    return f"ws://{host}:{port}"
+
+
+def open_hint(host: str, port: int) -> str:
+    """The line to print: where to point the Foxglove app."""
+    return (f"live view: {live_url(host, port)}  (Foxglove: Open connection > Foxglove WebSocket; "
+            "layout: docs/foxglove-layout.json)")
