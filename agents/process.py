@@ -47,7 +47,7 @@ def _raise_exit(signum, _frame):
 
 def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: bool = False,
               spec: dict | None = None, world_grace: float = WORLD_GRACE, creds_file: Path | None = None,
-              trust: tuple[str, ...] = ()) -> int:
+              trust: tuple[str, ...] = (), world_wait: float = CONNECT_TIMEOUT_MS / 1000) -> int:
     """Entry point of an agent process; returns its exit code. It connects as `agent-<id>`
     with the run's credentials (`creds_file`, else $SWARM_CREDENTIALS, else the local run's
     file in the runtime directory) and imports only a law that is built in or trusted."""
@@ -55,7 +55,7 @@ def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: b
     signal.signal(signal.SIGINT, _raise_exit)
     try:
         tie_to_launcher()  # started by `swarm up`: SIGTERM when the launcher dies
-        opened = _connect(agent_id, connect, run, creds_file)
+        opened = _connect(agent_id, connect, run, creds_file, world_wait)
     except AgentExit as e:  # a signal before the session is open
         _log(f"swarm agent {agent_id}: stopped by {signal.Signals(e.code - 128).name} while connecting to {connect}")
         return e.code
@@ -84,16 +84,16 @@ def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: b
     return code
 
 
-def _connect(agent_id: int, connect: str, run: str | None, creds_file: Path | None):
+def _connect(agent_id: int, connect: str, run: str | None, creds_file: Path | None, world_wait: float):
     """(session, credentials) of agent `agent_id` on `connect`, or the exit code, said in one
     line: EXIT_NO_WORLD when nothing listens there (started before its world, which it waits
     for as long as a connection may take), EXIT_REFUSED when there are no usable credentials
     or what listens there refuses the session."""
-    t_end = time.monotonic() + CONNECT_TIMEOUT_MS / 1000  # a world starting meanwhile is waited for
+    t_end = time.monotonic() + world_wait  # a world starting meanwhile is waited for
     while endpoint_refuses(connect):  # no socket file, or a refused connection: no world (yet)
         if time.monotonic() > t_end:
             _log(f"swarm agent {agent_id}: no world at {connect}: nothing listened there for "
-                 f"{CONNECT_TIMEOUT_MS / 1000:g} s (start the run first: swarm up, or swarm world)")
+                 f"{world_wait:g} s (start the run first: swarm up, or swarm world)")
             return EXIT_NO_WORLD
         time.sleep(0.1)
     user = agent_user(agent_id)

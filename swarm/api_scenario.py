@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -156,6 +157,11 @@ def _value(v: Any) -> str:
     raise TypeError(f"cannot write {v!r} as TOML")
 
 
+def _key(k: str) -> str:
+    """A TOML key: bare when it can be, else quoted (e.g. a [law.params] name with a space or a dot)."""
+    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else json.dumps(k, ensure_ascii=False)
+
+
 def _table(name: str, data: dict, lines: list[str]) -> None:
     """`data` as TOML under `name` ("" at the top): its values, then its tables, then its
     arrays of tables."""
@@ -163,13 +169,13 @@ def _table(name: str, data: dict, lines: list[str]) -> None:
     arrays = {k: v for k, v in data.items() if isinstance(v, list) and v and all(isinstance(x, dict) for x in v)}
     if name:
         lines += ["", f"[{name}]"]
-    lines += [f"{k} = {_value(v)}" for k, v in data.items() if k not in subs and k not in arrays]
+    lines += [f"{_key(k)} = {_value(v)}" for k, v in data.items() if k not in subs and k not in arrays]
     for k, v in subs.items():
-        _table(f"{name}.{k}" if name else k, v, lines)
+        _table(f"{name}.{_key(k)}" if name else _key(k), v, lines)
     for k, items in arrays.items():
         for item in items:
             lines += ["", f"[[{name}.{k}]]" if name else f"[[{k}]]"]
-            lines += [f"{kk} = {_value(x)}" for kk, x in item.items()]
+            lines += [f"{_key(kk)} = {_value(x)}" for kk, x in item.items()]
 
 
 def to_toml(scenario: Scenario) -> str:

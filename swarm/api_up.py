@@ -103,6 +103,10 @@ class UpRun:
         from swarm.contracts.lifeline import LAUNCHER_PID_ENV
 
         env = {**(os.environ if env is None else env), "PYTHONUNBUFFERED": "1", LAUNCHER_PID_ENV: str(os.getpid())}
+        if self._tmp is not None:  # the file is in a temporary dir: its laws resolve as they did here
+            from swarm.contracts.laws import ENV_LAW_PATH, with_law_path
+
+            env[ENV_LAW_PATH] = with_law_path([p for p in sys.path if p and os.path.isdir(p)])
         self._lines: list[str] = []
         self._live = None  # a swarm.live.LiveRun, opened by the first state()
         self._group = Group(session=True)  # no terminal's Ctrl-C reaches it: stop() does
@@ -175,6 +179,8 @@ class UpRun:
                 self.process.wait(grace)
             except subprocess.TimeoutExpired:  # the world and agents get SIGTERM when it dies
                 self._group.stop(grace=3.0)
+                # ... and write what they have: give them the grace to (results() reads it)
+                wait_until(lambda: (self.out / "summary.json").exists(), grace, 0.1)
         self._finish()
         return self.process.returncode
 

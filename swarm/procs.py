@@ -155,7 +155,7 @@ class Reaper:
     every `interval` s, however long its owner's own loop is busy (e.g. in a query waiting
     for its timeout): a member that exits is reaped within `interval` s. `stop()` ends it."""
 
-    def __init__(self, group: Group, interval: float = 0.05):
+    def __init__(self, group: Group, interval: float = 0.2):
         import threading
 
         self.group = group

@@ -3,6 +3,7 @@ swarm/up_cli.py): the options they share are declared once, below, as `Annotated
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from pathlib import Path
@@ -10,8 +11,9 @@ from typing import Annotated, Optional
 
 import typer
 
-from swarm.offline_cli import ScenarioArg, fail, read_scenario, render_run_plots
+from swarm.contracts.lifeline import LAUNCHER_PID_ENV
 from swarm.live_cli import CredentialsOpt, TrustLawOpt
+from swarm.offline_cli import ScenarioArg, fail, read_scenario, render_run_plots
 
 
 def out_option(help: str):
@@ -137,7 +139,7 @@ def sim(
     force: ForceOpt = False,
     batch: Annotated[bool, typer.Option("--batch", help="step all agents as arrays (the batch engine: the "
                                         "same results, faster for many agents); refuses scenarios with "
-                                        "faults or a follower law of one's own")] = False,
+                                        "faults or a law of one's own (follower or leader)")] = False,
 ) -> None:
     """Run a scenario in one process (the reference engine) and write its results.
 
@@ -234,7 +236,10 @@ def world(
     code = run_world(WorldConfig(s, run, listen, out, clock, time_scale, duration, join_timeout,
                                  foxglove=(foxglove_host, foxglove_port) if foxglove else None))
     summary = out / "summary.json" if out is not None else None
-    if summary is not None and code in (0, 130, 143, EXIT_DESERTED) and summary.exists():
+    # the table `swarm up` prints; not when the launcher runs us (it prints its own, and reads a
+    # world's failure from the last line of its log)
+    launched = bool(os.environ.get(LAUNCHER_PID_ENV))
+    if summary is not None and not launched and code in (0, 130, 143, EXIT_DESERTED) and summary.exists():
         import json
 
         print_summary(json.loads(summary.read_text()), out)  # the table `swarm up` prints
@@ -251,6 +256,8 @@ def agent(
     wait_world: Annotated[bool, typer.Option(help="keep waiting when the world vanishes")] = False,
     world_grace: Annotated[float, typer.Option(help="s to wait for a world that stopped answering (a "
                                                "frozen or cut-off world; exit 5 after that)", min=0.0)] = 10.0,
+    world_wait: Annotated[float, typer.Option(help="s to wait for a world to listen on --connect before "
+                                              "giving up (exit 6)", min=0.0)] = 10.0,
     credentials: CredentialsOpt = None,
     trust_law: TrustLawOpt = None,
 ) -> None:
@@ -263,14 +270,14 @@ def agent(
 
     Exit codes: 0 the run ended, 1 crashed (e.g. an exception in its law), 3 refused,
     4 the world vanished, 5 the world did not answer within --world-grace, 6 no world to
-    join (nothing listened on --connect for 10 s), 130/143 stopped.
+    join (nothing listened on --connect for --world-wait s), 130/143 stopped.
 
     Example: swarm agent --id 3 --connect tcp/10.0.0.5:7447 --credentials agent-3.cred
     """
     from agents.process import run_agent
 
     raise typer.Exit(run_agent(id, connect, run, wait_world, world_grace=world_grace, creds_file=credentials,
-                               trust=tuple(trust_law or ())))
+                               trust=tuple(trust_law or ()), world_wait=world_wait))
 
 
 def register(app: typer.Typer) -> None:

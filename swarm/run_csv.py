@@ -8,6 +8,7 @@ Columns (`COLUMNS`); ``nan`` where a value is undefined:
     x, y             m     position
     heading          rad   heading (nan if trajectory.npz has none)
     u                rad/s turn rate applied over [t, t + dt); nan in the last row and while not alive
+                           (0 while a dropped agent coasts: on_dropout = "coast")
     out              -     out-neighbour id chosen at the tick, -1 for none (always -1 for a leader)
     alive            0/1   controlled by a live process at the tick
     r                m     distance from the target

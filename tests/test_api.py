@@ -86,6 +86,16 @@ def test_to_toml_round_trips_every_shipped_scenario(name):
     assert parse_scenario(tomllib.loads(swarm.to_toml(s))) == s
 
 
+def test_to_toml_quotes_keys_toml_cannot_leave_bare(base):
+    base["law"] = {"params": {"k phase": 0.5, "a.b": 1.0, "plain_k": 2.0}}
+    s = swarm.from_dict(base)
+    text = swarm.to_toml(s)
+    assert '"k phase" = 0.5' in text and '"a.b" = 1.0' in text and "plain_k = 2.0" in text
+    import tomllib
+
+    assert parse_scenario(tomllib.loads(text)) == s
+
+
 # -- simulate and open_run ------------------------------------------------------------------
 
 def test_simulate_equals_run_sim(base):

@@ -27,7 +27,7 @@ from world.kinematics import step
 ROOT = Path(__file__).resolve().parents[1]
 
 # Sample sizes: the fast tier checks a sample, the long tier the whole of it.
-SAMPLE = pytest.mark.parametrize("n", [pytest.param(80, id="sample"),
+SAMPLE = pytest.mark.parametrize("n", [pytest.param(50, id="sample"),
                                        pytest.param(None, id="all", marks=pytest.mark.slow)])
 
 

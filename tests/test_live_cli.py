@@ -692,20 +692,20 @@ def test_environment_picks_one_of_two_runs(live, tmp_path, capsys):
 
 @pytest.mark.slow
 def test_agent_before_its_world(live, tmp_path):
-    """An agent started before a world that does not come: after waiting for it as long as a
-    connection may take (10 s), its own exit code (6, not 3, a refused id's) and one line, no
+    """An agent started before a world that does not come: after waiting for it (--world-wait,
+    10 s by default; 2 s here), its own exit code (6, not 3, a refused id's) and one line, no
     zenoh source path; a SIGTERM while it connects: one line, exit 143, no traceback. (One
     whose world comes meanwhile joins: test_environment_picks_one_of_two_runs.)"""
     tr = live["tracker"]
     early = tr.spawn(swarm_cmd("agent", "--id", 1, "--connect", f"unixsock-stream/{live['runtime']}/later.sock",
-                               "--run", "later-run"), "agent-early")
-    refused = tr.spawn(swarm_cmd("agent", "--id", 1, "--connect", "tcp/127.0.0.1:9", "--run", "later-run"),
-                       "agent-refused")
+                               "--run", "later-run", "--world-wait", "2"), "agent-early")
+    refused = tr.spawn(swarm_cmd("agent", "--id", 1, "--connect", "tcp/127.0.0.1:9", "--run", "later-run",
+                                 "--world-wait", "2"), "agent-refused")
     t0 = time.monotonic()
     assert early.wait(30) == 6, early.text()
     print(f"\n[timing] an agent with no world to join exited 6 after {time.monotonic() - t0:.1f} s")
     out = early.text().strip().splitlines()
-    assert len(out) == 1 and "no world at" in out[0] and "later.sock" in out[0], out
+    assert len(out) == 1 and "no world at" in out[0] and "later.sock" in out[0] and "for 2 s" in out[0], out
     tcp = early.text()
     assert refused.wait(15) == 6 and len(refused.text().strip().splitlines()) == 1, refused.text()
     # a listener that never answers zenoh's handshake: the agent waits in its connection

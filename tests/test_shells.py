@@ -24,11 +24,21 @@ SCENARIO = {
 }
 
 
-def open_world():
-    world = World(WorldConfig(parse_scenario(SCENARIO), RUN, "unixsock-stream//nonexistent", None, progress=False))
+def open_world(scenario: dict = SCENARIO):
+    world = World(WorldConfig(parse_scenario(scenario), RUN, "unixsock-stream//nonexistent", None, progress=False))
     ses = FakeSession()
     world._open(ses)
     return world, ses
+
+
+def test_the_join_reply_is_version_2_only_when_the_run_has_laws_of_its_own():
+    """protocol.md 5.2: an agent that cannot read "law" must refuse a run whose laws it would
+    otherwise replace with the built-in ones."""
+    world, _ = open_world()
+    assert claim(world, 2)["v"] == 1
+    own = {**SCENARIO, "law": {"leader": "helpers_law:orbit_rate_leader", "params": {"rate": 0.25}}}
+    world, _ = open_world(own)
+    assert claim(world, 2)["v"] == wire.JOIN_REPLY_LAW_VERSION  # its follower too: one run, one version
 
 
 def claim(world, aid: int, on: int | None = None) -> dict:

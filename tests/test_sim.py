@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from swarm.contracts.orbits import root_of
+from swarm.contracts.orbits import root_of, roots
 from swarm.contracts.scenario import load_scenario, parse_scenario
 from swarm.sim import run_sim
 from world.core import ACTIVE, COASTING, GONE, WorldCore
@@ -181,6 +181,18 @@ def test_root_of():
     assert root_of(7, out, leaders) == (None, None)  # follower-only cycle
     assert root_of(9, out, leaders) == (None, None)  # lost
     assert root_of(10, out, leaders) == (None, None)  # points at an unknown agent
+
+
+def test_roots_in_one_pass_equal_root_of_for_every_agent():
+    import random
+
+    rng = random.Random(5)
+    for _ in range(300):
+        n = rng.randint(1, 30)
+        leaders = {i for i in range(n) if rng.random() < 0.2}
+        out = {i: (None if i in leaders or rng.random() < 0.1 else rng.randrange(-1, n + 2)) for i in range(n)}
+        got = roots(out, leaders)
+        assert got == {i: root_of(i, out, leaders)[0] for i in out}, (out, leaders)
 
 
 def test_settling_time_synthetic():

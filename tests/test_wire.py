@@ -72,6 +72,22 @@ def test_join_round_trip():
     assert no == {"v": 1, "ok": False, "error": "agent 4 is already live"}
 
 
+def test_a_join_reply_naming_laws_of_its_own_is_version_2():
+    """An agent of a build that does not read the brain's "law" refuses such a reply (its
+    strict version check) instead of flying the built-in laws in their place; this build
+    reads both versions; every other message stays version 1."""
+    import json
+
+    plain = wire.encode_join_reply(True, run="r", agent=4, key=99, brain={"dt": 0.01})
+    own = wire.encode_join_reply(True, run="r", agent=4, key=99, brain={"dt": 0.01}, own_laws=True)
+    assert json.loads(plain)["v"] == 1 and json.loads(own)["v"] == wire.JOIN_REPLY_LAW_VERSION == 2
+    assert wire.decode_join_reply(own)["key"] == 99
+    with pytest.raises(wire.WireError, match="protocol version 2"):
+        wire.decode_json(own, "join reply")  # what a version-1-only reader does
+    with pytest.raises(wire.WireError, match="protocol version 2"):
+        wire.decode_status(wire.encode_json({"id": 4}, 2))
+
+
 def test_admin_ctl_control_event_round_trip():
     assert wire.decode_admin(wire.encode_admin("pause", by="me"))["by"] == "me"
     assert wire.decode_admin(wire.encode_admin("fault_done", index=3))["index"] == 3

@@ -30,6 +30,14 @@ EXIT_DESERTED = 5
 class Clock:
     deserted_since: float | None = None  # monotonic s since when no agent is in the started run
 
+    def answer_pause_waiters(self) -> None:
+        """Answer the pause queries that came during a tick, now that it is done, with the
+        clock's state now (a resume in the same tick: paused false), and finish them."""
+        for q in self.pause_waiters:
+            answer(q, wire.world_admin_key(self.cfg.run),
+                   wire.encode_admin_reply(True, paused=self.paused, tick=self.core.tick))
+        self.pause_waiters.clear()
+
     def wait_for_agents(self) -> None:
         ids = self.cfg.scenario.ids
         t_end = None if self.cfg.join_timeout is None else time.monotonic() + self.cfg.join_timeout
@@ -146,12 +154,9 @@ class Clock:
                 self.drain(None, 0.1)  # nobody to step for: hold (a join ends the hold)
                 t0_ticks += time.monotonic() - t_hold
                 continue
+            self.answer_pause_waiters()  # a pause (and a resume) asked during the last tick
             if self.paused:
                 t_pause = time.monotonic()
-                for q in self.pause_waiters:
-                    answer(q, wire.world_admin_key(self.cfg.run),
-                            wire.encode_admin_reply(True, paused=True, tick=self.core.tick))
-                self.pause_waiters.clear()
                 while self.paused:
                     self.drain(None, 0.1)
                 t_next += time.monotonic() - t_pause

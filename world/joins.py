@@ -14,7 +14,7 @@ from __future__ import annotations
 import time
 
 from swarm.contracts import wire
-from swarm.contracts.brain_config import BrainConf
+from swarm.contracts.brain_config import BrainConf, LawConf
 from swarm.contracts.transport import answer
 from world.roster import AgentBook, admit, new_agent_spec
 
@@ -76,9 +76,10 @@ class Joins:
                 self.add_agent(aid, req["spec"])
             key = admit(self.core, self.book[aid], req, time.monotonic())
             x, y, h = self.core.pose(aid)
+            conf = BrainConf.from_scenario(self.core.scenario, aid)
             reply = wire.encode_join_reply(True, run=self.cfg.run, agent=aid, tick=self.core.tick, key=key,
-                                           clock=self.cfg.clock, pose=[x, y, h],
-                                           brain=BrainConf.from_scenario(self.core.scenario, aid).to_json())
+                                           clock=self.cfg.clock, pose=[x, y, h], brain=conf.to_json(),
+                                           own_laws=conf.law != LawConf())
         except wire.WireError as e:
             reply = wire.encode_join_reply(False, error=str(e))
         answer(query, str(query.key_expr), reply)

@@ -21,7 +21,7 @@ from collections import deque
 
 import numpy as np
 
-from swarm.contracts.orbits import expected_radius, root_of
+from swarm.contracts.orbits import expected_radius, roots
 
 TRAIL_SECONDS = 30.0  # simulated s of path each trail shows
 TRAIL_RATE = 2.0  # trail points per simulated second
@@ -51,11 +51,12 @@ class SceneBuilder:
         leaders = {int(i) for k, i in enumerate(ids) if alive[k] and spec[int(i)].role == "leader"}
         outs = {int(i): (int(out[k]) if out[k] >= 0 else None) for k, i in enumerate(ids)}
         tx, ty = self.target
+        rooted = roots(outs, leaders)
         rows = []
         for k, i in enumerate(ids):
             i = int(i)
             a = spec[i]
-            root, _ = root_of(i, outs, leaders) if alive[k] else (None, None)
+            root = rooted[i] if alive[k] else None
             if root is not None:
                 L = spec[root]
                 R = expected_radius(a.speed, L.speed, L.orbit_radius)

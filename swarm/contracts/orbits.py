@@ -35,6 +35,33 @@ def root_of(agent: int, out: dict[int, int | None], leaders: set[int]) -> tuple[
     return cur, hops
 
 
+def roots(out: dict[int, int | None], leaders: set[int]) -> dict[int, int | None]:
+    """`root_of`'s root for every agent of `out`, in one pass: each agent is walked once (the
+    walk of a long chain is shared by everyone on it), O(N) where N calls of root_of are O(N x depth)."""
+    found: dict[int, int | None] = {}
+    for start in out:
+        path: list[int] = []
+        on_path: set[int] = set()
+        cur = start
+        while True:
+            if cur in found:
+                root = found[cur]
+                break
+            if cur in leaders:
+                root = cur
+                break
+            if cur in on_path or out.get(cur) is None:
+                root = None
+                break
+            on_path.add(cur)
+            path.append(cur)
+            cur = out[cur]
+        for a in path:
+            found[a] = root
+        found.setdefault(start, root)
+    return found
+
+
 def expected_radius(speed: float, leader_speed: float, leader_radius: float) -> float:
     """R_i (m) of an agent of `speed` (m/s) rooted at a leader of `leader_speed` (m/s) on
     an orbit of `leader_radius` (m): it turns at the leader's omega = v_L / R_L."""

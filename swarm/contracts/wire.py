@@ -36,6 +36,10 @@ from dataclasses import dataclass
 from swarm.contracts.frames import Contact, SensorFrame
 
 VERSION = 1
+# A join reply whose brain names laws other than the built-in ones ("law": [law] follower /
+# leader / params) says version 2: an agent that does not read "law" refuses it (its strict
+# version check) instead of flying the built-in laws in their place.
+JOIN_REPLY_LAW_VERSION = 2
 PREFIX = "swarm"
 KIND_SENSE, KIND_CMD, KIND_TRUTH = 1, 2, 3
 MAX_AGENTS = 10_000
@@ -281,11 +285,11 @@ def _finite_float(text: str) -> float:
     return v
 
 
-def encode_json(obj: dict) -> bytes:
-    return json.dumps({"v": VERSION, **obj}, separators=(",", ":"), allow_nan=False).encode()
+def encode_json(obj: dict, version: int = VERSION) -> bytes:
+    return json.dumps({"v": version, **obj}, separators=(",", ":"), allow_nan=False).encode()
 
 
-def decode_json(buf: bytes, what: str = "message") -> dict:
+def decode_json(buf: bytes, what: str = "message", versions: tuple[int, ...] = (VERSION,)) -> dict:
     if len(buf) > MAX_JSON_BYTES:
         raise WireError(f"{what}: {len(buf)} bytes, more than {MAX_JSON_BYTES}")
     try:
@@ -295,8 +299,9 @@ def decode_json(buf: bytes, what: str = "message") -> dict:
         raise WireError(f"{what}: not JSON: {str(e)[:200]}") from None
     if not isinstance(obj, dict):
         raise WireError(f"{what}: expected a JSON object")
-    if type(obj.get("v")) is not int or obj["v"] != VERSION:
-        raise WireError(f"{what}: protocol version {obj.get('v')!r}, this build speaks {VERSION}")
+    if type(obj.get("v")) is not int or obj["v"] not in versions:
+        raise WireError(f"{what}: protocol version {obj.get('v')!r}, this build speaks "
+                        f"{' and '.join(map(str, versions))}")
     return obj
 
 
@@ -349,15 +354,19 @@ def encode_join_request(agent: int, pid: int, host: str, spec: dict | None = Non
     return encode_json({"id": agent, "pid": pid, "host": host, **({"spec": spec} if spec is not None else {})})
 
 
-def encode_join_reply(ok: bool, *, error: str | None = None, **fields) -> bytes:
-    """world -> agent: ok with run, agent, tick, key, clock, pose, brain; or an error."""
-    return encode_json({"ok": True, **fields} if ok else {"ok": False, "error": error})
+def encode_join_reply(ok: bool, *, error: str | None = None, own_laws: bool = False, **fields) -> bytes:
+    """world -> agent: ok with run, agent, tick, key, clock, pose, brain; or an error.
+    `own_laws`: the brain's "law" names other than the built-in laws: version 2
+    (JOIN_REPLY_LAW_VERSION), so that only an agent that reads "law" accepts it."""
+    if not ok:
+        return encode_json({"ok": False, "error": error})
+    return encode_json({"ok": True, **fields}, JOIN_REPLY_LAW_VERSION if own_laws else VERSION)
 
 
 def decode_join_reply(buf: bytes) -> dict:
     """The world's answer to a claim; WireError unless it is a refusal with an error or an
     acceptance with a valid claim key and a brain configuration (checked by BrainConf)."""
-    obj = decode_json(buf, "join reply")
+    obj = decode_json(buf, "join reply", (VERSION, JOIN_REPLY_LAW_VERSION))
     if _field(obj, "ok", bool, "join reply") is False:
         _field(obj, "error", str, "join reply")
         return obj
