@@ -6,11 +6,12 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from swarm.contracts.scenario import Scenario, ScenarioError, load_scenario, scenario_json_schema
+if TYPE_CHECKING:  # the scenario model (pydantic) is imported by the commands that read one:
+    from swarm.contracts.scenario import Scenario  # live commands start without it (~0.13 s)
 
 ScenarioArg = Annotated[Path, typer.Argument(help="scenario file (TOML), e.g. scenarios/case2.toml",
                                              show_default=False)]
@@ -21,7 +22,9 @@ def fail(message: str, code: int = 2) -> "typer.Exit":
     return typer.Exit(code)
 
 
-def read_scenario(path: Path) -> Scenario:
+def read_scenario(path: Path) -> "Scenario":
+    from swarm.contracts.scenario import ScenarioError, load_scenario
+
     try:
         return load_scenario(path)
     except ScenarioError as e:
@@ -76,7 +79,7 @@ def check(scenario: ScenarioArg) -> None:
     _warn_nearest_graph(s)
 
 
-def _warn_nearest_graph(s: Scenario) -> None:
+def _warn_nearest_graph(s: "Scenario") -> None:
     """Warn (exit 0) when the paper's nearest choice at t = 0 breaks Assumption 1."""
     from agents.selection import nearest
     from swarm.graph import analyse
@@ -107,6 +110,8 @@ def schema() -> None:
 
     Example: swarm schema > scenario.schema.json
     """
+    from swarm.contracts.scenario import scenario_json_schema
+
     typer.echo(json.dumps(scenario_json_schema(), indent=2))
 
 

@@ -12,10 +12,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from swarm.contracts import wire
 from swarm.contracts.orbits import expected_radius, root_of
-from swarm.contracts.scenario import Scenario
+
+if TYPE_CHECKING:  # annotations only: `swarm up` imports this module for every command's app
+    from swarm.contracts.scenario import Scenario
 
 PROGRESS_AGENTS = 12  # more agents than this: the progress line sums them up
 WORST_SHOWN = 3  # unsettled agents named on a summed-up line
@@ -56,7 +59,7 @@ def added_specs(session, run: str, ids: set[int]) -> dict[int, AddedSpec]:
     return {}
 
 
-def truth_progress(buf: bytes | None, s: Scenario, added: dict[int, AddedSpec] | None = None) -> dict | None:
+def truth_progress(buf: bytes | None, s: "Scenario", added: dict[int, AddedSpec] | None = None) -> dict | None:
     """Figures for the progress line from a ground-truth message (None: none, or unreadable).
     `added`: the specs of agents added at run time; one not (yet) known is left out."""
     if buf is None:
