@@ -29,12 +29,14 @@ import sys
 import tempfile
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 import psutil
+import pytest
 
 from swarm.contracts.scenario import load_scenario
 from swarm.procs import Group, wait_until
@@ -610,3 +612,48 @@ def check_time_column(traj: dict, ticks: int, dt: float) -> None:
     assert t[0] == 0.0
     for k in ("x", "y", "heading", "out", "alive"):
         assert traj[k].shape[0] == ticks + 1, f"{k} has {traj[k].shape[0]} rows"
+
+
+@contextmanager
+def live_swarm(base: Path, scenario: Path | str, n: int, *up_args, timeout: float = 40.0):
+    """`swarm up` of `scenario` (`n` agents, realtime) in a private runtime dir under `base`,
+    once `swarm runs` shows all `n` live: yields a dict with run, endpoint, runtime dir, the
+    up run, the tracker and `extra_pids` ((pid, create time) of agents a test starts outside
+    the launcher). At the end: Ctrl-C, exit 130, and no process left, spawned agents included."""
+    from typer.testing import CliRunner
+
+    from swarm.cli import app
+
+    rt = Runtime(base)
+    state = {"runtime": rt.dir, "tracker": rt.tracker, "extra_pids": []}
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("SWARM_RUNTIME_DIR", rt.dir)
+        up = start_up(rt.tracker, scenario, base / "run", "--clock", "realtime", *up_args)
+        state["up"] = up
+        try:
+            def ready():
+                if up.launcher.poll() is not None:
+                    raise AssertionError(f"swarm up exited {up.launcher.poll()}:\n{up.launcher.text()[-3000:]}")
+                res = CliRunner().invoke(app, ["runs", "--json"])
+                docs = json.loads(res.stdout) if res.exit_code == 0 else []
+                ok = len(docs) == 1 and docs[0]["agents_live"] == docs[0]["agents_total"] == n and docs[0]["tick"]
+                return docs[0] if ok else None
+
+            doc = wait_for(ready, timeout, f"swarm runs to show the run with {n} live agents", interval=0.1)
+            state.update(run=doc["run"], endpoint=doc["endpoint"])
+            rt.tracker.poll_once()
+            yield state
+        finally:
+            if up.launcher.poll() is None:
+                os.kill(up.launcher.pid, signal.SIGINT)
+            code = up.launcher.wait(60)
+            # Agents started by `swarm spawn` are not the launcher's: they leave on their own when
+            # the world ends (its "end" notice, or its token gone); give them a deadline to.
+            wait_until(lambda: not (rt.tracker.living() or still_running(state["extra_pids"])), 10, 0.05)
+            left = rt.close()  # kills only our groups / recorded descendants, removes the runtime dir
+            strays = still_running(state["extra_pids"])
+            for proc in strays:
+                proc.kill()
+            assert code == 130, f"swarm up exited {code} on SIGINT:\n{up.launcher.text()[-3000:]}"
+            assert not left, "processes left alive (now killed):\n  " + "\n  ".join(left)
+            assert not strays, f"spawned agents left alive (now killed): {[x.pid for x in strays]}"

@@ -31,8 +31,7 @@ import psutil
 import pytest
 from typer.testing import CliRunner
 
-from runtime_helpers import (SCENARIOS, Runtime, reaped, ring_scenario, run_credentials, start_up, still_running,
-                             swarm_cmd, wait_for)
+from runtime_helpers import SCENARIOS, live_swarm, reaped, ring_scenario, run_credentials, swarm_cmd, wait_for
 from swarm.procs import wait_until
 from swarm import watch as W
 from swarm.cli import app
@@ -300,50 +299,9 @@ def test_merge_and_graph_offline():
 # --- against a live swarm -----------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def live(tmp_path_factory):
-    """case2 under `swarm up` (realtime, 600 s) in a private runtime dir; yields a dict with
-    run, endpoint, runtime dir, the tracker and the pids started outside the launcher."""
-    base = tmp_path_factory.mktemp("inspect")
-    rt = Runtime(base)
-    state = {"runtime": rt.dir, "tracker": rt.tracker, "extra_pids": []}
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("SWARM_RUNTIME_DIR", rt.dir)
-        up = start_up(rt.tracker, SCENARIOS / "case2.toml", base / "run", "--clock", "realtime",
-                      "--duration", "600")
-        state["up"] = up
-        try:
-            def ready():
-                if up.launcher.poll() is not None:
-                    raise AssertionError(f"swarm up exited {up.launcher.poll()}:\n{up.launcher.text()[-3000:]}")
-                res = invoke("runs", "--json")
-                if res.exit_code != 0:
-                    return None
-                docs = json.loads(res.stdout)
-                ok = len(docs) == 1 and docs[0]["agents_live"] == docs[0]["agents_total"] == 6 and docs[0]["tick"]
-                return docs[0] if ok else None
-
-            doc = wait_for(ready, 40, "swarm runs to show the run with 6 live agents", interval=0.1)
-            state.update(run=doc["run"], endpoint=doc["endpoint"])
-            rt.tracker.poll_once()
-            yield state
-        finally:
-            launcher = up.launcher
-            if launcher.poll() is None:
-                os.kill(launcher.pid, signal.SIGINT)
-            code = launcher.wait(30)
-
-            def extra_alive():
-                return still_running(state["extra_pids"])
-
-            # Agents started by `swarm spawn` are not the launcher's: they leave on their own when
-            # the world ends (its "end" notice, or its token gone); give them a deadline to.
-            wait_until(lambda: not (rt.tracker.living() or extra_alive()), 10, 0.05)
-            left = rt.close()  # kills only our groups / recorded descendants, removes the runtime dir
-            strays = extra_alive()
-            for p in strays:
-                p.kill()
-            assert code == 130, f"swarm up exited {code} on SIGINT:\n{launcher.text()[-3000:]}"
-            assert not left, "processes left alive (now killed):\n  " + "\n  ".join(left)
-            assert not strays, f"spawned agents left alive (now killed): {[p.pid for p in strays]}"
+    """case2 under `swarm up` (realtime, 600 s) in a private runtime dir (runtime_helpers.live_swarm)."""
+    with live_swarm(tmp_path_factory.mktemp("inspect"), SCENARIOS / "case2.toml", 6, "--duration", "600") as state:
+        yield state
 
 
 def _json(*args):

@@ -11,9 +11,7 @@ are tested first, without a run.
 from __future__ import annotations
 
 import json
-import os
 import re
-import signal
 import statistics
 import subprocess
 import time
@@ -23,8 +21,7 @@ import psutil
 import pytest
 from typer.testing import CliRunner
 
-from runtime_helpers import (Runtime, reaped, ring_scenario, run_credentials, start_up, still_running, swarm_cmd,
-                             wait_for)
+from runtime_helpers import live_swarm, reaped, ring_scenario, run_credentials, swarm_cmd, wait_for
 from swarm.cli import app
 
 N = 30
@@ -72,36 +69,8 @@ def test_progress_line_counts_added_agents(tmp_path):
 @pytest.fixture(scope="module")
 def many(tmp_path_factory):
     base = tmp_path_factory.mktemp("many")
-    rt = Runtime(base)
-    state = {"runtime": rt.dir, "tracker": rt.tracker, "extra_pids": []}
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("SWARM_RUNTIME_DIR", rt.dir)
-        up = start_up(rt.tracker, ring_scenario(base / "ring30.toml", N), base / "run", "--clock", "realtime")
-        state["up"] = up
-        try:
-            def ready():
-                if up.launcher.poll() is not None:
-                    raise AssertionError(f"swarm up exited {up.launcher.poll()}:\n{up.launcher.text()[-3000:]}")
-                res = invoke("runs", "--json")
-                docs = json.loads(res.stdout) if res.exit_code == 0 else []
-                return docs[0] if docs and docs[0]["agents_live"] == N and docs[0]["tick"] else None
-
-            doc = wait_for(ready, 120, f"swarm runs to show {N} live agents", interval=0.2)
-            state.update(run=doc["run"], endpoint=doc["endpoint"])
-            rt.tracker.poll_once()
-            yield state
-        finally:
-            if up.launcher.poll() is None:
-                os.kill(up.launcher.pid, signal.SIGINT)
-            code = up.launcher.wait(60)
-
-            def extra_alive():
-                return still_running(state["extra_pids"])
-
-            wait_for(lambda: not extra_alive(), 10, "spawned agents to leave with the world")
-            left = rt.close()
-            assert code == 130, f"swarm up exited {code} on SIGINT:\n{up.launcher.text()[-3000:]}"
-            assert not left, "processes left alive (now killed):\n  " + "\n  ".join(left)
+    with live_swarm(base, ring_scenario(base / "ring30.toml", N), N, timeout=120) as state:
+        yield state
 
 
 @pytest.mark.slow

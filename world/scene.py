@@ -35,6 +35,8 @@ class SceneBuilder:
     def __init__(self, scenario, scene_rate: float):
         self.target = (scenario.target.x, scenario.target.y)
         self.agents = list(scenario.agents)
+        self.spec = {a.id: a for a in self.agents}
+        self.leaders = {a.id for a in self.agents if a.role == "leader"}  # ids of the leader role
         self.trail_every = max(1, int(round(scene_rate / TRAIL_RATE)))
         self.trail_len = int(TRAIL_SECONDS * TRAIL_RATE)
         self.trails: dict[int, deque] = {}
@@ -44,11 +46,14 @@ class SceneBuilder:
 
     def add_agent(self, spec) -> None:
         self.agents.append(spec)
+        self.spec[spec.id] = spec
+        if spec.role == "leader":
+            self.leaders.add(spec.id)
 
     # -- per-agent numbers ------------------------------------------------------------------
     def numbers(self, tick, t, ids, x, y, heading, u, out, alive) -> dict:
-        spec = {a.id: a for a in self.agents}
-        leaders = {int(i) for k, i in enumerate(ids) if alive[k] and spec[int(i)].role == "leader"}
+        spec = self.spec
+        leaders = {int(i) for k, i in enumerate(ids) if alive[k] and int(i) in self.leaders}
         outs = {int(i): (int(out[k]) if out[k] >= 0 else None) for k, i in enumerate(ids)}
         tx, ty = self.target
         rooted = roots(outs, leaders)
@@ -77,7 +82,7 @@ class SceneBuilder:
         ts = _stamp(ns)
         red, blue, grey = Color(r=0.85, g=0.15, b=0.15, a=1.0), Color(r=0.15, g=0.35, b=0.85, a=1.0), \
             Color(r=0.4, g=0.4, b=0.4, a=0.8)
-        leader = {a.id for a in self.agents if a.role == "leader"}
+        leader = self.leaders
         col = {int(i): k for k, i in enumerate(ids)}
         arrows, points = [], []
         for k in range(len(ids)):
@@ -122,7 +127,7 @@ class SceneBuilder:
         from foxglove.messages import Color, LinePrimitive, LinePrimitiveLineType, Point3, SceneEntity, SceneUpdate
 
         ts = _stamp(ns)
-        leader = {a.id for a in self.agents if a.role == "leader"}
+        leader = self.leaders
         lines = [LinePrimitive(type=LinePrimitiveLineType.LineStrip, thickness=0.15,
                                color=Color(r=0.85, g=0.4, b=0.4, a=0.6) if i in leader else
                                Color(r=0.4, g=0.55, b=0.9, a=0.6),
