@@ -59,7 +59,7 @@ import psutil
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from swarm.procs import Group, stop_groups, wait_until  # noqa: E402  (the repository, not an installed copy)
+from swarm.procs import Group, agent_id_of, stop_groups, wait_until  # noqa: E402  (the repository, not an installed copy)
 
 BENCH = Path(__file__).resolve().parent
 PY = sys.executable
@@ -257,7 +257,7 @@ def startup_cpu(agents: list[psutil.Process], others: dict[str, psutil.Process |
 
 def is_agent(pr: psutil.Process) -> bool:
     try:
-        return "agents.process" in pr.cmdline()
+        return agent_id_of(pr.cmdline()) is not None
     except (psutil.NoSuchProcess, psutil.AccessDenied):
         return False
 
@@ -506,8 +506,8 @@ def run_swarm(n: int, ticks: int, work: Path, env: dict, tag: str, profile: floa
             by_id = {}
             for a in state["agents"]:
                 try:
-                    by_id[int(a.cmdline()[-3])] = a
-                except (psutil.NoSuchProcess, ValueError, IndexError):
+                    by_id[agent_id_of(a.cmdline())] = a
+                except psutil.NoSuchProcess:
                     pass
             leader_ids = {1, n // 2 + 1}
             followers = sorted(i for i in by_id if i not in leader_ids)

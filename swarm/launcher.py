@@ -3,7 +3,9 @@
 All children run in one process group that the launcher owns (a `swarm.procs.Group`, led
 by the world, which is not reaped until the end, so the group outlives any agent; the
 agents are reaped as they exit, by a `swarm.procs.Reaper` thread). The world writes the
-results; the launcher watches the run over zenoh like any observer would (ground truth and
+results. Agents are forked by a fork server that has imported what they need (swarm/forks.py,
+agents/forkserver.py; exec'd if it cannot), and are this process's children all the same (it
+is their subreaper). The launcher watches the run over zenoh like any observer would (ground truth and
 events), prints progress, and on Ctrl-C/SIGTERM stops the world first with the signal it
 got (so the results are written, and say which signal), then the agents, then anything
 left in the group. Each child's output goes to `<out>/logs/`.
@@ -27,6 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from swarm import forks
 from swarm.contracts import credentials, wire
 from swarm.contracts.laws import ENV_LAW_PATH, ENV_TRUSTED_LAWS, with_law_path, with_trusted_laws
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV
@@ -86,18 +89,22 @@ class Launcher:
         self.failure: str | None = None  # one line: why the run could not start
         self.added: dict[int, AddedSpec] = {}  # agents added at run time (`swarm spawn`), for the progress line
         self.unknown_added: set[int] = set()  # added agents whose spec is still to be asked for
+        self.forks: forks.ForkServer | None = None  # forks the agents (None: they are exec'd)
 
     # -- processes --------------------------------------------------------------------------
+    def _env(self) -> dict:
+        return {**os.environ, LAUNCHER_PID_ENV: str(os.getpid()),  # children stop when we die
+                # the laws of our own scenario are the laws our agents may import, from its directory too
+                ENV_TRUSTED_LAWS: with_trusted_laws(self.cfg.scenario.law_names),
+                ENV_LAW_PATH: with_law_path([self.cfg.scenario_path.resolve().parent]),
+                # our agents use our run's own credentials, whatever the shell says
+                credentials.ENV_CREDENTIALS: str(credentials.run_file(self.cfg.run))}
+
     def _spawn(self, args: list[str], log_name: str) -> subprocess.Popen:
         log = open(self.logs / log_name, "ab")
-        env = {**os.environ, LAUNCHER_PID_ENV: str(os.getpid()),  # children stop when we die
-               # the laws of our own scenario are the laws our agents may import, from its directory too
-               ENV_TRUSTED_LAWS: with_trusted_laws(self.cfg.scenario.law_names),
-               ENV_LAW_PATH: with_law_path([self.cfg.scenario_path.resolve().parent]),
-               # our agents use our run's own credentials, whatever the shell says
-               credentials.ENV_CREDENTIALS: str(credentials.run_file(self.cfg.run))}
         try:
-            return self.group.start(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, env=env)
+            return self.group.start(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
+                                    env=self._env())
         finally:
             log.close()
 
@@ -114,9 +121,24 @@ class Launcher:
             args += ["--foxglove", "--foxglove-host", c.foxglove[0], "--foxglove-port", str(c.foxglove[1])]
         self.world = self._spawn(args, "world.log")
 
+    def start_forkserver(self) -> None:
+        """The agents' fork server (swarm/forks.py), where this process can adopt what it forks."""
+        if forks.wanted() and forks.make_subreaper():
+            self.forks = forks.ForkServer(self.group, self._env(), self.logs / "forkserver.log")
+
     def start_agent(self, agent_id: int) -> subprocess.Popen:
-        p = self._spawn([sys.executable, "-m", "agents.process", str(agent_id), self.dial, self.cfg.run,
-                         "--world-grace", str(self.cfg.world_grace)], f"agent-{agent_id}.log")
+        args = [str(agent_id), self.dial, self.cfg.run, "--world-grace", str(self.cfg.world_grace)]
+        log_name = f"agent-{agent_id}.log"
+        p = None
+        if self.forks is not None:
+            try:
+                p = self.forks.spawn(args, self.logs / log_name)
+                self.group.adopt(p)
+            except forks.ForkError as e:
+                self.say(f"swarm up: {e}; agents are exec'd from now on")
+                self.forks = None
+        if p is None:
+            p = self._spawn([sys.executable, "-m", "agents.process", *args], log_name)
         self.agents[agent_id] = p
         self.procs.append((agent_id, p))
         return p
@@ -196,6 +218,7 @@ class Launcher:
         reaper = Reaper(self.group)  # a child killed from outside (`swarm kill`) is no zombie meanwhile
         try:
             self.start_world()
+            self.start_forkserver()  # it imports while the world starts
             session = self.connect()  # agents start once the world listens
             if session is not None:
                 self.listening = True
@@ -223,6 +246,8 @@ class Launcher:
                 self.supervise(None)  # exits just before the world ended (the world has ended)
         finally:
             reaper.stop()
+            if self.forks is not None:
+                self.forks.close()
             if session is not None:
                 session.close()
             self.stop_all()

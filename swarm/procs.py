@@ -7,6 +7,8 @@ benchmark all start, signal, stop and wait for processes through this module.
   it (pgid == its pid; a new session with `session=True`), later ones join it. The group
   can be signalled as a whole and stopped (SIGTERM, SIGKILL after a grace period, every
   child reaped, and a last SIGKILL for whatever else joined it, e.g. grandchildren).
+- `command_words`, `agent_id_of`: a process's command line as words, and the agent id
+  in an agent's, whether it was exec'd or forked (and titled) by the fork server.
 - `Reaper`: a thread that reaps a group's members (not its leader) as they exit, so a
   child killed from outside is no zombie while its parent is busy.
 
@@ -73,6 +75,12 @@ class Group:
             self.pgid = p.pid
         self.members.append(p)
         return p
+
+    def adopt(self, p) -> None:
+        """Count as a member a child already in the group that this process did not start
+        itself (a Popen-like handle: pid, returncode, poll, wait; swarm/forks.py's `Forked`)."""
+        assert self.pgid is not None, "a group is led by a child it started"
+        self.members.append(p)
 
     def exit_code(self, p: subprocess.Popen) -> int | None:
         """A member's exit status (negative: killed by that signal), None while it runs.
@@ -215,3 +223,22 @@ def _wait(p: subprocess.Popen, timeout: float) -> None:
         p.wait(timeout=timeout)
     except subprocess.TimeoutExpired:
         pass
+
+
+def command_words(parts: list[str]) -> list[str]:
+    """A process's command line as words, from /proc/PID/cmdline's NUL-separated parts (or
+    psutil's `cmdline()`). A process that set its title (an agent forked by the fork server,
+    agents/forkserver.py) has it as one string of words, padded with empty parts."""
+    words = [p for p in parts if p]
+    return words[0].split() if len(words) == 1 else words
+
+
+def agent_id_of(parts: list[str]) -> int | None:
+    """The agent id of an agent process (`python -m agents.process ID ...`) from its command
+    line's parts; None for any other process."""
+    words = command_words(parts)
+    if "agents.process" not in words:
+        return None
+    i = words.index("agents.process") + 1
+    return int(words[i]) if i < len(words) and words[i].isdigit() else None
+

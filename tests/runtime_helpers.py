@@ -39,7 +39,7 @@ import psutil
 import pytest
 
 from swarm.contracts.scenario import load_scenario
-from swarm.procs import Group, wait_until
+from swarm.procs import Group, agent_id_of, wait_until
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = REPO / "scenarios"
@@ -196,10 +196,9 @@ class ProcessTracker:
         """{agent id: pid} of the agent processes started under `root` (by their command line)."""
         out = {}
         for s in self.descendants(root):
-            cl = s.cmdline
-            if "agents.process" in cl:
-                i = cl.index("agents.process")
-                out[int(cl[i + 1])] = s.pid
+            aid = agent_id_of(s.cmdline)
+            if aid is not None:
+                out[aid] = s.pid
         return out
 
     def wait_agent_pids(self, root: Tracked, n: int, timeout: float = 10.0) -> dict[int, int]:

@@ -1,0 +1,141 @@
+"""A fork server for agent processes: one process that has imported everything an agent
+needs forks every agent of a run, so N agents pay for the interpreter's start and the
+imports once instead of N times (an agent's CPU until it has joined: 0.11 s exec'd; see
+the README's "Speed and memory" for what forking saves).
+
+`swarm up` starts it (`python -m agents.forkserver`) in the run's process group, with the
+agents' environment, once it has made itself a child subreaper (swarm/forks.py). One JSON
+line each way on stdin / stdout:
+
+    request   {"argv": ["7", "unixsock-stream//...", "case2-734b0c", "--world-grace", "10"],
+               "log": "/path/logs/agent-7.log"}
+    reply     {"pid": 12345}          or   {"error": "why"}
+
+`argv` is what `python -m agents.process` takes. Each agent is forked twice: the middle
+process exits at once, so the agent is re-parented to the launcher (the subreaper), which
+waits for it, reads its exit status and reaps it as it would a process it had exec'd, and
+the server itself never has a child for longer than a request. The agent waits to be
+re-parented before anything else, so that `tie_to_launcher` (swarm/contracts/lifeline.py)
+sees the launcher as its parent; its title (`ps`, /proc/PID/cmdline) is the command line it
+would have had if exec'd, so tools that find agents by their command line still do.
+
+The server ends at the end of its stdin (the launcher closed it, or died) and on SIGTERM.
+Standard library and setproctitle only; imports the agent's modules so its children don't.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+import time
+
+import agents.brain  # noqa: F401  (imported here so that no agent has to)
+import agents.laws  # noqa: F401
+import agents.leader  # noqa: F401
+import agents.process
+from swarm.contracts.lifeline import LAUNCHER_PID_ENV
+
+REPARENT_WAIT = 5.0  # s an agent waits to be re-parented to the launcher (its middle process exits at once)
+
+
+def serve(stdin=None, stdout=None) -> int:
+    """Answer fork requests until stdin ends; 0."""
+    stdin = stdin or sys.stdin.buffer
+    out = (stdout or sys.stdout.buffer).fileno()
+    for line in iter(stdin.readline, b""):
+        try:
+            req = json.loads(line)
+            argv, log = [str(a) for a in req["argv"]], str(req["log"])
+        except (ValueError, KeyError, TypeError) as e:
+            reply = {"error": f"bad request: {e}"}
+        else:
+            try:
+                reply = {"pid": fork_agent(argv, log)}
+            except OSError as e:
+                reply = {"error": f"cannot fork agent: {e}"}
+        os.write(out, json.dumps(reply).encode() + b"\n")
+    return 0
+
+
+def fork_agent(argv: list[str], log: str) -> int:
+    """Fork an agent running `python -m agents.process *argv` (its output to `log`), through a
+    middle process that exits at once; returns the agent's pid."""
+    r, w = os.pipe()
+    middle = os.fork()
+    if middle == 0:  # the middle process: fork the agent, tell its pid, go
+        try:
+            os.close(r)
+            pid = os.fork()
+            if pid == 0:
+                os.close(w)
+                _become_agent(argv, log)  # never returns
+            os.write(w, str(pid).encode())
+        finally:
+            os._exit(0)
+    os.close(w)
+    try:
+        got = b""
+        while chunk := os.read(r, 32):
+            got += chunk
+    finally:
+        os.close(r)
+        os.waitpid(middle, 0)
+    if not got:
+        raise OSError("the middle process did not fork")
+    return int(got)
+
+
+def _become_agent(argv: list[str], log: str) -> None:
+    """In the forked agent: wait to be the launcher's, take the agent's title, output and
+    default signals, run it, exit with its code."""
+    code = 1
+    try:
+        launcher = int(os.environ.get(LAUNCHER_PID_ENV, "0") or 0)
+        t_end = time.monotonic() + REPARENT_WAIT
+        while launcher and os.getppid() != launcher and time.monotonic() < t_end:
+            time.sleep(0.001)
+        for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGCHLD, signal.SIGPIPE):
+            signal.signal(sig, signal.SIG_DFL)
+        null = os.open(os.devnull, os.O_RDONLY)
+        out = os.open(log, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+        os.dup2(null, 0)
+        os.dup2(out, 1)
+        os.dup2(out, 2)
+        os.close(null)
+        os.close(out)
+        _set_title([sys.executable, "-m", "agents.process", *argv])
+        sys.argv = [agents.process.__file__, *argv]
+        try:
+            agents.process.main(argv)
+            code = 0
+        except SystemExit as e:
+            code = e.code if isinstance(e.code, int) else (0 if e.code is None else 1)
+    except BaseException:  # noqa: BLE001: whatever it is, the log says it and the agent exits 1
+        import traceback
+
+        traceback.print_exc()
+    finally:
+        try:
+            sys.stdout.flush()
+            sys.stderr.flush()
+        finally:
+            os._exit(code)
+
+
+def _set_title(argv: list[str]) -> None:
+    try:
+        import setproctitle
+    except ImportError:  # the title is a convenience: without it, `ps` shows the fork server's
+        return
+    setproctitle.setproctitle(" ".join(argv))
+
+
+def main() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the launcher stops us (SIGTERM, or the end of stdin)
+    sys.exit(serve())
+
+
+if __name__ == "__main__":
+    main()

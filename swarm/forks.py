@@ -1,0 +1,134 @@
+"""The launcher's side of the agents' fork server (agents/forkserver.py).
+
+- `make_subreaper()`: make this process a child subreaper (Linux `PR_SET_CHILD_SUBREAPER`):
+  orphans among its descendants become its children, so an agent forked by the server (and
+  left by the server's middle process) is the launcher's to wait for and reap.
+- `ForkServer`: the server as a member of the run's process group; `spawn(argv, log)` forks
+  one agent and returns a `Forked`, the Popen-like handle of a process this one adopted.
+- `wanted()`: whether to fork agents at all ($SWARM_FORK_AGENTS=0 says no: every agent is
+  exec'd, as before; the benchmarks compare the two).
+
+Anything wrong with the server (it cannot start, died, answers nonsense) makes `spawn`
+raise `ForkError`; the launcher then execs that agent and the ones after it.
+Standard library only.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import select
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+from swarm.procs import Group, wait_until
+
+ENV_FORK_AGENTS = "SWARM_FORK_AGENTS"
+PR_SET_CHILD_SUBREAPER = 36
+REPLY_TIMEOUT = 10.0  # s for the server to answer a request (it answers in milliseconds)
+
+
+class ForkError(RuntimeError):
+    """The fork server cannot fork an agent (the message says why)."""
+
+
+def wanted(env=None) -> bool:
+    env = os.environ if env is None else env
+    return env.get(ENV_FORK_AGENTS, "1") not in ("0", "no", "false") and sys.platform.startswith("linux")
+
+
+def make_subreaper() -> bool:
+    """Make this process a child subreaper; True when it is one."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+class Forked:
+    """A child this process adopted (an agent forked by the server): the part of
+    `subprocess.Popen` the launcher and `swarm.procs.Group` use (pid, returncode, poll, wait,
+    send_signal, terminate, kill), on os.waitpid. Safe to poll from two threads."""
+
+    def __init__(self, pid: int, args: list[str]):
+        self.pid = pid
+        self.args = args
+        self.returncode: int | None = None
+        self._lock = threading.Lock()
+
+    def poll(self) -> int | None:
+        return self._wait(os.WNOHANG)
+
+    def wait(self, timeout: float | None = None) -> int:
+        if timeout is None:
+            code = self._wait(0)
+        else:
+            wait_until(lambda: self.poll() is not None, timeout, 0.01)
+            code = self.returncode
+        if code is None:
+            raise subprocess.TimeoutExpired(self.args, timeout)
+        return code
+
+    def _wait(self, flags: int) -> int | None:
+        with self._lock:
+            if self.returncode is not None:
+                return self.returncode
+            try:
+                pid, status = os.waitpid(self.pid, flags)
+            except ChildProcessError:  # not ours (any more): reaped elsewhere, its status unknown
+                self.returncode = 255
+                return self.returncode
+            if pid == 0:
+                return None
+            self.returncode = os.waitstatus_to_exitcode(status)
+            return self.returncode
+
+    def send_signal(self, sig: int) -> None:
+        if self.poll() is None:
+            os.kill(self.pid, sig)
+
+    def terminate(self) -> None:
+        self.send_signal(signal.SIGTERM)
+
+    def kill(self) -> None:
+        self.send_signal(signal.SIGKILL)
+
+
+class ForkServer:
+    """agents/forkserver.py as a member of `group`, started with `env` (the agents')."""
+
+    def __init__(self, group: Group, env: dict, log: Path):
+        with open(log, "ab") as err:
+            self.proc = group.start([sys.executable, "-m", "agents.forkserver"], stdin=subprocess.PIPE,
+                                    stdout=subprocess.PIPE, stderr=err, env=env)
+        self.broken: str | None = None
+
+    def spawn(self, argv: list[str], log: Path) -> Forked:
+        """Fork `python -m agents.process *argv`, its output to `log`."""
+        if self.broken:
+            raise ForkError(self.broken)
+        try:
+            self.proc.stdin.write(json.dumps({"argv": argv, "log": str(log)}).encode() + b"\n")
+            self.proc.stdin.flush()
+            ready, _, _ = select.select([self.proc.stdout], [], [], REPLY_TIMEOUT)
+            line = self.proc.stdout.readline() if ready else b""
+            reply = json.loads(line) if line else {"error": "no answer (it ended, or took too long)"}
+            if "pid" not in reply:
+                raise ForkError(str(reply.get("error", reply)))
+            return Forked(int(reply["pid"]), [sys.executable, "-m", "agents.process", *argv])
+        except (OSError, ValueError, TypeError, ForkError) as e:
+            self.broken = f"the agents' fork server: {e}"
+            raise ForkError(self.broken) from None
+
+    def close(self) -> None:
+        """End the server (end of its stdin); the group's stop reaps it."""
+        try:
+            self.proc.stdin.close()
+        except OSError:
+            pass
