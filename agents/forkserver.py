@@ -8,11 +8,12 @@ agents' environment, once it has made itself a child subreaper (swarm/forks.py).
 line each way on stdin / stdout:
 
     request   {"argv": ["7", "unixsock-stream//...", "case2-734b0c", "--world-grace", "10"],
-               "log": "/path/logs/agent-7.log"}
+               "log": "/path/logs/agent-7.log", "env": {"SWARM_CREDENTIALS": "..."}}
     reply     {"pid": 12345}          or   {"error": "why"}
 
-`argv` is what `python -m agents.process` takes. Each agent is forked twice: the middle
-process exits at once, so the agent is re-parented to the launcher (the subreaper), which
+`argv` is what `python -m agents.process` takes; `env` (optional) is added to the server's
+environment, which is the agents' (`swarm host` gives each agent its own credentials file).
+Each agent is forked twice: the middle process exits at once, so the agent is re-parented to the launcher (the subreaper), which
 waits for it, reads its exit status and reaps it as it would a process it had exec'd, and
 the server itself never has a child for longer than a request. The agent waits to be
 re-parented before anything else, so that `tie_to_launcher` (swarm/contracts/lifeline.py)
@@ -48,20 +49,21 @@ def serve(stdin=None, stdout=None) -> int:
         try:
             req = json.loads(line)
             argv, log = [str(a) for a in req["argv"]], str(req["log"])
-        except (ValueError, KeyError, TypeError) as e:
+            env = {str(k): str(v) for k, v in req.get("env", {}).items()}
+        except (ValueError, KeyError, TypeError, AttributeError) as e:
             reply = {"error": f"bad request: {e}"}
         else:
             try:
-                reply = {"pid": fork_agent(argv, log)}
+                reply = {"pid": fork_agent(argv, log, env)}
             except OSError as e:
                 reply = {"error": f"cannot fork agent: {e}"}
         os.write(out, json.dumps(reply).encode() + b"\n")
     return 0
 
 
-def fork_agent(argv: list[str], log: str) -> int:
-    """Fork an agent running `python -m agents.process *argv` (its output to `log`), through a
-    middle process that exits at once; returns the agent's pid."""
+def fork_agent(argv: list[str], log: str, env: dict[str, str] | None = None) -> int:
+    """Fork an agent running `python -m agents.process *argv` (its output to `log`, `env`
+    added to its environment), through a middle process that exits at once; its pid."""
     r, w = os.pipe()
     middle = os.fork()
     if middle == 0:  # the middle process: fork the agent, tell its pid, go
@@ -70,7 +72,7 @@ def fork_agent(argv: list[str], log: str) -> int:
             pid = os.fork()
             if pid == 0:
                 os.close(w)
-                _become_agent(argv, log)  # never returns
+                _become_agent(argv, log, env or {})  # never returns
             os.write(w, str(pid).encode())
         finally:
             os._exit(0)
@@ -87,7 +89,7 @@ def fork_agent(argv: list[str], log: str) -> int:
     return int(got)
 
 
-def _become_agent(argv: list[str], log: str) -> None:
+def _become_agent(argv: list[str], log: str, env: dict[str, str]) -> None:
     """In the forked agent: wait to be the launcher's, take the agent's title, output and
     default signals, run it, exit with its code."""
     code = 1
@@ -96,6 +98,7 @@ def _become_agent(argv: list[str], log: str) -> None:
         t_end = time.monotonic() + REPARENT_WAIT
         while launcher and os.getppid() != launcher and time.monotonic() < t_end:
             time.sleep(0.001)
+        os.environ.update(env)
         for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGCHLD, signal.SIGPIPE):
             signal.signal(sig, signal.SIG_DFL)
         null = os.open(os.devnull, os.O_RDONLY)

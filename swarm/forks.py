@@ -3,13 +3,15 @@
 - `make_subreaper()`: make this process a child subreaper (Linux `PR_SET_CHILD_SUBREAPER`):
   orphans among its descendants become its children, so an agent forked by the server (and
   left by the server's middle process) is the launcher's to wait for and reap.
-- `ForkServer`: the server as a member of the run's process group; `spawn(argv, log)` forks
-  one agent and returns a `Forked`, the Popen-like handle of a process this one adopted.
+- `AgentStarter`: what the launcher and `swarm host` start agents with: forked when it can,
+  exec'd otherwise.
+- `ForkServer`: the server as a member of the run's process group; `spawn(argv, log, env)`
+  forks one agent and returns a `Forked`, the Popen-like handle of a process this one adopted.
 - `wanted()`: whether to fork agents at all ($SWARM_FORK_AGENTS=0 says no: every agent is
   exec'd, as before; the benchmarks compare the two).
 
 Anything wrong with the server (it cannot start, died, answers nonsense) makes `spawn`
-raise `ForkError`; the launcher then execs that agent and the ones after it.
+raise `ForkError`; `AgentStarter` then execs that agent and the ones after it.
 Standard library only.
 """
 
@@ -23,6 +25,7 @@ import subprocess
 import sys
 import threading
 from pathlib import Path
+from typing import Callable
 
 from swarm.procs import Group, wait_until
 
@@ -100,6 +103,39 @@ class Forked:
         self.send_signal(signal.SIGKILL)
 
 
+class AgentStarter:
+    """Starts agent processes (`python -m agents.process ARGS`) in `group`, each with `env`
+    plus its own extra variables and its output in `logs/<name>`: forked by a fork server when
+    it can (this process made a subreaper, the server started at once so it imports while
+    the caller does other things), exec'd otherwise, and exec'd from the first time the
+    server fails on (said once through `say`). The launcher and `swarm host` use it."""
+
+    def __init__(self, group: Group, env: dict, logs: Path, say: Callable[[str], None], fork: bool = True):
+        self.group, self.env, self.logs, self.say = group, env, logs, say
+        self.server: ForkServer | None = None
+        if fork and wanted(env) and make_subreaper():
+            self.server = ForkServer(group, env, logs / "forkserver.log")
+
+    def start(self, args: list[str], log_name: str, extra_env: dict | None = None):
+        """One agent process (a `Forked` or a `subprocess.Popen`)."""
+        log = self.logs / log_name
+        if self.server is not None:
+            try:
+                p = self.server.spawn(args, log, extra_env)
+                self.group.adopt(p)
+                return p
+            except ForkError as e:
+                self.say(f"{e}; agents are exec'd from now on")
+                self.server = None
+        with open(log, "ab") as out:
+            return self.group.start([sys.executable, "-m", "agents.process", *args], stdin=subprocess.DEVNULL,
+                                    stdout=out, stderr=subprocess.STDOUT, env={**self.env, **(extra_env or {})})
+
+    def close(self) -> None:
+        if self.server is not None:
+            self.server.close()
+
+
 class ForkServer:
     """agents/forkserver.py as a member of `group`, started with `env` (the agents')."""
 
@@ -109,12 +145,14 @@ class ForkServer:
                                     stdout=subprocess.PIPE, stderr=err, env=env)
         self.broken: str | None = None
 
-    def spawn(self, argv: list[str], log: Path) -> Forked:
-        """Fork `python -m agents.process *argv`, its output to `log`."""
+    def spawn(self, argv: list[str], log: Path, extra_env: dict | None = None) -> Forked:
+        """Fork `python -m agents.process *argv`, its output to `log`, with `extra_env` added
+        to the server's environment."""
         if self.broken:
             raise ForkError(self.broken)
         try:
-            self.proc.stdin.write(json.dumps({"argv": argv, "log": str(log)}).encode() + b"\n")
+            req = {"argv": argv, "log": str(log), "env": extra_env or {}}
+            self.proc.stdin.write(json.dumps(req).encode() + b"\n")
             self.proc.stdin.flush()
             ready, _, _ = select.select([self.proc.stdout], [], [], REPLY_TIMEOUT)
             line = self.proc.stdout.readline() if ready else b""

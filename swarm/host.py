@@ -27,7 +27,6 @@ import queue
 import shutil
 import signal
 import subprocess
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,6 +37,7 @@ from swarm.contracts.identities import agent_user
 from swarm.contracts.laws import ENV_TRUSTED_LAWS, with_trusted_laws
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV, endpoint_refuses, exit_status
 from swarm.host_setup import EXIT_FAILED, HostError, HostSetup
+from swarm.forks import AgentStarter
 from swarm.procs import Group
 from swarm.supervision import AgentExitReport, agent_exit
 
@@ -78,6 +78,7 @@ class Host(HostSetup):
     hub_zid: str | None = None
     group: Group = field(default_factory=Group)
     procs: dict[int, subprocess.Popen] = field(default_factory=dict)
+    starter: AgentStarter | None = None
     exits: list[AgentExitReport] = field(default_factory=list)
     stop_signal: int | None = None
     world_gone: bool = False
@@ -93,13 +94,12 @@ class Host(HostSetup):
         return credentials.write(one, self.dir / f"agent-{aid}.cred")
 
     def start_agent(self, aid: int) -> subprocess.Popen:
-        env = {**os.environ, LAUNCHER_PID_ENV: str(os.getpid()),  # they stop when the host dies
-               credentials.ENV_CREDENTIALS: str(self.agent_file(aid)),
-               ENV_TRUSTED_LAWS: with_trusted_laws(self.cfg.trust)}
-        with open(self.logs / f"agent-{aid}.log", "ab") as log:
-            p = self.group.start([sys.executable, "-m", "agents.process", str(aid), self.local, self.creds.run,
-                                  "--world-grace", str(self.cfg.world_grace)],
-                                 stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, env=env)
+        if self.starter is None:  # forked by a fork server where it can (swarm/forks.py)
+            env = {**os.environ, LAUNCHER_PID_ENV: str(os.getpid()),  # they stop when the host dies
+                   ENV_TRUSTED_LAWS: with_trusted_laws(self.cfg.trust)}
+            self.starter = AgentStarter(self.group, env, self.logs, lambda m: self.say(f"swarm host: {m}"))
+        p = self.starter.start([str(aid), self.local, self.creds.run, "--world-grace", str(self.cfg.world_grace)],
+                               f"agent-{aid}.log", {credentials.ENV_CREDENTIALS: str(self.agent_file(aid))})
         self.procs[aid] = p
         return p
 
@@ -172,6 +172,8 @@ class Host(HostSetup):
     def stop(self) -> None:
         """The agents first (SIGTERM, SIGKILL 3 s later; every one reaped), then the router;
         the agents' credentials and the router's socket go with it."""
+        if self.starter is not None:
+            self.starter.close()
         if self.procs:
             self.group.stop(grace=3.0)
             self.supervise(quiet=True)

@@ -29,12 +29,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from swarm import forks
 from swarm.contracts import credentials, wire
 from swarm.contracts.laws import ENV_LAW_PATH, ENV_TRUSTED_LAWS, with_law_path, with_trusted_laws
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.transport import default_endpoint, dial_endpoint, open_client
+from swarm.forks import AgentStarter
 from swarm.procs import Group, Reaper, wait_until
 from swarm.supervision import AgentExitReport, agent_exit, send_report, world_failure
 from swarm.up_progress import AddedSpec, added_specs, truth_progress
@@ -89,7 +89,7 @@ class Launcher:
         self.failure: str | None = None  # one line: why the run could not start
         self.added: dict[int, AddedSpec] = {}  # agents added at run time (`swarm spawn`), for the progress line
         self.unknown_added: set[int] = set()  # added agents whose spec is still to be asked for
-        self.forks: forks.ForkServer | None = None  # forks the agents (None: they are exec'd)
+        self.starter: AgentStarter | None = None  # starts the agents (forked, or exec'd)
 
     # -- processes --------------------------------------------------------------------------
     def _env(self) -> dict:
@@ -121,24 +121,16 @@ class Launcher:
             args += ["--foxglove", "--foxglove-host", c.foxglove[0], "--foxglove-port", str(c.foxglove[1])]
         self.world = self._spawn(args, "world.log")
 
-    def start_forkserver(self) -> None:
-        """The agents' fork server (swarm/forks.py), where this process can adopt what it forks."""
-        if forks.wanted() and forks.make_subreaper():
-            self.forks = forks.ForkServer(self.group, self._env(), self.logs / "forkserver.log")
+    def start_starter(self) -> None:
+        """What starts the agents (swarm/forks.py: a fork server, which imports meanwhile); after
+        the world, which leads the group."""
+        if self.starter is None:
+            self.starter = AgentStarter(self.group, self._env(), self.logs, lambda m: self.say(f"swarm up: {m}"))
 
     def start_agent(self, agent_id: int) -> subprocess.Popen:
-        args = [str(agent_id), self.dial, self.cfg.run, "--world-grace", str(self.cfg.world_grace)]
-        log_name = f"agent-{agent_id}.log"
-        p = None
-        if self.forks is not None:
-            try:
-                p = self.forks.spawn(args, self.logs / log_name)
-                self.group.adopt(p)
-            except forks.ForkError as e:
-                self.say(f"swarm up: {e}; agents are exec'd from now on")
-                self.forks = None
-        if p is None:
-            p = self._spawn([sys.executable, "-m", "agents.process", *args], log_name)
+        self.start_starter()
+        p = self.starter.start([str(agent_id), self.dial, self.cfg.run, "--world-grace", str(self.cfg.world_grace)],
+                               f"agent-{agent_id}.log")
         self.agents[agent_id] = p
         self.procs.append((agent_id, p))
         return p
@@ -218,7 +210,7 @@ class Launcher:
         reaper = Reaper(self.group)  # a child killed from outside (`swarm kill`) is no zombie meanwhile
         try:
             self.start_world()
-            self.start_forkserver()  # it imports while the world starts
+            self.start_starter()  # the fork server imports while the world starts
             session = self.connect()  # agents start once the world listens
             if session is not None:
                 self.listening = True
@@ -246,8 +238,8 @@ class Launcher:
                 self.supervise(None)  # exits just before the world ended (the world has ended)
         finally:
             reaper.stop()
-            if self.forks is not None:
-                self.forks.close()
+            if self.starter is not None:
+                self.starter.close()
             if session is not None:
                 session.close()
             self.stop_all()
