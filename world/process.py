@@ -30,7 +30,7 @@ from world.clock import Clock
 from world.engine import Engine
 from world.inbox import Inbox
 from world.joins import Joins, TokenBucket
-from world.recording import RECORDING_FILE, RecordingError, write_run
+from world.recording import RECORDING_FILE, DeferredRecorder, RecordingError, write_run
 from world.roster import AgentBook, agent_figures
 
 TRUTH_PERIOD = 0.02  # s of wall time between ground-truth messages (observers, not the recording)
@@ -71,6 +71,7 @@ class World(Inbox, Joins, Clock):
             recording = self.cfg.out_dir / RECORDING_FILE
         self.engine = Engine(s, self.ticks, joined=False, wall_clock=time.time, on_event=self._announce,
                              recording=recording)
+        self.engine.rec = DeferredRecorder(self.engine.rec)  # written while the agents think (publish_frames)
         self.core = self.engine.core
         self.book = {i: AgentBook() for i in s.ids}
         self.garbage = 0  # malformed or foreign messages on keys the world listens to
@@ -145,6 +146,7 @@ class World(Inbox, Joins, Clock):
                     self.book[aid].missed += 1  # its frame was lost
             for aid, frame in frames.items():
                 self.sense_pub[aid].put(wire.encode_sense(frame))
+            self.engine.rec.flush()
             return set(frames)
         self.engine.mark_frames()  # the same numbers, encoded straight from the arrays
         sensed, bearing, rng = c.sensing()
@@ -155,6 +157,7 @@ class World(Inbox, Joins, Clock):
         pubs = self.sense_pub
         for aid, frame in zip(active, frames):
             pubs[aid].put(frame)
+        self.engine.rec.flush()  # the last tick's recording, while the agents answer these frames
         return set(active)
 
     def record_and_step(self) -> None:

@@ -133,6 +133,32 @@ class StreamRecorder:
         return self._arrays
 
 
+class DeferredRecorder:
+    """A recorder whose ticks are written one step late: `record` keeps the tick (copies of
+    its arrays), `flush` writes it. The world flushes right after it has sent the next tick's
+    frames, so writing the recording overlaps the agents' turn instead of delaying the next
+    tick. Everything else (an event, a new agent, reading `rows`, closing) flushes first, so
+    what is written, and in what order, is the same as with the recorder it wraps."""
+
+    def __init__(self, inner: Recorder | StreamRecorder):
+        self.inner = inner
+        self.pending: tuple | None = None
+
+    def record(self, tick: int, time: float, x, y, heading, u, out, alive, missed: int = 0) -> None:
+        self.flush()
+        self.pending = (tick, time, np.array(x), np.array(y), np.array(heading), np.array(u), np.array(out),
+                        np.array(alive), missed)
+
+    def flush(self) -> None:
+        if self.pending is not None:
+            tick, self.pending = self.pending, None
+            self.inner.record(*tick)
+
+    def __getattr__(self, name: str):
+        self.flush()
+        return getattr(self.inner, name)
+
+
 def recording_arrays(rec: Recording) -> dict[str, np.ndarray]:
     """The arrays of trajectory.npz from a recording's tick rows (agents added at run time
     are columns of their own, absent before they were added). A tick written twice (a
