@@ -21,10 +21,11 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Mapping
+from typing import Any, Callable, Iterable
 
 import numpy as np
 
+from swarm.api_record import Record
 from swarm.api_scenario import Builder, Scenario, ScenarioError, as_scenario, source_of, with_duration
 from swarm.results import OutDirError
 from world.recording import RECORDING_FILE, SUMMARY_FILE, TRAJECTORY_FILE
@@ -36,52 +37,6 @@ __all__ = ["AgentTrack", "Record", "Results", "RunReadError", "Summary", "open_r
 TICK_ARRAYS = ("t", "x", "y", "heading", "u", "out", "alive", "missed")
 #: Per-agent and per-run constants.
 STATIC_ARRAYS = ("ids", "role", "speed", "orbit_radius", "target", "dt")
-
-
-def _wrap(v: Any) -> Any:
-    if isinstance(v, Mapping) and not isinstance(v, Record):
-        return Record(v)
-    if isinstance(v, list):
-        return [_wrap(x) for x in v]
-    return v
-
-
-class Record(Mapping):
-    """A JSON object with attribute access: `r.converged` is `r["converged"]`; nested
-    objects are Records too. `to_dict()` gives the plain data back."""
-
-    def __init__(self, data: Mapping):
-        object.__setattr__(self, "_data", dict(data))
-
-    def __getattr__(self, name: str) -> Any:
-        if name.startswith("_"):
-            raise AttributeError(name)
-        try:
-            return _wrap(self._data[name])
-        except KeyError:
-            raise AttributeError(f"no field {name!r} here (fields: {', '.join(map(str, self._data))})") from None
-
-    def __setattr__(self, name: str, value: Any) -> None:
-        raise AttributeError("read-only")
-
-    def __getitem__(self, key: Any) -> Any:
-        return _wrap(self._data[key])
-
-    def __iter__(self) -> Iterator:
-        return iter(self._data)
-
-    def __len__(self) -> int:
-        return len(self._data)
-
-    def __dir__(self) -> list[str]:
-        return sorted(k for k in self._data if isinstance(k, str) and k.isidentifier())
-
-    def __repr__(self) -> str:
-        shown = ", ".join(f"{k}={v!r}" for k, v in self._data.items() if not isinstance(v, (dict, list)))
-        return f"{type(self).__name__}({shown[:300]}{'...' if len(shown) > 300 else ''})"
-
-    def to_dict(self) -> dict:
-        return self._data
 
 
 class Summary(Record):

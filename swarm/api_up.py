@@ -14,8 +14,9 @@ writes the results, then every process ends; SIGKILL after a grace period.
         run.wait()
     results = run.results()                          # swarm.open_run(out)
 
-Live state is read as `swarm agents` and `swarm graph` read it (swarm/live_data.py):
-the world's info merged with the agents' own statuses, and the communication graph.
+Live state is read as `swarm agents` and `swarm graph` read it, through the object
+`swarm.connect(...)` returns (swarm/api_live.py): the world's info merged with the agents'
+own statuses, and the communication graph.
 """
 
 from __future__ import annotations
@@ -33,8 +34,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-from swarm.api import Record, Results, open_run
+from swarm.api import Results, open_run
+from swarm.api_live import LiveState
 from swarm.api_scenario import as_scenario, source_of, to_toml, with_duration
+from swarm.errors import UpError
 from swarm.procs import Group, wait_until
 
 __all__ = ["UpError", "UpRun", "LiveState"]
@@ -45,22 +48,6 @@ BANNER_RE = re.compile(r"^run (\S+)\s+endpoint (\S+)\s+agents", re.M)
 _BOOT = ("import sys; from swarm.contracts.lifeline import tie_to_launcher; tie_to_launcher(); "
          "sys.argv[0] = 'swarm'; from swarm.cli import main; main()")
 _RUNNING: set["UpRun"] = set()  # stopped at interpreter exit
-
-
-class UpError(RuntimeError):
-    """The run cannot do what was asked (it ended, or never started); the message says why,
-    with the last lines of `swarm up`'s output."""
-
-
-class LiveState(Record):
-    """One reading of a live run: `tick`, `time`, `started`, `paused`, `agents` (by int id:
-    role, alive, x, y, heading, out, root, hops, radial_error...: the rows of `swarm
-    agents`), `graph` (`swarm graph --json`'s document) and `info` (the world's as it came)."""
-
-    @property
-    def poses(self) -> dict[int, tuple[float, float, float]]:
-        """(x, y, heading) of every agent, by id."""
-        return {aid: (a["x"], a["y"], a["heading"]) for aid, a in self.agents.items()}
 
 
 class UpRun:
@@ -108,7 +95,7 @@ class UpRun:
 
             env[ENV_LAW_PATH] = with_law_path([p for p in sys.path if p and os.path.isdir(p)])
         self._lines: list[str] = []
-        self._live = None  # a swarm.live.LiveRun, opened by the first state()
+        self._live = None  # a swarm.api_live.Live, opened by the first state()
         self._group = Group(session=True)  # no terminal's Ctrl-C reaches it: stop() does
         self.process = self._group.start(args, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                          stderr=subprocess.STDOUT, env=env)
@@ -209,8 +196,10 @@ class UpRun:
 
     # -- live state -----------------------------------------------------------------------
     def live(self, timeout: float = 30.0):
-        """A new session to the running world (`swarm.live.LiveRun`: info(), statuses(),
-        admin(...)); close it, or use it in a `with` block."""
+        """A new session to the running world: what `swarm.connect(...)` returns (a
+        `swarm.api_live.Live`: agents(), graph(), info(), pause(), kill(...)...); close it,
+        or use it in a `with` block."""
+        from swarm.api_live import Live
         from swarm.contracts import credentials
         from swarm.live import LiveRun, NoRun, RunRef
 
@@ -221,7 +210,7 @@ class UpRun:
                 raise self._why("the run has ended")
             try:  # the world writes the run's credentials just before it listens
                 creds = credentials.read(credentials.run_file(run))
-                return LiveRun(RunRef(run, creds.endpoint, creds)).__enter__()
+                return Live(LiveRun(RunRef(run, creds.endpoint, creds)).__enter__())
             except (credentials.CredentialsError, NoRun):
                 return None
 
@@ -232,30 +221,23 @@ class UpRun:
 
     def state(self, timeout: float = 30.0) -> LiveState:
         """The live run now, as a `LiveState` (agents, poses, graph); UpError once it has ended."""
-        from swarm.live import NoRun
-        from swarm.live_data import graph_of, snapshot
+        from swarm.errors import NoRunError
 
         if self._live is None:
             self._live = self.live(timeout)
         deadline = time.monotonic() + timeout
         while True:
             try:
-                snap = snapshot(self._live)
-                break
-            except NoRun:  # listening, not answering yet; or gone
+                return self._live.state()
+            except NoRunError:  # listening, not answering yet; or gone
                 if not self.running() or time.monotonic() > deadline:
                     raise self._why("the world did not answer") from None
                 time.sleep(0.05)
-        info = snap["info"]
-        return LiveState({"run": info.get("run"), "tick": info.get("tick"), "time": info.get("time"),
-                          "started": info.get("started"), "paused": info.get("paused"),
-                          "agents": {int(r["id"]): r for r in snap["agents"]}, "graph": graph_of(snap),
-                          "info": info})
 
     def _close_live(self) -> None:
         if self._live is not None:
             live, self._live = self._live, None
-            live.__exit__(None, None, None)
+            live.close()
 
     def __repr__(self) -> str:
         state = "running" if self.running() else f"exit code {self.returncode}"

@@ -1,5 +1,7 @@
 """The `swarm` command line: the root typer app, made of small command groups, each in its
-own module and added here with its `register(app)`; failures are one message and an exit code.
+own module and added here with its `register(app)`. A command parses its options, calls the
+Python API (`import swarm`) and renders what it returns; the API's errors become one line and
+an exit code in one place (swarm/cli_errors.py, wrapped round every command here).
 
     up_cli       up                             (run a scenario as processes)
     run_cli      sim, world, agent              (run a scenario, or a part of one)
@@ -9,29 +11,57 @@ own module and added here with its `register(app)`; failures are one message and
     access_cli   credentials                    (hand an identity to another machine)
     host_cli     host                           (agents of a run on this machine, via its router)
     study_cli    study swarms, study gains      (batch studies)
+
+`app` (every command) is built on first use. The `swarm` process of a live command builds
+only that command's group (`LAZY`): a live command is a short query, and importing and
+declaring every other command was most of its own time.
 """
 
 from __future__ import annotations
 
-import typer
+import sys
+from importlib import import_module
 
-from swarm import access_cli, control_cli, host_cli, live_cli, offline_cli, run_cli, up_cli
-from swarm.study_cli import study_app
+GROUPS = ("up_cli", "run_cli", "offline_cli", "live_cli", "control_cli", "access_cli", "host_cli")
+# command -> the group module that is enough to run it (groups of several commands only: a typer
+# app of one command would run it without its name)
+LAZY = {name: module for module, names in (("live_cli", ("runs", "agents", "graph", "watch")),
+                                           ("control_cli", ("kill", "spawn", "pause", "resume")))
+        for name in names}
 
-app = typer.Typer(
-    help="swarm: an agent-per-process runtime for bearing-based circumnavigation over zenoh.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
-)
 
-for group in (up_cli, run_cli, offline_cli, live_cli, control_cli, access_cli, host_cli):
-    group.register(app)
-app.add_typer(study_app, name="study")
+def build(groups=GROUPS, study: bool = True):
+    """The typer app of these command groups (and `swarm study`), every command's errors mapped."""
+    import typer
+
+    from swarm.cli_errors import map_app
+
+    app = typer.Typer(
+        help="swarm: an agent-per-process runtime for bearing-based circumnavigation over zenoh.",
+        no_args_is_help=True,
+        add_completion=False,
+        pretty_exceptions_enable=False,
+    )
+    for group in groups:
+        import_module(f"swarm.{group}").register(app)
+    if study:
+        from swarm.study_cli import study_app
+
+        app.add_typer(study_app, name="study")
+    map_app(app)  # the API's errors: one line on stderr and their exit code (swarm/cli_errors.py)
+    return app
+
+
+def __getattr__(name: str):
+    if name == "app":
+        value = globals()["app"] = build()
+        return value
+    raise AttributeError(f"module 'swarm.cli' has no attribute {name!r}")
 
 
 def main() -> None:
-    app()
+    group = LAZY.get(sys.argv[1]) if len(sys.argv) > 1 else None
+    (build((group,), study=False) if group else __getattr__("app"))()
 
 
 if __name__ == "__main__":

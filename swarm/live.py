@@ -31,13 +31,13 @@ from swarm.contracts.identities import OPERATOR, CredentialsError
 from swarm.contracts.lifeline import endpoint_refuses
 from swarm.contracts.transport import (QUERY_TIMEOUT, dial_endpoint, open_client, query_statuses, runtime_dir,
                                       socket_path)
+from swarm.errors import NoRunError
 
 ENDED_FAILURES = 3  # failed reads in a row, ...
 ENDED_SILENT_S = 5.0  # ... over at least this long, before a world that is still there counts as ended
 
 
-class NoRun(Exception):
-    """No (single) run matches; the message says what was looked at."""
+NoRun = NoRunError  # no (single) run matches, or its world stopped answering (swarm/errors.py)
 
 
 @dataclass(frozen=True)
@@ -59,20 +59,32 @@ def _socket_answers(path) -> bool:
         s.close()
 
 
-def world_answers(ref: RunRef, timeout: float = 0.5) -> bool:
-    """Whether the world of `ref` is alive on its endpoint (and lets these credentials in)."""
+def _probe(ref: RunRef, timeout: float = 0.5):
+    """A session to the world of `ref` if it is alive on its endpoint (and lets these
+    credentials in), else None."""
     path = socket_path(ref.endpoint)
     if path is not None and not _socket_answers(path):
-        return False
+        return None
     try:
         ses = open_client(ref.endpoint, timeout_ms=int(timeout * 1000), creds=ref.creds)
     except Exception:
-        return False
+        return None
     try:
         replies = ses.liveliness().get(wire.world_alive_key(ref.run), timeout=timeout)
-        return any(r.ok is not None for r in replies)
-    finally:
+        if any(r.ok is not None for r in replies):
+            return ses
+    except Exception:
+        pass
+    ses.close()
+    return None
+
+
+def world_answers(ref: RunRef, timeout: float = 0.5) -> bool:
+    """Whether the world of `ref` is alive on its endpoint (and lets these credentials in)."""
+    ses = _probe(ref, timeout)
+    if ses is not None:
         ses.close()
+    return ses is not None
 
 
 def candidates(connect: str | None = None, creds_file: Path | None = None) -> list[RunRef]:
@@ -86,13 +98,17 @@ def candidates(connect: str | None = None, creds_file: Path | None = None) -> li
     return [RunRef(c.run, c.endpoint, c) for c in credentials.local_runs() if dial is None or c.endpoint == dial]
 
 
-def find_runs(connect: str | None = None, creds_file: Path | None = None) -> list[RunRef]:
-    """The runs these options point at whose world answers."""
+def _candidates(connect: str | None, creds_file: Path | None, run: str | None) -> list[RunRef]:
     try:
         refs = candidates(connect, creds_file)
     except CredentialsError as e:
         raise NoRun(str(e)) from None
-    return [r for r in refs if world_answers(r)]
+    return [r for r in refs if run is None or r.run == run]
+
+
+def find_runs(connect: str | None = None, creds_file: Path | None = None, run: str | None = None) -> list[RunRef]:
+    """The runs these options point at whose world answers (only run `run`, if given)."""
+    return [r for r in _candidates(connect, creds_file, run) if world_answers(r)]
 
 
 def where_looked(connect: str | None = None, creds_file: Path | None = None) -> str:
@@ -106,24 +122,37 @@ def where_looked(connect: str | None = None, creds_file: Path | None = None) -> 
 
 def resolve(connect: str | None = None, run: str | None = None, creds_file: Path | None = None) -> RunRef:
     """The run a command should talk to, or NoRun with a one-line reason."""
+    live = open_run_session(connect, run, creds_file)
+    live.__exit__(None, None, None)
+    return live.ref
+
+
+def open_run_session(connect: str | None = None, run: str | None = None,
+                     creds_file: Path | None = None) -> "LiveRun":
+    """A LiveRun, open, on the run a command should talk to (the session that found its world
+    alive, so it is opened once), or NoRun with a one-line reason."""
     if run is not None:
         try:
             wire.check_run_id(run)
         except wire.WireError as e:
             raise NoRun(str(e)) from None
     where = where_looked(connect, creds_file)
-    found = find_runs(connect, creds_file)
-    if run is not None:
-        found = [r for r in found if r.run == run]
+    found = []
+    for ref in _candidates(connect, creds_file, run):
+        ses = _probe(ref)
+        if ses is not None:
+            found.append((ref, ses))
+    for _, ses in found[1:] if len(found) == 1 else found:
+        ses.close()
     if not found:
         what = f"run {run!r}" if run else "no swarm is running"
         raise NoRun(f"{what} not found: looked at {where}" if run else f"{what}: looked at {where} "
                     "(start one with `swarm up SCENARIO`; for a run on another machine pass "
                     "--credentials FILE from `swarm credentials`)")
     if len(found) > 1:
-        raise NoRun(f"{len(found)} runs found ({', '.join(f'{r.run} on {r.endpoint}' for r in found)}); "
+        raise NoRun(f"{len(found)} runs found ({', '.join(f'{r.run} on {r.endpoint}' for r, _ in found)}); "
                     "pick one with --run (or export SWARM_RUN=ID)")
-    return found[0]
+    return LiveRun(*found[0])
 
 
 def _first_reply(replies):
@@ -135,15 +164,18 @@ def _first_reply(replies):
 
 
 class LiveRun:
-    """An open session to one run: `with LiveRun(ref) as live: live.info()`."""
+    """An open session to one run: `with LiveRun(ref) as live: live.info()` (`session`: one
+    already open to it, which it then owns)."""
 
-    def __init__(self, ref: RunRef):
+    def __init__(self, ref: RunRef, session=None):
         self.ref = ref
-        self.session = None
+        self.session = session
         self.end_notice = False  # the world said the run ended (once `watch_end()` listens)
         self._end_sub = None
 
     def __enter__(self) -> "LiveRun":
+        if self.session is not None:
+            return self
         try:
             self.session = open_client(self.ref.endpoint, timeout_ms=1000, creds=self.ref.creds)
         except Exception as e:
@@ -152,7 +184,8 @@ class LiveRun:
 
     def __exit__(self, *exc) -> None:
         if self.session is not None:
-            self.session.close()
+            session, self.session = self.session, None
+            session.close()
 
     def _get(self, selector: str, payload: bytes | None = None):
         """A get whose replies come as they arrive (not held back until the query ends)."""

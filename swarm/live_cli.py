@@ -1,14 +1,14 @@
 """Read-only live commands (`swarm runs / agents / graph`; `swarm watch` is swarm/watch_cli.py's),
 and what every live command shares: the --connect/--run/--json options (defaults:
-$SWARM_CONNECT, $SWARM_RUN), attaching to a run, failing with one line, and reading a run
-again until it has really ended.
+$SWARM_CONNECT, $SWARM_RUN) and the console.
 
-Every command talks to a running swarm over zenoh only (`swarm.live`), so it works the
-same from another terminal or another machine (`--connect tcp/HOST:PORT`). A command
-that finds no run (or not the one asked for) prints one line to stderr and exits 1.
-The JSON shapes printed with `--json` are documented in docs/cli.md; keep them stable.
-The data is in `swarm.live_data`, its looks in `swarm.live_views`; the commands that act
-on a run (kill, spawn, pause, resume) in `swarm.control_cli`.
+Each command parses its options, calls the Python API (`swarm.connect`, `swarm.runs`:
+swarm/api_live.py) and renders what it returns; the API's errors (no run, the world ended
+mid-command...) become one line on stderr and exit 1 in swarm/cli_errors.py. Everything goes
+over zenoh, so it works the same from another terminal or another machine (`--connect
+tcp/HOST:PORT`). The JSON shapes printed with `--json` are documented in docs/cli.md; keep
+them stable. Their looks are in `swarm.live_views`; the commands that act on a run (kill,
+spawn, pause, resume) in `swarm.control_cli`.
 """
 
 from __future__ import annotations
@@ -16,20 +16,17 @@ from __future__ import annotations
 import json
 import sys
 import time
-from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, Iterator, Optional
+from typing import Annotated, Optional
 
 import typer
 
-from swarm.live_data import graph_key, graph_of, snapshot
+from swarm.api_live import ENV_CONNECT, ENV_RUN, connect as connect_run
+from swarm.cli_errors import fail
+from swarm.live_data import graph_key
 from swarm.live_views import agents_table, graph_dot, graph_renderable, header, runs_table
 
-EXIT_NO_RUN = 1
 EXIT_USAGE = 2
-
-ENV_RUN = "SWARM_RUN"  # the live commands' default --run
-ENV_CONNECT = "SWARM_CONNECT"  # the live commands' default --connect
 
 ConnectOpt = Annotated[Optional[str], typer.Option(
     "--connect", envvar=ENV_CONNECT, help="endpoint of the run, e.g. tcp/HOST:7447 or unixsock-stream/PATH "
@@ -48,50 +45,6 @@ TrustLawOpt = Annotated[Optional[list[str]], typer.Option(
     "--trust-law", metavar="MODULE:FUNCTION",
     help="a follower law of your own the agent may import if the run uses it (repeatable; built-in laws "
          "need nothing)")]
-
-
-def fail(message: str, code: int = EXIT_NO_RUN) -> typer.Exit:
-    typer.secho(message, err=True, fg=typer.colors.RED)
-    return typer.Exit(code)
-
-
-def _one_line(e: BaseException | str) -> str:
-    text = str(e).strip()
-    return text.splitlines()[0] if text else type(e).__name__
-
-
-@contextmanager
-def attached(connect: str | None, run: str | None, creds: Path | None = None) -> Iterator:
-    """A LiveRun on the run picked by --connect/--run; any failure to reach it (or its world
-    ending mid-command) becomes one line on stderr and exit 1."""
-    from swarm.contracts.identities import CredentialsError
-    from swarm.contracts.wire import WireError
-    from swarm.live import LiveRun, NoRun, resolve
-
-    try:
-        with LiveRun(resolve(connect, run, creds)) as live:
-            yield live
-    except typer.Exit:
-        raise
-    except (NoRun, WireError, CredentialsError) as e:
-        raise fail(_one_line(e)) from None
-    except Exception as e:  # zenoh errors: a clear line, never a traceback
-        raise fail(f"cannot talk to the run: {_one_line(e)}") from None
-
-
-def read_again(patience, read):
-    """`read()`, or None after a failure while the world has not ended (`swarm.live.Patience`:
-    read again next time); NoRun once it has."""
-    from swarm.live import NoRun
-
-    try:
-        value = read()
-    except NoRun:
-        if patience.ended():
-            raise
-        return None
-    patience.answered()
-    return value
 
 
 def console(err: bool = False):
@@ -118,28 +71,10 @@ def runs(
 
     Example: swarm runs --connect tcp/10.0.0.5:7447 --json
     """
-    from swarm.live import LiveRun, NoRun, find_runs, where_looked
+    from swarm.api_live import runs as live_runs
+    from swarm.live import where_looked
 
-    try:
-        found = [r for r in find_runs(connect, credentials) if run is None or r.run == run]
-    except NoRun as e:
-        raise fail(_one_line(e)) from None
-    docs = []
-    for ref in found:
-        doc = {"run": ref.run, "endpoint": ref.endpoint, "scenario": None, "clock": None, "paused": None,
-               "tick": None, "ticks": None, "time": None, "agents_live": None, "agents_total": None,
-               "host": None, "pid": None}
-        try:
-            with LiveRun(ref) as live:
-                info = live.info()
-            agents = info.get("agents", {})
-            doc.update({k: info.get(k) for k in ("scenario", "clock", "paused", "tick", "ticks", "time",
-                                                 "host", "pid")},
-                       agents_live=sum(1 for a in agents.values() if a.get("alive")),
-                       agents_total=len(agents))
-        except Exception:
-            pass  # it ended between the two questions (NoRun): listed with what is known
-        docs.append(doc)
+    docs = live_runs(run, connect, credentials)
     if as_json:
         typer.echo(_dumps(docs))
     where = where_looked(connect, credentials)
@@ -166,8 +101,8 @@ def agents(
 
     Example: swarm agents --json
     """
-    with attached(connect, run, credentials) as live:
-        snap = snapshot(live)
+    with connect_run(run, connect, credentials) as live:
+        snap = live.snapshot()
     info = snap["info"]
     if as_json:
         typer.echo(_dumps({"run": info.get("run"), "scenario": info.get("scenario"), "clock": info.get("clock"),
@@ -213,17 +148,15 @@ def graph(
                 con.print()
             con.print(graph_renderable(g))
 
-    with attached(connect, run, credentials) as live:
-        g = graph_of(snapshot(live, sensing), sensing)
+    with connect_run(run, connect, credentials) as live:
+        g = live.graph(sensing)
         if not watch:
             show(g, True)
             return
-        from swarm.live import NoRun, Patience
-
-        patience = Patience(live)
+        from swarm.errors import NoRunError
 
         def again(g: dict) -> dict:  # the graph now, or the last one while the world does not answer
-            return read_again(patience, lambda: graph_of(snapshot(live, sensing), sensing)) or g
+            return live.again(lambda: live.graph(sensing), g)
 
         tty = sys.stdout.isatty() and not (as_json or dot)
         key = None
@@ -249,8 +182,8 @@ def graph(
                 g = again(g)
         except KeyboardInterrupt:
             raise typer.Exit(0) from None
-        except NoRun:
-            typer.secho(f"the world of run {live.ref.run} ended", err=True)
+        except NoRunError:
+            typer.secho(f"the world of run {live.run} ended", err=True)
             raise typer.Exit(0) from None
 
 

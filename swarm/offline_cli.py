@@ -23,12 +23,10 @@ def fail(message: str, code: int = 2) -> "typer.Exit":
 
 
 def read_scenario(path: Path) -> "Scenario":
-    from swarm.contracts.scenario import ScenarioError, load_scenario
+    """`swarm.load(path)`: a bad file raises ScenarioError, its message and exit 2 (swarm/cli_errors.py)."""
+    from swarm.api_scenario import load
 
-    try:
-        return load_scenario(path)
-    except ScenarioError as e:
-        raise fail(str(e), 2) from None
+    return load(path)
 
 
 def render_run_plots(out: Path, formats: tuple[str, ...] = ("png",)) -> None:

@@ -149,35 +149,27 @@ def sim(
 
     Example: swarm sim scenarios/case2.toml --out runs/case2
     """
-    from world.recording import EXIT_NO_SPACE, RECORDING_FILE, RecordingError, write_run
+    from swarm.api import simulate
+    from world.recording import EXIT_NO_SPACE, RecordingError
 
     s = read_scenario(scenario)
     check_duration(s, duration, scenario)
     if batch:
-        from swarm.batch import refusal, run_batch
+        from swarm.batch import refusal
 
         why = refusal(s)
         if why is not None:
             raise fail(f"swarm sim --batch: {scenario}: {why}; run it without --batch")
-        engine = lambda *a: run_batch([s], *a)[0]  # noqa: E731
-    else:
-        from swarm.sim import run_sim
-
-        engine = lambda *a: run_sim(s, *a)  # noqa: E731
     out = out or default_out(scenario, "sim")
-    claim_out(out, force)
     total = int(round((duration or s.run.duration) / s.run.dt))
-    t0 = time.perf_counter()
     try:
         with _progress_bar(f"sim {scenario.stem}") as prog:
             task = prog.add_task("sim", total=total)
-            result = engine(duration, lambda k, n: prog.update(task, completed=k), out / RECORDING_FILE)
-        wall = time.perf_counter() - t0
-        result.extra["wall_time"] = wall
-        result.extra["sim_seconds_per_wall_second"] = total * s.run.dt / wall if wall > 0 else None
-        summary = write_run(result, out)
+            results = simulate(s, duration, out, force=force, batch=batch,
+                               progress=lambda k, n: prog.update(task, completed=k))
     except RecordingError as e:
         raise fail(f"swarm sim: {e}", EXIT_NO_SPACE) from None
+    summary, wall = results.summary.to_dict(), results.summary["wall_time"]
     print_summary(summary, out)
     typer.echo(f"speed: {total * s.run.dt / wall:.1f} simulated s per wall s ({total / wall:.0f} ticks/s)")
     if plots:

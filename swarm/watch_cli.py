@@ -1,7 +1,7 @@
 """`swarm watch`: a live terminal view of a run, the top-down picture (swarm/watch.py) beside
 the agents table (`watch_frame`, swarm/live_views.py), refreshed a few times a second. Its
-options and attaching are swarm/live_cli.py's; a world that misses a read is read again
-until it has really ended (`swarm.live.Patience`)."""
+options are swarm/live_cli.py's, its readings `swarm.connect(...)`'s (swarm/api_live.py); a
+world that misses a read is read again until it has really ended (`Live.again`)."""
 
 from __future__ import annotations
 
@@ -11,8 +11,9 @@ from typing import Annotated
 
 import typer
 
-from swarm.live_cli import ConnectOpt, CredentialsOpt, LiveRunOpt, console, attached, read_again
-from swarm.live_data import snapshot
+from swarm.api_live import connect as connect_run
+from swarm.errors import NoRunError
+from swarm.live_cli import ConnectOpt, CredentialsOpt, LiveRunOpt, console
 from swarm.live_views import watch_frame
 
 WORLD_GONE_EXIT = 3.0  # s: `watch` without a terminal exits this long after the world ended
@@ -36,15 +37,12 @@ def watch(
 
     Example: swarm watch --rate 10
     """
-    from swarm.live import NoRun, Patience
-
     period = 1.0 / rate
     tty = sys.stdout.isatty()
     con = console()
-    with attached(connect, run, credentials) as live:
-        snap = snapshot(live)
+    with connect_run(run, connect, credentials) as live:
+        snap = live.snapshot()
         ended_at: float | None = None
-        patience = Patience(live)
 
         def refresh() -> None:
             """A new snapshot (the last one while the world does not answer), or note when the
@@ -52,8 +50,8 @@ def watch(
             nonlocal snap, ended_at
             if ended_at is None:
                 try:
-                    snap = read_again(patience, lambda: snapshot(live)) or snap
-                except NoRun:
+                    snap = live.again(live.snapshot, snap)
+                except NoRunError:
                     ended_at = time.monotonic()
 
         try:

@@ -525,9 +525,9 @@ def test_kill_stopped_and_remote(live, monkeypatch):
     live["extra_pids"].append((pid4, psutil.Process(pid4).create_time()))
 
     # an agent on "another host": the signal goes over zenoh; SIGCONT cannot
-    import swarm.control_cli
+    import swarm.live_control
 
-    monkeypatch.setattr(swarm.control_cli.socket, "gethostname", lambda: "elsewhere.invalid")
+    monkeypatch.setattr(swarm.live_control.socket, "gethostname", lambda: "elsewhere.invalid")
     res = invoke("kill", "5", "--signal", "CONT")
     assert res.exit_code == 1 and "cannot be delivered over zenoh" in res.stderr, res.output
     pid5 = {r["id"]: r for r in _json("agents", "--json")["agents"]}[5]["pid"]
