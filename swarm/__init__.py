@@ -2,14 +2,15 @@
 
 `import swarm` is the Python API (swarm/api.py, README "Python API"): `swarm.load`,
 `swarm.from_dict`, `swarm.Builder`, `swarm.simulate`, `swarm.open_run`, `swarm.up`,
-`swarm.Results`..., and a live run: `swarm.connect`, `swarm.runs` (swarm/api_live.py); the
+`swarm.launch`, `swarm.Results`..., and a live run: `swarm.connect`, `swarm.runs` (swarm/api_live.py); the
 errors are swarm/errors.py's. Every name is imported on first use (module `__getattr__`), so
 `import swarm.contracts.wire` in an agent process still costs nothing more than it did.
 """
 
 _EXPORTS = {
-    "api": ("Builder", "OutDirError", "Record", "Results", "RunReadError", "Scenario", "ScenarioError", "Summary",
-            "AgentTrack", "open_run", "simulate", "up"),
+    "api": ("Builder", "OutDirError", "Record", "Recovery", "Results", "RunReadError", "Scenario", "ScenarioError",
+            "Summary", "AgentTrack", "open_run", "simulate", "up"),
+    "api_launch": ("Launch", "UpOutcome", "launch"),
     "api_scenario": ("from_dict", "load", "to_toml"),
     "api_live": ("Live", "LiveState", "connect", "runs"),
     "api_up": ("UpRun",),

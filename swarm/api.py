@@ -7,12 +7,15 @@ these names lazily, so the agent processes, which import swarm.contracts, pay no
   (swarm/sim.py; `batch=True`: swarm/batch.py's), the same results to the bit; with
   `out`, the same run directory as `swarm sim --out` (recording, trajectory, summary).
 - `open_run(dir)`: a finished run directory of `swarm sim` or `swarm up` (rebuilt from
-  its recording first if its world died, as `swarm plot` does).
+  its recording first if its world died, as `swarm plot` does; `Results.recovered` says
+  what was rebuilt).
 - `Results`: trajectory.npz's arrays as attributes (`t` (T,), `x`, `y`, `heading`, `u`,
   `out`, `alive` (T, N) in the order of `ids`; `agent(id)` for one agent's columns), the
   summary as a `Summary` (attribute access: `summary.converged`,
-  `summary.agents[3].radial_error`), `plot()` (swarm/plots, into a run directory).
-- `up(...)`: the distributed runtime, as a handle (swarm/api_up.py).
+  `summary.agents[3].radial_error`), `plot()` (swarm/plots, into a run directory),
+  `write_csv()` (`swarm export --csv`'s files).
+- `up(...)`: the distributed runtime, as a handle (swarm/api_up.py); `launch(...)`: the
+  same, run in this process until it ends (swarm/api_launch.py, what `swarm up` calls).
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ import numpy as np
 
 from swarm.api_record import Record
 from swarm.api_scenario import Builder, Scenario, ScenarioError, as_scenario, source_of, with_duration
-from swarm.results import OutDirError
+from swarm.results import OutDirError, Recovery
 from world.recording import RECORDING_FILE, SUMMARY_FILE, TRAJECTORY_FILE
 from world.run_reader import RunReadError
 
@@ -73,13 +76,16 @@ class AgentTrack:
 
 
 class Results:
-    """A run's results: arrays (trajectory.npz's, by name, as attributes), `summary`, and
-    `run_dir` (None for a run kept in memory)."""
+    """A run's results: arrays (trajectory.npz's, by name, as attributes), `summary`,
+    `run_dir` (None for a run kept in memory), and `recovered` (a `swarm.results.Recovery`
+    when `open_run` rebuilt them from the recording of a world that died, else None)."""
 
-    def __init__(self, arrays: dict[str, np.ndarray], summary: dict, run_dir: Path | None = None):
+    def __init__(self, arrays: dict[str, np.ndarray], summary: dict, run_dir: Path | None = None,
+                 recovered: Recovery | None = None):
         self.arrays = arrays
         self.summary = Summary(summary)
         self.run_dir = None if run_dir is None else Path(run_dir)
+        self.recovered = recovered
         for k in STATIC_ARRAYS + TICK_ARRAYS:
             setattr(self, k, arrays.get(k))
 
@@ -131,12 +137,26 @@ class Results:
         `formats`: e.g. ("png", "pdf") where swarm/plots offers them. Returns the files."""
         from swarm.plots import render_plots
 
+        target = self._saved_in(out_dir, "the figures")
+        return render_plots(target) if formats is None else render_plots(target, formats=tuple(formats))
+
+    def write_csv(self, out_dir: str | Path | None = None) -> list[Path]:
+        """Write csv/agent-<id>.csv, one per agent (swarm/run_csv.py: `swarm export --csv`), into
+        `out_dir`, default the run directory (in-memory results are saved there first).
+        Returns the files in scenario order."""
+        from swarm.run_csv import write_agent_csvs
+
+        return write_agent_csvs(self._saved_in(out_dir, "the CSV files"))
+
+    def _saved_in(self, out_dir: str | Path | None, what: str) -> Path:
+        """The run directory to draw from: `out_dir` (these results saved there if they are not
+        its own), else the run directory."""
         target = self.run_dir if out_dir is None else Path(out_dir)
         if target is None:
-            raise ValueError("these results are in memory: pass out_dir (a directory for the data and the figures)")
+            raise ValueError(f"these results are in memory: pass out_dir (a directory for the data and {what})")
         if self.run_dir is None or target.resolve() != self.run_dir.resolve():
             self.save(target)
-        return render_plots(target) if formats is None else render_plots(target, formats=tuple(formats))
+        return target
 
 
 def _plain(o: Any) -> Any:
@@ -200,20 +220,19 @@ def simulate(scenario: "Scenario | dict | str | Path | Builder", duration: float
 def open_run(run_dir: str | Path, recover: bool = True) -> Results:
     """The results of a finished run directory. One whose world died (a recording without
     trajectory.npz) is first rebuilt from its recording (`recover`; the summary then says
-    `complete: False`). RunReadError, naming the file, for anything unreadable."""
-    from swarm.results import needs_export
+    `complete: False`, and `Results.recovered` what was rebuilt). RunReadError, naming the
+    file, for anything unreadable; world.stream.RecordingError if the rebuilt files cannot
+    be written."""
+    from swarm.results import recover as rebuild
     from world.run_reader import load_run
 
     d = Path(run_dir)
     if not d.is_dir():
         raise RunReadError(f"{d}: not a directory")
-    if recover and needs_export(d):
-        from world.recording import recover_run
-
-        try:
-            recover_run(d)
-        except ValueError as e:
-            raise RunReadError(str(e)) from None
+    try:
+        recovered = rebuild(d) if recover else None
+    except ValueError as e:
+        raise RunReadError(str(e)) from None
     data = load_run(d)  # the checks (shapes, keys) and the summary
     arrays: dict[str, np.ndarray] = {
         "ids": data.ids, "role": data.role, "target": data.target, "t": data.t, "x": data.x, "y": data.y,
@@ -224,7 +243,7 @@ def open_run(run_dir: str | Path, recover: bool = True) -> Results:
         for k in ("heading", "speed", "dt", "missed"):
             if k in z.files:
                 arrays[k] = np.asarray(z[k])
-    return Results(arrays, data.summary, d)
+    return Results(arrays, data.summary, d, recovered)
 
 
 def up(scenario: "Scenario | dict | str | Path | Builder", out: str | Path | None = None, **options: Any):
@@ -234,4 +253,4 @@ def up(scenario: "Scenario | dict | str | Path | Builder", out: str | Path | Non
     return UpRun(scenario, out, **options)
 
 
-__all__ += ["Builder", "OutDirError", "Scenario", "ScenarioError", "up"]
+__all__ += ["Builder", "OutDirError", "Recovery", "Scenario", "ScenarioError", "up"]

@@ -28,7 +28,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 from pathlib import Path
@@ -36,7 +35,8 @@ from typing import Any
 
 from swarm.api import Results, open_run
 from swarm.api_live import LiveState
-from swarm.api_scenario import as_scenario, source_of, to_toml, with_duration
+from swarm.api_launch import check_clock, name_stem, scenario_file
+from swarm.api_scenario import as_scenario, source_of, with_duration
 from swarm.errors import UpError
 from swarm.procs import Group, wait_until
 
@@ -64,22 +64,14 @@ class UpRun:
 
         s = as_scenario(scenario)  # bad scenarios and options fail here, before any process
         with_duration(s, duration, source_of(scenario))
-        if clock not in (None, "lockstep", "realtime"):
-            raise ValueError(f"clock must be 'lockstep' or 'realtime', not {clock!r}")
+        check_clock(clock)
         self.scenario = s
-        stem = Path(scenario).stem if isinstance(scenario, (str, Path)) else (s.name or "scenario")
         self.out = Path(out) if out is not None else Path("runs") / (
-            f"{re.sub(r'[^A-Za-z0-9_.-]', '-', stem)[:40]}-up-{time.strftime('%Y%m%d-%H%M%S')}-{os.urandom(3).hex()}")
+            f"{name_stem(scenario, s)}-up-{time.strftime('%Y%m%d-%H%M%S')}-{os.urandom(3).hex()}")
         if self.out.is_dir() and results_in(self.out) and not force:
             raise OutDirError(f"out {self.out} already holds the results of a run ({', '.join(results_in(self.out))}); "
                               "choose another directory, or pass force=True to replace them")
-        self._tmp: str | None = None
-        if isinstance(scenario, (str, Path)):
-            path = Path(scenario)
-        else:  # the world reads a file: this scenario, written as one
-            self._tmp = tempfile.mkdtemp(prefix="swarm-up-")
-            path = Path(self._tmp) / f"{re.sub(r'[^A-Za-z0-9_.-]', '-', stem)[:40] or 'scenario'}.toml"
-            path.write_text(to_toml(s), encoding="utf-8")
+        path, self._tmp = scenario_file(scenario, s)  # the world reads a file
         args = [sys.executable, "-c", _BOOT, "up", str(path), "--out", str(self.out), "--no-plots"]
         for flag, value in (("--clock", clock), ("--duration", duration), ("--time-scale", time_scale),
                             ("--listen", listen), ("--world-grace", world_grace)):

@@ -6,9 +6,10 @@ agents are reaped as they exit, by a `swarm.procs.Reaper` thread). The world wri
 results. Agents are forked by a fork server that has imported what they need (swarm/forks.py,
 agents/forkserver.py; exec'd if it cannot), and are this process's children all the same (it
 is their subreaper). The launcher watches the run over zenoh like any observer would (ground truth and
-events), prints progress, and on Ctrl-C/SIGTERM stops the world first with the signal it
-got (so the results are written, and say which signal), then the agents, then anything
-left in the group. Each child's output goes to `<out>/logs/`.
+events), reports progress, and once told to `stop(signum)` (by whoever handles Ctrl-C/SIGTERM:
+swarm/api_launch.py) stops the world first with that signal (so the results are written,
+and say which signal), then the agents, then anything left in the group. Each child's
+output goes to `<out>/logs/`.
 
 It supervises: an agent process that exits by itself is reported live, sent to the world
 (an `agent_exit` admin request: the world records a `crash` or `exit` event, see
@@ -203,9 +204,9 @@ class Launcher:
 
     # -- the run -------------------------------------------------------------------------------
     def run(self, show: Callable[[dict | None, float], None]) -> int:
-        """Start everything, supervise until the world ends; returns the world's exit code."""
+        """Start everything, supervise until the world ends (or `stop`); returns the world's
+        exit code. `show(figures, wall)` gets the progress line's figures as they come."""
         self.logs.mkdir(parents=True, exist_ok=True)
-        handlers = {sig: signal.signal(sig, self._on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
         session = None
         reaper = Reaper(self.group)  # a child killed from outside (`swarm kill`) is no zombie meanwhile
         try:
@@ -243,8 +244,6 @@ class Launcher:
             if session is not None:
                 session.close()
             self.stop_all()
-            for sig, h in handlers.items():
-                signal.signal(sig, h)
         if self.failed or self.world is None:
             return EXIT_WORLD_FAILED
         return self.world.returncode
@@ -316,5 +315,7 @@ class Launcher:
                 list(session.get(wire.world_admin_key(self.cfg.run), timeout=2.0,
                                  payload=wire.encode_admin("fault_done", index=index)))
 
-    def _on_signal(self, signum, _frame) -> None:
-        self.stop_signal = signum
+    def stop(self, signum: int = signal.SIGTERM) -> None:
+        """Stop the run as signal `signum` asks (`run` returns soon after, the world told with
+        it). Only sets a field: callable from a signal handler or another thread."""
+        self.stop_signal = int(signum)

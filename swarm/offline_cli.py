@@ -1,6 +1,6 @@
 """Commands that need no running swarm (`swarm check / schema`; `plot / export` live in
 plot_cli.py), and the small helpers every scenario command shares (the scenario argument,
-reading it, failing, the plots, rebuilding results from a recording)."""
+reading it, failing, the plots)."""
 
 from __future__ import annotations
 
@@ -37,6 +37,10 @@ def render_run_plots(out: Path, formats: tuple[str, ...] = ("png",)) -> None:
         files = render_plots(out, formats=formats)
     except PlotError as e:
         raise fail(str(e), 1) from None
+    say_plots(files)
+
+
+def say_plots(files: list[Path]) -> None:
     typer.echo("plots: " + ", ".join(p.name for p in files))
 
 
@@ -111,26 +115,6 @@ def schema() -> None:
     from swarm.contracts.scenario import scenario_json_schema
 
     typer.echo(json.dumps(scenario_json_schema(), indent=2))
-
-
-def export_results(run_dir: Path) -> bool:
-    """trajectory.npz and summary.json from the run's recording.mcap when they are missing
-    (the world died before its end); one line says what was recovered. False: nothing to do."""
-    from swarm.results import needs_export
-    from world.recording import EXIT_NO_SPACE, RecordingError, recover_run
-
-    if not needs_export(run_dir):
-        return False
-    try:
-        summary = recover_run(run_dir)
-    except ValueError as e:
-        raise fail(str(e), 1) from None
-    except RecordingError as e:
-        raise fail(str(e), EXIT_NO_SPACE) from None
-    finished = "finished" if summary.get("recording_finished") else "cut short"
-    typer.echo(f"recovered {summary['ticks'] + 1} ticks (t = 0 to {summary['sim_time']:.2f} s) from the "
-               f"recording ({finished}) into {run_dir}: trajectory.npz, summary.json (complete: false)")
-    return True
 
 
 def register(app: typer.Typer) -> None:

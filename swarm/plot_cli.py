@@ -1,5 +1,7 @@
 """`swarm plot` and `swarm export`: a finished (or crashed) run's figures, animation and
-CSV files, from its run directory (registered with the offline commands)."""
+CSV files, from its run directory (registered with the offline commands). Both open it with
+`swarm.open_run` (which rebuilds a crashed run from its recording: `Results.recovered`, said
+in one line) and draw with `Results.plot` / write with `Results.write_csv`."""
 
 from __future__ import annotations
 
@@ -9,7 +11,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from swarm.offline_cli import export_results, fail, render_run_plots
+from swarm.offline_cli import fail, say_plots
 
 RunDirArg = Annotated[Path, typer.Argument(help="a run directory written by swarm sim / swarm up")]
 FORMAT_HELP = "figure format: png, pdf or svg; repeat it or give a comma list (-f png,pdf)"
@@ -28,6 +30,16 @@ def plot_formats(values: Optional[list[str]]) -> tuple[str, ...]:
 def _run_dir(run_dir: Path) -> None:
     if not run_dir.is_dir():
         raise fail(f"{run_dir}: not a directory", 2)
+
+
+def open_results(run_dir: Path):
+    """`swarm.open_run(run_dir)`, saying what was rebuilt from the recording (if anything)."""
+    from swarm.api import open_run
+
+    results = open_run(run_dir)
+    if results.recovered is not None:
+        typer.echo(results.recovered.line())
+    return results
 
 
 def render_animation_cli(run_dir: Path, frames: int) -> None:
@@ -70,23 +82,19 @@ def plot(
     if frames < 2:
         raise fail(f"--frames: {frames} is too few (at least 2)", 2)
     _run_dir(run_dir)
-    export_results(run_dir)
-    render_run_plots(run_dir, formats)
+    say_plots(open_results(run_dir).plot(formats=formats))
     if animate:
         render_animation_cli(run_dir, frames)
 
 
-def write_csvs(run_dir: Path) -> None:
-    """csv/agent-<id>.csv for every agent; a read failure exits 1."""
-    from swarm.run_csv import CSV_DIR, write_agent_csvs
-    from world.run_reader import RunReadError
+def write_csvs(results) -> None:
+    """csv/agent-<id>.csv for every agent of `results` (a read failure: RunReadError, exit 1)."""
+    from swarm.run_csv import CSV_DIR
 
     try:
-        paths = write_agent_csvs(run_dir)
-    except RunReadError as e:
-        raise fail(str(e), 1) from None
+        paths = results.write_csv()
     except OSError as e:
-        raise fail(f"{run_dir / CSV_DIR}: {e.strerror or e}", 1) from None
+        raise fail(f"{results.run_dir / CSV_DIR}: {e.strerror or e}", 1) from None
     typer.echo(f"csv: {len(paths)} files in {CSV_DIR}/ ({paths[0].name} ... {paths[-1].name})")
 
 
@@ -104,13 +112,19 @@ def export(
 
     Example: swarm export runs/case2-1a2b3c --csv
     """
+    from swarm.results import needs_export
+
     _run_dir(run_dir)
-    if not export_results(run_dir):
+    recover = needs_export(run_dir)
+    if not recover:
         if (run_dir / "recording.mcap").is_file():
             typer.echo(f"{run_dir}: trajectory.npz and summary.json are already there; nothing to recover")
         elif not csv:
             raise fail(f"{run_dir}: no recording.mcap to export from", 1)
+    if not (recover or csv or plots):
+        return
+    results = open_results(run_dir)
     if csv:
-        write_csvs(run_dir)
+        write_csvs(results)
     if plots:
-        render_run_plots(run_dir)
+        say_plots(results.plot())

@@ -4,11 +4,13 @@
   `force`, which removes them and the old logs first, so a new run never mixes with an
   old one).
 - `needs_export(run_dir)`: a recording without the files made from it (a world that died
-  before writing them; `world.recording.recover_run` rebuilds them).
+  before writing them); `recover(run_dir)` rebuilds them (`world.recording.recover_run`)
+  and says what it rebuilt (a `Recovery`, whose `line()` `swarm plot / export / up` print).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 from world.recording import RECORDING_FILE, RESULT_FILES, SUMMARY_FILE, TRAJECTORY_FILE
@@ -59,3 +61,32 @@ def needs_export(run_dir: Path) -> bool:
     """A recording without the files made from it (the world died before its end)."""
     return (run_dir / RECORDING_FILE).is_file() and not (
         (run_dir / TRAJECTORY_FILE).is_file() and (run_dir / SUMMARY_FILE).is_file())
+
+
+@dataclass(frozen=True)
+class Recovery:
+    """What `recover` rebuilt from a run's recording: ticks 0..`ticks` (t = 0 to
+    `sim_time` s), from a recording the world `finished` or one cut short."""
+
+    run_dir: Path
+    ticks: int
+    sim_time: float
+    finished: bool
+
+    def line(self) -> str:
+        """The line `swarm plot / export / up` print about it."""
+        return (f"recovered {self.ticks + 1} ticks (t = 0 to {self.sim_time:.2f} s) from the recording "
+                f"({'finished' if self.finished else 'cut short'}) into {self.run_dir}: trajectory.npz, "
+                "summary.json (complete: false)")
+
+
+def recover(run_dir: Path) -> Recovery | None:
+    """Rebuild trajectory.npz and summary.json from the run's recording when they are missing
+    (None: nothing to do). Raises ValueError (no readable recording) or
+    world.stream.RecordingError (the files cannot be written)."""
+    if not needs_export(run_dir):
+        return None
+    from world.recording import recover_run
+
+    summary = recover_run(run_dir)
+    return Recovery(run_dir, int(summary["ticks"]), float(summary["sim_time"]), bool(summary.get("recording_finished")))

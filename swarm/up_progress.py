@@ -5,7 +5,8 @@ from its path to a leader (swarm/contracts/orbits.py), or none without a path; t
 line's text, agent by agent for a small swarm, summed up for a large one: how many agents
 are settled (radial error within the settling band, 2%), how many are not and the worst
 few of those, how many have no leader, which (or how many) dropped. Agents added at run time (`swarm spawn`) count
-once the launcher knows their spec (`AddedSpec`, from the world's info).
+once the launcher knows their spec (`AddedSpec`, from the world's info). `ProgressLine`
+draws the line from the figures `swarm.launch` reports.
 """
 
 from __future__ import annotations
@@ -115,3 +116,39 @@ def progress_errors(p: dict) -> str:
     if dropped:
         text += "; " + (gone if len(dropped) <= WORST_SHOWN else f"{len(dropped)} dropped")
     return text
+
+
+class ProgressLine:
+    """`swarm up`'s progress line, from the figures `swarm.launch` reports (`show`): at most
+    one a second when stdout is not a terminal (and the last tick's); on a terminal, one
+    row rewritten in place (`end` moves past it)."""
+
+    def __init__(self, tty: bool):
+        self.tty = tty
+        self.last, self.tick, self.wall = 0.0, 0, 0.0
+
+    def show(self, p: dict) -> None:
+        import time
+
+        import typer
+
+        if p["tick"] == self.tick and self.wall > 0:
+            return
+        now = time.monotonic()
+        if not self.tty and now - self.last < 1.0 and p["tick"] < p["ticks"] - 1:
+            return
+        rate = (p["tick"] - self.tick) / max(p["wall"] - self.wall, 1e-9)
+        self.last, self.tick, self.wall = now, p["tick"], p["wall"]
+        line = f"t={p['time']:7.2f}s tick {p['tick']}/{p['ticks']} {rate:6.0f} ticks/s  " + progress_errors(p)
+        if self.tty:  # one terminal row: a wrapped line would not be cleared by the next one
+            import shutil
+
+            typer.echo("\r\033[K" + line[:max(20, shutil.get_terminal_size().columns - 1)], nl=False)
+        else:
+            typer.echo(line)
+
+    def end(self) -> None:
+        if self.tty:
+            import typer
+
+            typer.echo("")
