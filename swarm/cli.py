@@ -59,7 +59,33 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'swarm.cli' has no attribute {name!r}")
 
 
+FOXGLOVE_COMMANDS = ("up", "world", "watch")  # the commands with --foxglove [PORT]
+
+
+def foxglove_argv(argv: list[str]) -> list[str]:
+    """`--foxglove PORT` and `--foxglove=PORT` (PORT all digits) as `--foxglove --foxglove-port
+    PORT` for the commands of FOXGLOVE_COMMANDS (argv[1]); everything else as it is, and
+    nothing after `--`. typer cannot give an option a value that may be left out."""
+    if len(argv) < 2 or argv[1] not in FOXGLOVE_COMMANDS:
+        return list(argv)
+    out, k = list(argv[:2]), 2
+    while k < len(argv):
+        a = argv[k]
+        if a == "--":
+            return out + list(argv[k:])
+        if a.startswith("--foxglove=") and a[len("--foxglove="):].isdigit():
+            out += ["--foxglove", "--foxglove-port", a[len("--foxglove="):]]
+        elif a == "--foxglove" and k + 1 < len(argv) and argv[k + 1].isdigit():
+            out += ["--foxglove", "--foxglove-port", argv[k + 1]]
+            k += 1
+        else:
+            out.append(a)
+        k += 1
+    return out
+
+
 def main() -> None:
+    sys.argv[:] = foxglove_argv(sys.argv)
     group = LAZY.get(sys.argv[1]) if len(sys.argv) > 1 else None
     (build((group,), study=False) if group else __getattr__("app"))()
 

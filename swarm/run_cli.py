@@ -32,8 +32,10 @@ TimeScaleOpt = Annotated[float, typer.Option("--time-scale", "--speed", help="re
                                              "seconds per wall second", min=1e-6)]
 EndPlotsOpt = Annotated[bool, typer.Option(help="render PNG plots at the end")]
 FoxgloveOpt = Annotated[bool, typer.Option("--foxglove", help="serve the run live to the Foxglove app "
-                                           "(WebSocket, ws://HOST:PORT; README, \"Live view in Foxglove\")")]
-FoxglovePortOpt = Annotated[int, typer.Option("--foxglove-port", help="--foxglove: the port", min=1, max=65535)]
+                                           "(WebSocket, ws://HOST:PORT; `--foxglove PORT` for another port "
+                                           "than 8765; README, \"Live view in Foxglove\")")]
+FoxglovePortOpt = Annotated[int, typer.Option("--foxglove-port", help="--foxglove: the port (`--foxglove PORT` "
+                                              "says the same)", min=1, max=65535)]
 FoxgloveHostOpt = Annotated[str, typer.Option("--foxglove-host", help="--foxglove: the address to bind "
                                               "(0.0.0.0: every interface, anyone who can reach it sees the run)")]
 

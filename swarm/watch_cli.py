@@ -1,7 +1,8 @@
 """`swarm watch`: a live terminal view of a run, the top-down picture (swarm/watch.py) beside
 the agents table (`watch_frame`, swarm/live_views.py), refreshed a few times a second. Its
 options are swarm/live_cli.py's, its readings `swarm.connect(...)`'s (swarm/api_live.py); a
-world that misses a read is read again until it has really ended (`Live.again`)."""
+world that misses a read is read again until it has really ended (`Live.again`). With
+`--foxglove`, no terminal view: the run is served to the Foxglove app (swarm/watch_foxglove.py)."""
 
 from __future__ import annotations
 
@@ -15,15 +16,29 @@ from swarm.api_live import connect as connect_run
 from swarm.errors import NoRunError
 from swarm.live_cli import ConnectOpt, CredentialsOpt, LiveRunOpt, console
 from swarm.live_views import watch_frame
+from world.live_view import DEFAULT_HOST, DEFAULT_PORT
 
 WORLD_GONE_EXIT = 3.0  # s: `watch` without a terminal exits this long after the world ended
+
+WatchFoxgloveOpt = Annotated[bool, typer.Option(
+    "--foxglove", help=f"instead of the terminal view, serve the run to the Foxglove app over its WebSocket "
+    f"protocol, the topics of `swarm up --foxglove` (ws://{DEFAULT_HOST}:{DEFAULT_PORT}; `--foxglove PORT` for "
+    "another port; README, \"Live view in Foxglove\"); Ctrl-C exits 130")]
+WatchFoxglovePortOpt = Annotated[int, typer.Option(
+    "--foxglove-port", help="--foxglove: the port (`--foxglove PORT` says the same)", min=1, max=65535)]
+WatchFoxgloveHostOpt = Annotated[str, typer.Option(
+    "--foxglove-host", help="--foxglove: the address to bind (0.0.0.0: every interface; anyone who can reach "
+    "the port can watch)")]
 
 
 def watch(
     connect: ConnectOpt = None,
     run: LiveRunOpt = None,
     credentials: CredentialsOpt = None,
-    rate: Annotated[float, typer.Option(help="refreshes per second", min=0.2, max=30.0)] = 4.0,
+    rate: Annotated[float, typer.Option(help="refreshes per second (the terminal view)", min=0.2, max=30.0)] = 4.0,
+    foxglove: WatchFoxgloveOpt = False,
+    foxglove_port: WatchFoxglovePortOpt = DEFAULT_PORT,
+    foxglove_host: WatchFoxgloveHostOpt = DEFAULT_HOST,
 ) -> None:
     """A live terminal view: a top-down picture of the run beside the agents table.
 
@@ -35,8 +50,14 @@ def watch(
     without a terminal (stdout piped) a frame is printed per refresh and the command exits
     a few seconds after the world ended.
 
-    Example: swarm watch --rate 10
+    With --foxglove [PORT] it serves the run to the Foxglove app instead (the topics of
+    `swarm up --foxglove`, built from what the world publishes) until Ctrl-C (exit 130) or the
+    end of the run (exit 0); a port in use is one line and exit 2.
+
+    Example: swarm watch --rate 10;  swarm watch --foxglove 9000
     """
+    if foxglove:
+        raise typer.Exit(watch_foxglove(connect, run, credentials, foxglove_host, foxglove_port))
     period = 1.0 / rate
     tty = sys.stdout.isatty()
     con = console()
@@ -80,3 +101,23 @@ def watch(
                 refresh()
         except KeyboardInterrupt:
             raise typer.Exit(0) from None
+
+
+def watch_foxglove(connect, run, credentials, host: str, port: int) -> int:
+    """`swarm watch --foxglove`: serve the run until it ends (0) or Ctrl-C (130)."""
+    from swarm.cli_errors import fail
+    from swarm.watch_foxglove import serve_run
+    from world.live_view import LiveViewError
+
+    def say(line: str) -> None:
+        print(line, flush=True)
+
+    try:
+        with connect_run(run, connect, credentials) as live:
+            serve_run(live, host, port, say)
+            return 0
+    except LiveViewError as e:
+        raise fail(str(e), 2) from None
+    except KeyboardInterrupt:
+        say("stopped (Ctrl-C); the live view is closed")
+        return 130

@@ -1,12 +1,14 @@
 """The Foxglove side of a run: the recording's topics, and `--foxglove`, the live view served
-over Foxglove's WebSocket protocol (world/live_view.py), watched by a real WebSocket client
-(a minimal one, standard library only, below)."""
+over Foxglove's WebSocket protocol by the world (world/live_view.py) or by an observer of a
+live run (`swarm watch --foxglove`, swarm/watch_foxglove.py), watched by a real WebSocket
+client (a minimal one, standard library only, below); `--foxglove [PORT]` (swarm/cli.py)."""
 
 from __future__ import annotations
 
 import base64
 import json
 import os
+import re
 import signal
 import socket
 import struct
@@ -16,7 +18,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from swarm.cli import app
+from swarm.cli import app, foxglove_argv
 from swarm.contracts.scenario import load_scenario
 from world.live_view import LIVE_TOPICS, LiveViewError, start_live_view
 
@@ -85,6 +87,41 @@ def test_world_bind_failure_is_one_line(tmp_path):
     finally:
         held.close()
         w.close()
+
+
+@pytest.mark.parametrize("argv, expected", [
+    (["up", "s.toml", "--foxglove"], ["up", "s.toml", "--foxglove"]),
+    (["up", "s.toml", "--foxglove", "9000"], ["up", "s.toml", "--foxglove", "--foxglove-port", "9000"]),
+    (["world", "--foxglove=9001", "s.toml"], ["world", "--foxglove", "--foxglove-port", "9001", "s.toml"]),
+    (["watch", "--foxglove", "--run", "r"], ["watch", "--foxglove", "--run", "r"]),
+    (["watch", "--foxglove", "--foxglove-port", "9"], ["watch", "--foxglove", "--foxglove-port", "9"]),
+    (["watch", "--foxglove=x"], ["watch", "--foxglove=x"]),  # typer says what is wrong
+    (["up", "s.toml", "--", "--foxglove", "9"], ["up", "s.toml", "--", "--foxglove", "9"]),
+    (["sim", "s.toml", "--foxglove", "9"], ["sim", "s.toml", "--foxglove", "9"]),  # not a live-view command
+    ([], []),
+])
+def test_foxglove_takes_an_optional_port(argv, expected):
+    assert foxglove_argv(["swarm", *argv]) == ["swarm", *expected]
+
+
+def test_the_world_stops_before_listening_when_the_port_is_in_use(tmp_path, monkeypatch, capsys):
+    """world/main.py's own check (after `swarm world`'s): one line, exit 2, no recording left,
+    and nothing listened on the endpoint."""
+    from world.main import run_world
+    from world.process import WorldConfig
+
+    monkeypatch.setenv("SWARM_RUNTIME_DIR", str(tmp_path / "rt"))
+    held, port = busy_port()
+    listen = f"unixsock-stream/{tmp_path / 'w.sock'}"
+    try:
+        code = run_world(WorldConfig(load_scenario(CASE2), "fg-busy", listen, tmp_path / "out",
+                                     foxglove=("127.0.0.1", port)))
+    finally:
+        held.close()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and err == [f"swarm world: --foxglove: cannot serve on 127.0.0.1:{port}: "
+                                 "Address already in use"], err
+    assert not (tmp_path / "w.sock").exists() and not (tmp_path / "out" / "recording.mcap").exists()
 
 
 # --- a minimal WebSocket client (RFC 6455), enough for the Foxglove protocol ------------------
@@ -221,3 +258,111 @@ def test_up_serves_the_run_live(rt, tmp_path):
     assert up.launcher.wait(60) == 130
     assert f"ws://127.0.0.1:{port}" in up.launcher.text()
     assert (tmp_path / "run" / "summary.json").exists()
+
+
+def advertised(ws: WsClient) -> dict[str, dict]:
+    """The channels of the server's first `advertise`, by topic."""
+    while True:
+        msg = ws.recv()
+        if isinstance(msg, str) and json.loads(msg)["op"] == "advertise":
+            return {c["topic"]: c for c in json.loads(msg)["channels"]}
+
+
+def messages(ws: WsClient, subs: dict[int, str]):
+    """(topic, JSON document or raw bytes) of each message data frame of these subscriptions."""
+    while True:
+        msg = ws.recv()
+        if isinstance(msg, str) or msg[0] != 0x01:  # text ops, or not a message data frame
+            continue
+        sub, _ts = struct.unpack_from("<IQ", msg, 1)
+        topic = subs.get(sub)
+        yield topic, (msg[13:] if topic in ("/swarm/scene", "/swarm/trails") else json.loads(msg[13:]))
+
+
+@pytest.mark.slow
+def test_up_port_in_use_stops_at_once(rt, tmp_path):
+    """`swarm up --foxglove PORT` (the port given as the option's value) with PORT taken: one
+    line naming it, exit 2, nothing started."""
+    from runtime_helpers import start_up
+
+    held, port = busy_port()
+    try:
+        up = start_up(rt.tracker, CASE2, tmp_path / "run", "--foxglove", port)
+        rc = up.launcher.wait(30)
+    finally:
+        held.close()
+    rt.tracker.assert_none_left(timeout=10)
+    lines = up.launcher.text().strip().splitlines()
+    assert rc == 2 and lines == [f"--foxglove: cannot serve on 127.0.0.1:{port}: Address already in use"], lines
+
+
+@pytest.mark.slow
+def test_watch_serves_a_live_run(rt, tmp_path):
+    """`swarm watch --foxglove PORT` attached to a `swarm up`: the topics of the world's live
+    view, every agent's pose, the drop of a killed agent on /swarm/events; a port in use is one
+    line and exit 2; Ctrl-C exits 130 and leaves nothing running."""
+    from runtime_helpers import start_up, swarm_cmd
+
+    up = start_up(rt.tracker, CASE2, tmp_path / "run", "--clock", "realtime", "--duration", "120")
+    up.wait_started(60)
+    held, busy = busy_port()
+    try:
+        refused = rt.tracker.spawn(swarm_cmd("watch", "--foxglove", busy), "watch-busy")
+        assert refused.wait(30) == 2
+    finally:
+        held.close()
+    assert refused.text().strip().splitlines() == [f"--foxglove: cannot serve on 127.0.0.1:{busy}: "
+                                                   "Address already in use"], refused.text()
+    port, other = free_port(), free_port()
+    watcher = rt.tracker.spawn(swarm_cmd("watch", "--foxglove", port), "watch")
+    stays = rt.tracker.spawn(swarm_cmd("watch", f"--foxglove={other}"), "watch-to-the-end")
+    ws = connect(port, 30, lambda: watcher.check_running("the live view"))
+    try:
+        channels = advertised(ws)
+        assert set(channels) == set(LIVE_TOPICS), channels
+        assert {t: c["encoding"] for t, c in channels.items()} == {
+            "/swarm/scene": "protobuf", "/swarm/trails": "protobuf", "/swarm/agents": "json",
+            "/swarm/events": "json", "/swarm/run": "json"}
+        assert channels["/swarm/scene"]["schemaName"] == channels["/swarm/trails"]["schemaName"] == \
+            "foxglove.SceneUpdate"
+        subs = {1: "/swarm/agents", 2: "/swarm/scene", 3: "/swarm/events"}
+        ws.send_json({"op": "subscribe", "subscriptions": [{"id": k, "channelId": channels[t]["id"]}
+                                                           for k, t in subs.items()]})
+        ids = {a.id for a in load_scenario(CASE2).agents}
+        seen: set[int] = set()
+        got_scene = False
+        stream = messages(ws, subs)
+        end = time.monotonic() + 30
+        while not (seen == ids and got_scene):
+            assert time.monotonic() < end, f"poses seen of {sorted(seen)} only; scene: {got_scene}"
+            topic, doc = next(stream)
+            if topic == "/swarm/agents":
+                seen |= {r["id"] for r in doc["agents"] if r["alive"] and isinstance(r["x"], float)
+                         and isinstance(r["radial_error"], float)}
+            got_scene = got_scene or (topic == "/swarm/scene" and len(doc) > 0)
+        victim = 3
+        kill = rt.tracker.spawn(swarm_cmd("kill", victim), "kill")
+        assert kill.wait(30) == 0, kill.text()
+        end = time.monotonic() + 20
+        dropped = dead = False
+        while not (dropped and dead):
+            assert time.monotonic() < end, f"after `swarm kill {victim}`: drop event {dropped}, shown dead {dead}"
+            topic, doc = next(stream)
+            if topic == "/swarm/events":
+                dropped = dropped or (doc["kind"] == "drop" and doc["agent"] == victim)
+            elif topic == "/swarm/agents":
+                dead = any(r["id"] == victim and not r["alive"] for r in doc["agents"])
+    finally:
+        ws.close()
+        os.kill(watcher.pid, signal.SIGINT)
+    assert watcher.wait(30) == 130, watcher.text()
+    assert watcher.text().strip().splitlines()[-1] == "stopped (Ctrl-C); the live view is closed", watcher.text()
+    assert up.launcher.poll() is None  # the run goes on without its watcher
+    os.kill(up.launcher.pid, signal.SIGINT)
+    assert up.launcher.wait(60) == 130
+    assert stays.wait(30) == 0, stays.text()  # the other watcher saw the run end
+    lines = stays.text().strip().splitlines()
+    assert lines[0].startswith(f"run {up.banner()[0]}: live view: ws://127.0.0.1:{other}"), lines
+    assert len(lines) == 2 and re.fullmatch(rf"run {up.banner()[0]} ended at tick \d+; the live view is closed",
+                                            lines[1]), lines
+    rt.tracker.assert_none_left(timeout=10)

@@ -6,9 +6,14 @@ it serves exactly the recording's channels, as they are logged, with nothing log
 `/swarm/scene`, `/swarm/trails`, `/swarm/agents`, `/swarm/events` and `/swarm/run`. Only
 `/swarm/ticks` (every tick, in the project's own binary encoding, which Foxglove cannot
 draw) is left out. Without --foxglove this module is not imported and nothing runs.
+
+`swarm watch --foxglove` serves the same channels from an observer of a live run
+(swarm/watch_foxglove.py), with `serve` on a context of its own.
 """
 
 from __future__ import annotations
+
+import re
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8765
@@ -23,17 +28,23 @@ def _serve(channel) -> bool:
     return channel.topic != "/swarm/ticks"
 
 
-def start_live_view(writer, run: str, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT):
-    """Serve `writer`'s channels (a world/stream.py StreamWriter) on ws://host:port; returns
-    the server (`.stop()` ends it). Raises LiveViewError with one line on failure."""
+def serve(ctx, name: str, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT):
+    """Serve the channels of `ctx` (a foxglove.Context; all but `/swarm/ticks`) on
+    ws://host:port as server `name`; returns the server (`.stop()` ends it). Raises
+    LiveViewError with one line naming host and port on failure (the port in use)."""
     import foxglove
 
     try:
-        return foxglove.start_server(name=f"swarm {run}", host=host, port=port, context=writer.ctx,
-                                     channel_filter=_serve)
+        return foxglove.start_server(name=name, host=host, port=port, context=ctx, channel_filter=_serve)
     except Exception as e:  # foxglove reports a bind failure as RuntimeError
-        why = str(e).removeprefix("FoxgloveError: ")
+        why = re.sub(r" \(os error \d+\)$", "", str(e).removeprefix("FoxgloveError: ")
+                     .removeprefix("Failed to bind port: "))  # as `swarm up`'s own check says it
         raise LiveViewError(f"--foxglove: cannot serve on {host}:{port}: {why}") from None
+
+
+def start_live_view(writer, run: str, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT):
+    """Serve `writer`'s channels (a world/stream.py StreamWriter) on ws://host:port."""
+    return serve(writer.ctx, f"swarm {run}", host, port)
 
 
 def live_url(host: str, port: int) -> str:

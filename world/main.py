@@ -84,6 +84,15 @@ def _run_world(cfg: WorldConfig) -> int:
     code = 0  # SIGTERM/SIGINT raise Stop here (run_world installed the handlers)
     live = None  # the --foxglove server (world/live_view.py)
     try:
+        if cfg.foxglove is not None:  # before listening: a port in use stops the run before it starts
+            from world.live_view import LiveViewError, start_live_view
+
+            try:
+                live = start_live_view(world.engine.rec.writer, cfg.run, *cfg.foxglove)
+            except LiveViewError as e:
+                world.discard_recording()
+                print(f"swarm world: {e}", file=sys.stderr)
+                return 2
         try:
             world._open()
         except Stop as s:  # stopped before it listened: nothing to record
@@ -93,19 +102,11 @@ def _run_world(cfg: WorldConfig) -> int:
             world.discard_recording()
             print(f"swarm world: cannot listen on {cfg.listen}: {e}", file=sys.stderr)
             return 2
-        if cfg.foxglove is not None:
-            from world.live_view import LiveViewError, open_hint, start_live_view
-
-            try:
-                live = start_live_view(world.engine.rec.writer, cfg.run, *cfg.foxglove)
-            except LiveViewError as e:
-                world.discard_recording()
-                world._close()
-                print(f"swarm world: {e}", file=sys.stderr)
-                return 2
-            if cfg.progress:
-                print(f"[world] {open_hint(*cfg.foxglove)}", file=sys.stderr, flush=True)
         if cfg.progress:
+            if live is not None:
+                from world.live_view import open_hint
+
+                print(f"[world] {open_hint(*cfg.foxglove)}", file=sys.stderr, flush=True)
             print(f"[world] run {cfg.run} listening on {cfg.listen}", file=sys.stderr, flush=True)
         try:
             code = world.run()

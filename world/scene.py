@@ -1,5 +1,7 @@
-"""What Foxglove draws and plots of a run, built from one tick's arrays (world/stream.py logs
-it to the recording and, with --foxglove, to the live view, world/live_view.py):
+"""What Foxglove draws and plots of a run, built from one tick's arrays, and the channels it is
+logged on (`SceneChannels`): world/stream.py logs it to the recording (and so, with --foxglove,
+to the world's live view, world/live_view.py); `swarm watch --foxglove` (swarm/watch_foxglove.py)
+builds the same from the ground truth an observer of a live run receives.
 
 - `/swarm/scene`  foxglove.SceneUpdate: agents as arrows (leaders red, followers blue),
   out-neighbour edges as lines, the target as a sphere, each expected orbit as a circle
@@ -8,14 +10,16 @@ it to the recording and, with --foxglove, to the live view, world/live_view.py):
   one line strip per agent (less often than the scene: it is the bulk of the bytes);
 - `/swarm/agents` JSON `{"tick", "time", "agents": [{"id", "role", "alive", "x", "y",
   "heading", "u", "out", "root", "expected_radius", "radial_error"}]}`: per-agent
-  numbers to plot, e.g. `/swarm/agents.agents[:]{id==3}.radial_error`.
+  numbers to plot, e.g. `/swarm/agents.agents[:]{id==3}.radial_error`;
+- `/swarm/events` JSON, one message per event; `/swarm/run` JSON, what the run is.
 
 Only called at scene ticks (at most SCENE_RATE per simulated second), so a run pays for
-none of it on the other ticks.
+none of it on the other ticks. Log times are simulated time in nanoseconds.
 """
 
 from __future__ import annotations
 
+import json
 import math
 from collections import deque
 
@@ -27,14 +31,22 @@ TRAIL_SECONDS = 30.0  # simulated s of path each trail shows
 TRAIL_RATE = 2.0  # trail points per simulated second
 TRAIL_EVERY = 5  # a trails message every this many scene updates
 ORBIT_POINTS = 72
+SCENE_RATE = 10.0  # scene updates per simulated second, at most
+
+
+def log_time(t: float) -> int:
+    """A log time: simulated time `t` (s) in nanoseconds."""
+    return max(0, int(round(t * 1e9)))
 
 
 class SceneBuilder:
-    """Keeps what the scene needs beyond one tick (roles, speeds, orbits, trails)."""
+    """Keeps what the scene needs beyond one tick (roles, speeds, orbits, trails). `agents`:
+    what it needs of each agent, `.id`, `.role`, `.speed` and `.orbit_radius` (a scenario's
+    AgentSpec has them)."""
 
-    def __init__(self, scenario, scene_rate: float):
-        self.target = (scenario.target.x, scenario.target.y)
-        self.agents = list(scenario.agents)
+    def __init__(self, target: tuple[float, float], agents, scene_rate: float):
+        self.target = (float(target[0]), float(target[1]))
+        self.agents = list(agents)
         self.spec = {a.id: a for a in self.agents}
         self.leaders = {a.id for a in self.agents if a.role == "leader"}  # ids of the leader role
         self.trail_every = max(1, int(round(scene_rate / TRAIL_RATE)))
@@ -134,6 +146,53 @@ class SceneBuilder:
                                points=[Point3(x=px, y=py, z=0.0) for px, py in tr])
                  for i, tr in self.trails.items() if len(tr) > 1]
         return SceneUpdate(entities=[SceneEntity(timestamp=ts, frame_id="world", id="trails", lines=lines)])
+
+
+class SceneChannels:
+    """The channels of what Foxglove shows of a run, in `ctx` (a foxglove.Context), in this
+    order: `/swarm/events`, `/swarm/run`, `/swarm/scene`, `/swarm/agents`, `/swarm/trails`."""
+
+    def __init__(self, ctx, target: tuple[float, float], agents, scene_rate: float):
+        import foxglove
+        from foxglove.channels import SceneUpdateChannel
+
+        def json_channel(topic: str, title: str):
+            return foxglove.Channel(topic, schema={"title": title, "type": "object"}, context=ctx)
+
+        self.events_ch = json_channel("/swarm/events", "swarm.Event")
+        self.run_ch = json_channel("/swarm/run", "swarm.Run")
+        self.scene_ch = SceneUpdateChannel("/swarm/scene", context=ctx)
+        self.agents_ch = json_channel("/swarm/agents", "swarm.Agents")
+        self.trails_ch = SceneUpdateChannel("/swarm/trails", context=ctx)
+        self.builder = SceneBuilder(target, agents, scene_rate)
+
+    def run(self, msg: dict, t: float = 0.0) -> None:
+        self.run_ch.log(msg, log_time=log_time(t))
+
+    def add_agent(self, spec, doc: dict, t: float) -> None:
+        """An agent added at run time: drawn from now on, and `{"add_agent": doc}` on /swarm/run."""
+        self.builder.add_agent(spec)
+        self.run({"add_agent": doc}, t)
+
+    def event(self, ev: dict) -> None:
+        self.events_ch.log(json.loads(json.dumps(ev, default=_plain)), log_time=log_time(ev.get("time", 0.0)))
+
+    def tick(self, tick, t, ids, x, y, heading, u, out, alive) -> None:
+        """One scene update: the agents' numbers, the scene and, now and then, the trails."""
+        ns = log_time(t)
+        b = self.builder
+        numbers = b.numbers(tick, t, ids, x, y, heading, u, out, alive)
+        self.agents_ch.log(numbers, log_time=ns)
+        self.scene_ch.log(b.scene(ns, ids, x, y, out, heading, alive, numbers), log_time=ns)
+        trails = b.trails_update(ns, ids, x, y, alive)
+        if trails is not None:
+            self.trails_ch.log(trails, log_time=ns)
+
+
+def _plain(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    raise TypeError(f"not JSON serialisable: {type(o)}")
 
 
 def _stamp(ns: int):

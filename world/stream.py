@@ -38,12 +38,11 @@ import numpy as np
 
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.scenario_tables import AgentSpec
-from world.scene import SceneBuilder
+from world.scene import SCENE_RATE, SceneChannels, log_time
 
 RECORDING_FILE = "recording.mcap"
 TICK_ENCODING = "swarm-tick-v1"
 FLUSH_PERIOD = 0.5  # s of wall time between flushes (a SIGKILL loses at most about this)
-SCENE_RATE = 10.0  # scene updates per simulated second, at most
 _HEAD = np.dtype([("tick", "<i8"), ("time", "<f8"), ("n", "<i8"), ("missed", "<i8")])
 
 
@@ -79,7 +78,6 @@ class StreamWriter:
 
     def __init__(self, path: Path, scenario: Scenario, ticks: int):
         import foxglove
-        from foxglove.channels import SceneUpdateChannel
         from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
         self.path = path
@@ -93,48 +91,27 @@ class StreamWriter:
         schema = foxglove.Schema(name="swarm.Tick", encoding="", data=b"")
         self.ticks_ch = foxglove.Channel("/swarm/ticks", schema=schema, message_encoding=TICK_ENCODING,
                                          context=self.ctx)
-        self.events_ch = foxglove.Channel("/swarm/events", schema={"title": "swarm.Event", "type": "object"},
-                                          context=self.ctx)
-        self.run_ch = foxglove.Channel("/swarm/run", schema={"title": "swarm.Run", "type": "object"},
-                                       context=self.ctx)
-        self.scene_ch = SceneUpdateChannel("/swarm/scene", context=self.ctx)
-        self.agents_ch = foxglove.Channel("/swarm/agents", schema={"title": "swarm.Agents", "type": "object"},
-                                          context=self.ctx)
-        self.trails_ch = SceneUpdateChannel("/swarm/trails", context=self.ctx)
         self.scene_every = max(1, int(round(1.0 / (SCENE_RATE * scenario.run.dt))))
-        self.scene = SceneBuilder(scenario, 1.0 / (self.scene_every * scenario.run.dt))
+        self.channels = SceneChannels(self.ctx, (scenario.target.x, scenario.target.y), scenario.agents,
+                                      1.0 / (self.scene_every * scenario.run.dt))
         self.last_flush = time.monotonic()
         self.closed = False
         self.failed = False  # a write failed: the file ends at the last good flush
-        self.run_ch.log({"scenario": scenario.model_dump(mode="json"), "ticks": ticks}, log_time=0)
-
-    @staticmethod
-    def _ns(t: float) -> int:
-        return max(0, int(round(t * 1e9)))
+        self.channels.run({"scenario": scenario.model_dump(mode="json"), "ticks": ticks})
 
     def add_agent(self, spec: AgentSpec, t: float) -> None:
-        self.scene.add_agent(spec)
-        self.run_ch.log({"add_agent": spec.model_dump(mode="json")}, log_time=self._ns(t))
+        self.channels.add_agent(spec, spec.model_dump(mode="json"), t)
 
     def event(self, ev: dict) -> None:
-        self.events_ch.log(json.loads(json.dumps(ev, default=_plain)), log_time=self._ns(ev.get("time", 0.0)))
+        self.channels.event(ev)
 
     def tick(self, tick: int, t: float, ids, x, y, heading, u, out, alive, missed: int) -> None:
-        ns = self._ns(t)
-        self.ticks_ch.log(encode_tick(tick, t, ids, x, y, heading, u, out, alive, missed), log_time=ns)
+        self.ticks_ch.log(encode_tick(tick, t, ids, x, y, heading, u, out, alive, missed), log_time=log_time(t))
         if tick % self.scene_every == 0:
-            self._scene(tick, t, ns, ids, x, y, heading, u, out, alive)
+            self.channels.tick(tick, t, ids, x, y, heading, u, out, alive)
         now = time.monotonic()
         if now - self.last_flush >= FLUSH_PERIOD:
             self.flush()
-
-    def _scene(self, tick, t, ns, ids, x, y, heading, u, out, alive) -> None:
-        numbers = self.scene.numbers(tick, t, ids, x, y, heading, u, out, alive)
-        self.agents_ch.log(numbers, log_time=ns)
-        self.scene_ch.log(self.scene.scene(ns, ids, x, y, out, heading, alive, numbers), log_time=ns)
-        trails = self.scene.trails_update(ns, ids, x, y, alive)
-        if trails is not None:
-            self.trails_ch.log(trails, log_time=ns)
 
     def flush(self) -> None:
         self.last_flush = time.monotonic()
@@ -161,12 +138,6 @@ class StreamWriter:
         except Exception:
             pass
         raise RecordingError(f"cannot write {self.path}: I/O error (disk full or file too large?)")
-
-
-def _plain(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    raise TypeError(f"not JSON serialisable: {type(o)}")
 
 
 @dataclass
