@@ -26,6 +26,7 @@ Standard library and setproctitle only; imports the agent's modules so its child
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import signal
@@ -45,6 +46,10 @@ def serve(stdin=None, stdout=None) -> int:
     """Answer fork requests until stdin ends; 0."""
     stdin = stdin or sys.stdin.buffer
     out = (stdout or sys.stdout.buffer).fileno()
+    # What is imported now stays shared with every agent: the collector of an agent never
+    # visits (and so never copies) the pages of these objects.
+    gc.collect()
+    gc.freeze()
     for line in iter(stdin.readline, b""):
         try:
             req = json.loads(line)

@@ -70,6 +70,13 @@ def name_stem(scenario: Any, s) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]", "-", stem)[:40]
 
 
+def new_run_id(scenario: Any, s=None) -> str:
+    """A new run id: the scenario's name stem and 6 random hex digits (`case2-734b0c`)."""
+    import secrets
+
+    return f"{name_stem(scenario, s) or 'run'}-{secrets.token_hex(3)}"
+
+
 def scenario_file(scenario: Any, s) -> tuple[Path, str | None]:
     """The file the world reads: `scenario` itself, or `s` written as TOML into a new
     temporary directory (returned too, for the caller to remove)."""
@@ -95,8 +102,6 @@ class Launch:
                  duration: float | None = None, clock: str | None = None, time_scale: float = 1.0,
                  listen: str | None = None, foxglove: tuple[str, int] | None = None, world_grace: float = 10.0,
                  say: Callable[[str], None] | None = None):
-        import secrets
-
         from swarm.launcher import Launcher, UpConfig
         from swarm.results import claim_out_dir
 
@@ -104,7 +109,7 @@ class Launch:
         with_duration(s, duration, source_of(scenario))
         check_clock(clock)
         self.scenario = s
-        self.run_id = f"{name_stem(scenario, s) or 'run'}-{secrets.token_hex(3)}"
+        self.run_id = new_run_id(scenario, s)
         self.out = Path(out) if out is not None else Path("runs") / self.run_id
         claim_out_dir(self.out, force)
         self.ticks = int(round((duration or s.run.duration) / s.run.dt))

@@ -100,14 +100,6 @@ def check_foxglove(host: str, port: int) -> None:
         raise fail(f"--foxglove: cannot serve on {host}:{port}: {e.strerror or e}") from None
 
 
-def new_run_id(scenario_path: Path) -> str:
-    import re
-    import secrets
-
-    stem = re.sub(r"[^A-Za-z0-9_.-]", "-", scenario_path.stem)[:40] or "run"
-    return f"{stem}-{secrets.token_hex(3)}"
-
-
 def _progress_bar(label: str):
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
@@ -212,7 +204,10 @@ def world(
     s = read_scenario(scenario)
     check_duration(s, duration, scenario)
     check_runtime_dir()
-    run = run or new_run_id(scenario)
+    if not run:
+        from swarm.api_launch import new_run_id
+
+        run = new_run_id(scenario)
     try:
         check_run_id(run)
     except WireError as e:
