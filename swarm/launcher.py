@@ -101,14 +101,6 @@ class Launcher:
                 # our agents use our run's own credentials, whatever the shell says
                 credentials.ENV_CREDENTIALS: str(credentials.run_file(self.cfg.run))}
 
-    def _spawn(self, args: list[str], log_name: str) -> subprocess.Popen:
-        log = open(self.logs / log_name, "ab")
-        try:
-            return self.group.start(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
-                                    env=self._env())
-        finally:
-            log.close()
-
     def start_world(self) -> None:
         c = self.cfg
         args = [sys.executable, "-m", "swarm", "world", str(c.scenario_path), "--listen", self.endpoint,
@@ -120,7 +112,9 @@ class Launcher:
             args += ["--clock", c.clock]
         if c.foxglove is not None:
             args += ["--foxglove", "--foxglove-host", c.foxglove[0], "--foxglove-port", str(c.foxglove[1])]
-        self.world = self._spawn(args, "world.log")
+        with open(self.logs / "world.log", "ab") as log:
+            self.world = self.group.start(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
+                                          env=self._env())
 
     def start_starter(self) -> None:
         """What starts the agents (swarm/forks.py: a fork server, which imports meanwhile); after

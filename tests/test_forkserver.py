@@ -96,7 +96,8 @@ agent = 4
 def test_agents_are_forked_and_a_dead_fork_server_falls_back_to_exec(rt, tmp_path):
     scenario = tmp_path / "case2-restart.toml"
     scenario.write_text((SCENARIOS / "case2.toml").read_text() + FAULTS)
-    up = start_up(rt.tracker, scenario, tmp_path / "run", "--clock", "lockstep", "--duration", "8")
+    # realtime, so that the server is dead well before the scripted restart (t = 5 s of wall time)
+    up = start_up(rt.tracker, scenario, tmp_path / "run", "--clock", "realtime", "--duration", "6")
     up.wait_started(60)
     pids = rt.tracker.wait_agent_pids(up.launcher, 6)
     for aid, pid in pids.items():
@@ -106,6 +107,7 @@ def test_agents_are_forked_and_a_dead_fork_server_falls_back_to_exec(rt, tmp_pat
         assert b"\0agents.process\0" not in raw and agent_id_of(proc.cmdline()) == aid, raw  # titled, not exec'd
     (server,) = [c for c in psutil.Process(up.launcher.pid).children() if "agents.forkserver" in c.cmdline()]
     os.kill(server.pid, signal.SIGKILL)  # before the scripted kill (t = 3 s)
+    assert up.info()["time"] < 2.5
 
     summ, _ = up.results(120)
     assert summ["completed"] is True
