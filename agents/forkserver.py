@@ -11,13 +11,16 @@ line each way on stdin / stdout:
                "log": "/path/logs/agent-7.log", "env": {"SWARM_CREDENTIALS": "..."}}
     reply     {"pid": 12345}          or   {"error": "why"}
 
+and, once, before any reply: {"ready": true} when the imports are done.
+
 `argv` is what `python -m agents.process` takes; `env` (optional) is added to the server's
 environment, which is the agents' (`swarm host` gives each agent its own credentials file).
-Each agent is forked twice: the middle process exits at once, so the agent is re-parented to the launcher (the subreaper), which
-waits for it, reads its exit status and reaps it as it would a process it had exec'd, and
-the server itself never has a child for longer than a request. The agent waits to be
-re-parented before anything else, so that `tie_to_launcher` (swarm/contracts/lifeline.py)
-sees the launcher as its parent; its title (`ps`, /proc/PID/cmdline) is the command line it
+Each agent is forked twice: the middle process exits at once, so the agent is re-parented
+to the launcher (the subreaper), which waits for it, reads its exit status and reaps it as
+it would a process it had exec'd, and the server itself never has a child for longer than
+a request. The agent waits to be re-parented before anything else, so that
+`tie_to_launcher` (swarm/contracts/lifeline.py) sees the launcher as its parent (or, if the
+launcher died meanwhile, sees that it did, and stops); its title (`ps`, /proc/PID/cmdline) is the command line it
 would have had if exec'd, so tools that find agents by their command line still do.
 
 The server ends at the end of its stdin (the launcher closed it, or died) and on SIGTERM.
@@ -37,9 +40,8 @@ import agents.brain  # noqa: F401  (imported here so that no agent has to)
 import agents.laws  # noqa: F401
 import agents.leader  # noqa: F401
 import agents.process
-from swarm.contracts.lifeline import LAUNCHER_PID_ENV
 
-REPARENT_WAIT = 5.0  # s an agent waits to be re-parented to the launcher (its middle process exits at once)
+REPARENT_WAIT = 5.0  # s an agent waits to be re-parented (its middle process exits at once)
 
 
 def serve(stdin=None, stdout=None) -> int:
@@ -50,6 +52,7 @@ def serve(stdin=None, stdout=None) -> int:
     # visits (and so never copies) the pages of these objects.
     gc.collect()
     gc.freeze()
+    os.write(out, b'{"ready": true}\n')  # imported: requests are answered in milliseconds from now on
     for line in iter(stdin.readline, b""):
         try:
             req = json.loads(line)
@@ -99,13 +102,15 @@ def _become_agent(argv: list[str], log: str, env: dict[str, str]) -> None:
     default signals, run it, exit with its code."""
     code = 1
     try:
-        launcher = int(os.environ.get(LAUNCHER_PID_ENV, "0") or 0)
-        t_end = time.monotonic() + REPARENT_WAIT
-        while launcher and os.getppid() != launcher and time.monotonic() < t_end:
+        middle, t_end = os.getppid(), time.monotonic() + REPARENT_WAIT
+        while os.getppid() == middle and time.monotonic() < t_end:  # the launcher's (or, if it died, init's)
             time.sleep(0.001)
         os.environ.update(env)
-        for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGCHLD, signal.SIGPIPE):
-            signal.signal(sig, signal.SIG_DFL)
+        # the signals as a Python started afresh has them (SIGPIPE ignored: a write to a closed
+        # socket is an error, not death); the agent installs its own SIGTERM / SIGINT handlers
+        for sig, handler in ((signal.SIGTERM, signal.SIG_DFL), (signal.SIGCHLD, signal.SIG_DFL),
+                             (signal.SIGINT, signal.default_int_handler), (signal.SIGPIPE, signal.SIG_IGN)):
+            signal.signal(sig, handler)
         null = os.open(os.devnull, os.O_RDONLY)
         out = os.open(log, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
         os.dup2(null, 0)

@@ -31,6 +31,7 @@ from swarm.procs import Group, wait_until
 
 ENV_FORK_AGENTS = "SWARM_FORK_AGENTS"
 PR_SET_CHILD_SUBREAPER = 36
+READY_TIMEOUT = 60.0  # s for the server's imports (0.1-0.2 s on a quiet machine)
 REPLY_TIMEOUT = 10.0  # s for the server to answer a request (it answers in milliseconds)
 
 
@@ -45,11 +46,16 @@ def wanted(env=None) -> bool:
 
 def make_subreaper() -> bool:
     """Make this process a child subreaper; True when it is one."""
+    return set_subreaper(True)
+
+
+def set_subreaper(on: bool) -> bool:
+    """Make this process a child subreaper, or no longer one; True when done."""
     try:
         import ctypes
 
         libc = ctypes.CDLL(None, use_errno=True)
-        return libc.prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) == 0
+        return libc.prctl(PR_SET_CHILD_SUBREAPER, int(on), 0, 0, 0) == 0
     except (OSError, AttributeError):
         return False
 
@@ -66,7 +72,12 @@ class Forked:
         self._lock = threading.Lock()
 
     def poll(self) -> int | None:
-        return self._wait(os.WNOHANG)
+        if not self._lock.acquire(blocking=False):  # another thread is waiting for it: not now
+            return self.returncode
+        try:
+            return self._wait_locked(os.WNOHANG)
+        finally:
+            self._lock.release()
 
     def wait(self, timeout: float | None = None) -> int:
         if timeout is None:
@@ -80,17 +91,20 @@ class Forked:
 
     def _wait(self, flags: int) -> int | None:
         with self._lock:
-            if self.returncode is not None:
-                return self.returncode
-            try:
-                pid, status = os.waitpid(self.pid, flags)
-            except ChildProcessError:  # not ours (any more): reaped elsewhere, its status unknown
-                self.returncode = 255
-                return self.returncode
-            if pid == 0:
-                return None
-            self.returncode = os.waitstatus_to_exitcode(status)
+            return self._wait_locked(flags)
+
+    def _wait_locked(self, flags: int) -> int | None:
+        if self.returncode is not None:
             return self.returncode
+        try:
+            pid, status = os.waitpid(self.pid, flags)
+        except ChildProcessError:  # not ours (any more): reaped elsewhere, its status unknown
+            self.returncode = 255
+            return self.returncode
+        if pid == 0:
+            return None
+        self.returncode = os.waitstatus_to_exitcode(status)
+        return self.returncode
 
     def send_signal(self, sig: int) -> None:
         if self.poll() is None:
@@ -114,7 +128,11 @@ class AgentStarter:
         self.group, self.env, self.logs, self.say = group, env, logs, say
         self.server: ForkServer | None = None
         if fork and wanted(env) and make_subreaper():
-            self.server = ForkServer(group, env, logs / "forkserver.log")
+            try:
+                self.server = ForkServer(group, env, logs / "forkserver.log")
+            except OSError as e:
+                self.say(f"the agents' fork server did not start ({e}); agents are exec'd")
+                set_subreaper(False)
 
     def start(self, args: list[str], log_name: str, extra_env: dict | None = None):
         """One agent process (a `Forked` or a `subprocess.Popen`)."""
@@ -126,14 +144,18 @@ class AgentStarter:
                 return p
             except ForkError as e:
                 self.say(f"{e}; agents are exec'd from now on")
-                self.server = None
+                self.close(kill=True)
         with open(log, "ab") as out:
             return self.group.start([sys.executable, "-m", "agents.process", *args], stdin=subprocess.DEVNULL,
                                     stdout=out, stderr=subprocess.STDOUT, env={**self.env, **(extra_env or {})})
 
-    def close(self) -> None:
-        if self.server is not None:
-            self.server.close()
+    def close(self, kill: bool = False) -> None:
+        """No more forks: end the server (at once with `kill`: it failed) and stop being a
+        subreaper (the agents adopted already stay this process's children)."""
+        server, self.server = self.server, None
+        if server is not None:
+            server.close(kill)
+            set_subreaper(False)
 
 
 class ForkServer:
@@ -144,6 +166,12 @@ class ForkServer:
             self.proc = group.start([sys.executable, "-m", "agents.forkserver"], stdin=subprocess.PIPE,
                                     stdout=subprocess.PIPE, stderr=err, env=env)
         self.broken: str | None = None
+        self.ready = False
+
+    def _reply(self, timeout: float) -> dict:
+        ready, _, _ = select.select([self.proc.stdout], [], [], timeout)
+        line = self.proc.stdout.readline() if ready else b""
+        return json.loads(line) if line else {"error": "no answer (it ended, or took too long)"}
 
     def spawn(self, argv: list[str], log: Path, extra_env: dict | None = None) -> Forked:
         """Fork `python -m agents.process *argv`, its output to `log`, with `extra_env` added
@@ -151,12 +179,15 @@ class ForkServer:
         if self.broken:
             raise ForkError(self.broken)
         try:
+            if not self.ready:  # its imports, once (they may take a while on a busy machine)
+                reply = self._reply(READY_TIMEOUT)
+                if not reply.get("ready"):
+                    raise ForkError(str(reply.get("error", reply)))
+                self.ready = True
             req = {"argv": argv, "log": str(log), "env": extra_env or {}}
             self.proc.stdin.write(json.dumps(req).encode() + b"\n")
             self.proc.stdin.flush()
-            ready, _, _ = select.select([self.proc.stdout], [], [], REPLY_TIMEOUT)
-            line = self.proc.stdout.readline() if ready else b""
-            reply = json.loads(line) if line else {"error": "no answer (it ended, or took too long)"}
+            reply = self._reply(REPLY_TIMEOUT)
             if "pid" not in reply:
                 raise ForkError(str(reply.get("error", reply)))
             return Forked(int(reply["pid"]), [sys.executable, "-m", "agents.process", *argv])
@@ -164,9 +195,12 @@ class ForkServer:
             self.broken = f"the agents' fork server: {e}"
             raise ForkError(self.broken) from None
 
-    def close(self) -> None:
-        """End the server (end of its stdin); the group's stop reaps it."""
-        try:
-            self.proc.stdin.close()
-        except OSError:
-            pass
+    def close(self, kill: bool = False) -> None:
+        """End the server (the end of its stdin; SIGKILL with `kill`); the group's stop reaps it."""
+        if kill and self.proc.poll() is None:
+            self.proc.kill()
+        for f in (self.proc.stdin, self.proc.stdout):
+            try:
+                f.close()
+            except OSError:
+                pass

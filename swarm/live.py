@@ -120,13 +120,6 @@ def where_looked(connect: str | None = None, creds_file: Path | None = None) -> 
     return f"local runs in {runtime_dir()}" + (f" on {connect}" if connect else "")
 
 
-def resolve(connect: str | None = None, run: str | None = None, creds_file: Path | None = None) -> RunRef:
-    """The run a command should talk to, or NoRun with a one-line reason."""
-    live = open_run_session(connect, run, creds_file)
-    live.__exit__(None, None, None)
-    return live.ref
-
-
 def open_run_session(connect: str | None = None, run: str | None = None,
                      creds_file: Path | None = None) -> "LiveRun":
     """A LiveRun, open, on the run a command should talk to (the session that found its world

@@ -10,16 +10,13 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
+from swarm.cli_errors import fail
+
 if TYPE_CHECKING:  # the scenario model (pydantic) is imported by the commands that read one:
     from swarm.contracts.scenario import Scenario  # live commands start without it (~0.13 s)
 
 ScenarioArg = Annotated[Path, typer.Argument(help="scenario file (TOML), e.g. scenarios/case2.toml",
                                              show_default=False)]
-
-
-def fail(message: str, code: int = 2) -> "typer.Exit":
-    typer.secho(message, err=True, fg=typer.colors.RED)
-    return typer.Exit(code)
 
 
 def read_scenario(path: Path) -> "Scenario":

@@ -11,7 +11,8 @@ from typing import Annotated, Optional
 
 import typer
 
-from swarm.offline_cli import fail, say_plots
+from swarm.cli_errors import fail
+from swarm.offline_cli import say_plots
 
 RunDirArg = Annotated[Path, typer.Argument(help="a run directory written by swarm sim / swarm up")]
 FORMAT_HELP = "figure format: png, pdf or svg; repeat it or give a comma list (-f png,pdf)"

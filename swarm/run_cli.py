@@ -13,7 +13,8 @@ import typer
 
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV
 from swarm.live_cli import CredentialsOpt, TrustLawOpt
-from swarm.offline_cli import ScenarioArg, fail, read_scenario, render_run_plots
+from swarm.cli_errors import fail
+from swarm.offline_cli import ScenarioArg, read_scenario, render_run_plots
 
 
 def out_option(help: str):
@@ -67,7 +68,7 @@ def check_duration(s, duration: float | None, path: Path) -> None:
         parse_scenario({**s.model_dump(), "run": {**s.run.model_dump(), "duration": duration}},
                        f"{path} with --duration {duration:g}")
     except ScenarioError as e:
-        raise fail(" ".join(line.strip() for line in str(e).splitlines())) from None
+        raise fail(" ".join(line.strip() for line in str(e).splitlines()), 2) from None
 
 
 def check_runtime_dir() -> None:
@@ -78,12 +79,12 @@ def check_runtime_dir() -> None:
     try:
         runtime_dir()
     except CredentialsError as e:
-        raise fail(f"swarm: {e}") from None
+        raise fail(f"swarm: {e}", 2) from None
 
 
 def check_clock(clock: str | None) -> None:
     if clock is not None and clock not in ("lockstep", "realtime"):
-        raise fail(f"--clock must be lockstep or realtime, not {clock!r}")
+        raise fail(f"--clock must be lockstep or realtime, not {clock!r}", 2)
 
 
 def check_foxglove(host: str, port: int) -> None:
@@ -97,7 +98,7 @@ def check_foxglove(host: str, port: int) -> None:
             so.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             so.bind(infos[0][4])
     except OSError as e:
-        raise fail(f"--foxglove: cannot serve on {host}:{port}: {e.strerror or e}") from None
+        raise fail(f"--foxglove: cannot serve on {host}:{port}: {e.strerror or e}", 2) from None
 
 
 def _progress_bar(label: str):
@@ -153,7 +154,7 @@ def sim(
 
         why = refusal(s)
         if why is not None:
-            raise fail(f"swarm sim --batch: {scenario}: {why}; run it without --batch")
+            raise fail(f"swarm sim --batch: {scenario}: {why}; run it without --batch", 2)
     out = out or default_out(scenario, "sim")
     total = int(round((duration or s.run.duration) / s.run.dt))
     try:
@@ -211,13 +212,13 @@ def world(
     try:
         check_run_id(run)
     except WireError as e:
-        raise fail(str(e)) from None
+        raise fail(str(e), 2) from None
     clock = clock or s.run.clock
     check_clock(clock)
     listen = listen or default_endpoint(run)
     if foxglove:
         if out is None:
-            raise fail("--foxglove needs --out: the live view serves the run's recording as it is written")
+            raise fail("--foxglove needs --out: the live view serves the run's recording as it is written", 2)
         check_foxglove(foxglove_host, foxglove_port)
     if out is not None:
         claim_out(out, force)

@@ -20,6 +20,7 @@ or a world that stopped answering (swarm.live.Patience; a NoRunError, exit 1). E
 from __future__ import annotations
 
 import queue
+import threading
 import time
 from typing import NamedTuple
 
@@ -92,9 +93,11 @@ class Feed:
     def __init__(self):
         self.q: queue.SimpleQueue = queue.SimpleQueue()
         self.latest: bytes | None = None
+        self.lock = threading.Lock()
 
     def on_truth(self, sample) -> None:
-        self.latest = sample.payload.to_bytes()
+        with self.lock:
+            self.latest = sample.payload.to_bytes()
         self.q.put(None)
 
     def on_event(self, sample) -> None:
@@ -111,7 +114,8 @@ class Feed:
                 item = self.q.get_nowait()
         except queue.Empty:
             pass
-        truth, self.latest = self.latest, None
+        with self.lock:
+            truth, self.latest = self.latest, None
         return events, truth
 
 
@@ -131,13 +135,16 @@ def serve_run(live, host: str, port: int, say) -> None:
     observer = Observer(ctx, info)
     server = serve(ctx, f"swarm {live.run} (watch)", host, port)
     try:
-        with talking(), LiveRun(live.ref) as lr:  # its own session for the subscriptions (swarm/live.py)
+        with talking():  # opening its own session for the subscriptions (swarm/live.py)
+            lr = LiveRun(live.ref).__enter__()
+        with lr:
             feed = Feed()
-            subs = [lr.session.declare_subscriber(wire.truth_key(live.run), feed.on_truth),
-                    lr.session.declare_subscriber(wire.events_key(live.run), feed.on_event)]
-            lr.watch_end()
+            with talking():
+                subs = [lr.session.declare_subscriber(wire.truth_key(live.run), feed.on_truth),
+                        lr.session.declare_subscriber(wire.events_key(live.run), feed.on_event)]
+                lr.watch_end()
             say(f"run {live.run}: {open_hint(host, port)}")
-            ended = _follow(live, lr, feed, observer, int(info.get("ticks") or 0))
+            ended = _follow(live, lr, feed, observer, int(info.get("ticks") or 0))  # a bug in it: a traceback
             for s in subs:
                 s.undeclare()
     finally:

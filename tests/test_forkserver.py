@@ -37,8 +37,8 @@ def test_a_bad_request_is_an_error_reply_and_the_end_of_stdin_ends_the_server():
     finally:
         p.kill() if p.poll() is None else None
     replies = [json.loads(line) for line in out.splitlines()]
-    assert [sorted(r) for r in replies] == [["error"], ["error"]], (out, err)
-    assert "log" in replies[0]["error"] and p.returncode == 0, (replies, err)
+    assert replies[0] == {"ready": True} and [sorted(r) for r in replies[1:]] == [["error"], ["error"]], (out, err)
+    assert "log" in replies[1]["error"] and p.returncode == 0, (replies, err)
 
 
 def _child(code: int | None, sleep: float = 0.0) -> Forked:

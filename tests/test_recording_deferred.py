@@ -50,3 +50,30 @@ def test_the_calls_reach_the_recorder_in_the_same_order_with_the_values_of_their
     assert inner.calls == direct.calls
     assert [c[0] for c in inner.calls] == ["record", "event", "record", "record", "close"]
     assert inner.calls[0][3] == [0.0, 1.0]
+
+
+class Interrupted(Calls):
+    """A recorder whose first write is interrupted (the world's Stop, raised by a signal)
+    after the row reached it."""
+
+    def __init__(self):
+        super().__init__()
+        self.interrupt = True
+
+    def record(self, *args, **kwargs):
+        super().record(*args, **kwargs)
+        if self.interrupt:
+            self.interrupt = False
+            raise KeyboardInterrupt
+
+
+def test_a_write_interrupted_by_a_signal_is_written_again_not_lost():
+    inner = Interrupted()
+    rec = DeferredRecorder(inner)
+    _tick(rec, 0, np.array([0.0, 1.0]))
+    try:
+        rec.flush()
+    except KeyboardInterrupt:
+        pass
+    assert rec.rows == 1  # flushed again on the way out: tick 0 twice, which counts once
+    assert [c[1] for c in inner.calls] == [0, 0]

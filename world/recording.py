@@ -150,9 +150,9 @@ class DeferredRecorder:
                         np.array(alive), missed)
 
     def flush(self) -> None:
-        if self.pending is not None:
-            tick, self.pending = self.pending, None
-            self.inner.record(*tick)
+        if self.pending is not None:  # written, then forgotten: a signal in between (the world's
+            self.inner.record(*self.pending)  # Stop) leaves it pending, written again at worst,
+            self.pending = None  # and a tick written twice counts once
 
     def __getattr__(self, name: str):
         self.flush()
