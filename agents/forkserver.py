@@ -77,10 +77,11 @@ def fork_agent(argv: list[str], log: str, env: dict[str, str] | None = None) -> 
     if middle == 0:  # the middle process: fork the agent, tell its pid, go
         try:
             os.close(r)
+            me = os.getpid()
             pid = os.fork()
             if pid == 0:
                 os.close(w)
-                _become_agent(argv, log, env or {})  # never returns
+                _become_agent(argv, log, env or {}, me)  # never returns
             os.write(w, str(pid).encode())
         finally:
             os._exit(0)
@@ -97,14 +98,24 @@ def fork_agent(argv: list[str], log: str, env: dict[str, str] | None = None) -> 
     return int(got)
 
 
-def _become_agent(argv: list[str], log: str, env: dict[str, str]) -> None:
+def reparented(middle: int, timeout: float) -> bool:
+    """Wait until this process's parent is not `middle` any more (the launcher's, or init's if
+    the launcher died); False after `timeout` s. `middle` is the pid the middle process had,
+    not what getppid() says now: the middle may have exited before this process first looks."""
+    t_end = time.monotonic() + timeout
+    while os.getppid() == middle:
+        if time.monotonic() >= t_end:
+            return False
+        time.sleep(0.001)
+    return True
+
+
+def _become_agent(argv: list[str], log: str, env: dict[str, str], middle: int) -> None:
     """In the forked agent: wait to be the launcher's, take the agent's title, output and
     default signals, run it, exit with its code."""
     code = 1
     try:
-        middle, t_end = os.getppid(), time.monotonic() + REPARENT_WAIT
-        while os.getppid() == middle and time.monotonic() < t_end:  # the launcher's (or, if it died, init's)
-            time.sleep(0.001)
+        reparented(middle, REPARENT_WAIT)
         os.environ.update(env)
         # the signals as a Python started afresh has them (SIGPIPE ignored: a write to a closed
         # socket is an error, not death); the agent installs its own SIGTERM / SIGINT handlers

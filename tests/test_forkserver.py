@@ -70,6 +70,15 @@ def test_forked_kill_is_a_negative_code_and_a_timeout_raises():
     f.kill()  # already reaped: nothing to signal, no error
 
 
+def test_an_agent_waits_only_while_its_parent_is_the_middle_process():
+    from agents.forkserver import reparented
+
+    assert reparented(os.getppid() + 10**6, timeout=5.0)  # another pid than the parent: at once
+    t0 = time.monotonic()
+    assert not reparented(os.getppid(), timeout=0.05)  # still the middle's: gives up at the timeout
+    assert time.monotonic() - t0 < 5.0
+
+
 def test_command_words_of_exec_d_and_titled_agents():
     exec_d = [sys.executable, "-m", "agents.process", "12", "unixsock-stream//x.sock", "run-1", ""]
     titled = [" ".join(exec_d[:-1]), "", "", ""]
@@ -111,6 +120,10 @@ def test_agents_are_forked_and_a_dead_fork_server_falls_back_to_exec(rt, tmp_pat
 
     summ, _ = up.results(120)
     assert summ["completed"] is True
+    from agents.forkserver import REPARENT_WAIT
+
+    (start,) = events_of(summ, "start")  # no agent waited out its re-parenting (a bug once did)
+    assert start["startup_s"] < REPARENT_WAIT, start
     (rejoin,) = events_of(summ, "rejoin", 4)
     assert rejoin["tick"] == 500, rejoin
     text = up.launcher.text()
