@@ -5,9 +5,8 @@ The per-agent brain computes with `math` on Python floats; the batch brains
 differently the batch side calls the `math` function per element, so that a batch run
 equals the per-agent run instead of drifting from it by rounding:
 
-- `wrap` is swarm.contracts.orbits.wrap (math.remainder, then (-pi, pi]): exact in
-  numpy for |angle| < 1.25 tau (there the remainder subtracts at most one tau, and by
-  Sterbenz's lemma that subtraction is exact); larger angles go through math.remainder.
+- `wrap` is swarm.contracts.orbits.wrap_array, the array version of orbits.wrap
+  (math.remainder, then (-pi, pi]), to the bit.
 - `hypot`, `atan2`, `atan`: numpy's SIMD versions differ from libm's in the last bit on
   some inputs, so these call `math` per element (leaders only: a few per member).
 - np.sin and math.sin agree (checked in tests/test_batch.py on this machine's numpy).
@@ -21,23 +20,11 @@ import math
 
 import numpy as np
 
-TAU = 2.0 * math.pi
-_FAST = 1.25 * TAU  # below this |angle| the remainder subtracts at most one tau
+from swarm.contracts.orbits import wrap_array as wrap  # noqa: F401  (the batch brains' wrap)
 
 _hypot = np.frompyfunc(math.hypot, 2, 1)
 _atan2 = np.frompyfunc(math.atan2, 2, 1)
 _atan = np.frompyfunc(math.atan, 1, 1)
-
-
-def wrap(angle) -> np.ndarray:
-    """swarm.contracts.orbits.wrap on an array: the angle in (-pi, pi], the same bits."""
-    a = np.asarray(angle, dtype=float)
-    w = np.where(a > math.pi, a - TAU, np.where(a < -math.pi, a + TAU, a))
-    big = np.abs(a) >= _FAST
-    if big.any():
-        w = np.array(w, dtype=float)
-        w[big] = [math.remainder(v, TAU) if math.isfinite(v) else math.nan for v in a[big].tolist()]
-    return np.where(w <= -math.pi, w + TAU, w)
 
 
 def saturate(u, limit) -> np.ndarray:

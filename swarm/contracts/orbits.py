@@ -3,7 +3,7 @@
 the orbit radius that path promises (Theorem 1: R_i = v_i / omega_root, with
 omega_root = v_L / R_L of the leader at the end of the path). Pure Python, scalars.
 
-world/kinematics.py has the numpy `wrap` for whole arrays of headings.
+`wrap_array` is `wrap` for whole arrays (world/kinematics.py's headings, the batch brains).
 """
 
 from __future__ import annotations
@@ -19,6 +19,24 @@ def wrap(angle: float) -> float:
     if w <= -math.pi:
         w += TAU
     return w
+
+
+_FAST = 1.25 * TAU  # below this |angle| the remainder subtracts at most one tau
+
+
+def wrap_array(angle):
+    """`wrap` on a numpy array (or anything numpy takes), the same bits: exact in numpy for
+    |angle| < 1.25 tau (there the remainder subtracts at most one tau, and by Sterbenz's
+    lemma that subtraction is exact); larger angles go through math.remainder."""
+    import numpy as np
+
+    a = np.asarray(angle, dtype=float)
+    w = np.where(a > math.pi, a - TAU, np.where(a < -math.pi, a + TAU, a))
+    big = np.abs(a) >= _FAST
+    if big.any():
+        w = np.array(w, dtype=float)
+        w[big] = [math.remainder(v, TAU) if math.isfinite(v) else math.nan for v in a[big].tolist()]
+    return np.where(w <= -math.pi, w + TAU, w)
 
 
 def root_of(agent: int, out: dict[int, int | None], leaders: set[int]) -> tuple[int | None, int | None]:
