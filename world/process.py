@@ -32,7 +32,9 @@ from world.inbox import Inbox
 from world.joins import Joins, TokenBucket
 from world.recording import RECORDING_FILE, DeferredRecorder, RecordingError, write_run
 from world.roster import AgentBook, agent_figures
+from world.sensing import encode_frames_pairwise
 
+FRAMES_PAIRWISE = 8  # agents: up to this many, frames are built pair by pair (world/sensing.py)
 TRUTH_PERIOD = 0.02  # s of wall time between ground-truth messages (observers, not the recording)
 
 
@@ -149,11 +151,17 @@ class World(Inbox, Joins, Clock):
             self.engine.rec.flush()
             return set(frames)
         self.engine.mark_frames()  # the same numbers, encoded straight from the arrays
-        sensed, bearing, rng = c.sensing()
-        tx, ty = c.target
         active = c.active_ids()
-        frames = wire.encode_sense_rows(c.tick, c.time, [c.index[aid] for aid in active], c.ids, c.heading,
-                                        tx - c.x, ty - c.y, c.is_leader, sensed, bearing, rng, c.hops)
+        rows = [c.index[aid] for aid in active]
+        if len(c.ids) <= FRAMES_PAIRWISE:
+            sens = c.scenario.sensing
+            frames = encode_frames_pairwise(c.tick, c.time, rows, c.ids, c.x, c.y, c.heading, c.present_mask(),
+                                            c.is_leader, c.target, sens.range, sens.fov, c.hops)
+        else:
+            sensed, bearing, rng = c.sensing()
+            tx, ty = c.target
+            frames = wire.encode_sense_rows(c.tick, c.time, rows, c.ids, c.heading, tx - c.x, ty - c.y,
+                                            c.is_leader, sensed, bearing, rng, c.hops)
         pubs = self.sense_pub
         for aid, frame in zip(active, frames):
             pubs[aid].put(frame)

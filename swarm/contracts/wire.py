@@ -31,6 +31,7 @@ import json
 import math
 import re
 import struct
+from itertools import starmap
 from dataclasses import dataclass
 
 from swarm.contracts.frames import Contact, SensorFrame
@@ -139,11 +140,17 @@ def _check_head(buf: bytes, head: struct.Struct, kind: int, what: str) -> tuple:
 
 
 def encode_sense(frame: SensorFrame) -> bytes:
-    has_t = frame.target is not None
-    tx, ty = frame.target if has_t else (math.nan, math.nan)
-    head = SENSE_HEAD.pack(KIND_SENSE, VERSION, int(has_t), 0, frame.agent, frame.tick, frame.time,
-                           frame.heading, tx, ty, len(frame.contacts))
-    return head + b"".join(CONTACT.pack(c.id, c.bearing, c.heading, c.range, c.hops) for c in frame.contacts)
+    return encode_sense_tuples(frame.tick, frame.time, frame.agent, frame.heading, frame.target, frame.contacts)
+
+
+def encode_sense_tuples(tick: int, time: float, agent: int, heading: float, target: tuple[float, float] | None,
+                        contacts) -> bytes:
+    """encode_sense from plain values; contacts: (id, bearing, heading, range, hops) tuples
+    (a Contact is one)."""
+    tx, ty = target if target is not None else (math.nan, math.nan)
+    head = SENSE_HEAD.pack(KIND_SENSE, VERSION, int(target is not None), 0, agent, tick, time, heading, tx, ty,
+                           len(contacts))
+    return head + b"".join(starmap(CONTACT.pack, contacts))
 
 
 CONTACT_FIELDS = [("id", "<i4"), ("bearing", "<f8"), ("heading", "<f8"), ("range", "<f8"),
