@@ -14,7 +14,7 @@ _EXPORTS = {
     "api_scenario": ("from_dict", "load", "to_toml"),
     "api_live": ("Live", "LiveState", "connect", "runs"),
     "api_up": ("UpRun",),
-    "errors": ("LiveError", "NoRunError", "SwarmError", "UpError", "UsageError"),
+    "errors": ("LiveError", "NoRunError", "StoppedAnswering", "SwarmError", "UpError", "UsageError"),
 }
 _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Iterable
 
 from swarm.api_record import Record
-from swarm.errors import NoRunError, SwarmError, one_line
+from swarm.errors import NoRunError, StoppedAnswering, SwarmError, one_line
 
 __all__ = ["Live", "LiveState", "connect", "runs"]
 
@@ -139,18 +139,25 @@ class Live:
     def again(self, read, last):
         """`read()` of a watching loop (`swarm watch`, `swarm graph --watch`): its value, or
         `last` while the world does not answer; NoRunError once the world has ended for sure
-        (its end notice, its endpoint refusing connections, or several failed reads over
-        several seconds: `swarm.live.Patience`)."""
-        from swarm.live import Patience
+        (its end notice, its endpoint refusing connections), StoppedAnswering (a NoRunError)
+        after several failed reads over several seconds of a world that has not ended
+        (`swarm.live.Patience`)."""
+        from swarm.live import ENDED_SILENT_S, Patience
 
         if self._patience is None:
             self._patience = Patience(self._lr)
         try:
             value = read()
-        except NoRunError:
-            if self._patience.ended():
-                raise
-            return last
+        except NoRunError as e:
+            if not self._patience.ended():
+                return last
+            if self._patience.silent:
+                why = one_line(e)
+                raise StoppedAnswering(
+                    f"the world of run {self.run} stopped answering for {ENDED_SILENT_S:g} s or more without "
+                    "ending (stalled, starved, or cut off from here)" + ("" if "did not answer" in why else f": {why}")
+                ) from None
+            raise
         self._patience.answered()
         return value
 

@@ -4,7 +4,8 @@ wrong in one line (its message) and carries the exit code the command line gives
 (scenarios, run directories, recordings, plots), into that line and that code.
 
 - `NoRunError` (1): no (single) run found or reachable, or its world ended or stopped
-  answering during a call (`swarm.live.NoRun` is this class).
+  answering during a call (`swarm.live.NoRun` is this class); `StoppedAnswering`, one of
+  them, says that a watched world stopped answering without having ended.
 - `LiveError` (1): the run is there but cannot do what was asked (an unknown agent id, an
   agent that is not live, a spawned agent that did not join, a kill not followed by a drop).
 - `UsageError` (2): a bad argument (a spawn spec, an id out of the run's range, a signal name).
@@ -13,7 +14,7 @@ wrong in one line (its message) and carries the exit code the command line gives
 
 from __future__ import annotations
 
-__all__ = ["LiveError", "NoRunError", "SwarmError", "UpError", "UsageError", "one_line"]
+__all__ = ["LiveError", "NoRunError", "StoppedAnswering", "SwarmError", "UpError", "UsageError", "one_line"]
 
 
 def one_line(e: BaseException) -> str:
@@ -30,6 +31,11 @@ class SwarmError(Exception):
 
 class NoRunError(SwarmError):
     """No (single) run matches, or its world ended or does not answer; the message says what was looked at."""
+
+
+class StoppedAnswering(NoRunError):
+    """A watched world stopped answering for several seconds without having ended (no end
+    notice, its endpoint still there): stalled, starved, or cut off from this machine."""
 
 
 class LiveError(SwarmError):

@@ -240,25 +240,28 @@ class LiveRun:
 
 
 class Patience:
-    """When a world that failed a read has ended (`swarm graph --watch`, `swarm watch`): at
-    once when it is gone (`LiveRun.gone`), otherwise after ENDED_FAILURES failed reads in a
-    row over at least ENDED_SILENT_S s. A loaded world that misses a query, or a stalled one
+    """When a world that failed a read is over for a watcher (`swarm graph --watch`, `swarm
+    watch`): at once when it is gone (`LiveRun.gone`: it ended), otherwise after
+    ENDED_FAILURES failed reads in a row over at least ENDED_SILENT_S s (it stopped
+    answering: `silent` is then True). A loaded world that misses a query, or a stalled one
     whose link dropped for a moment, is read again."""
 
     def __init__(self, live: LiveRun):
         self.live = live
         self.failures = 0
         self.since: float | None = None  # monotonic s of the first failure in a row
+        self.silent = False  # over because the world stopped answering, not because it ended
         live.watch_end()
 
     def answered(self) -> None:
         self.failures, self.since = 0, None
 
     def ended(self) -> bool:
-        """After a failed read: True when the world has ended."""
+        """After a failed read: True when the world has ended or stopped answering (`silent`)."""
         now = time.monotonic()
         self.failures += 1
         self.since = now if self.since is None else self.since
         if self.live.gone():
             return True
-        return self.failures >= ENDED_FAILURES and now - self.since >= ENDED_SILENT_S
+        self.silent = self.failures >= ENDED_FAILURES and now - self.since >= ENDED_SILENT_S
+        return self.silent

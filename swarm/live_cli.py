@@ -130,7 +130,8 @@ def graph(
     Shows the leaders, the edges, connected components, followers with no path to a
     leader and follower-only cycles. Edges come from the agents' own statuses (from the
     world's info for an agent that did not answer). With --watch, --json prints one JSON
-    object per line and --dot one graph per change.
+    object per line and --dot one graph per change; it exits 0 when the world ends, 1 when
+    it stops answering for 5 s without having ended.
 
     Example: swarm graph --dot | dot -Tpng > graph.png
     """
@@ -153,7 +154,7 @@ def graph(
         if not watch:
             show(g, True)
             return
-        from swarm.errors import NoRunError
+        from swarm.errors import NoRunError, StoppedAnswering
 
         def again(g: dict) -> dict:  # the graph now, or the last one while the world does not answer
             return live.again(lambda: live.graph(sensing), g)
@@ -182,6 +183,9 @@ def graph(
                 g = again(g)
         except KeyboardInterrupt:
             raise typer.Exit(0) from None
+        except StoppedAnswering as e:
+            typer.secho(str(e), err=True)
+            raise typer.Exit(1) from None
         except NoRunError:
             typer.secho(f"the world of run {live.run} ended", err=True)
             raise typer.Exit(0) from None

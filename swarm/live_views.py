@@ -109,8 +109,9 @@ def runs_table(docs: list[dict]):
     return t
 
 
-def header(info: dict, ended: bool = False):
-    """One line about the run: id, scenario, tick, time, clock; PAUSED, world ended."""
+def header(info: dict, ended: bool | str = False):
+    """One line about the run: id, scenario, tick, time, clock; PAUSED, world ended (or what
+    `ended` says, when it is a string)."""
     from rich.text import Text
 
     t = Text()
@@ -120,7 +121,7 @@ def header(info: dict, ended: bool = False):
     if info.get("paused"):
         t.append("  PAUSED", style="bold yellow")
     if ended:
-        t.append("  world ended", style="bold red")
+        t.append("  " + (ended if isinstance(ended, str) else "world ended"), style="bold red")
     return t
 
 
@@ -184,8 +185,9 @@ def legend():
     return t
 
 
-def watch_frame(snap: dict, ended: bool, width: int, height: int):
-    """One screen of `swarm watch`: header, picture beside (or above) the agents table, legend."""
+def watch_frame(snap: dict, ended: bool | str, width: int, height: int):
+    """One screen of `swarm watch`: header (`ended`: see `header`), picture beside (or above)
+    the agents table, legend."""
     from rich.console import Console, Group
     from rich.measure import Measurement
     from rich.table import Table

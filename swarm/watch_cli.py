@@ -13,7 +13,7 @@ from typing import Annotated
 import typer
 
 from swarm.api_live import connect as connect_run
-from swarm.errors import NoRunError
+from swarm.errors import NoRunError, StoppedAnswering
 from swarm.live_cli import ConnectOpt, CredentialsOpt, LiveRunOpt, console
 from swarm.live_views import watch_frame
 from world.live_view import DEFAULT_HOST, DEFAULT_PORT
@@ -48,7 +48,9 @@ def watch(
 
     Ctrl-C exits (0). When the world ends the last picture stays, marked "world ended";
     without a terminal (stdout piped) a frame is printed per refresh and the command exits
-    a few seconds after the world ended.
+    a few seconds after the world ended. A world that stops answering for 5 s without having
+    ended (stalled, or cut off from this machine) is marked "world not answering", and the
+    command exits 1 (at Ctrl-C on a terminal) with one line saying so.
 
     With --foxglove [PORT] it serves the run to the Foxglove app instead (the topics of
     `swarm up --foxglove`, built from what the world publishes) until Ctrl-C (exit 130) or the
@@ -64,16 +66,22 @@ def watch(
     with connect_run(run, connect, credentials) as live:
         snap = live.snapshot()
         ended_at: float | None = None
+        silent: StoppedAnswering | None = None
 
         def refresh() -> None:
             """A new snapshot (the last one while the world does not answer), or note when the
-            world ended (the last picture stays)."""
-            nonlocal snap, ended_at
+            world ended or stopped answering (the last picture stays)."""
+            nonlocal snap, ended_at, silent
             if ended_at is None:
                 try:
                     snap = live.again(live.snapshot, snap)
+                except StoppedAnswering as e:
+                    silent, ended_at = e, time.monotonic()
                 except NoRunError:
                     ended_at = time.monotonic()
+
+        def over() -> bool | str:
+            return "world not answering" if silent is not None else ended_at is not None
 
         try:
             if tty:
@@ -81,7 +89,7 @@ def watch(
 
                 def frame():
                     w, h = con.size
-                    return watch_frame(snap, ended_at is not None, w, h - 1)
+                    return watch_frame(snap, over(), w, h - 1)
 
                 with Live(frame(), console=con, auto_refresh=False, redirect_stderr=False) as view:
                     while True:
@@ -93,14 +101,18 @@ def watch(
                 now = (snap["info"].get("tick"), ended_at is not None)
                 if now != shown:  # a new frame only when something moved (not while paused)
                     shown = now
-                    con.print(watch_frame(snap, ended_at is not None, con.width, 30))
+                    con.print(watch_frame(snap, over(), con.width, 30))
                     con.print()
                 if ended_at is not None and time.monotonic() - ended_at > WORLD_GONE_EXIT:
-                    return
+                    break
                 time.sleep(period)
                 refresh()
         except KeyboardInterrupt:
-            raise typer.Exit(0) from None
+            pass
+        if silent is not None:
+            typer.secho(str(silent), err=True)
+            raise typer.Exit(1)
+        raise typer.Exit(0)
 
 
 def watch_foxglove(connect, run, credentials, host: str, port: int) -> int:

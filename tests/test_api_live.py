@@ -38,6 +38,43 @@ def test_error_classes_and_their_exit_codes():
     assert exit_code(ValueError("x")) is None and exit_code(KeyError(3)) is None  # bugs keep their traceback
 
 
+def test_a_watcher_tells_a_world_that_ended_from_one_that_stopped_answering(monkeypatch):
+    """Live.again: the last reading while the world misses reads; NoRunError at once when it is
+    gone (its end notice, its endpoint refusing); StoppedAnswering (a NoRunError, exit 1 too)
+    after ENDED_FAILURES failed reads over ENDED_SILENT_S s of a world that is still there."""
+    import swarm.live as live_mod
+    from swarm.api_live import Live
+
+    class FakeRun:
+        gone_now = False
+
+        def watch_end(self):
+            pass
+
+        def gone(self):
+            return self.gone_now
+
+        ref = live_mod.RunRef("r1", "unixsock-stream//nowhere")
+
+    def fails():
+        raise swarm.NoRunError("the world did not answer")
+
+    monkeypatch.setattr(live_mod, "ENDED_SILENT_S", 0.0)
+    fake = FakeRun()
+    live = Live(fake)
+    assert live.again(lambda: 5, 0) == 5
+    assert live.again(fails, 5) == 5 and live.again(fails, 5) == 5  # two misses: the last reading
+    with pytest.raises(swarm.StoppedAnswering, match="the world of run r1 stopped answering"):
+        live.again(fails, 5)
+    assert issubclass(swarm.StoppedAnswering, swarm.NoRunError) and exit_code(swarm.StoppedAnswering("x")) == 1
+
+    fake.gone_now = True
+    live = Live(fake)
+    with pytest.raises(swarm.NoRunError) as e:
+        live.again(fails, 5)  # gone: ended at once, not "stopped answering"
+    assert not isinstance(e.value, swarm.StoppedAnswering)
+
+
 @pytest.fixture
 def empty_runtime(monkeypatch):
     import shutil

@@ -794,6 +794,44 @@ def test_a_stalled_world_is_not_an_ended_one(live):
 
 
 @pytest.mark.slow
+def test_a_world_that_stops_answering_is_not_an_ended_one(live, tmp_path):
+    """A world stopped for longer than the watchers' patience (swarm.live.ENDED_SILENT_S), with
+    its endpoint still there, has not ended: `swarm graph --watch` and `swarm watch` (piped)
+    exit 1 saying it stopped answering, where a world that ended gives 0 (a world of its own,
+    no agents: it answers queries while it waits for them)."""
+    from swarm.live import ENDED_SILENT_S
+
+    tr = live["tracker"]
+    run, endpoint = "silent", f"unixsock-stream/{live['runtime']}/silent.sock"
+    scen = ring_scenario(tmp_path / "silent.toml", 2, leaders=1)
+    world = tr.spawn(swarm_cmd("world", scen, "--listen", endpoint, "--run", run, "--out", tmp_path / "out",
+                               "--duration", "600", "--no-plots"), "world-silent")
+    env = {**tr.env, "SWARM_RUN": run}
+    wait_for(lambda: world.check_running("it to listen") or
+             invoke("runs", "--json", "--run", run).exit_code == 0, 30, "the world to answer", interval=0.1)
+    gw = tr.spawn(swarm_cmd("graph", "--watch", "--json"), "graph-watch-silent", env=env)
+    wt = tr.spawn(swarm_cmd("watch", "--rate", "4"), "watch-silent", env=env)
+    wait_for(lambda: gw.text().startswith("{") and f"run {run}" in wt.text(), 20, "the watchers to show the run")
+    try:
+        os.kill(world.pid, signal.SIGSTOP)
+        t0 = time.monotonic()
+        try:
+            assert gw.wait(ENDED_SILENT_S + 10) == 1, gw.text()[-2000:]
+            assert wt.wait(10) == 1, wt.text()[-2000:]
+            print(f"\n[timing] the watchers gave up {time.monotonic() - t0:.1f} s after the world stopped")
+        finally:
+            os.kill(world.pid, signal.SIGCONT)
+        for p in (gw, wt):
+            assert f"the world of run {run} stopped answering" in p.text(), p.text()[-2000:]
+            assert f"run {run} ended" not in p.text() and "world ended" not in p.text(), p.text()[-2000:]
+            assert "Traceback" not in p.text(), p.text()[-2000:]
+        assert "world not answering" in wt.text()
+    finally:
+        os.kill(world.pid, signal.SIGINT)
+        assert world.wait(30) == 130, world.text()[-3000:]
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("args", LIVE_COMMANDS, ids=lambda a: " ".join(a))
 def test_no_swarm_fails_fast(args, monkeypatch, tmp_path):
     empty = os.path.join("/tmp", os.path.basename(tmp_path)[:8] + "-e")
