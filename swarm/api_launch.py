@@ -24,6 +24,7 @@ import shutil
 import signal
 import tempfile
 import threading
+import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -113,7 +114,9 @@ class Launch:
         self.out = Path(out) if out is not None else Path("runs") / self.run_id
         claim_out_dir(self.out, force)
         self.ticks = int(round((duration or s.run.duration) / s.run.dt))
-        path, self._tmp = scenario_file(scenario, s)
+        path, tmp = scenario_file(scenario, s)
+        # A temporary scenario file goes when the run is over, or with this object if it never runs.
+        self._forget_tmp = weakref.finalize(self, shutil.rmtree, tmp, True) if tmp is not None else None
         cfg = UpConfig(path, s, self.out, self.run_id, listen, duration, clock, time_scale,
                        world_grace=world_grace, foxglove=foxglove)
         self.launcher = Launcher(cfg) if say is None else Launcher(cfg, say)
@@ -137,8 +140,8 @@ class Launch:
             with stop_on_signals(self.stop if signals else None):
                 code = self.launcher.run(show)
         finally:
-            if self._tmp is not None:
-                shutil.rmtree(self._tmp, ignore_errors=True)
+            if self._forget_tmp is not None:
+                self._forget_tmp()
         return self.outcome(code)
 
     def outcome(self, code: int) -> UpOutcome:

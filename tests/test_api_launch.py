@@ -39,6 +39,21 @@ def test_launch_refuses_before_starting_anything(base, tmp_path):
     assert children() == before
 
 
+def test_a_launch_that_never_runs_leaves_no_temporary_scenario(base, tmp_path):
+    """A scenario that is not a file is written to a temporary one for the run; a Launch built
+    and dropped without running removes it too (as does a failed start, whose object goes)."""
+    import gc
+
+    from swarm.api_launch import Launch
+
+    launch = Launch(base, out=tmp_path / "never")
+    tmp = launch.launcher.cfg.scenario_path.parent
+    assert tmp.is_dir() and tmp.name.startswith("swarm-up-")
+    del launch
+    gc.collect()
+    assert not tmp.exists()
+
+
 def test_open_run_says_what_it_recovered(base, tmp_path):
     out = tmp_path / "run"
     swarm.simulate(base, duration=1.0, out=out)
