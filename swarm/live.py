@@ -12,9 +12,10 @@ $SWARM_CONNECT (swarm/live_cli.py), so a user with several runs can export one.
 Queries end as soon as what was asked for has answered (the world's one reply; every live
 agent's status), never waiting for the query's timeout: a queryable's final answer can
 come late (its process still holds the query), and only a world or an agent that does not
-answer costs the timeout. A world that stops answering has ended only when its endpoint
-refuses connections, it sent its end notice, or it failed several reads in a row over
-several seconds (`Patience`): one timeout under load is not the end of a run.
+answer costs the timeout. A world that misses reads has ended only when its endpoint
+refuses connections or it sent its end notice; one that failed several reads in a row over
+several seconds without that has stopped answering (`Patience`): one timeout under load is
+neither.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from swarm.contracts.transport import (QUERY_TIMEOUT, dial_endpoint, open_client
 from swarm.errors import NoRunError
 
 ENDED_FAILURES = 3  # failed reads in a row, ...
-ENDED_SILENT_S = 5.0  # ... over at least this long, before a world that is still there counts as ended
+ENDED_SILENT_S = 5.0  # ... over at least this long, before a world that is still there has stopped answering
 
 
 NoRun = NoRunError  # no (single) run matches, or its world stopped answering (swarm/errors.py)
@@ -254,13 +255,14 @@ class Patience:
         live.watch_end()
 
     def answered(self) -> None:
-        self.failures, self.since = 0, None
+        self.failures, self.since, self.silent = 0, None, False
 
     def ended(self) -> bool:
         """After a failed read: True when the world has ended or stopped answering (`silent`)."""
         now = time.monotonic()
         self.failures += 1
         self.since = now if self.since is None else self.since
+        self.silent = False
         if self.live.gone():
             return True
         self.silent = self.failures >= ENDED_FAILURES and now - self.since >= ENDED_SILENT_S

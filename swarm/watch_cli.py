@@ -54,7 +54,8 @@ def watch(
 
     With --foxglove [PORT] it serves the run to the Foxglove app instead (the topics of
     `swarm up --foxglove`, built from what the world publishes) until Ctrl-C (exit 130) or the
-    end of the run (exit 0); a port in use is one line and exit 2.
+    end of the run (exit 0), or until the world stops answering without ending (exit 1); a port
+    in use is one line and exit 2.
 
     Example: swarm watch --rate 10;  swarm watch --foxglove 9000
     """
@@ -116,7 +117,8 @@ def watch(
 
 
 def watch_foxglove(connect, run, credentials, host: str, port: int) -> int:
-    """`swarm watch --foxglove`: serve the run until it ends (0) or Ctrl-C (130)."""
+    """`swarm watch --foxglove`: serve the run until it ends (0), stops answering (StoppedAnswering,
+    1) or Ctrl-C (130)."""
     from swarm.cli_errors import fail
     from swarm.watch_foxglove import serve_run
     from world.live_view import LiveViewError

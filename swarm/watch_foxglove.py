@@ -13,8 +13,9 @@ the ground truth first has it. `/swarm/run` says what is watched: `{"run", "scen
 "clock", "ticks", "dt", "target", "agents": [{"id", "role", "speed", "orbit_radius"}]}` once,
 then `{"add_agent": {...}}` for each agent added.
 
-It serves until Ctrl-C (exit 130) or until the world is gone: the run's end notice (exit 0),
-or a world that stopped answering (swarm.live.Patience; a NoRunError, exit 1). Each says one line.
+It serves until Ctrl-C (exit 130) or until the world is gone: it ended (its end notice, or
+its endpoint refusing connections: exit 0), or it stopped answering without ending
+(swarm.live.Patience; StoppedAnswering, exit 1). Each says one line.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import time
 from typing import NamedTuple
 
 from swarm.contracts import wire
-from swarm.errors import NoRunError
+from swarm.errors import NoRunError, StoppedAnswering
 from world.scene import SCENE_RATE, SceneChannels
 
 SILENT_CHECK = 1.0  # s without ground truth before asking whether the world is still there
@@ -122,7 +123,7 @@ class Feed:
 def serve_run(live, host: str, port: int, say) -> None:
     """Serve the live run `live` (a swarm.connect Live) on ws://host:port until its world is
     gone, saying so with `say` when the run ended. Raises world.live_view.LiveViewError (the
-    port in use), NoRunError (the world stopped answering without ending the run) and
+    port in use), StoppedAnswering (the world stopped answering without ending the run) and
     KeyboardInterrupt (Ctrl-C)."""
     import foxglove
 
@@ -151,13 +152,13 @@ def serve_run(live, host: str, port: int, say) -> None:
         server.stop()
     last = "" if observer.tick is None else f" at tick {observer.tick}"
     if not ended:
-        raise NoRunError(f"the world of run {live.run} stopped answering{last}; the live view is closed")
+        raise StoppedAnswering(f"the world of run {live.run} stopped answering{last}; the live view is closed")
     say(f"run {live.run} ended{last}; the live view is closed")
 
 
 def _follow(live, lr, feed: Feed, observer: Observer, ticks: int) -> bool:
-    """Feed `observer` until the world is gone: True on its end notice, False when it stopped
-    answering."""
+    """Feed `observer` until the world is gone: True when it ended (its end notice, or its
+    endpoint refusing connections), False when it stopped answering."""
     heard = time.monotonic()
     info = None
     while True:
@@ -176,8 +177,10 @@ def _follow(live, lr, feed: Feed, observer: Observer, ticks: int) -> bool:
             if not observer.known.issuperset(int(i) for i in recs["id"]):
                 try:
                     info = live.again(live.info, None)  # an agent added at run time: its role and speed
-                except NoRunError:
-                    return lr.end_notice
+                except StoppedAnswering:
+                    return False
+                except NoRunError:  # gone: its end notice, or its endpoint refusing connections
+                    return True
                 if info is not None:
                     observer.add_agents(info, t)
             if observer.known.issuperset(int(i) for i in recs["id"]):
@@ -191,5 +194,7 @@ def _follow(live, lr, feed: Feed, observer: Observer, ticks: int) -> bool:
             heard = time.monotonic()
             try:
                 info = live.again(live.info, info)
+            except StoppedAnswering:
+                return False
             except NoRunError:
-                return lr.end_notice
+                return True

@@ -135,6 +135,24 @@ def test_step_one_is_step_to_the_bit():
         assert [p[2] for p in one] == ag.tolist()
 
 
+def test_step_one_gives_nan_where_step_does():
+    """Turn rates so large that the angles overflow: NaN where the array step gives NaN (numpy
+    warns; math's functions would raise and end the world), the same numbers elsewhere."""
+    import warnings
+
+    def same(a, b):
+        return all((math.isnan(p) and math.isnan(q)) or p == q for p, q in zip(a, b))
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        for g in (3.0, -math.pi, math.nan):
+            for u, dt in [(1e308, 1.0), (-1e308, 2.0), (1.7e308, 1.0), (math.inf, 0.01), (math.nan, 0.01),
+                          (1e300, 1e8), (1e308, 0.01)]:
+                arr = [float(v[0]) for v in step(np.array([1.0]), np.array([2.0]), np.array([g]), np.array([5.0]),
+                                                 np.array([u]), dt)]
+                assert same(arr, step_one(1.0, 2.0, g, 5.0, u, dt)), (g, u, dt)
+
+
 def test_small_and_large_swarms_step_alike(monkeypatch):
     """WorldCore.step agent by agent equals the array step, with agents active, coasting and gone."""
     import world.core as core_mod

@@ -23,9 +23,7 @@ from swarm.contracts.orbits import wrap_array
 _EPS = float(np.finfo(float).eps)  # np.sinc's stand-in for 0
 
 
-def wrap(angle):
-    """Wrap an angle (rad), or an array of them, to (-pi, pi]."""
-    return wrap_array(angle)
+wrap = wrap_array  # an angle (rad), or an array of them, wrapped to (-pi, pi]
 
 
 def step(x, y, heading, speed, turn_rate, dt: float):
@@ -42,11 +40,15 @@ def step(x, y, heading, speed, turn_rate, dt: float):
 
 def step_one(x: float, y: float, heading: float, speed: float, turn_rate: float,
              dt: float) -> tuple[float, float, float]:
-    """`step` for one agent on Python floats, with the same bits."""
+    """`step` for one agent on Python floats, with the same bits (NaN where `step` gives NaN:
+    a turn rate so large that the angles overflow, where math's functions would raise)."""
     half = 0.5 * turn_rate * dt
+    if not math.isfinite(half):
+        return math.nan, math.nan, math.nan
     a = math.pi * (half / math.pi)  # np.sinc(half / pi), step by step
     if a == 0.0:
         a = _EPS
     chord = speed * dt * (math.sin(a) / a)
-    mid = heading + half
-    return x + chord * math.cos(mid), y + chord * math.sin(mid), _wrap_one(heading + 2.0 * half)
+    mid, g = heading + half, heading + 2.0 * half
+    c, s = (math.cos(mid), math.sin(mid)) if math.isfinite(mid) else (math.nan, math.nan)
+    return x + chord * c, y + chord * s, _wrap_one(g) if math.isfinite(g) else math.nan

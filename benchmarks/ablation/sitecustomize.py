@@ -10,32 +10,36 @@ to show what each part of that work costs against the bare-zenoh floor:
   C2, a loitering circle), with no decoding of contacts, no selection and no law;
 - "world": after its first frames the world sends the same frames again (tick and time
   patched into the header), records nothing and does not integrate: no sensing, no frame
-  encoding, no recording, no physics; commands are still received, checked and latched;
+  encoding, no recording, no physics, no ground truth for observers (the whole end of the
+  tick is skipped); commands are still received, checked and latched. Agents that join
+  later get no frames (the benchmark's agents all join before the first tick);
 - "both": the two;
 - "recording": the world writes no recording (everything else as shipped).
 
 The messaging, the processes and the world's handling of commands are the product's own.
+Being first on PYTHONPATH, this file hides any other sitecustomize of the environment for
+those processes (a benchmark's price: nothing else here needs one).
 """
 
 from __future__ import annotations
 
 import os
+import struct
 
 MODE = os.environ.get("SWARM_ABLATE", "")
+TICK_AT = struct.calcsize("<BBBBi")  # where a frame's tick is (wire.SENSE_HEAD: kind, version, has_target,
+# reserved, agent; tick)
 
 
 def _null_agents() -> None:
-    import struct
-
     from agents.node import AgentNode
     from swarm.contracts import wire
 
-    tick_at = struct.calcsize("<BBBBi")  # wire.SENSE_HEAD: kind, version, has_target, reserved, agent; tick
     tick_of = struct.Struct("<q").unpack_from
 
     def on_sense_sample(self, sample) -> None:
         payload = sample.payload.to_bytes()
-        tick = tick_of(payload, tick_at)[0]
+        tick = tick_of(payload, TICK_AT)[0]
         spec = self.spec
         if spec.role == "leader":
             u, phase, hops = spec.speed / spec.orbit_radius * spec.direction_sign, "orbit", 0
@@ -47,11 +51,8 @@ def _null_agents() -> None:
 
 
 def _frozen_world() -> None:
-    import struct
-
     from world.process import World
 
-    tick_at = struct.calcsize("<BBBBi")
     patch = struct.Struct("<qd").pack_into
     real_publish = World.publish_frames
 
@@ -70,7 +71,7 @@ def _frozen_world() -> None:
         c = self.core
         for aid, frame in cache.items():
             buf = bytearray(frame)
-            patch(buf, tick_at, c.tick, c.time)
+            patch(buf, TICK_AT, c.tick, c.time)
             self.sense_pub[aid].put(bytes(buf))
         return set(cache)
 

@@ -1,9 +1,9 @@
 """The paper's definitions every layer reports with, in one place: angles wrapped to
 (-pi, pi], the path from an agent to its leader along the chosen out-neighbours, and
 the orbit radius that path promises (Theorem 1: R_i = v_i / omega_root, with
-omega_root = v_L / R_L of the leader at the end of the path). Pure Python, scalars.
-
-`wrap_array` is `wrap` for whole arrays (world/kinematics.py's headings, the batch brains).
+omega_root = v_L / R_L of the leader at the end of the path). Pure, scalars in plain Python,
+but `wrap_array`: `wrap` for whole numpy arrays, to the bit (world/kinematics.py's headings,
+the batch brains).
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ def wrap_array(angle):
     if big.any():
         w = np.array(w, dtype=float)
         w[big] = [math.remainder(v, TAU) if math.isfinite(v) else math.nan for v in a[big].tolist()]
-    return np.where(w <= -math.pi, w + TAU, w)
+    return np.where(w <= -math.pi, w + TAU, w)[()]  # a scalar for a scalar
 
 
 def root_of(agent: int, out: dict[int, int | None], leaders: set[int]) -> tuple[int | None, int | None]:
