@@ -31,8 +31,8 @@ import json
 import math
 import re
 import struct
-from itertools import starmap
 from dataclasses import dataclass
+from itertools import starmap
 
 from swarm.contracts.frames import Contact, SensorFrame
 
