@@ -29,7 +29,8 @@ import numpy as np
 
 from agents import batch_maths as bm
 from agents.batch_leader import BatchLeaders
-from agents.batch_select import NONE, BatchSticky, select
+from agents.batch_select import NONE, select
+from agents.batch_sticky import BatchSticky
 
 
 @dataclass
@@ -60,7 +61,7 @@ class BatchBrains:
         self.pinned = np.array([[col[b][a.follow] if a.follow is not None else NONE for a in row]
                                 for b, row in enumerate(specs)], dtype=np.int64)
         self.leaders = BatchLeaders(specs, dt)
-        self.sticky = BatchSticky(shape, max_hops, max_hops) if self.mode == "sticky" else None
+        self.sticky = BatchSticky(specs, gains, sensing, dt, max_hops) if self.mode == "sticky" else None
         self.out = np.full(shape, NONE, dtype=np.int64)  # AgentBrain.out
         self.last_u = np.zeros(shape)
         self.hops = np.full(shape, NONE, dtype=np.int64)  # advertised last tick (rooted rule)
@@ -70,20 +71,8 @@ class BatchBrains:
 
     # -- selection ------------------------------------------------------------------------------
     def _choose(self, frames) -> tuple[np.ndarray, np.ndarray]:
-        """(choice columns, rooted) (B, N) for the followers' rows."""
+        """(choice columns, rooted) (B, N) for the followers' rows (not sticky)."""
         ids = None if frames.ids_sorted else frames.ids
-        if self.sticky is not None:
-            st = self.sticky
-            kept = st.keep(frames.sensed_pairs(st.out), frames.hops)
-            choice, rooted = np.where(kept, st.out, NONE), kept.copy()
-            need = self.follower & ~kept
-            m = np.flatnonzero(need.any(axis=1))
-            if m.size:
-                sensed, rng = frames.matrices(m)
-                c, r = st.choose(m, need[m], sensed, rng, frames.hops[m], None if ids is None else ids[m])
-                choice[m] = np.where(need[m], c, choice[m])
-                rooted[m] = np.where(need[m], r, rooted[m])
-            return choice, rooted
         choice = np.full(self.out.shape, NONE, dtype=np.int64)
         need = self.follower.copy()
         if self.mode == "fixed":  # the pinned out-neighbour while it is sensed
@@ -107,26 +96,41 @@ class BatchBrains:
         current = np.arange(hops.shape[1])[None, None, :] == self.out[m][..., None]
         return (hj >= 0) & ((below < 0) | (hj < below) | current)
 
+    def figures(self, b: int, i: int) -> dict:
+        """AgentBrain.figures of member b's agent in column i."""
+        more = {} if self.sticky is None else self.sticky.stats(b, i)
+        return {"nonfinite": int(self.nonfinite[b, i]), **more}
+
     # -- one tick -------------------------------------------------------------------------------
     def decide(self, tick: int, frames) -> BatchDecision:
         """AgentBrain.decide for every agent of every member on this tick's frames."""
         heading, hops_in = frames.heading, frames.hops
-        choice, rooted = self._choose(frames)
-        choice = np.where(self.follower, choice, NONE)
+        if self.sticky is not None:
+            kept = self.sticky.keep(frames, self.follower)
+            choice = np.where(kept, self.sticky.out, NONE)
+            rooted = kept
+        else:
+            choice, rooted = self._choose(frames)
+            choice = np.where(self.follower, choice, NONE)
         track = choice >= 0
         # the law on every follower with an out-neighbour (bearing_law, term for term)
         g_i, g_j = heading, bm.take(heading, choice)
         lam = frames.bearing_pairs(choice)
         u = self.c1 * bm.wrap(g_j - g_i) + self.c2 * np.sin(lam - g_i)
-        bad = track & ~np.isfinite(u)
+        # nobody (rooted) in sight: loiter the way it last turned
+        lost = np.copysign(self.c2, np.where(self.last_u == 0.0, 1.0, self.last_u))
+        u = np.where(track, u, lost)
+        h_j = bm.take(hops_in, choice)
+        hops = np.where(track & rooted & (h_j >= 0) & (h_j < self.max_hops), h_j + 1, NONE)
+        if self.sticky is not None:
+            self.sticky.sight(tick, frames, kept, lam)
+            # everybody who did not simply keep: one by one, written into choice, u, hops
+            self.sticky.rest(tick, frames, self.follower & ~kept, self.last_u, choice, u, hops)
+        bad = self.follower & ~np.isfinite(u)
         if bad.any():  # a NaN or inf turn rate: counted, the last one held
             self.nonfinite += bad
             u = np.where(bad, self.last_u, u)
-        # nobody (rooted) in sight: loiter the way it last turned
-        lost = np.copysign(self.c2, np.where(self.last_u == 0.0, 1.0, self.last_u))
-        u = bm.saturate(np.where(track, u, lost), self.limit)
-        h_j = bm.take(hops_in, choice)
-        hops = np.where(track & rooted & (h_j >= 0) & (h_j < self.max_hops), h_j + 1, NONE)
+        u = bm.saturate(u, self.limit)
         lead = self.leaders
         if len(lead.b):
             lb, li = lead.b, lead.i

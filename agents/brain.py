@@ -15,7 +15,8 @@ import math
 from typing import NamedTuple
 
 from agents.laws import agent_law, law_params
-from agents.selection import Sticky, select
+from agents.selection import select
+from agents.sticky_follower import StickyFollower
 from swarm.contracts.frames import SensorFrame
 from swarm.contracts.observation import Observation
 
@@ -29,7 +30,9 @@ class Decision(NamedTuple):
     tick: int
     u: float  # commanded turn rate over [t_k, t_k + dt) (rad/s)
     out: int | None  # chosen out-neighbour (None for leaders and lost followers)
-    phase: str  # leaders: "arc1" | "arc2" | "orbit"; followers: "track" | "lost"
+    phase: str  # leaders: "arc1" | "arc2" | "orbit"; followers: "track" (advertising a path through
+    # out), "shadow" (steering by out without a path), "search" (sticky: nobody to steer by, flying
+    # the search pattern), "lost" (other rules: nobody to steer by, loitering)
     fallback: bool = False  # pinned out-neighbour not sensed, nearest used instead
     hops: int | None = None  # hops to a leader it advertises (leaders 0; None: no path known)
 
@@ -64,20 +67,21 @@ class AgentBrain:
         self.unrooted_ticks = 0
         self.nonfinite = 0  # ticks on which the law returned NaN or inf (last u held)
         self.last_nonfinite: float | None = None
-        # selection = "sticky": wait and drain for max_hops ticks (the deepest a path can be)
-        self.sticky = Sticky(max_hops, max_hops) if sensing.selection == "sticky" else None
+        # selection = "sticky" (agents/sticky_follower.py): choose, hold, coast, shadow, search
+        sticky = sensing.selection == "sticky" and not self.is_leader
+        self.sticky = StickyFollower(spec, gains, sensing, dt, max_hops) if sticky else None
 
-    def _observe(self, frame: SensorFrame, out) -> Observation:
+    def _observe(self, frame: SensorFrame, out, search) -> Observation:
         s, g = self.spec, self.gains
         # tuple.__new__ straight away: a third of the cost of Observation(...) (0.2 against 0.6 us)
         return _new(Observation, (s.id, s.role, frame.tick, frame.time, self.dt, s.speed, frame.heading,
                                   s.max_turn_rate, frame.contacts, out, frame.target, s.orbit_radius, self.sign,
-                                  g.c1, g.c2, self.params, self.state, self.last_u))
+                                  g.c1, g.c2, self.params, self.state, self.last_u, search))
 
-    def _command(self, frame: SensorFrame, out) -> float:
+    def _command(self, frame: SensorFrame, out, search=None) -> float:
         """The law's turn rate, saturated; NaN or inf is counted (the agent reports it in its
         status and the run's summary) and its last turn rate held for this tick."""
-        u = float(self.law(self._observe(frame, out)))
+        u = float(self.law(self._observe(frame, out, search)))
         if math.isfinite(u):
             return saturate(u, self.spec.max_turn_rate)  # (before saturating: min/max would hide a NaN)
         self.nonfinite += 1
@@ -94,18 +98,19 @@ class AgentBrain:
 
     # -- followers -----------------------------------------------------------------
     def _follower(self, frame: SensorFrame) -> Decision:
+        search = None
         if self.sticky is not None:
-            choice = self.sticky.choose(frame.contacts)
+            choice, search = self.sticky.step(frame.contacts, frame.heading, frame.time, self.last_u)
         else:
             choice = select(frame.contacts, mode=self.sensing.selection, pinned=self.spec.follow,
                             current=self.out, hysteresis=self.sensing.hysteresis, below=self._below())
         self.out = choice.out
         c = choice.contact
-        u = self._command(frame, c)
-        if c is None:  # nobody (rooted) in sight: the law loiters
-            return Decision(frame.tick, u, None, "lost", choice.fallback)
+        u = self._command(frame, c, search)
+        if c is None:  # nobody (rooted) in sight: the law searches (sticky) or loiters
+            return Decision(frame.tick, u, None, "lost" if search is None else "search", choice.fallback)
         hops = c.hops + 1 if choice.rooted and 0 <= c.hops < self.max_hops else None
-        return Decision(frame.tick, u, c.id, "track", choice.fallback, hops)
+        return Decision(frame.tick, u, c.id, "track" if choice.rooted else "shadow", choice.fallback, hops)
 
     def _below(self) -> int | None:
         """Rooted rule: the hop count a new out-neighbour must beat (None: anyone rooted).
@@ -117,6 +122,12 @@ class AgentBrain:
         if self.hops is not None:
             return self.hops
         return self.feasible if self.unrooted_ticks < self.max_hops else None
+
+    def figures(self) -> dict:
+        """What this brain counted, for the run's summary: non-finite law outputs and, under
+        selection = "sticky", losses of its out-neighbour and the worst one's switches."""
+        more = {} if self.sticky is None else self.sticky.sticky.loss_figures()
+        return {"nonfinite": self.nonfinite, **more}
 
     def decide(self, frame: SensorFrame) -> Decision:
         d = self._leader(frame) if self.is_leader else self._follower(frame)

@@ -22,6 +22,7 @@ import math
 from types import MappingProxyType
 from typing import Callable
 
+from agents.leader import on_orbit_command
 from swarm.contracts.laws import FOLLOWER, GAINS, LEADER, LawError, follower_law_name, resolve_law
 from swarm.contracts.observation import Observation
 from swarm.contracts.orbits import wrap
@@ -35,9 +36,18 @@ def bearing_law(g_i: float, g_j: float, lambda_ij: float, c1: float, c2: float) 
 
 
 def loiter(obs: Observation) -> float:
-    """Nobody (rooted) in sight: a circle of radius v / C2, turning the way it last turned,
-    until somebody shows up: neither a spin nor bolting off in a line."""
+    """A circle of radius v / C2 where it is, turning the way it last turned: neither a spin
+    nor bolting off in a line (what `search` does without a search circle)."""
     return math.copysign(obs.c2, obs.last_u or 1.0)
+
+
+def search(obs: Observation) -> float:
+    """Nobody to steer by: fly `obs.search`, the circle about the point where it last sensed
+    an agent (agents/search.py), with the leaders' orbit hold; `loiter` without one."""
+    s = obs.search
+    if s is None:
+        return loiter(obs)
+    return on_orbit_command(-s.x, -s.y, obs.heading, obs.speed, s.radius, s.direction, obs.max_turn_rate)
 
 
 def bearing(obs: Observation) -> float:
@@ -45,7 +55,7 @@ def bearing(obs: Observation) -> float:
     while there is no out-neighbour."""
     j = obs.out
     if j is None:
-        return loiter(obs)
+        return search(obs)
     return bearing_law(obs.heading, j.heading, j.bearing, obs.c1, obs.c2)
 
 
@@ -73,7 +83,7 @@ def _older(name: str, c1: float, c2: float) -> Law:
     def law(obs: Observation) -> float:
         j = obs.out
         if j is None:
-            return loiter(obs)
+            return search(obs)
         return u(obs.heading, j.heading, j.bearing)
 
     return law

@@ -18,9 +18,22 @@ free, reacting on the tick the out-neighbour is lost. Pure: no I/O.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+import math
+from typing import Callable, NamedTuple
 
 from swarm.contracts.frames import Contact
+
+
+REACH = 0.85  # sticky: new choices within this fraction of the sensing range only
+LOSS_CHANGES = 4  # sticky: changes of out-neighbour one loss can cost, at most (Sticky's docstring)
+HOLD_TICKS = 20  # sticky: ticks a follower holds an out-neighbour that lost its path
+
+
+def reach(sensing_range: float | None) -> float:
+    """The range (m) within which a sticky follower makes new choices: REACH x its sensing
+    range (inf when unlimited). Kept choices last while sensed at all, so an agent near the
+    edge of the range, in and out of sight, is not taken and lost tick after tick."""
+    return math.inf if sensing_range is None else REACH * sensing_range
 
 
 class Choice(NamedTuple):
@@ -69,87 +82,183 @@ def select(contacts: tuple[Contact, ...], *, mode: str, pinned: int | None, curr
 
 
 class Sticky:
-    """selection = "sticky" (the default): the paper's nearest choice, made once and kept.
+    """selection = "sticky" (the default): the paper's nearest choice, made once and kept;
+    while nothing rooted can be chosen, hold on, shadow an agent it senses, or search.
 
-    State machine of one follower, fed one frame's contacts per tick (pure, no I/O):
+    State machine of one follower `me`, fed one frame's contacts per tick (pure, no I/O).
+    "Rooted" agents are those whose frame contact advertises a path (hops >= 0); new
+    choices are made among agents within `reach` (a fraction of the sensing range, so that
+    an agent at the edge, in and out of sight, is not taken and lost tick after tick):
 
-    - **Acquire** (its first choice after starting): take the nearest sensed agent as soon
-      as it advertises a path to a leader. Paths spread one hop per tick from the leaders,
-      so while the nearest agent is not rooted yet the follower waits up to `wait_ticks`
-      ticks for it, tracking the nearest rooted agent meanwhile and advertising nothing
-      (so nobody can root through a choice it may still change). If the nearest agent
-      never roots (it is the follower's partner in a follower-only cycle, or loiters),
-      the follower commits to the nearest rooted agent when the wait is over.
+    - **Acquire** (its first choice after starting): take the nearest agent as soon as it
+      is rooted. Paths spread one hop per tick from the leaders, so while the nearest
+      agent is not rooted yet the follower waits up to `wait_ticks` ticks for it,
+      tracking the nearest rooted agent meanwhile and advertising nothing (so nobody can
+      root through a choice it may still change). If the nearest agent never roots, the
+      follower commits to the nearest rooted agent when the wait is over.
     - **Keep**: a committed follower keeps its out-neighbour for as long as it senses it
       and it advertises a path. There are no voluntary switches: nearer agents passing by
       change nothing, which is what makes the graph stop changing.
+    - **Hold**: when the out-neighbour is still sensed but stops advertising a path (it
+      lost its own), the follower keeps steering by it for up to `hold_ticks` ticks,
+      advertising nothing, and commits to it again, with no change of out-neighbour, as
+      soon as it advertises a path again. One agent's short loss then costs its subtree
+      no switch at all.
     - **Lost**: when the out-neighbour is no longer sensed (dropped, out of range or
-      field of view) or no longer advertises a path, the follower switches on that very
-      tick to the nearest *feasible* rooted agent: one advertising fewer hops than the
-      fewest this follower has ever advertised since its last reset (`feasible`). Its
-      own descendants all advertise more than that, so the switch cannot close a loop
-      (the feasibility condition of loop-free distance-vector routing). With no feasible
-      agent in sight it loiters (out = None, advertising no path); after `drain_ticks`
-      ticks every stale advertisement that passed through it has been replaced, so it
-      resets `feasible` and takes any rooted agent.
+      field of view) or held for `hold_ticks` without rooting again, the follower switches
+      on that very tick to the nearest *feasible* rooted agent: one advertising fewer hops
+      than the fewest this follower has advertised since its last reset (`feasible`). Its
+      own descendants all advertise more than that, so the switch cannot close a loop (the
+      feasibility condition of loop-free distance-vector routing). After `drain_ticks`
+      ticks without advertising a path every stale advertisement that passed through it
+      has been replaced, so it resets `feasible` and takes any rooted agent.
+    - **Shadow**: while no feasible rooted agent is in reach, the follower steers by an
+      agent it senses without advertising a path: the nearest rooted one (if not
+      feasible), else the nearest one with a lower id than its own. It keeps that agent
+      while it senses it and it stays such a candidate, and commits to it, with no change,
+      as soon as it is a feasible rooted agent (or to the nearest feasible rooted agent in
+      reach). Once it has committed, a follower shadows only after `hold_ticks + 1` ticks
+      without advertising (so that nobody still holds it), and at most once per loss.
+    - **Search**: with nobody to hold, shadow or commit to, out = None; the agent's law
+      flies the search pattern of agents/search.py.
 
-    Loop-free: along every rooted edge i -> j, feasible_j < feasible_i (j's feasible is
-    at most the hops it advertised when i chose it, which were below feasible_i; later
-    both only decrease, and i's stays above j's since i advertises j's hops + 1). A cycle
-    would need feasible to decrease all the way round. Provisional edges (while acquiring)
-    point at rooted agents only, and a follower acquiring advertises no path, so nobody
-    rooted sits below it: they cannot close a cycle either.
+    Loop-free, every kind of edge included. *Ordered* edges (committed, held,
+    provisional) go down in `feasible`: along a committed or held edge i -> j,
+    feasible_j < feasible_i (j's feasible is at most the hops it advertised when i chose
+    it, which were below feasible_i; later both only decrease, as neither resets while
+    i holds: hold_ticks < drain_ticks; and i's stays above j's since i advertises j's
+    hops + 1); a provisional edge starts at a follower that never committed (feasible
+    infinite) and ends at a committed one. So no cycle is made of ordered edges alone.
+    A *shadow* edge s -> t starts at a follower that advertised nothing on the previous
+    tick and that nobody holds: it goes to an agent that advertised a path on the
+    previous tick, or to a lower id. Ordered edges never end at a shadowing agent
+    (committed and provisional edges end at agents that advertised on the previous tick,
+    held ones at agents silent for at most hold_ticks + 1 ticks, which do not shadow
+    yet). So from the head of a shadow edge a cycle continues either with more shadow
+    edges between silent agents, ids decreasing, which cannot close, or with ordered
+    edges only, which never reach a shadowing agent again, nor close by themselves.
 
-    Bound: without losses a follower changes its out-neighbour at most 1 + wait_ticks
-    times (median 1-2 in the README's studies: provisional choices, then the nearest once
-    rooted), and never after it has committed. Each loss of the out-neighbour costs at
-    most two more changes (to loitering and back). With unlimited sensing and no faults
-    nothing is ever lost, so the graph is fixed within about 2 x wait_ticks ticks and the
-    paper's theorem applies from there on. With a range or field of view, losses are forced by geometry
-    and are counted in every run's summary (`switches`).
+    Bound: the first commit comes after at most 1 + wait_ticks provisional choices and
+    any number of shadows and searches. After that, each loss of the out-neighbour
+    costs at most LOSS_CHANGES = 4 changes of out: to a feasible rooted agent (1); or to
+    nobody, then at most one shadow, then rooted (2 or 3, or 4 when that shadow is lost
+    too: a second loss of contact is searched out, not shadowed again). A held
+    out-neighbour that roots again costs nothing. With unlimited sensing and no faults
+    nothing is lost, so the graph is fixed within about 2 x wait_ticks ticks and the
+    paper's theorem applies from there on. With a range or field of view, losses are
+    forced by geometry while agents settle; once they are on their orbits (rigid
+    rotation: fixed relative positions) nothing is lost any more and the graph stops
+    changing.
     """
 
-    __slots__ = ("wait_ticks", "drain_ticks", "out", "committed", "acquired", "feasible",
-                 "waited", "unrooted_ticks")
+    __slots__ = ("wait_ticks", "drain_ticks", "hold_ticks", "coast_ticks", "quiet", "me", "reach", "out",
+                 "committed", "acquired", "feasible", "waited", "silent", "held", "coasted", "shadowed",
+                 "losses", "in_loss", "loss_changes", "worst_loss")
 
-    def __init__(self, wait_ticks: int, drain_ticks: int):
+    def __init__(self, wait_ticks: int, drain_ticks: int, me: int | None = None, reach: float = math.inf,
+                 hold_ticks: int = HOLD_TICKS, coast_ticks: int = 0):
         self.wait_ticks = wait_ticks
-        self.drain_ticks = drain_ticks
+        self.hold_ticks = hold_ticks
+        self.coast_ticks = coast_ticks
+        # silent this long, nobody holds it or coasts on it any more: it may shadow
+        self.quiet = max(hold_ticks, coast_ticks + 1)
+        self.drain_ticks = max(drain_ticks, self.quiet + 1)  # nobody resets while held (see the proof)
+        self.me = me  # own id: shadows of agents without a path go to lower ids only (None: never)
+        self.reach = reach  # new choices within this range only (m); kept ones while sensed
         self.out: int | None = None
-        self.committed = False  # rooted through `out`, advertising hops
+        self.committed = False  # rooted through `out` (advertising hops), or holding it
         self.acquired = False  # has committed at least once since the brain started
         self.feasible: int | None = None  # fewest hops advertised since the last reset
         self.waited = 0  # ticks spent waiting for the nearest agent to root
-        self.unrooted_ticks = 0  # ticks since the path was lost
+        self.silent = 0  # ticks in a row it advertised no path, up to the previous one
+        self.held = 0  # ticks it has held its out-neighbour without a path
+        self.coasted = 0  # ticks it has coasted on its out-neighbour out of sight
+        self.shadowed = 0  # shadows taken since the last loss
+        self.losses = 0  # committed out-neighbours lost (out of sight, gone, held too long)
+        self.in_loss = False  # lost one and not committed again yet
+        self.loss_changes = 0  # changes of out since that loss
+        self.worst_loss = 0  # the most changes of out any one loss has cost
 
-    def choose(self, contacts: tuple[Contact, ...]) -> Choice:
+    def loss_figures(self) -> dict:
+        """losses: committed out-neighbours lost; loss_switches_max: the most changes of
+        out-neighbour any one of them cost before it committed again (at most LOSS_CHANGES)."""
+        return {"losses": self.losses, "loss_switches_max": self.worst_loss}
+
+    def _shadow_ok(self, c: Contact) -> bool:
+        return c.hops >= 0 or (self.me is not None and c.id < self.me)
+
+    def choose(self, contacts: tuple[Contact, ...], coast: Callable[[int], Contact | None] | None = None) -> Choice:
         """This tick's out-neighbour; `Choice.rooted` says whether to advertise a path
-        (hops = contact.hops + 1) through it."""
+        (hops = contact.hops + 1) through it. coast(out): the predicted contact of a
+        committed out-neighbour that is not sensed (agents/coast.py), None if it cannot
+        coast; asked only then."""
+        before = self.out
+        ch = self._choose(contacts, coast)
+        self.silent = 0 if ch.rooted else self.silent + 1
+        if self.in_loss:
+            self.loss_changes += ch.out != before
+            if ch.rooted:
+                self.in_loss = False
+                self.worst_loss = max(self.worst_loss, self.loss_changes)
+        return ch
+
+    def _choose(self, contacts: tuple[Contact, ...], coast) -> Choice:
+        reach = self.reach
         if self.committed:
             for c in contacts:
                 if c.id == self.out:
                     if c.hops >= 0:
+                        self.held = self.coasted = 0
                         self.feasible = min(self.feasible, c.hops + 1)  # type: ignore[type-var]
                         return Choice(c.id, c, False, True)
+                    if self.held < self.hold_ticks:  # hold on: it may root again
+                        self.held += 1
+                        return Choice(c.id, c, False, False)
                     break
-            self.committed = False  # lost: out of sight, gone, or its path is gone
-            self.unrooted_ticks = 0
-        if self.feasible is not None and self.unrooted_ticks >= self.drain_ticks:
-            self.feasible = None  # stale advertisements have drained
-        best = nearest(tuple(c for c in contacts
-                             if c.hops >= 0 and (self.feasible is None or c.hops < self.feasible)))
-        if best is None:
+            else:
+                if coast is not None and self.held == 0 and self.coasted < self.coast_ticks:
+                    p = coast(self.out)
+                    if p is not None:  # out of sight at the edge: keep it where it must be
+                        self.coasted += 1
+                        return Choice(p.id, p, False, True)
+            self.committed = False  # lost: out of sight, gone, or held too long
+            self.held = self.coasted = self.shadowed = self.loss_changes = 0
+            self.losses += 1
+            self.in_loss = True
             self.out = None
-            self.unrooted_ticks += 1
+        if self.feasible is not None and self.silent >= self.drain_ticks:
+            self.feasible = None  # stale advertisements have drained
+        rooted = tuple(c for c in contacts if c.hops >= 0 and (self.feasible is None or c.hops < self.feasible))
+        best = nearest(tuple(c for c in rooted if c.range <= reach))
+        if self.acquired:
+            for c in rooted:  # the agent it shadows has rooted: commit to it
+                if c.id == self.out:
+                    best = c
+                    break
+        if best is not None:
+            if not self.acquired and self.waited < self.wait_ticks:
+                first = nearest(contacts)
+                if first is not None and first.id != best.id:
+                    self.waited += 1  # give the nearest agent time to root; track a rooted one
+                    self.out = best.id
+                    return Choice(best.id, best, False, False)
+            self.out = best.id
+            self.committed = self.acquired = True
+            self.feasible = best.hops + 1 if self.feasible is None else min(self.feasible, best.hops + 1)
+            return Choice(best.id, best, False, True)
+        if self.acquired and self.silent < self.quiet:  # somebody may still hold it, or coast on it
+            self.out = None
             return Choice(None, None, False, False)
-        if not self.acquired and self.waited < self.wait_ticks:
-            first = nearest(contacts)
-            if first is not None and first.id != best.id:
-                self.waited += 1  # give the nearest agent time to root; track a rooted one
-                self.out = best.id
-                return Choice(best.id, best, False, False)
-        self.out = best.id
-        self.committed = self.acquired = True
-        self.unrooted_ticks = 0
-        self.feasible = best.hops + 1 if self.feasible is None else min(self.feasible, best.hops + 1)
-        return Choice(best.id, best, False, True)
+        for c in contacts:  # keep the agent it shadows while it can
+            if c.id == self.out and self._shadow_ok(c):
+                return Choice(c.id, c, False, False)
+        shadow = None
+        if self.shadowed == 0 or not self.acquired:
+            shadow = nearest(tuple(c for c in contacts if c.hops >= 0 and c.range <= reach)) or \
+                nearest(tuple(c for c in contacts if self._shadow_ok(c) and c.range <= reach))
+        if shadow is None:
+            self.out = None
+            return Choice(None, None, False, False)
+        self.shadowed += 1
+        self.out = shadow.id
+        return Choice(shadow.id, shadow, False, False)

@@ -146,7 +146,7 @@ def _switches(k: int, dt: float, world: BatchWorld, frames, out, new, changed, p
 def _result(s: Scenario, b: int, rec, hist: dict, events: list[dict], world: BatchWorld, brains: BatchBrains,
             ticks: int) -> RunResult:
     extra = {"engine": ENGINE, "rejected_commands": int(world.rejected[b]), "lost_frames": 0, "lost_commands": 0}
-    agent_extra = {str(a.id): {"nonfinite": int(brains.nonfinite[b, i])} for i, a in enumerate(s.agents)}
+    agent_extra = {str(a.id): brains.figures(b, i) for i, a in enumerate(s.agents)}
     if rec is None:
         shape = (ticks + 1, len(s.agents))
         arrays = {k: hist[k][b] if k in hist else np.broadcast_to(np.nan, shape) for k in ("x", "y", "heading", "u")}

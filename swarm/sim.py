@@ -64,4 +64,4 @@ def run_sim(scenario: Scenario, duration: float | None = None,
         progress(ticks, ticks)
     return engine.result({"engine": "sim", "rejected_commands": engine.core.rejected,
                           "lost_frames": engine.fault_plan.lost_sense, "lost_commands": engine.fault_plan.lost_cmd},
-                         {str(aid): {"nonfinite": b.nonfinite} for aid, b in brains.items()})
+                         {str(aid): b.figures() for aid, b in brains.items()})

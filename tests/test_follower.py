@@ -119,6 +119,7 @@ def test_follower_falls_back_and_reports_it(base):
 
 
 def test_follower_lost_loiters_at_c2_in_its_last_direction(base):
+    base["sensing"] = {"selection": "nearest"}  # sticky searches instead: tests/test_search.py
     brain, s = _brain(base)
     d0 = brain.decide(_frame(0, 0.0, Contact(1, 1.0, 1.0, 3.0)))
     d1 = brain.decide(_frame(1, 0.0))

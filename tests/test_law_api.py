@@ -16,12 +16,13 @@ import pytest
 from typer.testing import CliRunner
 
 from agents.brain import AgentBrain
-from agents.laws import bearing, bearing_law, loiter
+from agents.laws import bearing, bearing_law, loiter, search
+from agents.leader import on_orbit_command
 from swarm.batch import refusal
 from swarm.cli import app
 from swarm.contracts.brain_config import BrainConf
 from swarm.contracts.laws import ENV_LAW_PATH, law_dirs, with_law_path
-from swarm.contracts.observation import Observation
+from swarm.contracts.observation import Observation, Search
 from swarm.contracts.scenario import ScenarioError, load_scenario, parse_scenario
 from swarm.sim import run_sim
 from world.sensing import Contact, SensorFrame
@@ -77,10 +78,14 @@ def test_state_is_kept_between_calls_and_new_with_a_new_brain(base, law_module):
 def test_the_built_in_follower_law_on_an_observation_is_the_formula(base):
     brain, s = _brain(base, 2, {})
     c = Contact(1, 1.1, 0.9, 8.0)
-    obs = brain._observe(SensorFrame(0, 0.0, 2, 0.2, (c,)), c)
+    obs = brain._observe(SensorFrame(0, 0.0, 2, 0.2, (c,)), c, None)
     assert bearing(obs) == bearing_law(0.2, 0.9, 1.1, s.gains.c1, s.gains.c2)
     lost = obs._replace(out=None, last_u=-0.4)
-    assert bearing(lost) == loiter(lost) == -s.gains.c2
+    assert bearing(lost) == loiter(lost) == -s.gains.c2  # no search circle: loiter
+    circle = Search(-10.0, 0.0, 4.0, 1)  # home 10 m behind it (heading 0.2)
+    searching = lost._replace(search=circle)
+    assert bearing(searching) == search(searching) == on_orbit_command(10.0, 0.0, 0.2, searching.speed, 4.0, 1,
+                                                                       searching.max_turn_rate)
 
 
 # -- through the engine ---------------------------------------------------------------------------

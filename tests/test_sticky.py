@@ -69,24 +69,69 @@ def test_switches_on_the_tick_its_out_neighbour_is_lost():
     assert (ch.out, ch.rooted) == (6, True)
 
 
-def test_switches_when_its_out_neighbour_loses_its_path():
-    s = Sticky(3, 3)
+def test_holds_an_out_neighbour_that_lost_its_path_and_commits_again_when_it_roots():
+    s = Sticky(3, 3, me=9, hold_ticks=5)
     s.choose((C(4, 10.0, 1), C(6, 60.0, 0)))
     assert s.feasible == 2
+    for _ in range(5):  # held: same out-neighbour, no path advertised
+        assert s.choose((C(4, 10.0, -1), C(6, 60.0, 0)))[::3] == (4, False)
+    ch = s.choose((C(4, 10.0, 1), C(6, 60.0, 0)))  # it rooted again: no change at all
+    assert (ch.out, ch.rooted) == (4, True) and s.losses == 0
+
+
+def test_switches_when_its_out_neighbour_stays_without_a_path_longer_than_the_hold():
+    s = Sticky(3, 3, me=9, hold_ticks=5)
+    s.choose((C(4, 10.0, 1), C(6, 60.0, 0)))
+    for _ in range(5):
+        s.choose((C(4, 10.0, -1), C(6, 60.0, 0)))
     ch = s.choose((C(4, 10.0, -1), C(6, 60.0, 0)))
-    assert ch.out == 6 and s.feasible == 1
+    assert (ch.out, ch.rooted) == (6, True) and s.feasible == 1 and s.losses == 1
 
 
-def test_after_a_loss_ignores_its_former_descendants_then_loiters_then_resets():
-    s = Sticky(4, 4)
+def test_after_a_loss_ignores_its_former_descendants_searches_shadows_then_resets():
+    s = Sticky(4, 4, me=9, hold_ticks=2)  # quiet after 2 silent ticks, drained after 4
     s.choose((C(1, 50.0, 0),))  # hops 1
     # leader gone; 5 still advertises 2 hops (it followed us): not feasible
     ch = s.choose((C(5, 5.0, 2),))
     assert ch.out is None and not ch.rooted
-    for _ in range(3):
-        assert s.choose((C(5, 5.0, 3),)).out is None
-    ch = s.choose((C(5, 5.0, 3),))  # drained: any rooted agent now
+    assert s.choose((C(5, 5.0, 3),)).out is None  # nobody may hold it yet: no shadow
+    ch = s.choose((C(5, 5.0, 3),))  # quiet long enough: shadow it, advertising nothing
+    assert (ch.out, ch.rooted) == (5, False)
+    ch = s.choose((C(5, 5.0, 3),))
+    assert (ch.out, ch.rooted) == (5, False)
+    ch = s.choose((C(5, 5.0, 3),))  # drained: any rooted agent now, the one it shadows first
     assert (ch.out, ch.rooted) == (5, True) and s.feasible == 4
+    assert (s.losses, s.worst_loss) == (1, 2)  # to nobody, then to 5
+
+
+def test_shadows_a_lower_id_only_among_agents_without_a_path():
+    s = Sticky(3, 3, me=5)
+    ch = s.choose((C(7, 5.0, -1), C(3, 20.0, -1)))  # 7 is nearer, but only 3 is below 5
+    assert (ch.out, ch.rooted) == (3, False)
+    assert Sticky(3, 3, me=2).choose((C(7, 5.0, -1), C(3, 20.0, -1))).out is None
+
+
+def test_new_choices_only_within_reach_but_kept_while_sensed():
+    s = Sticky(3, 3, me=9, reach=50.0)
+    assert s.choose((C(1, 55.0, 0),)).out is None  # beyond reach: not taken
+    ch = s.choose((C(1, 45.0, 0),))
+    assert (ch.out, ch.rooted) == (1, True)
+    ch = s.choose((C(1, 59.0, 0),))  # drifted beyond reach: kept
+    assert (ch.out, ch.rooted) == (1, True)
+
+
+def test_coasts_on_a_predicted_contact_then_loses_it():
+    s = Sticky(3, 3, me=9, coast_ticks=2)
+    s.choose((C(1, 50.0, 0),))
+    ghost = C(1, 61.0, 0)
+    for _ in range(2):
+        ch = s.choose((), lambda out: ghost)
+        assert ch.contact is ghost and ch.rooted  # keeps advertising its path
+    ch = s.choose((), lambda out: ghost)  # coasted long enough
+    assert ch.out is None and s.losses == 1
+    s2 = Sticky(3, 3, me=9, coast_ticks=2)
+    s2.choose((C(1, 50.0, 0),))
+    assert s2.choose((), lambda out: None).out is None  # cannot coast (vanished mid-range): lost at once
 
 
 def test_feasible_follows_the_fewest_hops_advertised():
@@ -99,7 +144,7 @@ def test_feasible_follows_the_fewest_hops_advertised():
     assert s.feasible == 2
 
 
-def test_nobody_rooted_in_sight_loiters_and_brain_turns_at_c2():
+def test_nobody_to_steer_by_searches_then_the_brain_tracks():
     from swarm.contracts.scenario import parse_scenario
 
     sc = parse_scenario({"gains": {"c1": 1.0, "c2": 0.5}, "agents": [
@@ -107,8 +152,8 @@ def test_nobody_rooted_in_sight_loiters_and_brain_turns_at_c2():
         {"id": 2, "role": "follower", "x": 5, "y": 0, "heading": 0, "speed": 1}]})
     assert sc.sensing.selection == "sticky"  # the default
     b = AgentBrain(sc.agent(2), sc.gains, sc.sensing, 0.01, 2)
-    d = b.decide(SensorFrame(0, 0.0, 2, 0.0, (C(3, 1.0, -1),), None))
-    assert d.out is None and d.phase == "lost" and d.hops is None and abs(d.u) == 0.5
+    d = b.decide(SensorFrame(0, 0.0, 2, 0.0, (C(3, 1.0, -1),), None))  # 3: a higher id, no path
+    assert d.out is None and d.phase == "search" and d.hops is None and math.isfinite(d.u)
     d = b.decide(SensorFrame(1, 0.01, 2, 0.0, (C(3, 1.0, -1), C(1, 9.0, 0)), None))
     assert d.out == 1 and d.hops is None  # waiting for 3, tracking 1
     d = b.decide(SensorFrame(2, 0.02, 2, 0.0, (C(3, 1.0, 1), C(1, 9.0, 0)), None))

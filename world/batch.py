@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 
+from swarm.contracts.frames import Contact
 from world.kinematics import step, wrap
 
 NONE = -1
@@ -55,9 +56,22 @@ class BatchFrames:
         w = self.w
         return w.target[b, 0] - w.x[b, i], w.target[b, 1] - w.y[b, i]
 
-    def _offsets(self, j):
+    def offsets(self, j):
+        """(dx, dy) (B, N): agent j[b, i]'s position minus agent i's."""
         w = self.w
         return _take(w.x, j) - w.x, _take(w.y, j) - w.y
+
+    def contacts(self, b: int, i: int, sensed_row, rng_row) -> tuple[Contact, ...]:
+        """The contacts of agent (b, i)'s frame (world/sensing.build_frames' values), from row i
+        of member b's sensing matrices; bearings with numpy's arctan2, as the world's."""
+        w = self.w
+        j = np.flatnonzero(sensed_row)
+        if not j.size:
+            return ()
+        x, y, ids, heading, hops = w.x[b], w.y[b], w.ids[b], self.heading[b], self.hops[b]
+        bearing = np.arctan2(y[j] - y[i], x[j] - x[i])
+        return tuple(Contact(int(ids[a]), float(bb), float(heading[a]), float(rng_row[a]), int(hops[a]))
+                     for a, bb in zip(j.tolist(), bearing.tolist()))
 
     def sensed_pairs(self, j: np.ndarray, b=slice(None)) -> np.ndarray:
         """(B, N): agent i senses agent j[b, i] (False where j < 0); with `b`, the
@@ -78,7 +92,7 @@ class BatchFrames:
 
     def bearing_pairs(self, j: np.ndarray) -> np.ndarray:
         """(B, N): line-of-sight angle from agent i to agent j[b, i] (meaningless where j < 0)."""
-        dx, dy = self._offsets(j)
+        dx, dy = self.offsets(j)
         return np.arctan2(dy, dx)
 
     def matrices(self, m: np.ndarray):

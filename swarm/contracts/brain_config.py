@@ -47,6 +47,8 @@ class LawConf:
 class SensingConf:
     selection: str  # "sticky" | "nearest" | "fixed" | "rooted"
     hysteresis: float
+    range: float | None = None  # own sensor's range (m), None: unlimited (sets the search pattern)
+    fov: float | None = None  # own sensor's field of view (rad), None: all round
 
 
 @dataclass(frozen=True, slots=True)
@@ -72,7 +74,7 @@ class BrainConf:
         a = scenario.agent(agent_id)
         g, s = scenario.gains, scenario.sensing
         return cls(AgentConf(a.id, a.role, a.speed, a.orbit_radius, a.direction, a.follow, a.max_turn_rate),
-                   GainsConf(g.c1, g.c2, g.law), SensingConf(s.selection, s.hysteresis),
+                   GainsConf(g.c1, g.c2, g.law), SensingConf(s.selection, s.hysteresis, s.range, s.fov),
                    scenario.run.dt, len(scenario.agents),
                    LawConf(scenario.law.follower, scenario.law.leader, dict(scenario.law.params)))
 
@@ -117,7 +119,8 @@ class BrainConf:
             raise ValueError("agent.orbit_radius: a leader needs one")
         return cls(agent, GainsConf(num(g, "c1", "gains"), num(g, "c2", "gains"), law),
                    SensingConf(choice(s, "selection", "sensing", ("sticky", "nearest", "fixed", "rooted")),
-                               num(s, "hysteresis", "sensing")),
+                               num(s, "hysteresis", "sensing"), num(s, "range", "sensing", positive=True, optional=True),
+                               num(s, "fov", "sensing", positive=True, optional=True)),
                    num(d, "dt", "brain", positive=True), integer(d, "n_agents", "brain"), _law_conf(d.get("law")))
 
 

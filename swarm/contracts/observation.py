@@ -20,6 +20,17 @@ from typing import Mapping, NamedTuple
 from swarm.contracts.frames import Contact
 
 
+class Search(NamedTuple):
+    """A searching follower's circle (`Observation.search`; agents/search.py says how it
+    is kept): fly about the point (x, y) relative to own position, world frame (m), at
+    `radius` (m), counter-clockwise for direction +1, clockwise for -1."""
+
+    x: float
+    y: float
+    radius: float
+    direction: int
+
+
 class Observation(NamedTuple):
     """One agent's view at one tick. Units: m, s, rad, m/s, rad/s; angles in the world
     frame, counter-clockwise from +x."""
@@ -42,6 +53,9 @@ class Observation(NamedTuple):
     params: Mapping[str, float]  # [law.params], read-only
     state: dict  # this agent's own dict, kept between calls (fresh when its brain is new)
     last_u: float  # the turn rate this agent commanded at the previous tick (0.0 at first)
+    # followers with nobody to steer by (out None, selection "sticky"): the search circle to
+    # fly, about the point where it last sensed an agent (agents/search.py); None otherwise
+    search: Search | None = None
 
     @property
     def target_range(self) -> float | None:

@@ -124,7 +124,7 @@ TRUTH_HEAD = struct.Struct("<BBBBIqd")
 TRUTH_FIELDS = [("id", "<i4"), ("x", "<f8"), ("y", "<f8"), ("heading", "<f8"),
                 ("u", "<f8"), ("out", "<i4"), ("state", "u1")]  # numpy dtype of one record
 
-PHASES = ("track", "lost", "arc1", "arc2", "orbit")
+PHASES = ("track", "lost", "arc1", "arc2", "orbit", "shadow", "search")
 STATES = ("active", "coasting", "gone")
 
 

@@ -1,0 +1,175 @@
+"""selection = "sticky" for (B, N) followers at once, equal to the per-agent brain to the bit.
+
+Most ticks of most followers are a plain *keep*: the committed out-neighbour is sensed
+and advertises a path, and the follower keeps it. That step is done here over arrays
+(`keep`, then `sight`, which records the sighting the follower's Tracker and
+SearchMemory would). Every other follower-tick (acquiring, holding, coasting, lost,
+shadowing, searching) goes through the follower's own agents.sticky_follower
+.StickyFollower, the very code AgentBrain runs (`rest`), fed the contacts its frame
+would hold; its law is agents.laws.bearing's arithmetic, or the search. A follower's
+scalar object is brought up to date from the arrays before it steps after keeps, and
+the arrays from it after: the two never disagree on what the next tick needs.
+
+Pure: no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from agents import batch_maths as bm
+from agents.batch_select import NONE
+from agents.coast import Sighting
+from agents.laws import bearing_law
+from agents.leader import on_orbit_command
+from agents.sticky_follower import StickyFollower
+
+
+class BatchSticky:
+    """The sticky followers of a batch: arrays for the keep, one StickyFollower each."""
+
+    def __init__(self, specs: list[list], gains: list, sensing: list, dt: float, max_hops: int):
+        shape = (len(specs), len(specs[0]))
+        self.dt = dt
+        self.max_hops = max_hops
+        self.specs = specs
+        self.gains = gains
+        self.col = [{a.id: k for k, a in enumerate(row)} for row in specs]
+        self.agents = {(b, i): StickyFollower(a, gains[b], sensing[b], dt, max_hops)
+                       for b, row in enumerate(specs) for i, a in enumerate(row) if a.role == "follower"}
+        self.out = np.full(shape, NONE, dtype=np.int64)  # Sticky.out (a column)
+        self.committed = np.zeros(shape, dtype=bool)
+        self.feasible = np.full(shape, NONE, dtype=np.int64)
+        self.fresh = np.ones(shape, dtype=bool)  # the scalar object is up to date
+        # the last sighting of the agent steered by (Tracker.last), and the one before (prev)
+        self.last = _Sightings(shape)
+        self.prev = _Sightings(shape)
+
+    # -- the keep, over arrays --------------------------------------------------------------------
+    def keep(self, frames, follower: np.ndarray) -> np.ndarray:
+        """(B, N) True where a committed follower senses its out-neighbour and it advertises a
+        path: Sticky.choose's first branch (feasible updated; held, coasted, silent are 0)."""
+        h_out = bm.take(frames.hops, self.out)
+        kept = follower & self.committed & (h_out >= 0)
+        if kept.any():
+            kept &= frames.sensed_pairs(self.out)
+        self.feasible = np.where(kept, np.minimum(self.feasible, h_out + 1), self.feasible)
+        self.fresh &= ~kept
+        return kept
+
+    def sight(self, tick: int, frames, kept: np.ndarray, lam: np.ndarray) -> None:
+        """Tracker.sighted (and SearchMemory's anchor) for the kept followers: lam the bearing
+        to their out-neighbours."""
+        if not kept.any():
+            return
+        out = self.out
+        dx, dy = frames.offsets(out)
+        same = self.last.valid & (self.last.col == out)
+        self.prev.assign(kept, self.last, same)
+        self.last.put(kept, out, tick * self.dt, np.hypot(dx, dy), lam, bm.take(frames.heading, out),
+                      bm.take(frames.hops, out), frames.heading)
+
+    # -- everybody else, one by one -----------------------------------------------------------------
+    def rest(self, tick: int, frames, need: np.ndarray, last_u: np.ndarray, choice: np.ndarray, u: np.ndarray,
+             hops: np.ndarray) -> None:
+        """StickyFollower.step and the law for the followers `need`, written into choice, u,
+        hops (B, N) in place."""
+        if not need.any():
+            return
+        time = tick * self.dt
+        members = np.flatnonzero(need.any(axis=1))
+        sensed, rng = frames.matrices(members)
+        for k, b in enumerate(members.tolist()):
+            col = self.col[b]
+            for i in np.flatnonzero(need[b]).tolist():
+                f = self.agents[(b, i)]
+                if not self.fresh[b, i]:
+                    self._load(f, b, i)
+                heading = float(frames.heading[b, i])
+                ch, search = f.step(frames.contacts(b, i, sensed[k, i], rng[k, i]), heading, time,
+                                    float(last_u[b, i]))
+                self._store(f, b, i, col)
+                c, g = ch.contact, self.gains[b]
+                if c is None:
+                    spec = self.specs[b][i]
+                    u[b, i] = math.copysign(g.c2, float(last_u[b, i]) or 1.0) if search is None else \
+                        on_orbit_command(-search.x, -search.y, heading, spec.speed, search.radius, search.direction,
+                                         spec.max_turn_rate)
+                    choice[b, i], hops[b, i] = NONE, NONE
+                else:
+                    u[b, i] = bearing_law(heading, c.heading, c.bearing, g.c1, g.c2)
+                    choice[b, i] = col[c.id]
+                    hops[b, i] = c.hops + 1 if ch.rooted and 0 <= c.hops < self.max_hops else NONE
+
+    def _load(self, f: StickyFollower, b: int, i: int) -> None:
+        """Bring the scalar follower up to date after keeps (what they changed)."""
+        st, tr, mem = f.sticky, f.tracker, f.memory
+        st.held = st.coasted = st.silent = 0
+        st.feasible = int(self.feasible[b, i])
+        ids = self.specs[b]
+        tr.last = self.last.get(b, i, ids)
+        tr.prev = self.prev.get(b, i, ids)
+        tr.state = tr.predicted = None
+        s = tr.last
+        mem.anchor, mem.home, mem.prev = (s.range, s.bearing), None, (s.own, s.time)  # type: ignore[union-attr]
+        self.fresh[b, i] = True
+
+    def _store(self, f: StickyFollower, b: int, i: int, col: dict) -> None:
+        """The arrays after a scalar step."""
+        st, tr = f.sticky, f.tracker
+        self.out[b, i] = NONE if st.out is None else col[st.out]
+        self.committed[b, i] = st.committed
+        self.feasible[b, i] = NONE if st.feasible is None else st.feasible
+        self.last.set(b, i, tr.last, col)
+        self.prev.set(b, i, tr.prev, col)
+
+    def stats(self, b: int, i: int) -> dict:
+        """Loss figures of one follower (as AgentBrain reports them)."""
+        f = self.agents.get((b, i))
+        return {} if f is None else f.sticky.loss_figures()
+
+
+class _Sightings:
+    """agents.coast.Sighting over (B, N) arrays (`valid` False: None)."""
+
+    FIELDS = ("time", "range", "bearing", "heading", "own")
+
+    def __init__(self, shape):
+        self.valid = np.zeros(shape, dtype=bool)
+        self.col = np.full(shape, NONE, dtype=np.int64)
+        self.hops = np.full(shape, NONE, dtype=np.int64)
+        for name in self.FIELDS:
+            setattr(self, name, np.zeros(shape))
+
+    def put(self, where, col, time, rng, bearing, heading, hops, own) -> None:
+        self.valid |= where
+        self.col = np.where(where, col, self.col)
+        self.hops = np.where(where, hops, self.hops)
+        for name, v in zip(self.FIELDS, (time, rng, bearing, heading, own)):
+            setattr(self, name, np.where(where, v, getattr(self, name)))
+
+    def assign(self, where, other: "_Sightings", same) -> None:
+        """self = other where `where` and `same`, None where `where` and not `same`."""
+        take = where & same
+        self.valid = np.where(where, take & other.valid, self.valid)
+        self.col = np.where(take, other.col, self.col)
+        self.hops = np.where(take, other.hops, self.hops)
+        for name in self.FIELDS:
+            setattr(self, name, np.where(take, getattr(other, name), getattr(self, name)))
+
+    def get(self, b: int, i: int, specs) -> Sighting | None:
+        if not self.valid[b, i]:
+            return None
+        return Sighting(specs[int(self.col[b, i])].id, float(self.time[b, i]), float(self.range[b, i]),
+                        float(self.bearing[b, i]), float(self.heading[b, i]), int(self.hops[b, i]),
+                        float(self.own[b, i]))
+
+    def set(self, b: int, i: int, s: Sighting | None, col: dict) -> None:
+        self.valid[b, i] = s is not None
+        if s is not None:
+            self.col[b, i], self.hops[b, i] = col[s.id], s.hops
+            for name in self.FIELDS:
+                getattr(self, name)[b, i] = getattr(s, name)
+

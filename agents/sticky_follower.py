@@ -1,0 +1,49 @@
+"""One sticky follower's choice of the tick, with everything it keeps between ticks.
+
+`StickyFollower.step` is the whole of it: whom to steer by (agents/selection.Sticky),
+where the out-neighbour must be while it coasts out of sight (agents/coast.Tracker), and
+where to search while it has nobody (agents/search.SearchMemory). AgentBrain calls it on
+every frame; the batch brains (agents/batch.py) call it for the followers whose tick is
+not a plain keep, so both engines make the same choices with the same bits.
+Pure: no I/O.
+"""
+
+from __future__ import annotations
+
+from agents.coast import Tracker, coast_ticks
+from agents.search import SearchMemory
+from agents.selection import Choice, Sticky, nearest, reach
+from swarm.contracts.frames import Contact
+from swarm.contracts.observation import Search
+
+
+class StickyFollower:
+    """A follower under selection = "sticky" (see agents/selection.Sticky)."""
+
+    __slots__ = ("sticky", "tracker", "memory")
+
+    def __init__(self, spec, gains, sensing, dt: float, max_hops: int):
+        """spec/gains/sensing: the scenario's AgentSpec/GainsSpec/SensingSpec or the
+        swarm.contracts.brain_config equivalents; max_hops: the deepest a path can be."""
+        sensing_range, fov = getattr(sensing, "range", None), getattr(sensing, "fov", None)
+        self.sticky = Sticky(max_hops, max_hops, spec.id, reach(sensing_range), coast_ticks=coast_ticks(dt))
+        self.tracker = Tracker(sensing_range, fov, spec.speed)
+        self.memory = SearchMemory(sensing_range, spec.speed, gains.c2, spec.max_turn_rate)
+
+    def step(self, contacts: tuple[Contact, ...], heading: float, time: float,
+             last_u: float) -> tuple[Choice, Search | None]:
+        """This tick's choice, and the search circle to fly when it has nobody to steer by."""
+        tracker = self.tracker
+
+        def coast(out: int) -> Contact | None:
+            return tracker.predict(out, heading, time)
+
+        choice = self.sticky.choose(contacts, coast)
+        c = choice.contact
+        if c is None:
+            tracker.forget()
+        elif c is not tracker.predicted:  # sensed, not predicted
+            tracker.sighted(c, heading, time)
+        # nobody to steer by: search about the nearest agent it senses with a path to a leader
+        seen = None if c is not None else nearest(tuple(k for k in contacts if k.hops >= 0))
+        return choice, self.memory.update(c, seen, heading, time, last_u)
