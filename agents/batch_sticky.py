@@ -89,7 +89,7 @@ class BatchSticky:
                     self._load(f, b, i)
                 heading = float(frames.heading[b, i])
                 ch, search = f.step(frames.contacts(b, i, sensed[k, i], rng[k, i]), heading, time,
-                                    float(last_u[b, i]))
+                                    float(last_u[b, i]), tick)
                 self._store(f, b, i, col)
                 c, g = ch.contact, self.gains[b]
                 if c is None:

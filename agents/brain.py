@@ -100,7 +100,7 @@ class AgentBrain:
     def _follower(self, frame: SensorFrame) -> Decision:
         search = None
         if self.sticky is not None:
-            choice, search = self.sticky.step(frame.contacts, frame.heading, frame.time, self.last_u)
+            choice, search = self.sticky.step(frame.contacts, frame.heading, frame.time, self.last_u, frame.tick)
         else:
             choice = select(frame.contacts, mode=self.sensing.selection, pinned=self.spec.follow,
                             current=self.out, hysteresis=self.sensing.hysteresis, below=self._below())

@@ -16,7 +16,9 @@ predicts it, and keeps advertising the path it had through it:
   out by dead reckoning (agents/search.drift).
 
 An out-neighbour that vanishes from the middle of the sensor's reach has dropped out: no
-coasting, the follower reacts on that tick. Pure: no I/O; scalar `math` only, so the
+coasting, the follower reacts on that tick; and coasting ends as soon as the prediction
+falls back inside the sensor's sure reach (short of the edge) without the agent being
+sensed there: the prediction is wrong. Pure: no I/O; scalar `math` only, so the
 batch brains call the same code per coasting follower and get the same bits.
 """
 
@@ -74,10 +76,15 @@ class Tracker:
         self.last = self.prev = None
         self.state = self.predicted = None
 
+    def _outside(self, rng: float, bearing: float, own: float) -> bool:
+        """Is a point at (rng, bearing) from a follower heading `own` at the edge of its
+        sensor's reach or beyond (where the sensor may miss it)?"""
+        return rng >= self.edge_range or abs(wrap(bearing - own)) >= self.edge_angle
+
     def at_edge(self) -> bool:
         """Was the last sighting at the edge of the sensor's reach?"""
         s = self.last
-        return s is not None and (s.range >= self.edge_range or abs(wrap(s.bearing - s.own)) >= self.edge_angle)
+        return s is not None and self._outside(s.range, s.bearing, s.own)
 
     def predict(self, out: int, heading: float, time: float) -> Contact | None:
         """The predicted contact of `out` at this tick (own heading, time), or None when it
@@ -99,5 +106,8 @@ class Tracker:
         x, y = drift(x + v * el * math.cos(mid), y + v * el * math.sin(mid), own, heading, self.speed, el)
         g = g + w * el
         self.state = (x, y, g, v, w, heading, time)
-        self.predicted = Contact(out, math.atan2(y, x), wrap(g), math.hypot(x, y), self.last.hops)  # type: ignore[union-attr]
-        return self.predicted
+        p = Contact(out, math.atan2(y, x), wrap(g), math.hypot(x, y), self.last.hops)  # type: ignore[union-attr]
+        if not self._outside(p.range, p.bearing, heading):  # it would be sensed there: it is not there
+            return None
+        self.predicted = p
+        return p

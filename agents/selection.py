@@ -153,16 +153,21 @@ class Sticky:
 
     __slots__ = ("wait_ticks", "drain_ticks", "hold_ticks", "coast_ticks", "quiet", "me", "reach", "out",
                  "committed", "acquired", "feasible", "waited", "silent", "held", "coasted", "shadowed",
-                 "losses", "in_loss", "loss_changes", "worst_loss")
+                 "patience", "losses", "in_loss", "loss_changes", "worst_loss")
 
     def __init__(self, wait_ticks: int, drain_ticks: int, me: int | None = None, reach: float = math.inf,
-                 hold_ticks: int = HOLD_TICKS, coast_ticks: int = 0):
+                 hold_ticks: int = HOLD_TICKS, coast_ticks: int = 0, late: bool = False):
         self.wait_ticks = wait_ticks
         self.hold_ticks = hold_ticks
         self.coast_ticks = coast_ticks
         # silent this long, nobody holds it or coasts on it any more: it may shadow
-        self.quiet = max(hold_ticks, coast_ticks + 1)
+        self.quiet = max(hold_ticks, coast_ticks) + 1
         self.drain_ticks = max(drain_ticks, self.quiet + 1)  # nobody resets while held (see the proof)
+        # late: joined a run already under way (restarted, or added): stays out of everybody's way
+        # until nothing can still point at, or advertise a path through, an earlier life of it
+        self.patience = 0
+        if late:
+            self.late_join()
         self.me = me  # own id: shadows of agents without a path go to lower ids only (None: never)
         self.reach = reach  # new choices within this range only (m); kept ones while sensed
         self.out: int | None = None
@@ -178,6 +183,10 @@ class Sticky:
         self.in_loss = False  # lost one and not committed again yet
         self.loss_changes = 0  # changes of out since that loss
         self.worst_loss = 0  # the most changes of out any one loss has cost
+
+    def late_join(self) -> None:
+        """It joined a run already under way (see `patience`)."""
+        self.patience = self.quiet + self.drain_ticks
 
     def loss_figures(self) -> dict:
         """losses: committed out-neighbours lost; loss_switches_max: the most changes of
@@ -203,6 +212,9 @@ class Sticky:
         return ch
 
     def _choose(self, contacts: tuple[Contact, ...], coast) -> Choice:
+        if self.patience:
+            self.patience -= 1
+            return Choice(None, None, False, False)
         reach = self.reach
         if self.committed:
             for c in contacts:
@@ -211,7 +223,7 @@ class Sticky:
                         self.held = self.coasted = 0
                         self.feasible = min(self.feasible, c.hops + 1)  # type: ignore[type-var]
                         return Choice(c.id, c, False, True)
-                    if self.held < self.hold_ticks:  # hold on: it may root again
+                    if self.held < self.hold_ticks and not self.coasted:  # hold on: it may root again
                         self.held += 1
                         return Choice(c.id, c, False, False)
                     break

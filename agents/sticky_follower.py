@@ -20,7 +20,7 @@ from swarm.contracts.observation import Search
 class StickyFollower:
     """A follower under selection = "sticky" (see agents/selection.Sticky)."""
 
-    __slots__ = ("sticky", "tracker", "memory")
+    __slots__ = ("sticky", "tracker", "memory", "fresh")
 
     def __init__(self, spec, gains, sensing, dt: float, max_hops: int):
         """spec/gains/sensing: the scenario's AgentSpec/GainsSpec/SensingSpec or the
@@ -29,10 +29,16 @@ class StickyFollower:
         self.sticky = Sticky(max_hops, max_hops, spec.id, reach(sensing_range), coast_ticks=coast_ticks(dt))
         self.tracker = Tracker(sensing_range, fov, spec.speed)
         self.memory = SearchMemory(sensing_range, spec.speed, gains.c2, spec.max_turn_rate)
+        self.fresh = True  # no frame yet
 
-    def step(self, contacts: tuple[Contact, ...], heading: float, time: float,
-             last_u: float) -> tuple[Choice, Search | None]:
-        """This tick's choice, and the search circle to fly when it has nobody to steer by."""
+    def step(self, contacts: tuple[Contact, ...], heading: float, time: float, last_u: float,
+             tick: int = 0) -> tuple[Choice, Search | None]:
+        """This tick's choice, and the search circle to fly when it has nobody to steer by.
+        tick: the frame's; a follower whose first frame is not the run's first joined late."""
+        if self.fresh:
+            self.fresh = False
+            if tick > 0:
+                self.sticky.late_join()
         tracker = self.tracker
 
         def coast(out: int) -> Contact | None:
