@@ -114,6 +114,7 @@ class BatchSticky:
         tr.state = tr.predicted = None
         s = tr.last
         mem.anchor, mem.home, mem.prev = (s.range, s.bearing), None, (s.own, s.time)  # type: ignore[union-attr]
+        mem.searching = False
         self.fresh[b, i] = True
 
     def _store(self, f: StickyFollower, b: int, i: int, col: dict) -> None:

@@ -39,6 +39,7 @@ from swarm.contracts.observation import Search
 from swarm.contracts.orbits import wrap
 
 PITCH = 0.5  # spiral pitch, in sensing ranges: p = PITCH * R (also the first radius)
+SEEN = 0.25  # the circle about a rooted agent it sees but may not take yet, in first radii
 MIN_TURN_MARGIN = 1.25  # radius at least this times v / max_turn_rate (the tightest circle)
 
 
@@ -54,8 +55,23 @@ def pattern(sensing_range: float | None, speed: float, c2: float,
 
 
 def radius(rho0: float, pitch: float, rho_min: float, speed: float, tau: float) -> float:
-    """rho(tau) = sqrt(rho0^2 + p v tau / pi), at least rho_min (m)."""
-    return max(rho_min, math.sqrt(rho0 * rho0 + pitch * speed * tau / math.pi))
+    """The search circle's radius after tau s of searching (m): a spiral of pitch p that
+    breathes, out from rho0 to 2 x rho0 x 2^k and back in again, k = 1, 2, 3...: on the
+    way out rho = sqrt(rho0^2 + p v s / pi) after s s, and the same backwards on the way
+    in. At least rho_min. Without a pitch (unlimited sensing): rho0."""
+    if pitch <= 0.0:
+        return max(rho_min, rho0)
+    rate = pitch * speed / math.pi  # area swept per s, over pi (m^2/s)
+    s, top = tau, 4.0 * rho0
+    while True:
+        leg = (top * top - rho0 * rho0) / rate  # s from rho0 out to `top`
+        if s <= 2.0 * leg:
+            break
+        s -= 2.0 * leg
+        top *= 2.0
+    if s > leg:
+        s = 2.0 * leg - s
+    return max(rho_min, math.sqrt(rho0 * rho0 + rate * s))
 
 
 def anchor_point(rng: float, bearing: float) -> tuple[float, float]:
@@ -73,33 +89,35 @@ def drift(hx: float, hy: float, h0: float, h1: float, speed: float, elapsed: flo
 class SearchMemory:
     """A follower's anchor, home and search clock (module docstring); one per brain."""
 
-    __slots__ = ("rho0", "pitch", "rho_min", "speed", "anchor", "home", "since", "direction", "prev")
+    __slots__ = ("rho0", "pitch", "rho_min", "speed", "anchor", "home", "searching", "since", "direction", "prev")
 
     def __init__(self, sensing_range: float | None, speed: float, c2: float, max_turn_rate: float | None):
         self.rho0, self.pitch, self.rho_min = pattern(sensing_range, speed, c2, max_turn_rate)
         self.speed = speed
         self.anchor: tuple[float, float] | None = None  # (range, bearing) last sensed
-        self.home: tuple[float, float] | None = None  # while searching: home minus own position
+        self.home: tuple[float, float] | None = None  # the anchor minus own position since, if carried
+        self.searching = False
         self.since = 0.0  # time the search began (s)
         self.direction = 1
         self.prev: tuple[float, float] | None = None  # (heading, time) of the previous tick
 
-    def update(self, steer, seen, heading: float, time: float, last_u: float) -> Search | None:
-        """One tick. steer: the Contact it steers by (None: nobody); seen: else the nearest
-        agent it senses with a path to a leader, which it may not take yet (None: none).
-        Returns the circle to fly, None while it steers by somebody."""
+    def update(self, steer, seen, heading: float, time: float, last_u: float,
+               predicted: bool = False) -> Search | None:
+        """One tick. steer: the Contact it steers by (None: nobody), `predicted` when that
+        is a coasting prediction (agents/coast.py: not a sighting, home is carried on);
+        seen: with nobody to steer by, the nearest agent it senses with a path to a leader,
+        which it may not take yet (None: none). Returns the circle to fly, None while it
+        steers by somebody."""
         prev, self.prev = self.prev, (heading, time)
-        if steer is not None:
+        if steer is not None and not predicted:
             self.anchor = (steer.range, steer.bearing)
             self.home = None
+            self.searching = False
             return None
-        if self.home is None:  # nobody to steer by since this tick
-            self.since, self.direction = time, (1 if last_u >= 0.0 else -1)
         if seen is not None:  # circle the rooted agent it sees, at the first radius, until it may take it
             self.anchor = (seen.range, seen.bearing)
             self.home = anchor_point(*self.anchor)
-            self.since = time
-        elif self.home is None:  # contact lost on this tick: home is where the anchor was
+        elif self.home is None:  # the anchor was sensed on the previous tick (or never)
             if self.anchor is None:
                 self.home = (0.0, 0.0)  # never sensed anybody: about where it is
             else:
@@ -108,5 +126,14 @@ class SearchMemory:
                     self.home = drift(self.home[0], self.home[1], prev[0], heading, self.speed, time - prev[1])
         elif prev is not None:
             self.home = drift(self.home[0], self.home[1], prev[0], heading, self.speed, time - prev[1])
+        if steer is not None:  # coasting: home carried along, the law flies by the prediction
+            self.searching = False
+            return None
+        if not self.searching:
+            self.searching, self.direction = True, (1 if last_u >= 0.0 else -1)
+            self.since = time
+        if seen is not None:  # close in on it: a tight circle about where it is now
+            self.since = time
+            return Search(self.home[0], self.home[1], max(self.rho_min, SEEN * self.rho0), self.direction)
         return Search(self.home[0], self.home[1],
                       radius(self.rho0, self.pitch, self.rho_min, self.speed, time - self.since), self.direction)

@@ -22,6 +22,7 @@ import math
 from typing import Callable, NamedTuple
 
 from swarm.contracts.frames import Contact
+from swarm.contracts.orbits import wrap
 
 
 REACH = 0.85  # sticky: new choices within this fraction of the sensing range only
@@ -34,6 +35,11 @@ def reach(sensing_range: float | None) -> float:
     range (inf when unlimited). Kept choices last while sensed at all, so an agent near the
     edge of the range, in and out of sight, is not taken and lost tick after tick."""
     return math.inf if sensing_range is None else REACH * sensing_range
+
+
+def cone(fov: float | None) -> float | None:
+    """The same for a field of view: new choices within REACH x half of it from the heading."""
+    return None if fov is None or fov >= 2 * math.pi else REACH * 0.5 * fov
 
 
 class Choice(NamedTuple):
@@ -153,10 +159,11 @@ class Sticky:
 
     __slots__ = ("wait_ticks", "drain_ticks", "hold_ticks", "coast_ticks", "quiet", "me", "reach", "out",
                  "committed", "acquired", "feasible", "waited", "silent", "held", "coasted", "shadowed",
-                 "patience", "losses", "in_loss", "loss_changes", "worst_loss")
+                 "patience", "late", "cone", "heading", "losses", "in_loss", "loss_changes", "worst_loss")
 
     def __init__(self, wait_ticks: int, drain_ticks: int, me: int | None = None, reach: float = math.inf,
-                 hold_ticks: int = HOLD_TICKS, coast_ticks: int = 0, late: bool = False):
+                 hold_ticks: int = HOLD_TICKS, coast_ticks: int = 0, late: bool = False,
+                 cone: float | None = None):
         self.wait_ticks = wait_ticks
         self.hold_ticks = hold_ticks
         self.coast_ticks = coast_ticks
@@ -166,10 +173,13 @@ class Sticky:
         # late: joined a run already under way (restarted, or added): stays out of everybody's way
         # until nothing can still point at, or advertise a path through, an earlier life of it
         self.patience = 0
+        self.late = False
         if late:
             self.late_join()
         self.me = me  # own id: shadows of agents without a path go to lower ids only (None: never)
         self.reach = reach  # new choices within this range only (m); kept ones while sensed
+        self.cone = cone  # ... and within this angle of its heading (rad; None: any), given each tick:
+        self.heading = 0.0  # its own heading (rad)
         self.out: int | None = None
         self.committed = False  # rooted through `out` (advertising hops), or holding it
         self.acquired = False  # has committed at least once since the brain started
@@ -185,13 +195,21 @@ class Sticky:
         self.worst_loss = 0  # the most changes of out any one loss has cost
 
     def late_join(self) -> None:
-        """It joined a run already under way (see `patience`)."""
-        self.patience = self.quiet + self.drain_ticks
+        """It joined a run already under way (restarted, or added): it chooses nobody until
+        every stale advertisement of a path through an earlier life of it has drained
+        (wait_ticks, the deepest a path can be), and shadows nobody until nobody can still
+        hold or coast on that earlier life (`quiet`)."""
+        self.patience = self.wait_ticks + 1
+        self.late = True
 
     def loss_figures(self) -> dict:
         """losses: committed out-neighbours lost; loss_switches_max: the most changes of
         out-neighbour any one of them cost before it committed again (at most LOSS_CHANGES)."""
         return {"losses": self.losses, "loss_switches_max": self.worst_loss}
+
+    def _reachable(self, c: Contact) -> bool:
+        """May it be a new choice: within `reach`, and within `cone` of the own heading?"""
+        return c.range <= self.reach and (self.cone is None or abs(wrap(c.bearing - self.heading)) <= self.cone)
 
     def _shadow_ok(self, c: Contact) -> bool:
         return c.hops >= 0 or (self.me is not None and c.id < self.me)
@@ -215,7 +233,6 @@ class Sticky:
         if self.patience:
             self.patience -= 1
             return Choice(None, None, False, False)
-        reach = self.reach
         if self.committed:
             for c in contacts:
                 if c.id == self.out:
@@ -230,9 +247,9 @@ class Sticky:
             else:
                 if coast is not None and self.held == 0 and self.coasted < self.coast_ticks:
                     p = coast(self.out)
-                    if p is not None:  # out of sight at the edge: keep it where it must be
+                    if p is not None:  # out of sight at the edge: steer by where it must be, silent
                         self.coasted += 1
-                        return Choice(p.id, p, False, True)
+                        return Choice(p.id, p, False, False)
             self.committed = False  # lost: out of sight, gone, or held too long
             self.held = self.coasted = self.shadowed = self.loss_changes = 0
             self.losses += 1
@@ -241,7 +258,7 @@ class Sticky:
         if self.feasible is not None and self.silent >= self.drain_ticks:
             self.feasible = None  # stale advertisements have drained
         rooted = tuple(c for c in contacts if c.hops >= 0 and (self.feasible is None or c.hops < self.feasible))
-        best = nearest(tuple(c for c in rooted if c.range <= reach))
+        best = nearest(tuple(c for c in rooted if self._reachable(c)))
         if self.acquired:
             for c in rooted:  # the agent it shadows has rooted: commit to it
                 if c.id == self.out:
@@ -258,7 +275,7 @@ class Sticky:
             self.committed = self.acquired = True
             self.feasible = best.hops + 1 if self.feasible is None else min(self.feasible, best.hops + 1)
             return Choice(best.id, best, False, True)
-        if self.acquired and self.silent < self.quiet:  # somebody may still hold it, or coast on it
+        if (self.acquired or self.late) and self.silent < self.quiet:  # somebody may still hold it, or coast on it
             self.out = None
             return Choice(None, None, False, False)
         for c in contacts:  # keep the agent it shadows while it can
@@ -266,8 +283,8 @@ class Sticky:
                 return Choice(c.id, c, False, False)
         shadow = None
         if self.shadowed == 0 or not self.acquired:
-            shadow = nearest(tuple(c for c in contacts if c.hops >= 0 and c.range <= reach)) or \
-                nearest(tuple(c for c in contacts if self._shadow_ok(c) and c.range <= reach))
+            shadow = nearest(tuple(c for c in contacts if c.hops >= 0 and self._reachable(c))) or \
+                nearest(tuple(c for c in contacts if self._shadow_ok(c) and self._reachable(c)))
         if shadow is None:
             self.out = None
             return Choice(None, None, False, False)

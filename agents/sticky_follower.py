@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from agents.coast import Tracker, coast_ticks
 from agents.search import SearchMemory
-from agents.selection import Choice, Sticky, nearest, reach
+from agents.selection import HOLD_TICKS, Choice, Sticky, cone, nearest, reach
 from swarm.contracts.frames import Contact
 from swarm.contracts.observation import Search
 
@@ -26,7 +26,9 @@ class StickyFollower:
         """spec/gains/sensing: the scenario's AgentSpec/GainsSpec/SensingSpec or the
         swarm.contracts.brain_config equivalents; max_hops: the deepest a path can be."""
         sensing_range, fov = getattr(sensing, "range", None), getattr(sensing, "fov", None)
-        self.sticky = Sticky(max_hops, max_hops, spec.id, reach(sensing_range), coast_ticks=coast_ticks(dt))
+        coast = coast_ticks(dt)  # holds last as long as coasts: a subtree waits out its root's coast
+        self.sticky = Sticky(max_hops, max_hops, spec.id, reach(sensing_range), hold_ticks=max(HOLD_TICKS, coast),
+                             coast_ticks=coast, cone=cone(fov))
         self.tracker = Tracker(sensing_range, fov, spec.speed)
         self.memory = SearchMemory(sensing_range, spec.speed, gains.c2, spec.max_turn_rate)
         self.fresh = True  # no frame yet
@@ -40,16 +42,18 @@ class StickyFollower:
             if tick > 0:
                 self.sticky.late_join()
         tracker = self.tracker
+        self.sticky.heading = heading
 
         def coast(out: int) -> Contact | None:
             return tracker.predict(out, heading, time)
 
         choice = self.sticky.choose(contacts, coast)
         c = choice.contact
+        predicted = c is not None and c is tracker.predicted
         if c is None:
             tracker.forget()
-        elif c is not tracker.predicted:  # sensed, not predicted
+        elif not predicted:
             tracker.sighted(c, heading, time)
         # nobody to steer by: search about the nearest agent it senses with a path to a leader
         seen = None if c is not None else nearest(tuple(k for k in contacts if k.hops >= 0))
-        return choice, self.memory.update(c, seen, heading, time, last_u)
+        return choice, self.memory.update(c, seen, heading, time, last_u, predicted)

@@ -104,12 +104,16 @@ class SwarmRow:
 
     seed: int
     converged: bool  # every live agent within 1% of its expected radius at the end
-    cut_off: bool  # see cut_off_at_start: reported apart, not as a failure of the policy
+    cut_off: bool  # see cut_off_at_start: counted like every run, and also shown apart
     settling_time: float  # s, the last agent into the 2% band for good; nan if not settled
     switches: int  # all followers' out-neighbour changes
     switches_max: int  # the most any one follower made
     switch_counts: str  # per follower, ';'-separated (for medians over agents)
     unrooted: int  # followers with no path to a live leader at the end
+    searching_s: float  # s a follower spent with nobody to steer by, mean over followers
+    searching_max_s: float  # ... the most any one follower spent
+    losses: int  # all followers' losses of a committed out-neighbour (selection "sticky")
+    loss_switches_max: int  # the most changes of out-neighbour any one loss cost
     wall_s: float
 
 
@@ -129,13 +133,20 @@ def swarm_row(setting: SwarmSetting, seed: int, cut: bool, res, wall: float) -> 
     """The CSV row of one run's RunResult (either engine's)."""
     summary = res.summary()
     a = res.recorder.arrays()
-    counts = [len(k) for k, r in zip(switch_ticks(a["out"], a["alive"]), a["role"]) if r == "follower"]
+    follower = a["role"] == "follower"
+    counts = [len(k) for k, f in zip(switch_ticks(a["out"], a["alive"]), follower) if f]
     agents = summary["agents"].values()
     settle = [v["settling_time"] for v in agents]
+    dt = float(a["t"][1] - a["t"][0]) if len(a["t"]) > 1 else 0.0
+    searching = ((a["out"][:-1] < 0) & a["alive"][:-1]).sum(axis=0)[follower] * dt  # the last row is the end
+    fol = [v for v in agents if v["role"] == "follower"]
     row = SwarmRow(seed, bool(summary["converged"]), cut,
                    max(settle) if settle and None not in settle else math.nan,
                    sum(counts), max(counts, default=0), ";".join(map(str, counts)),
-                   sum(1 for v in agents if v["role"] == "follower" and v["root"] is None), wall)
+                   sum(1 for v in fol if v["root"] is None),
+                   float(searching.mean()) if searching.size else 0.0, float(searching.max(initial=0.0)),
+                   sum(v.get("losses", 0) for v in fol), max((v.get("loss_switches_max", 0) for v in fol), default=0),
+                   wall)
     return {**asdict(setting), **asdict(row)}
 
 
@@ -153,31 +164,36 @@ def setting_of(row: dict) -> tuple:
 
 
 def summarise_swarms(rows: list[dict]) -> list[dict]:
-    """One line per setting: runs, converged fraction (cut-off swarms apart), settling
-    times and switches per follower."""
+    """One line per setting: runs, converged fraction over every run (and, apart, how
+    many were cut off at t = 0 and how those fared), settling times, switches per
+    follower, time spent searching and the worst loss's switches."""
     groups: dict[tuple, list[dict]] = {}
     for r in rows:
         groups.setdefault(setting_of(r), []).append(r)
     out = []
     for key, rs in groups.items():
         setting = SwarmSetting(*key)
-        fair = [r for r in rs if not is_true(r["cut_off"])]
         cut = [r for r in rs if is_true(r["cut_off"])]
-        conv = [r for r in fair if is_true(r["converged"])]
+        conv = [r for r in rs if is_true(r["converged"])]
         settle = sorted(float(r["settling_time"]) for r in conv if math.isfinite(float(r["settling_time"])))
         per_agent = [int(c) for r in rs for c in str(r["switch_counts"]).split(";") if c != ""]
+        search = sorted(float(r.get("searching_s", math.nan)) for r in rs)
         out.append({
             "setting": setting.label(),
             "runs": len(rs),
             "cut_off": len(cut),
             "cut_off_converged": sum(1 for r in cut if is_true(r["converged"])),
             "converged": len(conv),
-            "converged_fraction": len(conv) / len(fair) if fair else math.nan,
+            "converged_fraction": len(conv) / len(rs) if rs else math.nan,
             "settling_median_s": statistics.median(settle) if settle else math.nan,
             "settling_p90_s": settle[min(len(settle) - 1, int(0.9 * len(settle)))] if settle else math.nan,
             "switches_median": statistics.median(per_agent) if per_agent else math.nan,
             "switches_p90": sorted(per_agent)[int(0.9 * (len(per_agent) - 1))] if per_agent else math.nan,
             "switches_max": max(per_agent, default=0),
+            "searching_median_s": statistics.median(search) if search else math.nan,
+            "searching_max_s": max((float(r.get("searching_max_s", math.nan)) for r in rs), default=math.nan),
+            "losses": sum(int(r.get("losses", 0)) for r in rs),
+            "loss_switches_max": max((int(r.get("loss_switches_max", 0)) for r in rs), default=0),
             **{k: getattr(setting, k) for k in ("n", "leaders", "selection", "range", "fov")},
         })
     return out

@@ -160,9 +160,10 @@ def swarms(
 
     One setting per combination of the list options (--n, --leaders, --selection, --range).
 
-    Swarms whose followers cannot all reach a leader in the sensing graph at t = 0 (a
-    range or field of view cuts them off) are counted apart as `cut_off`, not as failures.
-    Writes runs.csv (one row per run, as it finishes), summary.csv and study.png.
+    Every run counts in the converged share. Swarms whose followers cannot all reach a
+    leader in the sensing graph at t = 0 (a range or field of view cuts them off) are
+    also shown apart (`cut off`, and how many of those converged). Writes runs.csv (one
+    row per run, as it finishes), summary.csv and study.png.
 
     By default each worker runs a batch of seeds at once as arrays (the batch engine,
     equal to swarm sim's per-agent engine: the same rows); --per-agent runs them one by one.
@@ -196,14 +197,19 @@ def swarms(
         "swarms", worker, job_list, swarm_columns(), summarise_swarms, jobs, out,
         f"{len(settings)} setting(s) x {seeds} seeds = {runs} runs of {duration:g} s (dt {dt:g} s), "
         + (f"{len(job_list)} batches" if batch else "per-agent engine"), runs)
-    _table(summary, [("setting", "setting", str), ("runs", "runs", str), ("cut off", "cut_off", str),
+    _table(summary, [("setting", "setting", str), ("runs", "runs", str),
                      ("converged", "converged_fraction", _num(".1%")),
+                     ("cut off (conv.)", "cut_off", str), ("", "cut_off_converged", lambda v: f"({v})"),
                      ("settle med s", "settling_median_s", _num(".0f")),
                      ("settle p90 s", "settling_p90_s", _num(".0f")),
                      ("switches med", "switches_median", _num("g")), ("p90", "switches_p90", _num("g")),
-                     ("max", "switches_max", _num("g"))])
-    typer.echo("converged: fraction of the runs not cut off at t = 0 in which every agent ends within 1% "
-               "of its expected radius; switches: per follower")
+                     ("max", "switches_max", _num("g")),
+                     ("search med s", "searching_median_s", _num(".1f")),
+                     ("per loss max", "loss_switches_max", _num("g"))])
+    typer.echo("converged: share of all runs in which every agent ends within 1% of its expected radius; "
+               "cut off: runs with a follower that has no sensing path to a leader at t = 0; switches: "
+               "per follower; search: s a follower spends with nobody to steer by (median over runs of "
+               "the mean per follower); per loss: the most switches one loss of an out-neighbour cost")
     if plot and summary:
         from swarm.study_plots import plot_swarms
 

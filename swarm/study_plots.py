@@ -17,7 +17,7 @@ from swarm.study import SwarmSetting, is_true, setting_of  # noqa: E402
 
 
 def plot_swarms(summary: list[dict], rows: list[dict], path: Path) -> Path:
-    """Three panels per setting: converged fraction (runs cut off at t = 0 apart),
+    """Three panels per setting: converged fraction of all runs (how many were cut off at t = 0 noted),
     settling times of the converged runs, and switches per follower."""
     labels = [s["setting"] for s in summary]
     by_label: dict[str, list[dict]] = {}
@@ -29,8 +29,7 @@ def plot_swarms(summary: list[dict], rows: list[dict], path: Path) -> Path:
     frac = [s["converged_fraction"] if math.isfinite(s["converged_fraction"]) else 0.0 for s in summary]
     ax.barh(y, frac, color=["tab:green" if f >= 0.99 else "tab:orange" if f >= 0.5 else "tab:red" for f in frac])
     for k, s in enumerate(summary):
-        fair = s["runs"] - s["cut_off"]
-        note = f" {s['converged']}/{fair}" + (f" (+{s['cut_off']} cut off)" if s["cut_off"] else "")
+        note = f" {s['converged']}/{s['runs']}" + (f" ({s['cut_off']} cut off at t = 0)" if s["cut_off"] else "")
         ax.text(min(frac[k], 0.55), k, note, va="center", fontsize=8)
     ax.set_yticks(y, labels, fontsize=8)
     ax.set_xlim(0, 1)

@@ -76,7 +76,26 @@ def test_random_30_agent_swarm_whole_run_equals_swarm_sim():
     ref, (got,) = run_sim(s), run_batch([s])
     assert_same_run(ref, got)
     reasons = {e["reason"] for e in ref.events}
-    assert {"out-neighbour chosen", "no out-neighbour: loitering", "out-neighbour out of sight"} <= reasons
+    assert {"out-neighbour chosen", "no out-neighbour: searching", "out-neighbour out of sight"} <= reasons
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name, make", [
+    ("range 40 m", lambda: random_swarm(SwarmSetting(range=40.0, duration=150.0), 7)),
+    ("range 60 m, fov 180 deg", lambda: random_swarm(SwarmSetting(range=60.0, fov=math.pi, duration=150.0), 8)),
+    ("case2-range", lambda: load_scenario(SCENARIOS / "case2-range.toml")),
+    ("case2-fov", lambda: load_scenario(SCENARIOS / "case2-fov.toml")),
+])
+def test_limited_sensing_whole_run_equals_swarm_sim(name, make):
+    """Holds, coasts, shadows and searches (the followers' slow path, one by one) beside
+    keeps over arrays: the same bits, the same events, the same loss figures."""
+    s = make()
+    ref, (got,) = run_sim(s), run_batch([s])
+    assert_same_run(ref, got)
+    a, b = ref.summary()["agents"], got.summary()["agents"]
+    assert {k: (v.get("losses"), v.get("loss_switches_max")) for k, v in a.items()} == \
+        {k: (v.get("losses"), v.get("loss_switches_max")) for k, v in b.items()}
+    assert sum(v.get("losses", 0) for v in a.values()) > 0  # the rule's other states were exercised
 
 
 # -- every rule, briefly -----------------------------------------------------------------------

@@ -126,7 +126,8 @@ def test_coasts_on_a_predicted_contact_then_loses_it():
     ghost = C(1, 61.0, 0)
     for _ in range(2):
         ch = s.choose((), lambda out: ghost)
-        assert ch.contact is ghost and ch.rooted  # keeps advertising its path
+        assert ch.contact is ghost and not ch.rooted  # steers by it, advertising nothing (it cannot see it)
+        assert s.committed and s.losses == 0
     ch = s.choose((), lambda out: ghost)  # coasted long enough
     assert ch.out is None and s.losses == 1
     s2 = Sticky(3, 3, me=9, coast_ticks=2)

@@ -59,16 +59,20 @@ def test_on_a_known_swarm_sticky_settles_where_rooted_chatters_and_nearest_cycle
     assert nearest["unrooted"] > 0 and not nearest["converged"]
 
 
-def test_cut_off_swarms_are_reported_apart():
+def test_every_run_counts_and_cut_off_swarms_are_also_shown_apart():
     far = SwarmSetting(n=6, leaders=1, range=1.0)  # nobody senses anybody
     assert cut_off_at_start(random_swarm(far, 0))
     assert not cut_off_at_start(random_swarm(SwarmSetting(n=6, leaders=1), 0))
-    fake = [{**SwarmSetting().__dict__, "seed": k, "converged": k == 0, "cut_off": k > 0, "settling_time": 10.0,
-             "switches": 0, "switches_max": 0, "switch_counts": "0;1", "unrooted": 0, "wall_s": 0.1}
+    fake = [{**SwarmSetting().__dict__, "seed": k, "converged": k != 1, "cut_off": k > 0, "settling_time": 10.0,
+             "switches": 0, "switches_max": 0, "switch_counts": "0;1", "unrooted": 0, "searching_s": float(k),
+             "searching_max_s": 2.0 * k, "losses": k, "loss_switches_max": k, "wall_s": 0.1}
             for k in range(3)]
     (line,) = summarise_swarms(fake)
-    assert (line["runs"], line["cut_off"], line["converged"], line["converged_fraction"]) == (3, 2, 1, 1.0)
+    assert (line["runs"], line["cut_off"], line["cut_off_converged"], line["converged"]) == (3, 2, 1, 2)
+    assert line["converged_fraction"] == 2 / 3  # over every run, cut off or not
     assert line["switches_median"] == 0.5
+    assert (line["searching_median_s"], line["searching_max_s"]) == (1.0, 4.0)
+    assert (line["losses"], line["loss_switches_max"]) == (3, 2)
 
 
 @pytest.mark.slow  # a whole run in-process

@@ -130,6 +130,7 @@ class BatchWorld:
         self.fov_on = np.array([s.sensing.fov is not None and s.sensing.fov < 2 * np.pi for s in scenarios])
         self.ranged = bool(np.isfinite(self.sense_range).any())
         self.unlimited = not self.ranged and not self.fov_on.any()
+        self.sticky = scenarios[0].sensing.selection == "sticky"  # one rule per batch
 
     def frames(self) -> BatchFrames:
         return BatchFrames(self)
@@ -155,7 +156,7 @@ class BatchWorld:
         (-1 none); pinned: the column of its `follow` under selection = "fixed", else None.
         Nobody leaves the world in a batch run, so that reason never comes up."""
         if new < 0:
-            return "no out-neighbour: loitering"
+            return "no out-neighbour: " + ("searching" if self.sticky else "loitering")
         if pinned is not None and new != pinned:
             return "pinned out-neighbour not sensed"
         if old < 0:

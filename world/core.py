@@ -166,7 +166,7 @@ class WorldCore:
         words both engines write into "switch" events: what ground truth and the hop
         counts sent in this tick's frames (`hops_sent`, (N,)) say about the old one."""
         if new is None:
-            return "no out-neighbour: loitering"
+            return "no out-neighbour: " + ("searching" if self.scenario.sensing.selection == "sticky" else "loitering")
         spec = self.scenario.agents[self.index[agent_id]]
         if self.scenario.sensing.selection == "fixed" and spec.follow is not None and new != spec.follow:
             return "pinned out-neighbour not sensed"

@@ -6,7 +6,8 @@
 - angular rate about the target (rad/s, ccw positive) over the last part of the run;
 - settling time: the earliest time after which |r_i - R_i| <= band * R_i for good;
 - switches: how often a follower changed its out-neighbour while alive (its first choice
-  after joining is not a switch; a change to or from "none", loitering, is).
+  after joining is not a switch, nor are the ticks before it with none; a later change to
+  or from "none", searching, is).
 """
 
 from __future__ import annotations
@@ -23,11 +24,27 @@ CONVERGED_TOL = 0.01  # a run has converged when every live agent is within 1% o
 
 def switch_ticks(out: np.ndarray, alive: np.ndarray) -> list[np.ndarray]:
     """Per column of the (T, N) `out` / `alive` arrays: the ticks k at which the agent's
-    out-neighbour differs from tick k - 1 while it was alive at both ticks."""
+    out-neighbour differs from tick k - 1 while it was alive at both ticks, once it has
+    made its first choice since it (re)joined: ticks with no out-neighbour before that
+    first choice, and the first choice itself, are not switches."""
     if len(out) < 2:
         return [np.zeros(0, dtype=np.int64) for _ in range(out.shape[1] if out.ndim == 2 else 0)]
     changed = (out[1:] != out[:-1]) & alive[1:] & alive[:-1]
-    return [np.flatnonzero(changed[:, j]) + 1 for j in range(out.shape[1])]
+    result = []
+    for j in range(out.shape[1]):
+        ks = np.flatnonzero(changed[:, j]) + 1
+        if ks.size:
+            # chose[k]: some tick since the last (re)join up to k had an out-neighbour
+            joined = np.cumsum(np.concatenate(([True], alive[1:, j] & ~alive[:-1, j])))
+            has = (out[:, j] >= 0) & alive[:, j]
+            first = np.full(joined[-1] + 1, len(out))
+            for seg in np.unique(joined):
+                idx = np.flatnonzero(has & (joined == seg))
+                if idx.size:
+                    first[seg] = idx[0]
+            ks = ks[ks > first[joined[ks]]]
+        result.append(ks)
+    return result
 
 
 def settling_time(t: np.ndarray, r: np.ndarray, R: float, band: float = SETTLING_BAND) -> float | None:

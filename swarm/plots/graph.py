@@ -89,7 +89,7 @@ def panel_graph(ax: Axes, ctx: Ctx) -> None:
 def panel_neighbours(ax: Axes, ctx: Ctx) -> None:
     """One row per follower: bars in the colour of the out-neighbour it followed over time,
     labelled with that agent's label where the bar is wide enough; hatched red: none
-    (loitering); grey: not alive."""
+    (searching, or loitering under the other rules); grey: not alive."""
     run, looks = ctx.run, ctx.looks
     followers = run.followers()
     index = run.column_of()
@@ -128,7 +128,7 @@ def panel_neighbours(ax: Axes, ctx: Ctx) -> None:
     ax.grid(True, axis="x", lw=0.3, alpha=0.5)
     handles = [Line2D([], [], ls="", marker="s", ms=8, mfc="0.85", mec="k",
                       label="bar: the out-neighbour followed (its colour and label; L = a leader)"),
-               Line2D([], [], ls="", marker="s", ms=8, mfc="white", mec=FLAG_COLOUR, label="none (loitering)"),
+               Line2D([], [], ls="", marker="s", ms=8, mfc="white", mec=FLAG_COLOUR, label="none (searching)"),
                Line2D([], [], ls="", marker="s", ms=8, mfc=DEAD_COLOUR, mec="none", label="not alive")]
     ax.figure.legend(handles=handles, fontsize=7, loc="outside lower center", ncol=3, framealpha=0.8)
     ax.annotate("switches", (1.0, 1.0), xycoords="axes fraction", xytext=(3, 2), textcoords="offset points",
