@@ -123,11 +123,14 @@ class AgentBrain:
             return self.hops
         return self.feasible if self.unrooted_ticks < self.max_hops else None
 
+    def figures_of_selection(self) -> dict:
+        """selection = "sticky": losses of its out-neighbour and the worst one's switches."""
+        return {} if self.sticky is None else self.sticky.sticky.loss_figures()
+
     def figures(self) -> dict:
         """What this brain counted, for the run's summary: non-finite law outputs and, under
         selection = "sticky", losses of its out-neighbour and the worst one's switches."""
-        more = {} if self.sticky is None else self.sticky.sticky.loss_figures()
-        return {"nonfinite": self.nonfinite, **more}
+        return {"nonfinite": self.nonfinite, **self.figures_of_selection()}
 
     def decide(self, frame: SensorFrame) -> Decision:
         d = self._leader(frame) if self.is_leader else self._follower(frame)

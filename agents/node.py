@@ -129,6 +129,7 @@ class AgentNode:
             "u": None if d is None else d.u,
             "commands": self.commands, "last_tick": self.last_tick, "garbage": self.garbage,
             "nonfinite": self.nonfinite(),
+            **self.brain.figures_of_selection(),
         }
 
     def nonfinite(self) -> int:

@@ -187,12 +187,13 @@ class World(Inbox, Joins, Clock):
 
     def agent_reports(self, timeout: float = 1.0) -> dict[int, dict]:
         """What each live agent counted itself (from its status), for the summary: malformed
-        messages it dropped (`garbage`) and non-finite law outputs (`nonfinite`)."""
+        messages it dropped (`garbage`), non-finite law outputs (`nonfinite`) and, under
+        selection = "sticky", losses of its out-neighbour (`losses`, `loss_switches_max`)."""
         reports: dict[int, dict] = {}
         try:
             for aid, st in query_statuses(self.session, self.cfg.run, timeout).items():
                 if aid in self.book:
-                    reports[aid] = {k: st[k] for k in ("garbage", "nonfinite")
+                    reports[aid] = {k: st[k] for k in wire.STATUS_COUNTERS
                                     if type(st.get(k)) is int and st[k] >= 0}
         except Exception:  # the summary is written whatever the agents do
             pass

@@ -73,13 +73,15 @@ def admit(core: WorldCore, book: AgentBook, req: dict, now: float) -> int:
     return book.key
 
 
-def agent_figures(book: AgentBook, ticks: int, realtime: bool, garbage: int = 0, nonfinite: int = 0) -> dict:
+def agent_figures(book: AgentBook, ticks: int, realtime: bool, garbage: int = 0, nonfinite: int = 0,
+                  **selection) -> dict:
     """One agent's process figures for summary.json (see README, "Outputs of a run");
-    `garbage` and `nonfinite` are what the agent counted itself (its status)."""
+    `garbage`, `nonfinite` and `selection` (losses, loss_switches_max) are what the agent
+    counted itself (its status)."""
     n = max(ticks, 1)
     return {
         "pid": book.pid, "host": book.host, "commands": book.commands, "missed_ticks": book.missed,
         "joins": book.joins, "drops": book.drops, "garbage": book.garbage + garbage,
-        "rogue_commands": book.rogue, "nonfinite": nonfinite,
+        "rogue_commands": book.rogue, "nonfinite": nonfinite, **selection,
         **({"staleness_mean_ticks": book.stale_sum / n, "staleness_max_ticks": book.stale_max} if realtime else {}),
     }

@@ -125,6 +125,9 @@ TRUTH_FIELDS = [("id", "<i4"), ("x", "<f8"), ("y", "<f8"), ("heading", "<f8"),
                 ("u", "<f8"), ("out", "<i4"), ("state", "u1")]  # numpy dtype of one record
 
 PHASES = ("track", "lost", "arc1", "arc2", "orbit", "shadow", "search")
+# what an agent counts itself and reports in its status (non-negative integers; the world
+# copies them into the run's summary): see README, "Outputs of a run"
+STATUS_COUNTERS = ("garbage", "nonfinite", "losses", "loss_switches_max")
 STATES = ("active", "coasting", "gone")
 
 
@@ -335,7 +338,7 @@ def decode_status(buf: bytes) -> dict:
     _field(obj, "out", int, "status", optional=True)
     _field(obj, "hops", int, "status", optional=True)
     _field(obj, "rooted", bool, "status")
-    for name in ("garbage", "nonfinite"):  # counters: absent in older agents
+    for name in STATUS_COUNTERS:  # counters: absent in older agents
         v = _field(obj, name, int, "status", optional=True)
         if v is not None and v < 0:
             raise WireError(f"status: negative {name}")
