@@ -7,7 +7,8 @@ such gap restarts the follower's transient every few seconds, and it may never s
 So a committed follower whose out-neighbour leaves the sensor's reach *at its edge* (its
 last sighting was at EDGE x the range or more, or off its own heading by EDGE x half the
 field of view or more) keeps it for up to COAST_S seconds, steering by where it
-predicts it, and keeps advertising the path it had through it:
+predicts it. It advertises no path meanwhile (it cannot see whether there still is one):
+its own followers hold it for as long (agents/selection.Sticky). The prediction:
 
 - from its last two sightings, the out-neighbour's speed (its displacement, with the
   follower's own dead-reckoned displacement taken out) and turn rate (the change of its

@@ -3,28 +3,30 @@
 From what the follower senses and its own heading and speed only, never the target nor
 ground truth:
 
-- **Memory.** Each tick it senses somebody, it keeps the range and bearing of the agent
-  it steers by (or, when it steers by nobody, of the nearest agent it senses): the
-  *anchor*. On the first tick it senses nobody, that point becomes its *home*, and from
-  then on it carries home relative to itself by dead reckoning: each tick it takes off
-  its own displacement, speed x elapsed time along the mean of its last two headings.
-  A follower that has never sensed anybody searches about the point where it started to.
-- **Pattern.** It flies about home on a circle whose radius grows with the time spent
-  searching, rho(tau) = sqrt(rho0^2 + p v tau / pi): an Archimedean spiral of pitch p
-  (one lap at speed v adds p to the radius; the area swept, 2 pi rho drho = p v dtau,
-  grows at the rate the follower flies times the pitch). With p = range / 2 and a
-  sensing range R, every point within distance D of home comes within R of the follower
-  by the time rho reaches D + p / 2, and so does every agent moving on a circle of
-  radius up to R - p / 2 = 3R/4 about any such point, whatever its phase: the orbits of
-  a swarm about a target closer than D to home, when they are smaller than 3R/4. The
-  spiral grows without bound, so the whole plane is covered in the end; a follower
-  flying at v covers the disc of radius D in about pi D^2 / (p v). With unlimited
-  sensing the pattern is a fixed circle of radius v / C2 about home (only a field of
-  view, or nobody left alive, leaves such a follower with nobody to steer by).
+- **Memory.** Each tick it senses the agent it steers by, it keeps that agent's range and
+  bearing: the *anchor*. From the first tick it no longer does (it coasts on a
+  prediction, agents/coast.py, or has nobody), that point becomes its *home*, carried
+  relative to itself by dead reckoning: each tick it takes off its own displacement,
+  speed x elapsed time along the mean of its last two headings. A follower that has never
+  sensed anybody searches about the point where it started to.
+- **Pattern.** It flies about home on a circle whose radius follows the time spent
+  searching along an Archimedean spiral of pitch p: rho = sqrt(rho0^2 + p v s / pi) after
+  s s (one lap at speed v adds p to the radius). With p = range / 2 = rho0, every point
+  within distance D of home comes within the range R of the follower by the time rho
+  reaches D + p / 2, and so does every agent moving on a circle of radius up to
+  R - p / 2 = 3R/4 about such a point, whatever its phase. The spiral breathes: out to
+  4 rho0 and back in, then out to 8 rho0 and back, and so on, so that it passes again
+  and again, at other phases, over the region near home where the swarm most likely is,
+  and still covers the whole plane in the end. With unlimited sensing the pattern is a
+  fixed circle of radius v / C2 about home (only a field of view, or nobody left alive,
+  leaves such a follower with nobody to steer by).
+- **Closing in.** A rooted agent it senses but may not take yet (out of reach, or not
+  feasible) becomes home, anew every tick, with a tight circle (SEEN x rho0): the
+  follower closes in on it until it may take it.
 - **Flying it.** The law's built-in answer to `obs.out is None` (agents.laws.search) is
-  the leaders' orbit hold (agents/leader.on_orbit_command) about home at radius
-  rho(tau), in the direction the follower was turning when it lost contact: from far
-  away that is a straight run back to home, then the spiral.
+  the leaders' orbit hold (agents/leader.on_orbit_command) about home at that radius, in
+  the direction the follower was turning when it lost contact: from far away that is a
+  straight run back to home, then the spiral.
 
 Pure: no I/O. `SearchMemory.update` is the whole per-tick state change; the batch
 brains (agents/batch.py) call its scalar helpers per searching agent, so both engines

@@ -12,8 +12,10 @@ the nearest (rooted) agent keeps changing, and a follower that alternates betwee
 leaders' trees never settles.
 
 selection = "sticky" (the default, `Sticky` below) makes the paper's nearest choice once,
-waits for it to be rooted, and keeps it until it is lost: finitely many switches, loop-
-free, reacting on the tick the out-neighbour is lost. Pure: no I/O.
+waits for it to be rooted, and keeps it until it is lost (holding it through a short
+loss of its path, coasting on it through a short spell out of sight), and with nothing
+rooted in reach shadows an agent it senses or searches: loop-free, at most 4 changes
+per loss. Pure: no I/O.
 """
 
 from __future__ import annotations
@@ -23,7 +25,6 @@ from typing import Callable, NamedTuple
 
 from swarm.contracts.frames import Contact
 from swarm.contracts.orbits import wrap
-
 
 REACH = 0.85  # sticky: new choices within this fraction of the sensing range only
 LOSS_CHANGES = 4  # sticky: changes of out-neighbour one loss can cost, at most (Sticky's docstring)
@@ -93,8 +94,9 @@ class Sticky:
 
     State machine of one follower `me`, fed one frame's contacts per tick (pure, no I/O).
     "Rooted" agents are those whose frame contact advertises a path (hops >= 0); new
-    choices are made among agents within `reach` (a fraction of the sensing range, so that
-    an agent at the edge, in and out of sight, is not taken and lost tick after tick):
+    choices are made among agents within `reach` and `cone` (fractions of the sensing
+    range and field of view, so that an agent at the edge, in and out of sight, is not
+    taken and lost tick after tick):
 
     - **Acquire** (its first choice after starting): take the nearest agent as soon as it
       is rooted. Paths spread one hop per tick from the leaders, so while the nearest
@@ -109,49 +111,62 @@ class Sticky:
       lost its own), the follower keeps steering by it for up to `hold_ticks` ticks,
       advertising nothing, and commits to it again, with no change of out-neighbour, as
       soon as it advertises a path again. One agent's short loss then costs its subtree
-      no switch at all.
-    - **Lost**: when the out-neighbour is no longer sensed (dropped, out of range or
-      field of view) or held for `hold_ticks` without rooting again, the follower switches
-      on that very tick to the nearest *feasible* rooted agent: one advertising fewer hops
-      than the fewest this follower has advertised since its last reset (`feasible`). Its
-      own descendants all advertise more than that, so the switch cannot close a loop (the
-      feasibility condition of loop-free distance-vector routing). After `drain_ticks`
-      ticks without advertising a path every stale advertisement that passed through it
-      has been replaced, so it resets `feasible` and takes any rooted agent.
+      no switch at all. (Only right after a sighting of it rooted: not after coasting.)
+    - **Coast**: when the out-neighbour leaves the frame at the edge of the sensor's reach,
+      `coast(out)` (agents/coast.py) predicts where it is; the follower steers by that
+      prediction for up to `coast_ticks` ticks, advertising nothing, and goes on as before
+      if the agent is sensed again, rooted.
+    - **Lost**: when the out-neighbour is no longer sensed and cannot be coasted on
+      (dropped mid-range, or coasted or held too long), the follower switches on that
+      very tick to the nearest *feasible* rooted agent in reach: one advertising fewer
+      hops than the fewest this follower has advertised since its last reset
+      (`feasible`). Its own descendants all advertise more than that, so the switch
+      cannot close a loop (the feasibility condition of loop-free distance-vector
+      routing). After `drain_ticks` ticks without advertising a path every stale
+      advertisement that passed through it has been replaced, so it resets `feasible`
+      and takes any rooted agent.
     - **Shadow**: while no feasible rooted agent is in reach, the follower steers by an
       agent it senses without advertising a path: the nearest rooted one (if not
       feasible), else the nearest one with a lower id than its own. It keeps that agent
       while it senses it and it stays such a candidate, and commits to it, with no change,
       as soon as it is a feasible rooted agent (or to the nearest feasible rooted agent in
-      reach). Once it has committed, a follower shadows only after `hold_ticks + 1` ticks
-      without advertising (so that nobody still holds it), and at most once per loss.
-    - **Search**: with nobody to hold, shadow or commit to, out = None; the agent's law
-      flies the search pattern of agents/search.py.
+      reach). Once it has committed, a follower shadows only after `quiet` =
+      max(hold_ticks, coast_ticks) + 1 ticks without advertising (so that nobody still
+      holds or coasts on it), and at most once per loss.
+    - **Search**: with nobody to hold, coast on, shadow or commit to, out = None; the
+      agent's law flies the search pattern of agents/search.py.
+    - **Late**: a follower that joins a run already under way (restarted, or added)
+      chooses nobody for wait_ticks + 1 ticks (stale advertisements of paths through an
+      earlier life of it have drained by then: nobody advertises while holding or
+      coasting) and shadows only after `quiet` ticks, like one that lost its path.
 
-    Loop-free, every kind of edge included. *Ordered* edges (committed, held,
-    provisional) go down in `feasible`: along a committed or held edge i -> j,
+    Loop-free, every kind of edge included. *Ordered* edges (committed, held, coasted,
+    provisional) go down in `feasible`: along a committed, held or coasted edge i -> j,
     feasible_j < feasible_i (j's feasible is at most the hops it advertised when i chose
     it, which were below feasible_i; later both only decrease, as neither resets while
-    i holds: hold_ticks < drain_ticks; and i's stays above j's since i advertises j's
-    hops + 1); a provisional edge starts at a follower that never committed (feasible
+    i holds or coasts: quiet < drain_ticks; and i's stays above j's since i advertises
+    j's hops + 1); a provisional edge starts at a follower that never committed (feasible
     infinite) and ends at a committed one. So no cycle is made of ordered edges alone.
     A *shadow* edge s -> t starts at a follower that advertised nothing on the previous
-    tick and that nobody holds: it goes to an agent that advertised a path on the
-    previous tick, or to a lower id. Ordered edges never end at a shadowing agent
-    (committed and provisional edges end at agents that advertised on the previous tick,
-    held ones at agents silent for at most hold_ticks + 1 ticks, which do not shadow
-    yet). So from the head of a shadow edge a cycle continues either with more shadow
-    edges between silent agents, ids decreasing, which cannot close, or with ordered
-    edges only, which never reach a shadowing agent again, nor close by themselves.
+    tick and that nobody holds or coasts on: it goes to an agent that advertised a path
+    on the previous tick, or to a lower id. Ordered edges never end at a shadowing agent
+    (committed and provisional edges end at agents that advertised on the previous tick;
+    held and coasted ones at agents silent for at most quiet - 1 ticks since they were
+    last seen rooted, which do not shadow yet). So from the head of a shadow edge a cycle
+    continues either with more shadow edges between silent agents, ids decreasing, which
+    cannot close, or with ordered edges only, which never reach a shadowing agent again,
+    nor close by themselves. A restarted agent's feasible starts afresh; the `late`
+    rule keeps it out of cycles through its earlier life (tests/test_sticky.py checks
+    all of this on random graphs with restarts).
 
     Bound: the first commit comes after at most 1 + wait_ticks provisional choices and
     any number of shadows and searches. After that, each loss of the out-neighbour
     costs at most LOSS_CHANGES = 4 changes of out: to a feasible rooted agent (1); or to
     nobody, then at most one shadow, then rooted (2 or 3, or 4 when that shadow is lost
-    too: a second loss of contact is searched out, not shadowed again). A held
-    out-neighbour that roots again costs nothing. With unlimited sensing and no faults
-    nothing is lost, so the graph is fixed within about 2 x wait_ticks ticks and the
-    paper's theorem applies from there on. With a range or field of view, losses are
+    too: a second loss of contact is searched out, not shadowed again). A held or coasted
+    out-neighbour that comes back rooted costs nothing. With unlimited sensing and no
+    faults nothing is lost, so the graph is fixed within about 2 x wait_ticks ticks and
+    the paper's theorem applies from there on. With a range or field of view, losses are
     forced by geometry while agents settle; once they are on their orbits (rigid
     rotation: fixed relative positions) nothing is lost any more and the graph stops
     changing.

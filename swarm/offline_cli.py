@@ -97,7 +97,8 @@ def _warn_nearest_graph(s: "Scenario") -> None:
     edges = ", ".join(f"{i}->{j}" for i, j in g["edges"])
     cure = {"nearest": "this run keeps re-choosing the nearest agent and may never converge; "
                        "selection = \"sticky\" (the default) keeps every follower rooted",
-            "sticky": "selection = \"sticky\" roots these followers on the nearest agent that has a path",
+            "sticky": "selection = \"sticky\" roots these followers on the nearest agent that has a path, "
+                      "and those that sense none shadow or search until one is in reach",
             "rooted": "selection = \"rooted\" roots these followers on the nearest agent that has a path",
             "fixed": "this scenario pins its graph with `follow`"}[s.sensing.selection]
     typer.secho(f"  warning: nearest choice at t = 0 ({edges}) breaks the paper's Assumption 1: "
