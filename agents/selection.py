@@ -159,6 +159,15 @@ class Sticky:
     rule keeps it out of cycles through its earlier life (tests/test_sticky.py checks
     all of this on random graphs with restarts).
 
+    Finite time to a rooted agent, when one can be reached: a follower with nobody to
+    steer by searches (agents/search.py), on a spiral that breathes out ever wider, so
+    every point of the plane comes within its range, and so does every agent circling a
+    point at up to 3/4 of the range from it, whatever its phase; a rooted agent it senses
+    it closes in on until it is in reach, and takes as soon as it is feasible, which any
+    rooted agent is once the follower has been silent for drain_ticks ticks. So a rooted
+    swarm circling a fixed target at such radii is found in finite time (the studies in
+    the README measure the rest: every run of every setting converged).
+
     Bound: the first commit comes after at most 1 + wait_ticks provisional choices and
     any number of shadows and searches. After that, each loss of the out-neighbour
     costs at most LOSS_CHANGES = 4 changes of out: to a feasible rooted agent (1); or to

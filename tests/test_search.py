@@ -8,6 +8,7 @@ now converge, with every loss under the bound."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +18,7 @@ from agents.search import SearchMemory, drift, radius
 from agents.selection import LOSS_CHANGES
 from swarm.batch import run_batch
 from swarm.contracts.frames import Contact
+from swarm.contracts.scenario import load_scenario
 from swarm.study import SwarmSetting, random_swarm
 from world.kinematics import step_one
 from world.metrics import switch_ticks
@@ -132,3 +134,19 @@ def test_swarms_that_used_to_stay_lost_now_converge():
                 assert agent["loss_switches_max"] <= LOSS_CHANGES
         counts = [len(k) for k, r in zip(switch_ticks(a["out"], a["alive"]), a["role"]) if r == "follower"]
         assert max(counts) <= 10, (s.name, counts)
+
+
+@pytest.mark.slow  # three whole runs, in one batch
+def test_the_limited_sensing_scenarios_converge_and_their_graphs_stop_changing():
+    """case2-range, case2-fov and swarm30-range: the graph changes while agents settle
+    (losses), then never again: relative positions are fixed on the orbits."""
+    root = Path(__file__).resolve().parent.parent / "scenarios"
+    scenarios = [load_scenario(root / f"{n}.toml") for n in ("case2-range", "case2-fov", "swarm30-range")]
+    for s, res in zip(scenarios, [run_batch([s])[0] for s in scenarios]):
+        summ = res.summary()
+        assert summ["converged"], s.name
+        assert sum(a.get("losses", 0) for a in summ["agents"].values()) > 0, s.name  # it did change
+        a = res.recorder.arrays()
+        last = max(int(k[-1]) for k in switch_ticks(a["out"], a["alive"]) if len(k))
+        settled = max(v["settling_time"] for v in summ["agents"].values())
+        assert last * s.run.dt < 25.0 < settled, (s.name, last * s.run.dt, settled)
