@@ -6,14 +6,15 @@ A law is a function of one Observation (swarm/contracts/observation.py):
 
 A follower law sees its own heading, speed and limit, every contact it senses and the one
 chosen as its out-neighbour (`obs.out`, None while it has nobody to follow: the law
-decides what to do then, `loiter` is the built-in answer), the gains, `obs.params` and a
-dict `obs.state` of its own. The paper's law is `bearing`, registered as "bearing":
+decides what to do then; `search` is the built-in answer, flying `obs.search`, and
+`loiter` where there is no search circle), the gains, `obs.params` and a dict `obs.state`
+of its own. The paper's law is `bearing`, registered as "bearing":
 
     u_i = C1 wrap(g_j - g_i) + C2 sin(lambda_ij - g_i)
 
 No range and no target position enter it. The older signature,
 law(g_i, g_j, lambda_ij, c1, c2) named in `[gains] law`, still works: `make_follower_law`
-binds it, and the agent loiters for it. Names resolve in swarm/contracts/laws.py.
+binds it, and the agent searches for it. Names resolve in swarm/contracts/laws.py.
 """
 
 from __future__ import annotations
