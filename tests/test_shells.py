@@ -91,7 +91,9 @@ def test_world_latches_owned_commands_and_counts_the_rest():
     world._on_cmd(cmd_key, wire.encode_cmd(wire.Command(2, 0, 0.3, 1, "track", 1, key2 ^ 1)), pending)
     assert world.book[2].rogue == 1 and pending == {1, 2}  # not the owner's key: ignored
     world._on_cmd(cmd_key, b"garbage", pending)
-    assert world.garbage == 1
+    world._on_cmd(cmd_key, wire.encode_cmd(wire.Command(2, 0, 0.3, 2, "track", 1, key2)), pending)  # follows itself
+    # the world's count, and agent 2's: what the world dropped on that agent's keys (README)
+    assert world.garbage == 2 and world.book[2].garbage == 2 and world.book[1].garbage == 0
     world._on_cmd(cmd_key, wire.encode_cmd(wire.Command(2, 0, 0.3, 1, "track", 1, key2)), pending)
     assert pending == {1} and world.core.u[1] == 0.3 and world.engine.out[1] == 1
     (switch,) = [e for e in world.engine.events if e["kind"] == "switch"]

@@ -51,17 +51,25 @@ class Inbox:
         elif kind == "admin":
             self._on_admin(item[1])
 
+    def _garbage_on(self, aid: int | None) -> None:
+        """A malformed message: the world's count, and the agent's whose key it came on."""
+        self.garbage += 1
+        b = self.book.get(aid) if aid is not None else None
+        if b is not None:
+            b.garbage += 1
+
     def _on_cmd(self, key: str, payload: bytes, pending: set[int] | None) -> None:
+        aid = None
         try:
             aid = wire.agent_of_key(key)
             cmd = wire.decode_cmd(payload)
             if cmd.agent != aid:
                 raise wire.WireError(f"command for agent {cmd.agent} on agent {aid}'s key")
         except wire.WireError:
-            self.garbage += 1
+            self._garbage_on(aid)
             return
         if cmd.out is not None and (cmd.out == aid or cmd.out not in self.core.index):
-            self.garbage += 1
+            self._garbage_on(aid)
             return
         k = self.core.index.get(aid)
         if k is None or self.core.state[k] != ACTIVE or cmd.tick > self.core.tick:

@@ -124,7 +124,8 @@ def panel_neighbours(ax: Axes, ctx: Ctx) -> None:
     ax.set_xlabel("t (s)")
     ax.set_ylabel("follower")
     counts = switch_counts(run)
-    ax.set_title(f"out-neighbour of each follower over time ({sum(counts)} switches)")
+    n_sw = sum(counts)
+    ax.set_title(f"out-neighbour of each follower over time ({n_sw} switch{'es' if n_sw != 1 else ''})")
     ax.grid(True, axis="x", lw=0.3, alpha=0.5)
     handles = [Line2D([], [], ls="", marker="s", ms=8, mfc="0.85", mec="k",
                       label="bar: the out-neighbour followed (its colour and label; L = a leader)"),
