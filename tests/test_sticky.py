@@ -305,3 +305,14 @@ def test_random_swarm_is_the_same_for_every_rule_and_range():
     assert [(x.x, x.y, x.heading, x.speed) for x in a.agents] == [(x.x, x.y, x.heading, x.speed) for x in b.agents]
     assert a.agents[0].orbit_radius == pytest.approx(a.agents[0].speed)  # omega = 1
     assert math.isinf(SwarmSetting().range)
+
+
+def test_a_first_choice_after_joining_is_never_a_switch():
+    """(issue 22, item 8) Ticks without an out-neighbour before the first choice, and the
+    first choice itself, are not switches; nor is the first choice after a rejoin. Later
+    changes, to or from none, are."""
+    out = np.array([[-1, -1], [-1, 3], [2, 3], [2, -1], [5, -1], [5, -1], [-1, -1], [-1, 4], [6, 4]])
+    alive = np.array([[1, 1], [1, 1], [1, 1], [1, 1], [1, 1], [0, 1], [1, 1], [1, 1], [1, 1]], dtype=bool)
+    a, b = switch_ticks(out, alive)
+    assert a.tolist() == [4]  # 2 -> 5; not the first choice (tick 2) nor the one after its rejoin (tick 8)
+    assert b.tolist() == [3, 7]  # 3 -> none, none -> 4
