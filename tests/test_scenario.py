@@ -117,6 +117,15 @@ BAD = [
     ("negative-seed", _set("run.seed", -1), ["run.seed", "greater than or equal to 0"]),
     ("huge-seed", _set("run.seed", 10**400), ["run.seed", "less than or equal to"]),
     ("relative-law-module", _set("gains.law", ".nowhere:law"), ["gains.law", "cannot import"]),
+    # finite values the engine cannot honour (issue 22, item 6): overflow, no precision left, no end
+    ("huge-x", _set("agents.0.x", 1e308), ["agents[0].x", "less than or equal to 10000000"]),
+    ("huge-target", _set("target.y", -1e12), ["target.y", "greater than or equal to -10000000"]),
+    ("huge-heading", _set("agents.1.heading", 1e17), ["agents[1].heading", "1000000"]),
+    ("huge-speed", _set("agents.1.speed", 1e200), ["agents[1].speed", "100000"]),
+    ("huge-radius", _set("agents.0.orbit_radius", 1e300), ["agents[0].orbit_radius", "10000000"]),
+    ("huge-gain", _set("gains.c1", 1e300), ["gains.c1", "1000000"]),
+    ("huge-range", _set("sensing.range", 1e300), ["sensing.range", "10000000"]),
+    ("huge-deadline", _set("run.lockstep_deadline", 1e300), ["run.lockstep_deadline", "3600"]),
 ]
 
 

@@ -20,6 +20,19 @@ from swarm.contracts.wire import MAX_AGENT_ID, MAX_AGENTS
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 AgentId = Annotated[int, Field(ge=0, le=MAX_AGENT_ID)]
+# What the engine can honour: finite numbers it can square, add and take the sine of without
+# overflow or losing the metre (a CC path from x = 1e308 overflows; a heading of 1e17 rad has
+# no fractional part left), and waits a run can end within.
+MAX_COORD = 1e7  # m: positions of agents and target, radii, ranges (10,000 km)
+MAX_SPEED = 1e5  # m/s
+MAX_ANGLE = 1e6  # rad: headings
+MAX_RATE = 1e6  # rad/s and 1/s: turn-rate limits, gains
+MAX_WAIT = 3600.0  # s: the lockstep deadline
+Coord = Annotated[float, Field(ge=-MAX_COORD, le=MAX_COORD, allow_inf_nan=False)]
+Length = Annotated[float, Field(gt=0, le=MAX_COORD, allow_inf_nan=False)]
+Speed = Annotated[float, Field(gt=0, le=MAX_SPEED, allow_inf_nan=False)]
+Angle = Annotated[float, Field(ge=-MAX_ANGLE, le=MAX_ANGLE, allow_inf_nan=False)]
+Rate = Annotated[float, Field(gt=0, le=MAX_RATE, allow_inf_nan=False)]
 
 MAX_SEED = 2**63 - 1  # fits a signed 64-bit integer wherever the seed is stored
 # Trajectory arrays cost about 40 bytes per agent and tick: 2e8 agent-ticks is about 8 GB.
@@ -46,7 +59,7 @@ class RunSpec(Strict):
         "leave",
         description="what the world does with a dead agent: leave the world, or coast uncontrolled",
     )
-    lockstep_deadline: PositiveFloat = Field(
+    lockstep_deadline: Annotated[float, Field(gt=0, le=MAX_WAIT, allow_inf_nan=False)] = Field(
         0.5,
         description="lockstep: wall seconds to wait for a live agent's command before holding its last one",
     )
@@ -77,8 +90,8 @@ class RunSpec(Strict):
 class TargetSpec(Strict):
     """[target]: the stationary target (m)."""
 
-    x: Finite = 0.0
-    y: Finite = 0.0
+    x: Coord = 0.0
+    y: Coord = 0.0
 
 
 def check_law_field(name: str, kind: str, info: ValidationInfo) -> str:
@@ -103,8 +116,8 @@ def check_law_field(name: str, kind: str, info: ValidationInfo) -> str:
 class GainsSpec(Strict):
     """[gains]: the follower law's gains (and, in older scenarios, the follower law)."""
 
-    c1: PositiveFloat = Field(description="gain on the heading difference wrap(g_j - g_i) (1/s)")
-    c2: PositiveFloat = Field(description="gain on sin(lambda_ij - g_i) (rad/s)")
+    c1: Rate = Field(description="gain on the heading difference wrap(g_j - g_i) (1/s)")
+    c2: Rate = Field(description="gain on sin(lambda_ij - g_i) (rad/s)")
     law: str = Field(
         "bearing",
         description="follower law of the older signature (g_i, g_j, lambda_ij, c1, c2): a registered "
@@ -142,7 +155,7 @@ class LawSpec(Strict):
 class SensingSpec(Strict):
     """[sensing]: who senses whom, and how followers pick their out-neighbour."""
 
-    range: PositiveFloat | None = Field(None, description="sensing range (m); unlimited if absent")
+    range: Length | None = Field(None, description="sensing range (m); unlimited if absent")
     fov: Annotated[float, Field(gt=0, le=2 * math.pi)] | None = Field(
         None, description="full field of view (rad) centred on the heading; 2*pi or absent = all round"
     )
@@ -166,14 +179,14 @@ class AgentSpec(Strict):
 
     id: Annotated[AgentId, Field(description="agent id (fits the int32 wire fields)")]
     role: Literal["leader", "follower"]
-    x: Finite
-    y: Finite
-    heading: Finite = Field(description="initial heading (rad)")
-    speed: PositiveFloat = Field(description="constant forward speed (m/s)")
-    orbit_radius: PositiveFloat | None = Field(None, description="leaders: orbit radius (m)")
+    x: Coord
+    y: Coord
+    heading: Angle = Field(description="initial heading (rad)")
+    speed: Speed = Field(description="constant forward speed (m/s)")
+    orbit_radius: Length | None = Field(None, description="leaders: orbit radius (m)")
     direction: Literal["ccw", "cw"] = Field("ccw", description="leaders: orbit direction")
     follow: AgentId | None = Field(None, description="followers: fixed out-neighbour id")
-    max_turn_rate: PositiveFloat | None = Field(None, description="turn-rate limit (rad/s)")
+    max_turn_rate: Rate | None = Field(None, description="turn-rate limit (rad/s)")
 
     @model_validator(mode="after")
     def _role_fields(self) -> "AgentSpec":
