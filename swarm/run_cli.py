@@ -169,6 +169,13 @@ def sim(
     typer.echo(f"speed: {total * s.run.dt / wall:.1f} simulated s per wall s ({total / wall:.0f} ticks/s)")
     if plots:
         render_run_plots(out)
+    crashes = [e for e in summary["events"] if e["kind"] == "crash"]
+    if crashes:  # as swarm up: results written, one line, exit 4
+        from swarm.api_launch import EXIT_AGENT_FAILED
+
+        e = crashes[0]
+        raise fail(f"swarm sim: {len(crashes)} agent(s) failed: agent {e['agent']} at t = {e['time']:g} s: "
+                   f"its law raised {e['cause']} (results in {out})", EXIT_AGENT_FAILED)
 
 
 def world(

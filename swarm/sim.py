@@ -25,6 +25,8 @@ def run_sim(scenario: Scenario, duration: float | None = None,
     Process faults as the world process carries them out: kill drops the agent; restart
     brings it back with a fresh brain; freeze drops it (in `swarm up` when its link lease
     runs out, with the clock held) and keeps its brain; thaw brings it back with that brain.
+    A law that raises is what an agent process dying of it is under `swarm up`: a "crash"
+    event (with its `cause`), the agent dropped, the run goes on (and is not converged).
     """
     dt = scenario.run.dt
     ticks = int(round((duration if duration is not None else scenario.run.duration) / dt))
@@ -54,7 +56,14 @@ def run_sim(scenario: Scenario, duration: float | None = None,
                 frozen.discard(aid)
                 engine.join(aid, "fault: thaw", rejoin=True)
         for aid, frame in engine.frames().items():
-            d = brains[aid].decide(frame)
+            try:
+                d = brains[aid].decide(frame)
+            except Exception as e:  # its law raised: as `swarm up` reports an agent process that died of it
+                cause = f"{type(e).__name__}: {e}"
+                engine.event("crash", aid, f"its law raised: {cause}", cause=cause)
+                engine.drop(aid, "its law raised (crash)")
+                frozen.discard(aid)
+                continue
             engine.command(aid, k, d.u, d.out, d.hops)
         engine.end_tick()
         if progress is not None and (k % every == 0):

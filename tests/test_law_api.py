@@ -164,6 +164,25 @@ def test_check_and_sim_import_a_law_next_to_the_scenario(tmp_path, write_toml, b
         assert np.all(z["u"][:-1, 0] == 0.2)
 
 
+def test_a_raising_law_under_swarm_sim_is_a_crash_event_and_exit_4(tmp_path, write_toml, base, monkeypatch):
+    """As under swarm up (tests/test_supervision_runtime.py): no traceback, a crash event with
+    its cause, the agent dropped, the results written, one line, exit 4 (issue 22, item 7)."""
+    monkeypatch.setattr(sys, "path", list(sys.path))
+    source = "def law(obs):\n    if obs.tick >= 3:\n        raise RuntimeError('gave up')\n    return 0.1\n"
+    path, _ = _law_next_to_scenario(tmp_path, write_toml, base, source, "follower")
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, ["sim", str(path), "--out", str(out), "--no-plots", "--duration", "0.5"])
+    assert res.exit_code == 4, res.output
+    assert "Traceback" not in res.output
+    (line,) = res.stderr.strip().splitlines()
+    assert "agent" in line and "RuntimeError: gave up" in line and str(out) in line
+    summ = json.loads((out / "summary.json").read_text())
+    crashes = [e for e in summ["events"] if e["kind"] == "crash"]
+    assert crashes and all(e["cause"] == "RuntimeError: gave up" and e["tick"] == 3 for e in crashes)
+    assert not summ["converged"] and (out / "trajectory.npz").exists()
+    assert {e["agent"] for e in summ["events"] if e["kind"] == "drop"} == {e["agent"] for e in crashes}
+
+
 def test_law_path_for_agent_processes(monkeypatch, tmp_path):
     monkeypatch.setenv(ENV_LAW_PATH, "/a")
     assert law_dirs([tmp_path]) == [str(tmp_path), "/a"]
