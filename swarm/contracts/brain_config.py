@@ -119,7 +119,8 @@ class BrainConf:
             raise ValueError("agent.orbit_radius: a leader needs one")
         return cls(agent, GainsConf(num(g, "c1", "gains"), num(g, "c2", "gains"), law),
                    SensingConf(choice(s, "selection", "sensing", ("sticky", "nearest", "fixed", "rooted")),
-                               num(s, "hysteresis", "sensing"), num(s, "range", "sensing", positive=True, optional=True),
+                               num(s, "hysteresis", "sensing"),
+                               num(s, "range", "sensing", positive=True, optional=True),
                                num(s, "fov", "sensing", positive=True, optional=True)),
                    num(d, "dt", "brain", positive=True), integer(d, "n_agents", "brain"), _law_conf(d.get("law")))
 
