@@ -74,9 +74,7 @@ def test_an_agent_waits_only_while_its_parent_is_the_middle_process():
     from agents.forkserver import reparented
 
     assert reparented(os.getppid() + 10**6, timeout=5.0)  # another pid than the parent: at once
-    t0 = time.monotonic()
     assert not reparented(os.getppid(), timeout=0.05)  # still the middle's: gives up at the timeout
-    assert time.monotonic() - t0 < 5.0
 
 
 def test_command_words_of_exec_d_and_titled_agents():

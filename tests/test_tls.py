@@ -50,11 +50,9 @@ def open_client(connect: str, extra: dict, timeout_ms: int = OPEN_MS):
 
 
 def assert_refused(connect: str, extra: dict):
-    t0 = time.monotonic()
     with pytest.raises(zenoh.ZError):
         s = open_client(connect, extra, timeout_ms=REFUSE_MS)
         s.close()
-    assert time.monotonic() - t0 < REFUSE_MS / 1000 + 2
 
 
 @pytest.fixture(scope="module")
