@@ -1,7 +1,7 @@
 """A fork server for agent processes: one process that has imported everything an agent
 needs forks every agent of a run, so N agents pay for the interpreter's start and the
 imports once instead of N times (an agent's CPU until it has joined: 0.11 s exec'd; see
-the README's "Speed and memory" for what forking saves).
+docs/performance.md for what forking saves).
 
 `swarm up` starts it (`python -m agents.forkserver`) in the run's process group, with the
 agents' environment, once it has made itself a child subreaper (swarm/forks.py). One JSON

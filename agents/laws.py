@@ -1,4 +1,4 @@
-"""Follower guidance laws, and how an agent gets the law it runs (README, "Writing a law").
+"""Follower guidance laws, and how an agent gets the law it runs (docs/scenarios.md, "Writing a law").
 
 A law is a function of one Observation (swarm/contracts/observation.py):
 

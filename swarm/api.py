@@ -36,14 +36,14 @@ from world.run_reader import RunReadError
 
 __all__ = ["AgentTrack", "Record", "Results", "RunReadError", "Summary", "open_run", "simulate"]
 
-#: Per-tick arrays of trajectory.npz (README, "Outputs of a run").
+#: Per-tick arrays of trajectory.npz (docs/outputs.md, "Outputs of a run").
 TICK_ARRAYS = ("t", "x", "y", "heading", "u", "out", "alive", "missed")
 #: Per-agent and per-run constants.
 STATIC_ARRAYS = ("ids", "role", "speed", "orbit_radius", "target", "dt")
 
 
 class Summary(Record):
-    """summary.json (README, "Outputs of a run") with attribute access; `agents` is keyed
+    """summary.json (docs/outputs.md, "Outputs of a run") with attribute access; `agents` is keyed
     by int id, `events` is a list of Records (`ev["from"]` for a switch's `from`)."""
 
     @property

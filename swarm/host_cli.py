@@ -1,5 +1,5 @@
 """`swarm host`: run some agents of a run on this machine, behind a zenoh router of its own
-connected to the run's world (swarm/host.py; README, "Several machines")."""
+connected to the run's world (swarm/host.py; docs/resilience.md, "Several machines")."""
 
 from __future__ import annotations
 

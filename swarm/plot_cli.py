@@ -103,7 +103,7 @@ def export(
     run_dir: RunDirArg,
     plots: Annotated[bool, typer.Option(help="render PNG plots too")] = True,
     csv: Annotated[bool, typer.Option("--csv", help="also write csv/agent-<id>.csv: one CSV per agent, a row per "
-                                      "tick (columns: README, 'Outputs of a run')")] = False,
+                                      "tick (columns: docs/outputs.md, 'Outputs of a run')")] = False,
 ) -> None:
     """Rebuild trajectory.npz and summary.json of a run from its recording.mcap; with --csv,
     write its trajectory as one CSV per agent.

@@ -34,7 +34,7 @@ TimeScaleOpt = Annotated[float, typer.Option("--time-scale", "--speed", help="re
 EndPlotsOpt = Annotated[bool, typer.Option(help="render PNG plots at the end")]
 FoxgloveOpt = Annotated[bool, typer.Option("--foxglove", help="serve the run live to the Foxglove app "
                                            "(WebSocket, ws://HOST:PORT; `--foxglove PORT` for another port "
-                                           "than 8765; README, \"Live view in Foxglove\")")]
+                                           "than 8765; docs/outputs.md, \"Live view in Foxglove\")")]
 FoxglovePortOpt = Annotated[int, typer.Option("--foxglove-port", help="--foxglove: the port (`--foxglove PORT` "
                                               "says the same)", min=1, max=65535)]
 FoxgloveHostOpt = Annotated[str, typer.Option("--foxglove-host", help="--foxglove: the address to bind "
@@ -262,7 +262,7 @@ def agent(
 
     It connects as agent-ID with the run's credentials: --credentials FILE, else
     $SWARM_CREDENTIALS, else the local run's file in the runtime directory. On another
-    machine, use a file from `swarm credentials --agent ID` (see README, "Agents on other
+    machine, use a file from `swarm credentials --agent ID` (see docs/resilience.md, "Agents on other
     machines").
 
     Exit codes: 0 the run ended, 1 crashed (e.g. an exception in its law), 3 refused,

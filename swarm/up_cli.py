@@ -116,7 +116,7 @@ def attach_hints(run_id: str, dial: str, s) -> list[str]:
              "--x --y --heading --speed)"]
     if not dial.startswith("unixsock"):
         lines.append(f"from another machine: swarm credentials --agent N{pick}, there swarm agent --id N --connect {dial} "
-                     "--credentials FILE (README, \"Agents on other machines\")")
+                     "--credentials FILE (docs/resilience.md, \"Agents on other machines\")")
     return lines
 
 

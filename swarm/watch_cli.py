@@ -23,7 +23,7 @@ WORLD_GONE_EXIT = 3.0  # s: `watch` without a terminal exits this long after the
 WatchFoxgloveOpt = Annotated[bool, typer.Option(
     "--foxglove", help=f"instead of the terminal view, serve the run to the Foxglove app over its WebSocket "
     f"protocol, the topics of `swarm up --foxglove` (ws://{DEFAULT_HOST}:{DEFAULT_PORT}; `--foxglove PORT` for "
-    "another port; README, \"Live view in Foxglove\"); Ctrl-C exits 130")]
+    "another port; docs/outputs.md, \"Live view in Foxglove\"); Ctrl-C exits 130")]
 WatchFoxglovePortOpt = Annotated[int, typer.Option(
     "--foxglove-port", help="--foxglove: the port (`--foxglove PORT` says the same)", min=1, max=65535)]
 WatchFoxgloveHostOpt = Annotated[str, typer.Option(

@@ -1,4 +1,4 @@
-"""The law API (README, "Writing a law"): one Observation in, a turn rate out, for
+"""The law API (docs/scenarios.md, "Writing a law"): one Observation in, a turn rate out, for
 followers and leaders; laws named in [law] and checked at load; the scenario's directory
 on the import path; the join reply's `law`; the batch engine's refusal."""
 

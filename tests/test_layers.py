@@ -1,4 +1,4 @@
-"""The layers of the tree (README, "How it is built"), checked on every import statement,
+"""The layers of the tree (docs/architecture.md, "How it is built"), checked on every import statement,
 at module level or inside functions:
 
     swarm.contracts   scenario, laws, observation, frames, wire, brain_config, transport: imports none of the others

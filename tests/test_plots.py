@@ -11,7 +11,7 @@ import pytest
 from swarm.plots import PLOT_FILES, PlotError, final_graph, load_run, render_plots, switch_count
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
-# The documented plot files (README, "Outputs of a run"), in the order render_plots returns them.
+# The documented plot files (docs/outputs.md, "Outputs of a run"), in the order render_plots returns them.
 EXPECTED_PNGS = ["trajectories.png", "distance.png", "control.png", "graph.png", "overview.png", "neighbours.png"]
 
 

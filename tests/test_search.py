@@ -2,7 +2,7 @@
 the breathing spiral, the predicted contact, and whole swarms that used to stay lost.
 
 Pure tier: the helpers against the world's own kinematics. In-process tier: random swarms
-whose followers were left loitering for the whole run before (the README's failed seeds)
+whose followers were left loitering for the whole run before (the failed seeds of the limited-sensing study)
 now converge, with every loss under the bound."""
 
 from __future__ import annotations

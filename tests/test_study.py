@@ -77,7 +77,7 @@ def test_every_run_counts_and_cut_off_swarms_are_also_shown_apart():
 
 @pytest.mark.slow  # a whole run in-process
 def test_gain_map_finds_where_the_law_settles():
-    # README, "Which gains converge": C2 = omega/2 settles a follower twice as fast as its
+    # docs/scenarios.md, "Which gains converge": C2 = omega/2 settles a follower twice as fast as its
     # leader; C2 = 3 omega makes it oscillate about its orbit for ever.
     good = run_gain(GainJob(1.0, 0.5, 2.0, 0, duration=200.0))
     bad = run_gain(GainJob(1.0, 3.0, 2.0, 0, duration=200.0))

@@ -1,6 +1,6 @@
 """Law names, as a scenario gives them: a registered name or "package.module:function".
 Resolving a name imports the module it points to, by name, so this contract depends on
-no agent code; the laws themselves live in agents/ (README, "Writing a law").
+no agent code; the laws themselves live in agents/ (docs/scenarios.md, "Writing a law").
 
 Three places name a law, each with its signature, checked when a scenario is loaded:
 
@@ -138,5 +138,5 @@ def check_law(name: str, kind: str = GAINS, dirs: Iterable = ()) -> Law:
         hint = ("; a (g_i, g_j, lambda_ij, c1, c2) law goes in [gains] law"
                 if kind == FOLLOWER and _binds(law, 0.0, 0.0, 0.0, 1.0, 1.0) else "")
         raise LawError(f"{_what(kind)} {name!r} does not take one argument (obs: an Observation, "
-                       f"see README, \"Writing a law\"){hint}")
+                       f"see docs/scenarios.md, \"Writing a law\"){hint}")
     return law

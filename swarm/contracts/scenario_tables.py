@@ -132,7 +132,7 @@ class GainsSpec(Strict):
 
 
 class LawSpec(Strict):
-    """[law]: the guidance laws, each law(obs) -> u (README, "Writing a law"), and their
+    """[law]: the guidance laws, each law(obs) -> u (docs/scenarios.md, "Writing a law"), and their
     parameters."""
 
     follower: str = Field("bearing", description="follower law: 'bearing' (the paper's) or 'module:function'")

@@ -126,7 +126,7 @@ TRUTH_FIELDS = [("id", "<i4"), ("x", "<f8"), ("y", "<f8"), ("heading", "<f8"),
 
 PHASES = ("track", "lost", "arc1", "arc2", "orbit", "shadow", "search")
 # what an agent counts itself and reports in its status (non-negative integers; the world
-# copies them into the run's summary): see README, "Outputs of a run"
+# copies them into the run's summary): see docs/outputs.md, "Outputs of a run"
 STATUS_COUNTERS = ("garbage", "nonfinite", "losses", "loss_switches_max")
 STATES = ("active", "coasting", "gone")
 
