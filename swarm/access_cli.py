@@ -17,11 +17,12 @@ from typing import Annotated, Optional
 
 import typer
 
+from swarm.contracts.wire import MAX_AGENT_ID
 from swarm.live_cli import EXIT_USAGE, RunOpt, fail
 
 
 def credentials(
-    agent: Annotated[Optional[int], typer.Option("--agent", metavar="ID", min=0,
+    agent: Annotated[Optional[int], typer.Option("--agent", metavar="ID", min=0, max=MAX_AGENT_ID,
                                                  help="export agent ID's identity", show_default=False)] = None,
     operator: Annotated[bool, typer.Option("--operator", help="export the operator's identity (the live "
                                            "commands: agents, graph, watch, pause, resume, kill)")] = False,

@@ -34,9 +34,10 @@ def build(groups=GROUPS, study: bool = True):
     """The typer app of these command groups (and `swarm study`), every command's errors mapped."""
     import typer
 
-    from swarm.cli_errors import map_app
+    from swarm.cli_errors import OneLineErrors, map_app
 
     app = typer.Typer(
+        cls=OneLineErrors,  # typer's usage errors (a bad option value...) as one line (swarm/cli_errors.py)
         help="swarm: an agent-per-process runtime for bearing-based circumnavigation over zenoh.",
         no_args_is_help=True,
         add_completion=False,

@@ -13,11 +13,13 @@ from typing import Annotated, Optional
 import typer
 
 from swarm.api_live import connect as connect_run
+from swarm.contracts.wire import MAX_AGENT_ID
 from swarm.live_cli import ConnectOpt, CredentialsOpt, LiveRunOpt, TrustLawOpt
 
 
 def kill(
-    agent_id: Annotated[int, typer.Argument(metavar="ID", help="the agent's id", show_default=False)],
+    agent_id: Annotated[int, typer.Argument(metavar="ID", help="the agent's id", min=0, max=MAX_AGENT_ID,
+                                            show_default=False)],
     signal: Annotated[str, typer.Option("--signal", "-s", help="KILL | TERM | STOP | CONT")] = "KILL",
     connect: ConnectOpt = None,
     run: LiveRunOpt = None,
@@ -44,7 +46,7 @@ def kill(
 def spawn(
     agent_id: Annotated[int, typer.Option("--id", help="the agent's id: a dropped one rejoins from "
                                           "where it dropped; a new one needs --x --y --heading --speed",
-                                          min=0, show_default=False)],
+                                          min=0, max=MAX_AGENT_ID, show_default=False)],
     x: Annotated[Optional[float], typer.Option(help="new agent: x (m)", show_default=False)] = None,
     y: Annotated[Optional[float], typer.Option(help="new agent: y (m)", show_default=False)] = None,
     heading: Annotated[Optional[float], typer.Option(help="new agent: heading (rad)", show_default=False)] = None,

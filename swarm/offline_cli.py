@@ -51,9 +51,7 @@ def check(scenario: ScenarioArg) -> None:
     typer.echo(f"{scenario}: ok - {s.name or scenario.stem}")
     typer.echo(f"  run: dt={r.dt} s, duration={r.duration} s ({r.ticks} ticks), clock={r.clock}, "
                f"seed={r.seed}, on_dropout={r.on_dropout}")
-    ids = s.added_id_range
-    typer.echo(f"  added agents: up to {s.added_agents_cap}"
-               + (f" (ids {ids.start}..{ids.stop - 1})" if ids else " (run.max_added_agents = 0)"))
+    typer.echo(f"  added agents: up to {len(s.added_id_range)} ({s.added_ids_text()})")
     typer.echo(f"  target: ({s.target.x}, {s.target.y}) m; gains: c1={s.gains.c1}, c2={s.gains.c2}")
     from swarm.contracts.laws import follower_law_name
 

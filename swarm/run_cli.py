@@ -12,6 +12,7 @@ from typing import Annotated, Optional
 import typer
 
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV
+from swarm.contracts.wire import MAX_AGENT_ID
 from swarm.live_cli import CredentialsOpt, TrustLawOpt
 from swarm.cli_errors import fail
 from swarm.offline_cli import ScenarioArg, read_scenario, render_run_plots
@@ -26,8 +27,9 @@ SimOutOpt = out_option("output directory (default runs/<scenario>-sim-<time>-<ra
 WorldOutOpt = out_option("where to write the results (default: nowhere); one that already holds "
                          "results is refused unless --force")
 ForceOpt = Annotated[bool, typer.Option("--force", help="replace the results already in --out")]
+# (no range of typer's: the scenario's own checks say what is wrong with any value, check_duration)
 DurationOpt = Annotated[Optional[float], typer.Option(help="simulated seconds (default: the "
-                                                      "scenario's run.duration)", min=0.0)]
+                                                      "scenario's run.duration)")]
 ClockOpt = Annotated[Optional[str], typer.Option(help="lockstep | realtime (default: the scenario's)")]
 TimeScaleOpt = Annotated[float, typer.Option("--time-scale", "--speed", help="realtime clock: simulated "
                                              "seconds per wall second", min=1e-6)]
@@ -58,8 +60,9 @@ def claim_out(out: Path, force: bool) -> None:
 
 
 def check_duration(s, duration: float | None, path: Path) -> None:
-    """--duration goes through the scenario's own checks (finite, at least one step, a
-    recording that fits in memory): one line naming the option, exit 2."""
+    """--duration goes through the scenario's own checks (positive, finite, at least one
+    step, a recording that fits in memory): one line naming the option and its value, as
+    typer's range errors are said (swarm/cli_errors.py), exit 2."""
     if duration is None:
         return
     from swarm.contracts.scenario import ScenarioError, parse_scenario
@@ -68,7 +71,11 @@ def check_duration(s, duration: float | None, path: Path) -> None:
         parse_scenario({**s.model_dump(), "run": {**s.run.model_dump(), "duration": duration}},
                        f"{path} with --duration {duration:g}")
     except ScenarioError as e:
-        raise fail(" ".join(line.strip() for line in str(e).splitlines()), 2) from None
+        why = []
+        for line in str(e).splitlines()[1:]:
+            line = line.strip().removeprefix("run.duration: ")
+            why.append(line[len("Input "):] if line.startswith("Input should be ") else line)
+        raise fail(f"--duration {duration:g}: {'; '.join(why)} ({path})", 2) from None
 
 
 def check_runtime_dir() -> None:
@@ -185,7 +192,7 @@ def world(
                                                   "$SWARM_RUNTIME_DIR or /tmp/swarm-<uid>)")] = None,
     run: Annotated[Optional[str], typer.Option(help="run id: the key prefix (default <scenario>-<random>)")] = None,
     out: WorldOutOpt = None,
-    duration: Annotated[Optional[float], typer.Option(help="simulated seconds", min=0.0)] = None,
+    duration: Annotated[Optional[float], typer.Option(help="simulated seconds")] = None,
     clock: ClockOpt = None,
     time_scale: TimeScaleOpt = 1.0,
     join_timeout: Annotated[Optional[float], typer.Option(help="give up if not every agent joined "
@@ -246,15 +253,18 @@ def world(
 
 
 def agent(
-    id: Annotated[int, typer.Option("--id", help="the agent's id in the scenario", min=0)],
+    id: Annotated[int, typer.Option("--id", help="the agent's id in the scenario", min=0, max=MAX_AGENT_ID)],
     connect: Annotated[str, typer.Option(help="the world's endpoint, e.g. tcp/HOST:7447 or "
                                          "unixsock-stream/PATH")],
     run: Annotated[Optional[str], typer.Option(help="run id (default: the only run on the endpoint)")] = None,
-    wait_world: Annotated[bool, typer.Option(help="keep waiting when the world vanishes")] = False,
+    wait_world: Annotated[bool, typer.Option(help="keep waiting when the world vanishes (for a new world "
+                                             "of the run) instead of exiting 4")] = False,
     world_grace: Annotated[float, typer.Option(help="s to wait for a world that stopped answering (a "
                                                "frozen or cut-off world; exit 5 after that)", min=0.0)] = 10.0,
-    world_wait: Annotated[float, typer.Option(help="s to wait for a world to listen on --connect before "
-                                              "giving up (exit 6)", min=0.0)] = 10.0,
+    connect_timeout: Annotated[float, typer.Option(help="s to wait for a world to listen on --connect before "
+                                                   "giving up (exit 6)", min=0.0)] = 10.0,
+    world_wait: Annotated[Optional[float], typer.Option(
+        "--world-wait", hidden=True, min=0.0, help="the old name of --connect-timeout (deprecated)")] = None,
     credentials: CredentialsOpt = None,
     trust_law: TrustLawOpt = None,
 ) -> None:
@@ -266,15 +276,25 @@ def agent(
     machines").
 
     Exit codes: 0 the run ended, 1 crashed (e.g. an exception in its law), 3 refused,
-    4 the world vanished, 5 the world did not answer within --world-grace, 6 no world to
-    join (nothing listened on --connect for --world-wait s), 130/143 stopped.
+    4 the world vanished (unless --wait-world), 5 the world did not answer within
+    --world-grace, 6 no world to join (nothing listened on --connect for --connect-timeout
+    s), 130/143 stopped.
 
     Example: swarm agent --id 3 --connect tcp/10.0.0.5:7447 --credentials agent-3.cred
     """
     from agents.process import run_agent
 
+    if credentials is not None:  # a file that cannot be used: said now, not after waiting for the world
+        from swarm.contracts import credentials as C
+        from swarm.contracts.identities import CredentialsError
+
+        try:
+            C.read(credentials)
+        except CredentialsError as e:
+            raise fail(f"swarm agent {id}: {e}", 3) from None
+    wait = connect_timeout if world_wait is None else world_wait
     raise typer.Exit(run_agent(id, connect, run, wait_world, world_grace=world_grace, creds_file=credentials,
-                               trust=tuple(trust_law or ()), world_wait=world_wait))
+                               trust=tuple(trust_law or ()), world_wait=wait))
 
 
 def register(app: typer.Typer) -> None:

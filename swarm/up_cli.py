@@ -29,7 +29,7 @@ from swarm.run_cli import (
     out_option,
     print_summary,
 )
-from swarm.up_progress import ProgressLine
+from swarm.up_progress import Paused, ProgressLine
 
 UpOutOpt = out_option("output directory (default runs/<run id>); one that already holds results is "
                       "refused unless --force")
@@ -69,7 +69,10 @@ def up(
     if live is not None:
         check_foxglove(*live)
 
+    launched = []
+
     def started(run) -> None:  # checked, nothing started yet: what another terminal needs
+        launched.append(run)
         typer.echo(f"run {run.run_id}  endpoint {run.endpoint}  agents {len(s.agents)}  "
                    f"clock {clock or s.run.clock}")
         for line in attach_hints(run.run_id, run.dial, s):
@@ -79,9 +82,13 @@ def up(
 
             typer.echo(open_hint(*live))
 
-    line = ProgressLine(sys.stdout.isatty())
+    line, paused = ProgressLine(sys.stdout.isatty()), Paused()
+
+    def progress(p: dict) -> None:  # "paused" from the world's pause/resume events the launcher heard
+        line.show({**p, "paused": paused(launched[0].launcher.events) if launched else False})
+
     o = launch(scenario, out, force=force, duration=duration, clock=clock, time_scale=time_scale, listen=listen,
-               foxglove=live, world_grace=world_grace, progress=line.show, on_start=started)  # SIGINT/TERM: stop
+               foxglove=live, world_grace=world_grace, progress=progress, on_start=started)  # SIGINT/TERM: stop
     line.end()
     err = dict(err=True, fg=typer.colors.RED)
     if o.words is not None:
@@ -113,7 +120,9 @@ def attach_hints(run_id: str, dial: str, s) -> list[str]:
     lines = [f"watch it from another terminal: swarm watch{pick}  (table: swarm agents{pick}; graph: "
              f"swarm graph{pick}" + (f"; or export SWARM_RUN={run_id} once" if others else "") + ")",
              f"add an agent by hand: swarm spawn --id N{pick} (a new id, {ids.start}..{ids.stop - 1}, with "
-             "--x --y --heading --speed)"]
+             "--x --y --heading --speed)" if ids else
+             f"add an agent by hand: no new id ({s.added_ids_text()}); a dropped agent rejoins with "
+             f"swarm spawn --id N{pick}"]
     if not dial.startswith("unixsock"):
         lines.append(f"from another machine: swarm credentials --agent N{pick}, there swarm agent --id N --connect {dial} "
                      "--credentials FILE (docs/resilience.md, \"Agents on other machines\")")

@@ -6,7 +6,10 @@ line's text, agent by agent for a small swarm, summed up for a large one: how ma
 are settled (radial error within the settling band, 2%), how many are not and the worst
 few of those, how many have no leader, which (or how many) dropped. Agents added at run time (`swarm spawn`) count
 once the launcher knows their spec (`AddedSpec`, from the world's info). `ProgressLine`
-draws the line from the figures `swarm.launch` reports.
+draws the line from the figures `swarm.launch` reports; while the world's clock is paused
+(`swarm pause`: the figures' "paused", from the world's pause and resume events,
+`Paused`) it says "paused" where the tick rate goes, and a world that does not tick
+otherwise shows 0 ticks/s, not the last rate it had.
 """
 
 from __future__ import annotations
@@ -126,20 +129,25 @@ class ProgressLine:
     def __init__(self, tty: bool):
         self.tty = tty
         self.last, self.tick, self.wall = 0.0, 0, 0.0
+        self.clock = ""  # the rate (or "paused") last shown
 
     def show(self, p: dict) -> None:
         import time
 
         import typer
 
-        if p["tick"] == self.tick and self.wall > 0:
-            return
         now = time.monotonic()
+        still = p["tick"] == self.tick and self.wall > 0
+        if still and now - self.last < 1.0:
+            return  # no new tick: said again at most once a second (the rate falls, or "paused")
         if not self.tty and now - self.last < 1.0 and p["tick"] < p["ticks"] - 1:
             return
         rate = (p["tick"] - self.tick) / max(p["wall"] - self.wall, 1e-9)
-        self.last, self.tick, self.wall = now, p["tick"], p["wall"]
-        line = f"t={p['time']:7.2f}s tick {p['tick']}/{p['ticks']} {rate:6.0f} ticks/s  " + progress_errors(p)
+        clock = "paused" if p.get("paused") else f"{rate:6.0f} ticks/s"
+        if still and not self.tty and clock == self.clock:
+            return  # a log gets a line when something changed
+        self.last, self.tick, self.wall, self.clock = now, p["tick"], p["wall"], clock
+        line = f"t={p['time']:7.2f}s tick {p['tick']}/{p['ticks']} {clock}  " + progress_errors(p)
         if self.tty:  # one terminal row: a wrapped line would not be cleared by the next one
             import shutil
 
@@ -152,3 +160,20 @@ class ProgressLine:
             import typer
 
             typer.echo("")
+
+
+
+class Paused:
+    """Whether the world's clock is paused, from the events the launcher heard (a list that
+    only grows): the last `pause` or `resume`. Each call reads only the new events."""
+
+    def __init__(self):
+        self.seen, self.paused = 0, False
+
+    def __call__(self, events: list[dict]) -> bool:
+        n = len(events)
+        for ev in events[self.seen:n]:
+            if ev.get("kind") in ("pause", "resume"):
+                self.paused = ev["kind"] == "pause"
+        self.seen = n
+        return self.paused

@@ -200,11 +200,36 @@ def parse(text: str, path: Path | None = None) -> Credentials:
 
 
 def read(path: Path) -> Credentials:
-    """A credentials file; it must be the user's own and readable by nobody else."""
+    """A credentials file; it must be the user's own and readable by nobody else. A file
+    refused for its owner or mode that is no credentials file at all (`--credentials
+    /etc/passwd`) is refused as that, not with advice to chmod it."""
     path = Path(path)
-    data = read_private(path)
+    try:
+        data = read_private(path)
+    except CredentialsError:
+        _refuse_if_not_credentials(path)
+        raise
     try:
         return parse(data.decode("utf-8"), path)
+    except UnicodeDecodeError:
+        raise CredentialsError(f"{path}: not a credentials file (not UTF-8)") from None
+
+
+def _refuse_if_not_credentials(path: Path) -> None:
+    """CredentialsError "not a credentials file" if `path`, a regular file that read_private
+    refused, does not parse as one; nothing if it does or cannot be read (read_private's
+    reason stands). What it reads is only parsed, never used."""
+    import stat
+
+    try:
+        if not stat.S_ISREG(os.lstat(path).st_mode):
+            return
+        with open(path, "rb") as f:
+            data = f.read(1 << 20)
+    except OSError:
+        return
+    try:
+        parse(data.decode("utf-8"), path)
     except UnicodeDecodeError:
         raise CredentialsError(f"{path}: not a credentials file (not UTF-8)") from None
 

@@ -12,6 +12,13 @@ Three places name a law, each with its signature, checked when a scenario is loa
 
 `obs` is a swarm.contracts.observation.Observation; u in rad/s. A module is looked up on
 sys.path, to which the scenario file's directory and $SWARM_LAW_PATH are appended.
+
+A law must be a Python function (`def` or `lambda`, or a method bound to an object) whose
+parameters take the arguments of its kind. Anything else that can be called is refused
+when the scenario is loaded, naming the scenario field: a builtin (`os:system` takes one
+argument, but a string, and would crash on the first tick), a class (`collections:OrderedDict`),
+an object with `__call__`, a `functools.partial`: their signatures cannot be checked, or
+do not mean what a law's does.
 """
 
 from __future__ import annotations
@@ -120,16 +127,32 @@ def resolve_law(name: str, kind: str = GAINS, dirs: Iterable = ()) -> Law:
 def _binds(fn, *args) -> bool:
     try:
         inspect.signature(fn).bind(*args)
-    except TypeError:
+    except (TypeError, ValueError):  # ValueError: no signature to check
         return False
-    except ValueError:
-        pass  # builtins without a signature: trust them
     return True
 
 
+def _is_python_function(fn) -> bool:
+    """A `def` or `lambda` (also one bound to an object): code whose signature is its own."""
+    return inspect.isfunction(fn) or (inspect.ismethod(fn) and inspect.isfunction(fn.__func__))
+
+
+def _kind_of(fn) -> str:
+    if inspect.isclass(fn):
+        return "a class"
+    if inspect.isbuiltin(fn) or inspect.ismethoddescriptor(fn) or type(fn).__name__ == "method-wrapper":
+        return "a builtin"
+    return f"a {type(fn).__name__} object"
+
+
 def check_law(name: str, kind: str = GAINS, dirs: Iterable = ()) -> Law:
-    """Resolve `name` and check that it takes the arguments its kind documents."""
+    """Resolve `name` and check that it is a Python function taking the arguments its kind
+    documents."""
     law = resolve_law(name, kind, dirs)
+    if not _is_python_function(law):
+        raise LawError(f"{_what(kind)} {name!r} is {_kind_of(law)}, not a Python function (a law is a "
+                       "`def` taking " + ("(g_i, g_j, lambda_ij, c1, c2)" if kind == GAINS else "obs") +
+                       ", see docs/scenarios.md, \"Writing a law\")")
     if kind == GAINS:
         if not _binds(law, 0.0, 0.0, 0.0, 1.0, 1.0):
             hint = "; a law of one argument (obs) goes in [law] follower" if _binds(law, None) else ""

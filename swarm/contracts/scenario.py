@@ -114,13 +114,13 @@ class Scenario(Strict):
         if n + cap > MAX_AGENTS:
             raise ValueError(
                 f"run.max_added_agents: {n + cap} agents ({n} + {cap} that may be added{default}), more "
-                f"than the wire carries ({MAX_AGENTS}); set run.max_added_agents = {MAX_AGENTS - n} or fewer")
+                f"than the wire carries ({MAX_AGENTS}); set run.max_added_agents = {_at_most(MAX_AGENTS - n)}")
         top = max(self.ids)
         if cap and top + cap > MAX_AGENT_ID:
             raise ValueError(
                 f"agents[{self.ids.index(top)}].id: the {cap} agents that may be added{default} take ids "
                 f"{top + 1}..{top + cap}, past the largest id the wire carries ({MAX_AGENT_ID}); use "
-                f"smaller ids or set run.max_added_agents = {MAX_AGENT_ID - top} or fewer")
+                f"smaller ids or set run.max_added_agents = {_at_most(MAX_AGENT_ID - top)}")
         ticks = self.run.ticks
         if ticks * (n + cap) > MAX_AGENT_TICKS:
             raise ValueError(
@@ -164,6 +164,24 @@ class Scenario(Strict):
         it from the scenario as loaded, not from a copy the world has added agents to."""
         start = max(self.ids) + 1
         return range(start, start + self.added_agents_cap)
+
+    def added_ids_text(self) -> str:
+        """The ids agents added while the run goes may take, in words: "ids 7..30", or, when
+        there are none, why (run.max_added_agents = 0, no id left past the largest, no room
+        on the wire)."""
+        ids = self.added_id_range
+        if ids:
+            return f"ids {ids.start}..{ids.stop - 1}"
+        if self.run.max_added_agents == 0:
+            return "run.max_added_agents = 0"
+        top = max(self.ids)
+        if top >= MAX_AGENT_ID:
+            return f"agent {top} has the largest id the wire carries, so no id is left after it"
+        return f"{len(self.agents)} agents, the most the wire carries ({MAX_AGENTS})"
+
+
+def _at_most(m: int) -> str:
+    return f"{m} or fewer" if m > 0 else f"{m}"
 
 
 class ScenarioError(Exception):
