@@ -78,6 +78,7 @@ class AgentNode:
         self.commands = 0
         self.garbage = 0
         self.last_tick = -1
+        self.last_cmd: bytes | None = None  # the command answering frame `last_tick`
         self.last = None  # last Decision
         self.link = WorldLink(session, run, agent_id, endpoint, world_grace, wait_world)
         self.nonfinite_before = 0  # non-finite law outputs of earlier brains (a new world)
@@ -185,7 +186,9 @@ class AgentNode:
         """Answer `frame` (not an older or repeated one); True when what the status says
         changed (out-neighbour, phase, fallback or hops)."""
         if frame.tick <= self.last_tick:
-            return False  # duplicate or old frame
+            if frame.tick == self.last_tick and self.last_cmd is not None:
+                self.cmd_pub.put(self.last_cmd)  # sent again by a world after its stall: the same answer
+            return False  # duplicate or old frame: the brain does not step twice
         brain = self.brain
         bad = brain.nonfinite
         d = brain.decide(frame)
@@ -193,7 +196,8 @@ class AgentNode:
             self.nonfinite_noted = time.monotonic()
             _log(f"[agent {self.id}] tick {frame.tick}: the law {self.conf.law_names()[0]!r} returned "
                  f"{brain.last_nonfinite}; the last turn rate is held ({self.nonfinite()} so far)")
-        self.cmd_pub.put(wire.encode_cmd_fields(self.id, frame.tick, d.u, d.out, d.phase, d.hops, self.key))
+        self.last_cmd = wire.encode_cmd_fields(self.id, frame.tick, d.u, d.out, d.phase, d.hops, self.key)
+        self.cmd_pub.put(self.last_cmd)
         self.commands += 1
         self.last_tick = frame.tick
         last, self.last = self.last, d
@@ -217,7 +221,7 @@ class AgentNode:
                 self.answering = False
                 self.nonfinite_before = self.nonfinite()
                 self.brain = self.new_brain()
-                self.last_tick, self.last = -1, None
+                self.last_tick, self.last, self.last_cmd = -1, None, None
             _log(f"[agent {self.id}] a world is back; rejoining")
             key = claim(self.session, self.run, self.id).get("key", 0)
             with self.lock:

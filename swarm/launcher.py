@@ -12,7 +12,8 @@ and say which signal), then the agents, then anything left in the group. Each ch
 output goes to `<out>/logs/`.
 
 It supervises: an agent process that exits by itself is reported live, sent to the world
-(an `agent_exit` admin request: the world records a `crash` or `exit` event, see
+(an `agent_exit` request on the world's supervise key, which only the launcher's own
+`supervisor` identity may use: the world records a `crash` or `exit` event, see
 swarm/supervision.py) and listed at the end; one that exits before the run started, or a
 world that does, stops the run with one line naming the cause. Children get the
 launcher's pid (swarm/contracts/lifeline.py) and stop by themselves if it dies.
@@ -21,16 +22,18 @@ launcher's pid (swarm/contracts/lifeline.py) and stop by themselves if it dies.
 from __future__ import annotations
 
 import os
+import secrets
 import signal
 import subprocess
 import sys
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
 from swarm.contracts import credentials, wire
+from swarm.contracts.identities import ENV_SUPERVISOR, SUPERVISOR
 from swarm.contracts.laws import ENV_LAW_PATH, ENV_TRUSTED_LAWS, with_law_path, with_trusted_laws
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV
 from swarm.contracts.scenario import Scenario
@@ -91,6 +94,9 @@ class Launcher:
         self.added: dict[int, AddedSpec] = {}  # agents added at run time (`swarm spawn`), for the progress line
         self.unknown_added: set[int] = set()  # added agents whose spec is still to be asked for
         self.starter: AgentStarter | None = None  # starts the agents (forked, or exec'd)
+        # The supervisor's password (swarm/contracts/access.py): this process and its world
+        # alone have it; only with it may the world be told of agent exits and faults done.
+        self.supervisor_password = secrets.token_hex(16)
 
     # -- processes --------------------------------------------------------------------------
     def _env(self) -> dict:
@@ -114,7 +120,7 @@ class Launcher:
             args += ["--foxglove", "--foxglove-host", c.foxglove[0], "--foxglove-port", str(c.foxglove[1])]
         with open(self.logs / "world.log", "ab") as log:
             self.world = self.group.start(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
-                                          env=self._env())
+                                          env={**self._env(), ENV_SUPERVISOR: self.supervisor_password})
 
     def start_starter(self) -> None:
         """What starts the agents (swarm/forks.py: a fork server, which imports meanwhile); after
@@ -161,7 +167,8 @@ class Launcher:
                 return True
             try:  # the world writes the run's credentials before it listens
                 creds = credentials.read(credentials.run_file(self.cfg.run))
-                ses = open_client(self.dial, timeout_ms=500, creds=creds)
+                creds = replace(creds, secret=None, user=SUPERVISOR, password=self.supervisor_password)
+                ses = open_client(self.dial, timeout_ms=500, creds=creds, user=SUPERVISOR)
             except Exception:
                 return False
             if any(r.ok for r in ses.liveliness().get(wire.world_alive_key(self.cfg.run), timeout=1.0)):
@@ -306,7 +313,7 @@ class Launcher:
                 except ProcessLookupError:
                     pass
             if session is not None:
-                list(session.get(wire.world_admin_key(self.cfg.run), timeout=2.0,
+                list(session.get(wire.world_supervise_key(self.cfg.run), timeout=2.0,
                                  payload=wire.encode_admin("fault_done", index=index)))
 
     def stop(self, signum: int = signal.SIGTERM) -> None:

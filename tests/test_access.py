@@ -21,7 +21,7 @@ import pytest
 
 from runtime_helpers import SCENARIOS, Runtime, UpRun, open_session, run_credentials, swarm_cmd, wait_for
 from swarm.contracts import credentials, wire
-from swarm.contracts.identities import agent_user
+from swarm.contracts.identities import SUPERVISOR, agent_user
 from swarm.contracts.transport import open_client, query_statuses
 
 pytestmark = pytest.mark.slow
@@ -288,3 +288,24 @@ def test_operator_cannot_forge_commands_or_notices(run):
     time.sleep(1.0)
     assert info(run)["agents"]["1"]["rogue_commands"] == 0
     assert all_alive(run)
+
+
+def test_operator_cannot_write_the_record(run):
+    """Issue 22: agent exits and faults done come from the launcher's `supervisor` identity
+    alone. The operator's forged reports (a crash of live agent 5, a fault done) are refused
+    on world/admin, never routed to world/supervise, and the run's secret does not give
+    the supervisor's password: no report reaches the world, every agent stays in."""
+    r = run["run"]
+    for payload in (wire.encode_agent_exit(5, run["pids"][5], 1, True, "forged", []),
+                    wire.encode_admin("fault_done", index=0)):
+        admin = [wire.decode_admin_reply(x.ok.payload.to_bytes())
+                 for x in run["operator"].get(wire.world_admin_key(r), payload=payload, timeout=2.0) if x.ok]
+        assert admin and not admin[0]["ok"] and "unknown cmd" in admin[0]["error"], admin
+        assert not [x for x in run["operator"].get(wire.world_supervise_key(r), payload=payload, timeout=2.0)
+                    if x.ok], "the hub let the operator's query reach the supervise key"
+    with pytest.raises(Exception):
+        open_client(run["endpoint"], timeout_ms=REFUSE_MS, creds=run["creds"], user=SUPERVISOR).close()
+    after = info(run)
+    assert "supervise" not in after["over_limit"], after["over_limit"]
+    assert all(a["alive"] for a in after["agents"].values()) and all_alive(run)
+    ticks_on(run)

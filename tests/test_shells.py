@@ -144,8 +144,9 @@ def test_agent_answers_its_frames_with_commands_and_counts_garbage():
     brain = node.new_brain()
     d = brain.decide(frame)
     assert (cmd.agent, cmd.tick, cmd.u, cmd.out, cmd.hops, cmd.key) == (2, 0, d.u, 1, 1, reply["key"])
-    node.on_sense(frame)  # the same tick again: no second command
-    assert len(ses.on(wire.agent_key(RUN, 2, "cmd"))) == 1
+    node.on_sense(frame)  # the same tick again (a world after its stall): the same command, brain not stepped
+    first, again = ses.on(wire.agent_key(RUN, 2, "cmd"))
+    assert again == first and node.commands == 1
     node.on_ctl(wire.encode_json({"kind": "signal", "signal": "HUP"}))
     assert node.garbage == 1
     node.maybe_publish_status(force=True)
@@ -212,6 +213,51 @@ def test_a_full_inbox_drops_commands_and_queries_but_never_liveliness(monkeypatc
     while world.drain(None, 0):
         pass
     assert world.over_limit["inbox"] == 2 and [e["kind"] for e in events].count("limit") == 1
+
+
+def test_one_keys_flood_costs_no_other_agent_a_command():
+    """Agent 2's command key flooded far past its share: every command of agent 1's gets in,
+    agent 2's excess is dropped and counted to agent 2 (flooded_messages), one event."""
+    from world.inbox import PER_KEY_MAX
+
+    world, _ = open_world()
+    k1, k2 = join(world, 1), join(world, 2)
+    events = []
+    world.engine.on_event = events.append
+    for _ in range(PER_KEY_MAX + 500):
+        world.enqueue(("cmd", wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd_fields(2, 0, 0.1, None, "track", None, k2)))
+    world.enqueue(("cmd", wire.agent_key(RUN, 1, "cmd"), wire.encode_cmd_fields(1, 0, 0.1, None, "track", None, k1)))
+    pending = {1, 2}
+    while world.drain(pending, 0):
+        pass
+    assert world.book[1].commands == 1 and world.book[1].flooded == 0
+    assert world.book[2].flooded == 500 and world.book[2].commands == 1
+    assert [e.get("key") for e in events if e["kind"] == "limit"] == [wire.agent_key(RUN, 2, "cmd")]
+    assert not world.fair.waiting, "the count of waiting messages went astray"
+
+
+def test_a_flapping_token_is_seen_at_its_latest_state_and_its_churn_is_capped():
+    """100,000 toggles of agent 2's token while the world is busy: one inbox entry, the
+    latest state; churn past CHURN_EVENTS is counted, not written."""
+    from world.roster import CHURN_EVENTS
+
+    world, _ = open_world()
+    join(world, 1)
+    key = wire.agent_key(RUN, 2, "alive")
+    for i in range(100_000):
+        world.enqueue(("alive", key, zenoh.SampleKind.PUT if i % 2 == 0 else zenoh.SampleKind.DELETE), False)
+    assert world.inbox.qsize() == 1
+    while world.drain(None, 0):
+        pass
+    assert 2 not in world.core.active_ids() and world.book[2].joins == 0  # last state: gone
+    for i in range(2 * CHURN_EVENTS + 11):  # handled one by one: each a join or a drop
+        world.enqueue(("alive", key, zenoh.SampleKind.PUT if i % 2 == 0 else zenoh.SampleKind.DELETE), False)
+        world.drain(None, 0)
+    b = world.book[2]
+    written = [e for e in world.engine.events if e["agent"] == 2 and e["kind"] in ("join", "rejoin", "drop")]
+    assert len(written) == CHURN_EVENTS and b.churn_unwritten == CHURN_EVENTS + 11 and b.joins + b.drops == b.churn
+    assert [e["limit"] for e in world.engine.events if e["kind"] == "limit"] == ["churn"]
+    assert 2 in world.core.active_ids()  # the last toggle was a PUT: the state is still followed
 
 
 def test_a_law_from_the_join_reply_is_not_imported_unless_trusted(tmp_path, monkeypatch):

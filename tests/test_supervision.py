@@ -75,27 +75,59 @@ def test_agent_exit_round_trip_and_limits():
         wire.decode_admin(wire.encode_json(good))
 
 
-def _admin(world, payload: bytes) -> dict:
+def _admin(world, payload: bytes, on: str = "supervise") -> dict:
     q = FakeQuery(payload)
-    world._on_admin(q)
+    (world._on_supervise if on == "supervise" else world._on_admin)(q)
     return wire.decode_admin_reply(q.replies[0][1])
+
+
+def _leave(world, aid: int) -> None:
+    world._on_alive(wire.agent_key(RUN, aid, "alive"), zenoh.SampleKind.DELETE, None)
 
 
 def test_world_records_crash_and_exit_events():
     world, _ = open_world()
     join(world, 1)
     join(world, 2)
+    _leave(world, 2)
     rep = _admin(world, wire.encode_agent_exit(2, 102, 1, True, "RuntimeError: boom",
                                                ["Traceback", "RuntimeError: boom"]))
     assert rep["ok"]
-    _admin(world, wire.encode_agent_exit(1, 101, -9, False, "", []))
+    _admin(world, wire.encode_agent_exit(1, 101, -9, False, "", []))  # before its token went: kept
+    assert [e["kind"] for e in world.engine.events if e["kind"] in ("crash", "exit")] == ["crash"]
+    _leave(world, 1)
+    world.drain(None, 0)
     crash, gone = [e for e in world.engine.events if e["kind"] in ("crash", "exit")]
     assert (crash["kind"], crash["agent"], crash["code"], crash["cause"]) == ("crash", 2, 1, "RuntimeError: boom")
     assert crash["reason"] == "process 102 ended (exit code 1): RuntimeError: boom"
     assert crash["log"] == ["Traceback", "RuntimeError: boom"]
     assert (gone["kind"], gone["reason"]) == ("exit", "process 101 ended (killed by SIGKILL)")
     stranger = _admin(world, wire.encode_agent_exit(9, 1, 1, True, "x", []))
-    assert not stranger["ok"] and "not in the run" in stranger["error"] and world.garbage == 1
+    assert not stranger["ok"] and "not in the run" in stranger["error"] and world.over_limit["supervise"] == 1
+
+
+def test_a_report_on_a_live_agent_never_reaches_the_record(monkeypatch):
+    """A crash reported for an agent that stays in the world is refused once the wait is
+    over; a fault_done for a fault the clock is not waiting for is refused; neither report
+    is accepted on the operator's admin key at all."""
+    import world.inbox as inbox_mod
+
+    monkeypatch.setattr(inbox_mod, "EXIT_REPORT_WAIT", 0.0)
+    world, _ = open_world()
+    join(world, 1)
+    join(world, 2)
+    assert _admin(world, wire.encode_agent_exit(2, 1, 1, True, "forged", []))["ok"]
+    world.drain(None, 0)
+    assert not [e for e in world.engine.events if e["kind"] in ("crash", "exit")]
+    assert world.over_limit["supervise"] == 1 and not world.exit_reports
+    rep = _admin(world, wire.encode_admin("fault_done", index=0))
+    assert not rep["ok"] and "not being carried out" in rep["error"] and not world.faults_done
+    world.fault_awaited = 0
+    assert _admin(world, wire.encode_admin("fault_done", index=0))["ok"] and world.faults_done == {0}
+    for forged in (wire.encode_agent_exit(2, 1, 1, True, "forged", []), wire.encode_admin("fault_done", index=0)):
+        rep = _admin(world, forged, on="admin")
+        assert not rep["ok"] and "unknown cmd" in rep["error"]
+    assert 2 in world.core.active_ids()
 
 
 # -- non-finite law outputs ------------------------------------------------------------------------

@@ -24,11 +24,16 @@ from world.core import ACTIVE
 from world.faults import fault_event
 
 DESERTED_GRACE = 5.0  # s of wall time a started run may go on with no agent at all
+STALL_GRACE = 3.0  # s the agents get to answer after a stall of the world (their links come back in ~0.5 s)
+RESEND_S = 0.25  # s between resends of a tick's frames after a stall of the world
+MAX_REASONS = 20  # reasons kept for `not_reproducible`
 EXIT_DESERTED = 5
 
 
 class Clock:
     deserted_since: float | None = None  # monotonic s since when no agent is in the started run
+    restarts: int = 0  # lockstep: deadlines restarted (a stall of the world, a link back)
+    carrying: int | None = None  # the agent a scripted fault is being carried out on
 
     def answer_pause_waiters(self) -> None:
         """Answer the pause queries that came during a tick, now that it is done, with the
@@ -65,6 +70,32 @@ class Clock:
             self.drain(None, min(left, 0.05))
         return True
 
+    def unscripted(self, aid: int, what: str) -> None:
+        """Agent `aid` joined or left the started run, not by a scripted fault: `swarm sim`
+        cannot do the same, so the run is no longer reproducible (its reasons say why)."""
+        if self.started and aid != self.carrying:
+            self.not_reproducible(f"agent {aid} {what} at tick {self.core.tick}, not by a scripted fault")
+
+    def not_reproducible(self, reason: str) -> None:
+        if len(self.irreproducible) < MAX_REASONS:
+            self.irreproducible.append(reason)
+        elif len(self.irreproducible) == MAX_REASONS:
+            self.irreproducible.append("... and more")
+
+    def reproducibility(self) -> dict:
+        """summary.json's `reproducible` (bool) and `not_reproducible` (reasons): whether
+        `swarm sim` of the same scenario gives this run's trajectories exactly."""
+        reasons = list(self.irreproducible)
+        if self.cfg.clock != "lockstep":
+            reasons.insert(0, f"clock {self.cfg.clock}: commands are used as they arrive")
+        late = {aid: n for aid, n in self.late.items() if n}
+        if late:
+            reasons.insert(0, f"{sum(late.values())} commands missed the lockstep deadline (agents "
+                              f"{', '.join(map(str, sorted(late)))}): their last ones were held")
+        if len(self.book) > len(self.cfg.scenario.ids):
+            reasons.append(f"{len(self.book) - len(self.cfg.scenario.ids)} agents added at run time")
+        return {"reproducible": not reasons, "not_reproducible": reasons}
+
     def carry_out(self, index: int, f) -> None:
         """A scripted fault is due at this tick. Network faults are the fault plan's job;
         process faults are asked of the launcher (it owns the processes) while the clock
@@ -72,9 +103,21 @@ class Clock:
         if f.kind not in ("kill", "restart", "freeze", "thaw"):
             return
         t_hold = time.monotonic()
+        self.carrying = f.agent  # its drop or join is the fault's (see `unscripted`)
+        try:
+            self._carry_out(index, f)
+        finally:
+            self.carrying = None
+            self.held += time.monotonic() - t_hold
+
+    def _carry_out(self, index: int, f) -> None:
+        self.fault_awaited = index  # the one fault_done the launcher may report now (world/inbox.py)
         self.control_pub.put(wire.encode_fault_notice(index, self.core.tick, fault_event(index, f)))
-        if not self._wait(lambda: index in self.faults_done, 5.0):
+        done = self._wait(lambda: index in self.faults_done, 5.0)
+        self.fault_awaited = None
+        if not done:
             self.event("fault_skipped", f.agent, f"nobody carried out the {f.kind} (no launcher?)")
+            self.not_reproducible(f"the scripted {f.kind} of agent {f.agent} did not land on tick {self.core.tick}")
             return
         k = self.core.index[f.agent]
         # Hold the clock until the fault has taken effect, so that it lands on this tick as
@@ -83,9 +126,10 @@ class Clock:
         if f.kind in ("kill", "freeze"):
             if not self._wait(lambda: self.core.state[k] != ACTIVE, 3.0 if f.kind == "kill" else 6.0):
                 self.event("fault_late", f.agent, f"the {f.kind} did not drop the agent in time")
+                self.not_reproducible(f"the scripted {f.kind} of agent {f.agent} did not land on tick {self.core.tick}")
         elif not self._wait(lambda: self.core.state[k] == ACTIVE, 20.0):
             self.event("fault_late", f.agent, f"the {f.kind} agent did not rejoin within 20 s")
-        self.held += time.monotonic() - t_hold
+            self.not_reproducible(f"the scripted {f.kind} of agent {f.agent} did not land on tick {self.core.tick}")
 
     def deserted(self) -> bool:
         """No agent in the run, and no scripted restart or thaw to come (see the module)."""
@@ -104,16 +148,41 @@ class Clock:
         return now - self.deserted_since > DESERTED_GRACE
 
     def lockstep_tick(self) -> None:
+        """Frames out, then every live agent's command in, up to the deadline. The deadline
+        is the agents': a stall of the world itself (SIGSTOP, a starved CPU), or an agent's
+        link coming back, restarts it (STALL_GRACE at least) and sends this tick's frames
+        again, every RESEND_S, to those that have not answered (the first ones may have gone
+        with the links); an agent whose token is being ridden out (world/inbox.py,
+        `rides_out`) is waited for until it is back or dropped; whatever reached the inbox
+        before the deadline counts."""
         pending = self.publish_frames()
         t_end = time.monotonic() + self.deadline
+        seen, resent = self.disturbed, None
         while pending:
-            left = t_end - time.monotonic()
+            now = time.monotonic()
+            if self.disturbed != seen:  # not the agents' fault
+                seen, resent = self.disturbed, now
+                t_end = now + max(self.deadline, STALL_GRACE)
+                self.restarts += 1
+                self.resend_frames(pending)
+            elif resent is not None and now - resent >= RESEND_S:
+                resent = now
+                self.resend_frames(pending)
+            left = t_end - now
             if left <= 0:
+                while pending and self.drain(pending, 0):  # already here: not missed
+                    pass
+                if not pending or self.disturbed != seen:
+                    continue
+                if self.lost_after_stall and pending & self.lost_after_stall.keys():
+                    self.drain(pending, RESEND_S)  # held: back (a disturbance) or dropped (not pending)
+                    continue
                 for aid in pending:
                     self.book[aid].missed += 1
+                    self.late[aid] = self.late.get(aid, 0) + 1
                 self.engine.miss(len(pending))
                 break
-            self.drain(pending, left)
+            self.drain(pending, left if resent is None else min(left, RESEND_S))
         while self.drain(None, 0):  # joins/drops that arrived meanwhile take effect now
             pass
 

@@ -86,23 +86,26 @@ class Engine:
             self.event("fault", f.agent, f"scripted {f.kind}", fault=fault_event(i, f))
         return due
 
-    def drop(self, agent: int, reason: str) -> str | None:
+    def drop(self, agent: int, reason: str, quiet: bool = False) -> str | None:
         """The agent's process is gone (killed, frozen past its lease): it leaves the world
-        or coasts. None if it was not active."""
+        or coasts. None if it was not active. `quiet`: no event (counted by the shell)."""
         k = self.core.index[agent]
         if self.core.state[k] != ACTIVE:
             return None
         state = self.core.drop(agent)
         self.out[k] = -1
-        self.event("drop", agent, reason, now=state)
+        if not quiet:
+            self.event("drop", agent, reason, now=state)
         return state
 
-    def join(self, agent: int, reason: str, rejoin: bool, **more) -> bool:
-        """The agent's process is (back) in the world, controlled from its current pose."""
+    def join(self, agent: int, reason: str, rejoin: bool, quiet: bool = False, **more) -> bool:
+        """The agent's process is (back) in the world, controlled from its current pose.
+        `quiet`: no event (counted by the shell)."""
         if self.core.state[self.core.index[agent]] == ACTIVE:
             return False
         self.core.join(agent)
-        self.event("rejoin" if rejoin else "join", agent, reason, **more)
+        if not quiet:
+            self.event("rejoin" if rejoin else "join", agent, reason, **more)
         return True
 
     def add_agent(self, spec) -> None:

@@ -15,7 +15,7 @@ from dataclasses import replace
 import sys
 
 from swarm.contracts import credentials
-from swarm.contracts.identities import CredentialsError
+from swarm.contracts.identities import ENV_SUPERVISOR, CredentialsError
 from swarm.contracts.runtime_dir import pid_alive
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.transport import HubAuth, dial_endpoint, open_hub_requested, runtime_dir
@@ -53,7 +53,10 @@ def run_auth(run: str, listen: str, scenario: Scenario) -> HubAuth | None:
         print("swarm world: SWARM_OPEN_HUB is set: anyone who reaches the endpoint can act on this run",
               file=sys.stderr, flush=True)
         return None
-    return HubAuth(creds, tuple(scenario.ids) + tuple(added), tls_settings)
+    # The launcher's own password (swarm/contracts/access.py, `supervisor`): taken out of the
+    # environment at once; a world started by hand has no supervisor.
+    supervisor = os.environ.pop(ENV_SUPERVISOR, "") or None
+    return HubAuth(creds, tuple(scenario.ids) + tuple(added), tls_settings, supervisor)
 
 
 def forget_run(run: str, listen: str) -> None:

@@ -9,7 +9,18 @@ whose state it reads and changes.
 After the world itself has stalled (SIGSTOP, a starved CPU: more than STALL_S s without
 reaching its inbox), every agent's link has timed out on the agent's side and comes back
 at once: a token that vanishes then is given REJOIN_WAIT s to come back before the agent
-is dropped, so a stalled world does not drop and rejoin every agent.
+is dropped, so a stalled world does not drop and rejoin every agent. In a lockstep run, any
+token lost not by a scripted fault is held LINK_GRACE s the same way (the clock waits for
+it), unless the launcher reports the agent's process ended: a link lease that ran out under
+load is ridden out, and the run stays what `swarm sim` gives.
+
+Fairness: no identity's messages may cost another's. Liveliness changes are coalesced
+per key (the main thread sees the latest state of each token, however fast it flaps);
+every other message counts against its key (one agent's command key, one query key),
+and past PER_KEY_MAX waiting on one key that key's new messages are dropped and counted
+to it (`flooded_messages`), whatever the others send. An agent's join, rejoin and drop
+events past CHURN_EVENTS (world/roster.py) are counted, not written, so one identity's
+churn cannot grow the run's record without bound.
 """
 
 from __future__ import annotations
@@ -18,6 +29,7 @@ import os
 import queue
 import socket
 import sys
+import threading
 import time
 
 from swarm.contracts import wire
@@ -26,30 +38,62 @@ from swarm.contracts.transport import answer
 from world.core import ACTIVE
 from world.engine import LOST, REFUSED
 from world.report import run_info
+from world.roster import CHURN_EVENTS
 
 STALL_S = 0.8  # s the world's main thread may go without reaching its inbox (the link lease is 1 s)
 REJOIN_WAIT = 2.0  # s a token lost just after a stall of the world has to come back
+LINK_GRACE = 10.0  # s a token lost in a lockstep run has to come back (`rides_out`)
+EXIT_REPORT_WAIT = 10.0  # s an agent_exit report waits for its agent to leave the world
 INBOX_MAX = 100_000  # messages waiting for the main thread; commands and queries past it are dropped
+PER_KEY_MAX = 256  # messages waiting on one key (a command every tick needs 1 to 2)
+_FAIR_INIT = threading.Lock()
+
+
+class _Fair:
+    """What the zenoh callbacks and the main thread share: messages waiting per key, the
+    latest state of each liveliness token not yet handled, drops per key."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.waiting: dict[str, int] = {}
+        self.alive: dict[str, object] = {}
+        self.flooded: dict[str, int] = {}
+        self.noted: set[str] = set()  # keys whose drops have had their `limit` event
+
+
+def _key_of(item) -> str:
+    """The key a queued message counts against: its sample's key, or its query's."""
+    if item[0] in ("cmd", "alive"):
+        return item[1]
+    try:
+        return str(item[1].key_expr)
+    except Exception:
+        return item[0]
 
 
 class Inbox:
     inbox_dropped = 0  # messages dropped by the callbacks with the inbox full
     drained_at = 0.0  # monotonic s the main thread last came back from its inbox
     stall_seen = -1e9  # monotonic s a stall of the world itself was last noticed
+    disturbed = 0  # stalls of the world and links back: each sends the tick's frames again (lockstep)
     lost_after_stall: dict | None = None  # agent -> monotonic s its drop is due (token lost after a stall)
+    exit_reports: dict | None = None  # agent -> (agent_exit report, monotonic s it is kept until)
+    fault_awaited: int | None = None  # index of the scripted fault the clock waits for (world/clock.py)
 
     def handle(self, item, pending: set[int] | None) -> None:
         kind = item[0]
         if kind == "cmd":
             self._on_cmd(item[1], item[2], pending)
         elif kind == "alive":
-            self._on_alive(item[1], item[2], pending)
+            self._on_alive(item[1], item[2] if len(item) > 2 else self._latest_alive(item[1]), pending)
         elif kind == "join":
             self._on_join(item[1])
         elif kind == "info":
             self._on_info(item[1])
         elif kind == "admin":
             self._on_admin(item[1])
+        elif kind == "supervise":
+            self._on_supervise(item[1])
 
     def _garbage_on(self, aid: int | None) -> None:
         """A malformed message: the world's count, and the agent's whose key it came on."""
@@ -117,49 +161,131 @@ class Inbox:
         b = self.book[aid]
         waiting = self.lost_after_stall if self.lost_after_stall is not None else {}
         if kind == zenoh.SampleKind.PUT:
-            if waiting.pop(aid, None) is not None and self.cfg.progress:
-                print(f"[world] agent {aid}: its link is back after the world's stall", file=sys.stderr, flush=True)
+            if waiting.pop(aid, None) is not None:
+                self.disturbed += 1  # lockstep: its frame goes again (world/clock.py)
+                if self.cfg.progress:
+                    print(f"[world] agent {aid}: its link is back", file=sys.stderr, flush=True)
             if self.core.state[k] == ACTIVE:
                 return
             b.claim_until = 0.0  # the key stays: a thawed process rejoins with the claim it had
             b.last_cmd_tick = self.core.tick - 1
             self.engine.join(aid, f"liveliness token appeared (pid {b.pid} on {b.host})", b.joins > 0,
-                             pid=b.pid, host=b.host)
+                             quiet=self._churn_quiet(aid), pid=b.pid, host=b.host)
             b.joins += 1
+            self.unscripted(aid, "joined")
         elif self.core.state[k] == ACTIVE and time.monotonic() - self.stall_seen < REJOIN_WAIT:
             self.lost_after_stall = {**waiting, aid: time.monotonic() + REJOIN_WAIT}
+        elif self.core.state[k] == ACTIVE and self.rides_out(aid):
+            self.lost_after_stall = {**waiting, aid: time.monotonic() + LINK_GRACE}
         else:
             self._drop(aid, pending)
 
+    def rides_out(self, aid: int) -> bool:
+        """Lockstep: a token lost in the started run, not by a scripted fault, is given
+        LINK_GRACE s to come back (a link lease run out under load; an agent host's link)
+        before the agent is dropped; the launcher's exit report of its process drops it at
+        once (`_on_agent_exit`). The clock waits for it meanwhile."""
+        return self.cfg.clock == "lockstep" and self.started and aid != self.carrying
+
+    def _churn_quiet(self, aid: int) -> bool:
+        """One more join, rejoin or drop of `aid`: True when it is past CHURN_EVENTS (counted,
+        not written; one `limit` event says so)."""
+        b = self.book[aid]
+        b.churn += 1
+        if b.churn <= CHURN_EVENTS:
+            return False
+        if b.churn == CHURN_EVENTS + 1:
+            self.event("limit", aid, f"more than {CHURN_EVENTS} joins and drops: later ones are counted "
+                                     "(churn_events_unwritten), not written", limit="churn")
+        b.churn_unwritten += 1
+        self.over_limit["churn"] = self.over_limit.get("churn", 0) + 1
+        return True
+
     def _drop(self, aid: int, pending: set[int] | None, why: str = "liveliness token lost") -> None:
-        if self.engine.drop(aid, why) is not None:
+        if self.core.state[self.core.index[aid]] != ACTIVE:
+            return
+        self.unscripted(aid, "dropped")
+        if self.engine.drop(aid, why, quiet=self._churn_quiet(aid)) is not None:
             self.book[aid].drops += 1
             if pending is not None:
                 pending.discard(aid)
 
     def _due_drops(self, pending: set[int] | None) -> None:
-        """Tokens lost after a stall of the world that did not come back in time: dropped now."""
+        """Tokens held (lost after a stall of the world, or ridden out in lockstep) that did not
+        come back in time: dropped now."""
         now = time.monotonic()
         for aid, due in list((self.lost_after_stall or {}).items()):
             if now >= due:
                 del self.lost_after_stall[aid]
-                self._drop(aid, pending, f"liveliness token lost (not back {REJOIN_WAIT:g} s after the world's stall)")
+                self._drop(aid, pending, "liveliness token lost (and not back in time)")
 
     def _note_inbox_dropped(self) -> None:
-        """Messages the zenoh callbacks dropped because the inbox was full (counted there)."""
-        first = "inbox" not in self.over_limit
+        """Messages the zenoh callbacks dropped (see `enqueue`): counted to the agent whose
+        key they came on, and one `limit` event per key the first time."""
+        fair = self.fair
+        with fair.lock:
+            flooded, fair.flooded = fair.flooded, {}
         self.over_limit["inbox"] = self.inbox_dropped
-        if first:
-            self.event("limit", None, f"more than {INBOX_MAX} messages waiting: commands and queries dropped",
-                       limit="inbox")
+        for key, n in flooded.items():
+            try:
+                aid = wire.agent_of_key(key)
+            except wire.WireError:
+                aid = None
+            b = self.book.get(aid) if aid is not None else None
+            if b is not None:
+                b.flooded += n
+            if key not in fair.noted:
+                fair.noted.add(key)
+                self.event("limit", aid, f"more than {PER_KEY_MAX} messages waiting on {key} (or {INBOX_MAX} in "
+                                         "all): its messages dropped, no one else's", limit="inbox", key=key)
+
+    @property
+    def fair(self) -> _Fair:
+        st = self.__dict__.get("_fair")
+        if st is None:
+            with _FAIR_INIT:
+                st = self.__dict__.setdefault("_fair", _Fair())
+        return st
 
     def enqueue(self, item, droppable: bool = True) -> None:
-        """What a zenoh callback does with a message: queue it for the main thread; past
-        INBOX_MAX waiting, a command or a query is dropped and counted (liveliness never)."""
-        if droppable and self.inbox.qsize() >= INBOX_MAX:
-            self.inbox_dropped += 1
+        """What a zenoh callback does with a message: queue it for the main thread. A
+        liveliness change replaces the one of the same token still waiting (never dropped);
+        past PER_KEY_MAX waiting on its key, or INBOX_MAX in all, a message is dropped and
+        counted (see the module)."""
+        fair = self.fair
+        key = _key_of(item)
+        if item[0] == "alive":
+            with fair.lock:
+                first = key not in fair.alive
+                fair.alive[key] = item[2]
+            if first:
+                self.inbox.put(("alive", key))
             return
+        with fair.lock:
+            n = fair.waiting.get(key, 0)
+            if droppable and (n >= PER_KEY_MAX or self.inbox.qsize() >= INBOX_MAX):
+                fair.flooded[key] = fair.flooded.get(key, 0) + 1
+                self.inbox_dropped += 1
+                return
+            fair.waiting[key] = n + 1
         self.inbox.put(item)
+
+    def _latest_alive(self, key: str):
+        with self.fair.lock:
+            return self.fair.alive.pop(key)
+
+    def _taken(self, item) -> None:
+        """The main thread took `item` off the inbox: one less waiting on its key."""
+        if item[0] == "alive":
+            return
+        fair = self.fair
+        key = _key_of(item)
+        with fair.lock:
+            n = fair.waiting.get(key, 0) - 1
+            if n > 0:
+                fair.waiting[key] = n
+            else:
+                fair.waiting.pop(key, None)
 
     def limited(self, what: str, reason: str) -> None:
         """Something over a limit: counted each time, one event the first time."""
@@ -185,18 +311,10 @@ class Inbox:
         answer(query, wire.world_info_key(self.cfg.run), wire.encode_info(self.info(sensing)))
 
     def _on_admin(self, query) -> None:
-        """pause / resume the world clock; fault done and agent exit (from the launcher)."""
+        """pause / resume the world clock (the operator's)."""
         try:
-            req = wire.decode_admin(query.payload.to_bytes() if query.payload else b"")
+            req = wire.decode_admin(query.payload.to_bytes() if query.payload else b"", wire.ADMIN_CMDS)
             cmd = req["cmd"]
-            if cmd == "fault_done":
-                self.faults_done.add(req["index"])
-                answer(query, wire.world_admin_key(self.cfg.run), wire.encode_admin_reply(True))
-                return
-            if cmd == "agent_exit":
-                self._on_agent_exit(req)
-                answer(query, wire.world_admin_key(self.cfg.run), wire.encode_admin_reply(True))
-                return
             if (cmd == "pause") != self.paused:
                 self.paused = cmd == "pause"
                 self.event(cmd, None, "asked by " + str(req.get("by", "a client")))
@@ -209,35 +327,81 @@ class Inbox:
             reply = wire.encode_admin_reply(False, error=str(e))
         answer(query, wire.world_admin_key(self.cfg.run), reply)
 
+    def _on_supervise(self, query) -> None:
+        """The launcher's reports (only its `supervisor` identity reaches this key): a
+        scripted fault carried out, an agent process that exited. Each is checked against
+        what the world knows: only the fault the clock is waiting for can be done; an exit
+        is written only for an agent that has left (its token gone)."""
+        try:
+            req = wire.decode_admin(query.payload.to_bytes() if query.payload else b"", wire.SUPERVISE_CMDS)
+            if req["cmd"] == "fault_done":
+                if req["index"] != self.fault_awaited:
+                    raise wire.WireError(f"fault_done: fault {req['index']} is not being carried out")
+                self.faults_done.add(req["index"])
+            else:
+                self._on_agent_exit(req)
+            reply = wire.encode_admin_reply(True)
+        except wire.WireError as e:
+            self.limited("supervise", f"a supervision report refused: {e}")
+            reply = wire.encode_admin_reply(False, error=str(e))
+        answer(query, wire.world_supervise_key(self.cfg.run), reply)
+
     def _on_agent_exit(self, req: dict) -> None:
         """The launcher saw an agent process it started exit by itself: a `crash` event (a
-        failure of the agent: the run does not count as converged) or an `exit` event."""
+        failure of the agent: the run does not count as converged) or an `exit` event. An
+        agent still in the world (the report came before its token went) has its report
+        kept until it drops, for EXIT_REPORT_WAIT s at most."""
         aid = req["id"]
         if aid not in self.core.index:
             raise wire.WireError(f"agent_exit: agent {aid} is not in the run")
-        status = exit_status(req["code"])
         if self.lost_after_stall and self.lost_after_stall.pop(aid, None) is not None:
             self._drop(aid, None, "liveliness token lost (its process exited)")
-        self.event("crash" if req["crash"] else "exit", aid,
+        if self.core.state[self.core.index[aid]] == ACTIVE:
+            self.exit_reports = {**(self.exit_reports or {}), aid: (req, time.monotonic() + EXIT_REPORT_WAIT)}
+            return
+        self._exit_event(req)
+
+    def _exit_event(self, req: dict) -> None:
+        status = exit_status(req["code"])
+        self.event("crash" if req["crash"] else "exit", req["id"],
                    f"process {req['pid']} ended ({status})" + (f": {req['cause']}" if req["cause"] else ""),
                    code=req["code"], pid=req["pid"], cause=req["cause"], log=req["log"])
+
+    def _due_exit_reports(self) -> None:
+        """Exit reports kept for agents still in the world: written once they have left;
+        refused (counted) when they are still there EXIT_REPORT_WAIT s later."""
+        now = time.monotonic()
+        for aid, (req, until) in list(self.exit_reports.items()):
+            if self.core.state[self.core.index[aid]] != ACTIVE:
+                del self.exit_reports[aid]
+                self._exit_event(req)
+            elif now > until:
+                del self.exit_reports[aid]
+                self.limited("supervise", f"a supervision report refused: agent {aid} reported ended "
+                                          f"but still in the world after {EXIT_REPORT_WAIT:g} s")
 
     def drain(self, pending: set[int] | None, timeout: float | None) -> bool:
         """Handle one inbox item, waiting up to `timeout` s; False when none came."""
         t0 = time.monotonic()
         if self.drained_at and t0 - self.drained_at > STALL_S:  # away from the inbox too long
             self.stall_seen = t0
+            self.disturbed += 1
         try:
             item = self.inbox.get(timeout=timeout) if timeout is None or timeout > 0 else self.inbox.get_nowait()
         except queue.Empty:
             item = None
         self.drained_at = time.monotonic()
-        if self.inbox_dropped:
+        if item is not None:
+            self._taken(item)
+        if self.fair.flooded:
             self._note_inbox_dropped()
         if timeout is not None and self.drained_at - t0 > max(timeout, 0.0) + STALL_S:
             self.stall_seen = self.drained_at  # stopped while waiting
+            self.disturbed += 1
         if self.lost_after_stall:
             self._due_drops(pending)
+        if self.exit_reports:
+            self._due_exit_reports()
         if item is None:
             return False
         self.handle(item, pending)
@@ -247,5 +411,6 @@ class Inbox:
                 item = get()
             except queue.Empty:
                 break
+            self._taken(item)
             self.handle(item, pending)
         return True

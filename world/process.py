@@ -90,6 +90,9 @@ class World(Inbox, Joins, Clock):
         self.ticking = False  # between the first frame of a tick and its step
         self.pause_waiters: list = []
         self.t_start = 0.0
+        self.frames_sent: dict[int, bytes] = {}  # this tick's encoded frames, by agent
+        self.late: dict[int, int] = {}  # lockstep: commands per agent that missed the deadline
+        self.irreproducible: list[str] = []  # why `swarm sim` would not give this run (world/clock.py)
 
     # -- zenoh plumbing (callbacks: enqueue only) -----------------------------------------
     def _open(self, session=None):
@@ -107,7 +110,8 @@ class World(Inbox, Joins, Clock):
                                                 history=True),
             ses.declare_queryable(wire.agent_key(run, "*", "join"), lambda q: put(("join", q))),
             ses.declare_queryable(wire.world_info_key(run), lambda q: put(("info", q))),
-            ses.declare_queryable(wire.world_admin_key(run), lambda q: put(("admin", q), False)),  # the launcher's
+            ses.declare_queryable(wire.world_admin_key(run), lambda q: put(("admin", q))),
+            ses.declare_queryable(wire.world_supervise_key(run), lambda q: put(("supervise", q), False)),
         ]
         self.sense_pub = {i: ses.declare_publisher(wire.agent_key(run, i, "sense"), express=True)
                           for i in self.cfg.scenario.ids}
@@ -146,8 +150,9 @@ class World(Inbox, Joins, Clock):
             for aid in c.active_ids():
                 if aid not in frames:
                     self.book[aid].missed += 1  # its frame was lost
-            for aid, frame in frames.items():
-                self.sense_pub[aid].put(wire.encode_sense(frame))
+            self.frames_sent = {aid: wire.encode_sense(frame) for aid, frame in frames.items()}
+            for aid, buf in self.frames_sent.items():
+                self.sense_pub[aid].put(buf)
             self.engine.rec.flush()
             return set(frames)
         self.engine.mark_frames()  # the same numbers, encoded straight from the arrays
@@ -165,8 +170,18 @@ class World(Inbox, Joins, Clock):
         pubs = self.sense_pub
         for aid, frame in zip(active, frames):
             pubs[aid].put(frame)
+        self.frames_sent = dict(zip(active, frames))  # sent again as they are after a stall (world/clock.py)
         self.engine.rec.flush()  # the last tick's recording, while the agents answer these frames
         return set(active)
+
+    def resend_frames(self, aids) -> None:
+        """This tick's frames again, byte for byte, to agents that have not answered (after a
+        stall of the world: the first ones may have been lost with the agents' links). An
+        agent answers a repeated frame with the command it already sent (agents/node.py)."""
+        for aid in aids:
+            buf = self.frames_sent.get(aid)
+            if buf is not None:
+                self.sense_pub[aid].put(buf)
 
     def record_and_step(self) -> None:
         self.engine.end_tick(observe=self.publish_truth)
@@ -227,5 +242,6 @@ class World(Inbox, Joins, Clock):
             "stopped_by_signal": self.stopped_by, "garbage_messages": self.garbage,
             "ignored_messages": self.ignored, "rejected_commands": c.rejected, "over_limit": self.over_limit,
             "wall_time": wall, "ticks_per_second": (c.tick / wall) if wall else None,
+            "deadline_restarts": self.restarts, **self.reproducibility(),
         }, agent_extra)
         return write_run(result, self.cfg.out_dir)

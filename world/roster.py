@@ -16,6 +16,7 @@ from swarm.contracts import wire
 from world.core import ACTIVE, WorldCore
 
 CLAIM_TTL = 10.0  # s: an accepted join claim waits this long for the agent's token
+CHURN_EVENTS = 500  # join/rejoin/drop events written per agent; later ones are counted only
 
 
 @dataclass
@@ -37,6 +38,9 @@ class AgentBook:
     key: int | None = None  # claim key of the process that owns the id; commands must carry it
     rogue: int = 0  # commands on this agent's key without its owner's claim key
     rogue_noted: float = 0.0
+    flooded: int = 0  # messages on this agent's keys dropped: more than its share waiting (world/inbox.py)
+    churn: int = 0  # join, rejoin and drop events; past CHURN_EVENTS they are counted, not written
+    churn_unwritten: int = 0
 
 
 def new_agent_spec(aid: int, spec, core: WorldCore):
@@ -82,6 +86,7 @@ def agent_figures(book: AgentBook, ticks: int, realtime: bool, garbage: int = 0,
     return {
         "pid": book.pid, "host": book.host, "commands": book.commands, "missed_ticks": book.missed,
         "joins": book.joins, "drops": book.drops, "garbage": book.garbage + garbage,
-        "rogue_commands": book.rogue, "nonfinite": nonfinite, **selection,
+        "rogue_commands": book.rogue, "nonfinite": nonfinite, "flooded_messages": book.flooded,
+        "churn_events_unwritten": book.churn_unwritten, **selection,
         **({"staleness_mean_ticks": book.stale_sum / n, "staleness_max_ticks": book.stale_max} if realtime else {}),
     }

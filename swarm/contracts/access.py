@@ -10,10 +10,16 @@ here runs per message in Python. Default: deny. Allowed, on the ingress of the h
 - `agent-<k>`: put its own `cmd` and `status`; subscribe to its own `sense` and `ctl`
   and to `world/control`; declare and answer its own `status` queryable; claim its id
   on its own `join` key; declare its own `alive` token; watch and query `world/alive`.
-- `operator` (the `swarm up` launcher and the CLI): read everything of the run
-  (subscribe, query, liveliness), query `world/info` and `world/admin` (pause,
-  resume, fault done, agent exit), put on any agent's `ctl`. It cannot put commands,
-  frames, truth, events or control notices, and declares no queryable or token.
+- `operator` (the CLI, and whoever holds the run's credentials): read everything of
+  the run (subscribe, query, liveliness), query `world/info` and `world/admin` (pause,
+  resume), put on any agent's `ctl`. It cannot put commands, frames, truth, events or
+  control notices, declares no queryable or token, and cannot write the run's record.
+- `supervisor` (the `swarm up` launcher alone): what the operator may do, and query
+  `world/supervise` (an agent process exited, a scripted fault was carried out). Its
+  password is not derived from the run's secret: the launcher makes it and gives it to
+  its world only (`identities.ENV_SUPERVISOR`); no credentials file holds it, and a
+  world started without it has no supervisor at all. The world also checks each report
+  against what it knows (world/inbox.py).
 
 - `host` (the router of an agent host, `swarm host`): what any agent of the run may do,
   the union of every `agent-<k>` rule. zenoh judges a message by the link it came in
@@ -34,7 +40,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from swarm.contracts import wire
-from swarm.contracts.identities import HOST, OPERATOR, agent_user, password_for
+from swarm.contracts.identities import HOST, OPERATOR, SUPERVISOR, agent_user, password_for
 
 ALL_MESSAGES = ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
                 "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"]
@@ -76,6 +82,14 @@ def operator_rules(run: str) -> list[dict]:
     ]
 
 
+def supervisor_rules(run: str) -> list[dict]:
+    return [_rule("sup-read", ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
+                  [f"{wire.run_prefix(run)}/**"]),
+            _rule("sup-query", ["query"], [wire.world_info_key(run), wire.world_admin_key(run),
+                                           wire.world_supervise_key(run), wire.agent_key(run, "*", "status")]),
+            _rule("sup-ctl", ["put"], [wire.agent_key(run, "*", "ctl")])]
+
+
 def access_control(run: str, agent_ids: Iterable[int], host: bool = False, operator: bool = True) -> dict:
     """zenoh's `access_control` section for run `run` whose agents may take `agent_ids`; with
     `host`, a `host` identity allowed what any of those agents is (the hub of a run that
@@ -97,7 +111,11 @@ def access_control(run: str, agent_ids: Iterable[int], host: bool = False, opera
         rules += op
         subjects.append({"id": OPERATOR, "usernames": [OPERATOR]})
         policies.append({"rules": [r["id"] for r in op], "subjects": [OPERATOR]})
-        users.insert(0, OPERATOR)
+        sup = supervisor_rules(run)
+        rules += sup
+        subjects.append({"id": SUPERVISOR, "usernames": [SUPERVISOR]})
+        policies.append({"rules": [r["id"] for r in sup], "subjects": [SUPERVISOR]})
+        users[:0] = [OPERATOR, SUPERVISOR]
     rules.append(_rule("egress", ALL_MESSAGES, [f"{wire.run_prefix(run)}/**"], flow="egress"))
     policies.append({"rules": ["egress"], "subjects": users})
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
@@ -126,15 +144,18 @@ def size_filters(run: str) -> list[dict]:
     return [
         f("cmd", [wire.agent_key(run, "*", "cmd")], CMD_LIMIT),
         f("small", [wire.agent_key(run, "*", "status"), wire.agent_key(run, "*", "ctl"),
-                    wire.world_admin_key(run), wire.world_info_key(run)], SMALL_LIMIT),
+                    wire.world_admin_key(run), wire.world_supervise_key(run), wire.world_info_key(run)], SMALL_LIMIT),
         f("join", [wire.agent_key(run, "*", "join")], JOIN_LIMIT),
     ]
 
 
-def user_dictionary(secret: str, run: str, agent_ids: Iterable[int], host: bool = False) -> str:
-    """The hub's `dictionary_file` content: one `user:password` line per identity."""
+def user_dictionary(secret: str, run: str, agent_ids: Iterable[int], host: bool = False,
+                    supervisor: str | None = None) -> str:
+    """The hub's `dictionary_file` content: one `user:password` line per identity; the
+    `supervisor` line only with its password (the launcher's: see the module)."""
     users = [OPERATOR] + [agent_user(a) for a in agent_ids] + ([HOST] if host else [])
-    return "".join(f"{u}:{password_for(secret, run, u)}\n" for u in users)
+    sup = f"{SUPERVISOR}:{supervisor}\n" if supervisor else ""
+    return sup + "".join(f"{u}:{password_for(secret, run, u)}\n" for u in users)
 
 
 def host_dictionary(passwords: Iterable[tuple[str, str]]) -> str:

@@ -2,7 +2,9 @@
 
 Each process that connects has an identity (a zenoh username): `operator` (the launcher
 and the CLI), `agent-<id>` (one per agent), `host` (the router of an agent host: `swarm
-host`) and `world` (the hub itself), with a password derived from the run's secret. An
+host`) and `world` (the hub itself), with a password derived from the run's secret; and
+`supervisor` (the `swarm up` launcher alone), whose password the launcher makes and hands
+to its world only, so that no credentials file holds it. An
 agent host also has a name of its own (a label, not an identity). The hub's rules
 (swarm/contracts/access.py) need only these; the files that carry them are
 swarm/contracts/credentials.py's. `CredentialsError` is the one error (one line) of
@@ -18,6 +20,10 @@ import re
 OPERATOR = "operator"
 WORLD = "world"
 HOST = "host"  # the router of an agent host (swarm/host.py)
+SUPERVISOR = "supervisor"  # the launcher (`swarm up`) alone: reports agent exits and faults done
+# The supervisor's password: made by the launcher, given to its world in this environment
+# variable, never written to a file (so no credentials file, and no operator, holds it).
+ENV_SUPERVISOR = "SWARM_SUPERVISOR_PASSWORD"
 _HOST_NAME = re.compile(r"^[A-Za-z0-9_.-]{1,32}$")
 
 

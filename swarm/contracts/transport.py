@@ -58,6 +58,7 @@ class HubAuth:
     creds: Credentials  # the run's own credentials (with its secret)
     agent_ids: tuple[int, ...]  # every id an agent of this run may take
     tls: dict | None = None  # zenoh settings for a tls/ endpoint (swarm/contracts/tls.py)
+    supervisor: str | None = None  # the launcher's password (identities.ENV_SUPERVISOR); None: no supervisor
 
 
 def open_hub_requested() -> bool:
@@ -115,7 +116,7 @@ def open_hub(listen: str, auth: HubAuth | None = None):
         return zenoh.open(hub_config(listen))
     dictionary = runtime_dir() / f".{auth.creds.run}.users"
     write_private(dictionary, access.user_dictionary(auth.creds.secret, auth.creds.run, auth.agent_ids,
-                                                     host=True).encode())
+                                                     host=True, supervisor=auth.supervisor).encode())
     try:
         return zenoh.open(hub_config(listen, auth, dictionary))
     finally:

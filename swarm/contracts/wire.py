@@ -78,6 +78,12 @@ def world_admin_key(run: str) -> str:
     return f"{run_prefix(run)}/world/admin"
 
 
+def world_supervise_key(run: str) -> str:
+    """Queryable of the world for the launcher's reports (agent exit, fault done): only the
+    run's `supervisor` identity may query it (swarm/contracts/access.py)."""
+    return f"{run_prefix(run)}/world/supervise"
+
+
 def world_control_key(run: str) -> str:
     return f"{run_prefix(run)}/world/control"
 
@@ -405,18 +411,19 @@ def decode_info(buf: bytes) -> dict:
     return obj
 
 
-ADMIN_CMDS = ("pause", "resume", "fault_done", "agent_exit")
+ADMIN_CMDS = ("pause", "resume")  # on world/admin (the operator)
+SUPERVISE_CMDS = ("fault_done", "agent_exit")  # on world/supervise (the launcher alone)
 EXIT_LOG_LINES, EXIT_LINE_CHARS = 20, 500  # agent_exit: at most this much of the agent's log
 
 
 def encode_admin(cmd: str, **fields) -> bytes:
-    """operator -> world/admin query: pause, resume (with `by`), fault_done (with `index`);
-    agent_exit: see `encode_agent_exit`."""
+    """operator -> world/admin query: pause, resume (with `by`); launcher -> world/supervise
+    query: fault_done (with `index`), agent_exit (see `encode_agent_exit`)."""
     return encode_json({"cmd": cmd, **fields})
 
 
 def encode_agent_exit(agent: int, pid: int, code: int, crash: bool, cause: str, log: list[str]) -> bytes:
-    """launcher -> world/admin query: an agent process it started exited by itself.
+    """launcher -> world/supervise query: an agent process it started exited by itself.
     code: its exit status (negative: killed by that signal); crash: a failure of the agent
     (not the end of the run, a scripted fault or a signal from outside); cause: one line;
     log: the last lines of its output (trimmed to EXIT_LOG_LINES of EXIT_LINE_CHARS)."""
@@ -424,11 +431,13 @@ def encode_agent_exit(agent: int, pid: int, code: int, crash: bool, cause: str, 
                         log=[line[:EXIT_LINE_CHARS] for line in log[-EXIT_LOG_LINES:]])
 
 
-def decode_admin(buf: bytes) -> dict:
+def decode_admin(buf: bytes, cmds: tuple[str, ...] = ADMIN_CMDS + SUPERVISE_CMDS) -> dict:
+    """An admin or supervise request; WireError unless its cmd is one of `cmds` (the world
+    passes those of the key it came on)."""
     obj = decode_json(buf, "admin request")
     cmd = obj.get("cmd")
-    if cmd not in ADMIN_CMDS:
-        raise WireError(f"admin request: unknown cmd {cmd!r} ({', '.join(ADMIN_CMDS)})")
+    if cmd not in cmds:
+        raise WireError(f"admin request: unknown cmd {cmd!r} ({', '.join(cmds)})")
     if cmd == "fault_done":
         _field(obj, "index", int, "admin request: fault_done")
     elif cmd == "agent_exit":
