@@ -155,14 +155,24 @@ def test_alive_sees_a_grandchild_the_leader_left_and_reap_kills_it(groups):
     leader.stdout.close()
 
 
-def test_stop_groups_shares_one_grace_period(groups):
+def test_stop_groups_shares_one_grace_period(groups, tmp_path):
+    """One grace for all, not one each: every group gets its SIGTERM while all of them still
+    run (one after another, the second would get it only once the first was killed). Each
+    member ignores SIGTERM but, on it, writes how many of the three members still run."""
+    pids, log = tmp_path / "pids", tmp_path / "log"
+    script = (f'trap \'n=0; for p in $(cat {pids}); do kill -0 $p 2>/dev/null && n=$((n+1)); done; '
+              f'echo $n >> {log}\' TERM; echo ready; while :; do sleep 0.05; done')
     gs = [groups() for _ in range(3)]
-    ps = [ignoring_term(g) for g in gs]
-    t0 = time.monotonic()
-    stop_groups(gs, grace=5.0)
-    # one grace for all (5 s), not one each (15 s): the margin is the grace itself
-    assert time.monotonic() - t0 < 10.0, "one grace period for all, not one each"
+    ps = []
+    for g in gs:
+        p = g.start(["sh", "-c", script], stdout=subprocess.PIPE, text=True)
+        assert p.stdout.readline() == "ready\n"
+        p.stdout.close()
+        ps.append(p)
+    pids.write_text(" ".join(str(p.pid) for p in ps))
+    stop_groups(gs, grace=2.0)
     assert [p.returncode for p in ps] == [-signal.SIGKILL] * 3 and not any(g.alive() for g in gs)
+    assert log.read_text().split() == ["3", "3", "3"], "a group got its SIGTERM after another was killed"
 
 
 def test_an_empty_group_is_not_alive_and_stops_at_once():
