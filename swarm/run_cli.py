@@ -130,6 +130,10 @@ def print_summary(summary: dict, out: Path) -> None:
                    f"{f(a['angular_rate'], '8.4f'):>8} {f(a['settling_time'], '8.2f'):>8} "
                    f"{f(a.get('switches'), 'd'):>8}"
                    + ("" if a["alive"] else "  (dropped)"))
+    why = summary.get("not_reproducible") or []
+    if summary.get("clock") == "lockstep" and summary.get("reproducible") is False and why:
+        more = f" (and {len(why) - 1} more: summary.json, not_reproducible)" if len(why) > 1 else ""
+        typer.echo(f"not what lockstep promises (swarm sim would differ): {why[0]}{more}")
     typer.echo(f"results: {out}")
 
 

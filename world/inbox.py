@@ -42,7 +42,7 @@ from world.roster import CHURN_EVENTS
 
 STALL_S = 0.8  # s the world's main thread may go without reaching its inbox (the link lease is 1 s)
 REJOIN_WAIT = 2.0  # s a token lost just after a stall of the world has to come back
-LINK_GRACE = 10.0  # s a token lost in a lockstep run has to come back (`rides_out`)
+LINK_GRACE = 5.0  # s a token lost in a lockstep run has to come back (`rides_out`)
 EXIT_REPORT_WAIT = 10.0  # s an agent_exit report waits for its agent to leave the world
 INBOX_MAX = 100_000  # messages waiting for the main thread; commands and queries past it are dropped
 PER_KEY_MAX = 256  # messages waiting on one key (a command every tick needs 1 to 2)
