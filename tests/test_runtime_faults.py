@@ -122,8 +122,8 @@ def test_run_completes_after_kills(fault_run):
     assert kinds == [("drop", 4), ("drop", 1), ("rejoin", 4)], kinds
     # Kills from outside: `swarm sim` cannot do the same, and the summary says so.
     assert summ["reproducible"] is False
-    assert [r.split(" at tick")[0] for r in summ["not_reproducible"]] == \
-        ["agent 4 dropped", "agent 1 dropped", "agent 4 joined"], summ["not_reproducible"]
+    churn = [r.split(" at tick")[0] for r in summ["not_reproducible"] if r.startswith("agent ")]
+    assert churn == ["agent 4 dropped", "agent 1 dropped", "agent 4 joined"], summ["not_reproducible"]
     for e in summ["events"]:
         assert e.get("reason"), e
     assert summ["agents"]["1"]["drops"] == 1 and summ["agents"]["1"]["alive"] is False

@@ -90,8 +90,10 @@ class Clock:
             reasons.insert(0, f"clock {self.cfg.clock}: commands are used as they arrive")
         late = {aid: n for aid, n in self.late.items() if n}
         if late:
-            reasons.insert(0, f"{sum(late.values())} commands missed the lockstep deadline (agents "
-                              f"{', '.join(map(str, sorted(late)))}): their last ones were held")
+            n = sum(late.values())
+            reasons.insert(0, f"{n} command{'s' if n > 1 else ''} missed the lockstep deadline (agent"
+                              f"{'s' if len(late) > 1 else ''} {', '.join(map(str, sorted(late)))}): "
+                              "the last command was held instead")
         if len(self.book) > len(self.cfg.scenario.ids):
             reasons.append(f"{len(self.book) - len(self.cfg.scenario.ids)} agents added at run time")
         return {"reproducible": not reasons, "not_reproducible": reasons}
