@@ -105,7 +105,7 @@ def usage_line(e) -> str:
 
     ctx = e.ctx
     path = " ".join(["swarm", *ctx.command_path.split()[1:]]) if ctx is not None else "swarm"  # (any prog name)
-    where = f" (see {path} --help)"
+    where = f"; see {path} --help"
     if isinstance(e, BadParameter) and not isinstance(e, MissingParameter) and e.param is not None:
         opts = getattr(e.param, "opts", None) if getattr(e.param, "param_type_name", "") == "option" else None
         name = max(opts, key=len) if opts else e.param.get_error_hint().strip("'")

@@ -12,9 +12,10 @@ agent the launcher starts must be admitted), and crash signals (SIGSEGV, SIGABRT
 The cause (of an agent's exit, and of a world's failure: `world_failure`) is taken from the
 log only when the log's last line is an error, by this rule (`error_line`):
 
-- the last line of a Python traceback: a "Traceback (most recent call last):" line earlier
-  in the log's tail, and a last line that is not indented and reads `Name` or
-  `Name: message` (e.g. "RuntimeError: the law gave up");
+- the last line of a Python traceback: a last line that is not indented and reads `Name`
+  or `Name: message` (e.g. "RuntimeError: the law gave up"), after an indented line (the
+  traceback's last frame) or with a "Traceback (most recent call last):" line earlier in
+  the log's tail;
 - a line the process marked as its error: "swarm <command>[ <id>]: ..." is how the world
   and agent processes say why they stop (world/main.py, agents/process.py), while their
   progress and notes are "[world] ..." / "[agent N] ..." lines; also faulthandler's
@@ -101,7 +102,8 @@ def error_line(log: list[str]) -> str | None:
     if not log:
         return None
     last = log[-1].rstrip()
-    if _MARKED_ERROR.match(last) or (TRACEBACK in log[:-1] and _EXCEPTION_LINE.match(last)):
+    after_frame = len(log) > 1 and log[-2][:1].isspace()
+    if _MARKED_ERROR.match(last) or (_EXCEPTION_LINE.match(last) and (after_frame or TRACEBACK in log[:-1])):
         return _RUST_SOURCE.sub("", last.strip())
     return None
 

@@ -151,6 +151,9 @@ def test_a_crash_line_quotes_no_unrelated_log_line(tmp_path):
                    "RuntimeError: the law gave up\n")
     assert agent_exit(2, 42, 1, log, False).line() == \
         "agent 2 (pid 42) crashed (exit code 1): RuntimeError: the law gave up"
+    deep = "".join(f'  File "m.py", line {k}, in f\n    f()\n' for k in range(30))  # its header out of the tail
+    log.write_text(f"Traceback (most recent call last):\n{deep}RecursionError: too deep\n")
+    assert agent_exit(2, 42, 1, log, False).cause == "RecursionError: too deep"
     log.write_text("[agent 2] tick 9: x\nswarm agent: the world of run r vanished; exiting\n")
     assert agent_exit(2, 42, 4, log, False).line() == \
         "agent 2 (pid 42) exited (exit code 4): swarm agent: the world of run r vanished; exiting"
