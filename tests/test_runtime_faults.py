@@ -51,6 +51,10 @@ def fault_run(tmp_path_factory):
             os.kill(pids[victim], signal.SIGKILL)
             up.wait_info(lambda i, v=victim: agent_info(i, v)["drops"], 10, f"the world to drop agent {victim}")
         assert up.launcher.poll() is None, "the run ended before the faults were done: make it longer"
+        # The clock goes on after the drops before agent 4 comes back (lockstep: had the world
+        # still been waiting on this tick, the drop and the rejoin would share it).
+        k = up.info()["tick"]
+        up.wait_info(lambda i: i["tick"] > k + 2, 30, "the clock to go on after the drops")
 
         t_again = time.monotonic()
         again = tr.spawn(agent_cmd(4, endpoint, run_id), "agent-4-again")

@@ -106,6 +106,26 @@ def test_world_records_crash_and_exit_events():
     assert not stranger["ok"] and "not in the run" in stranger["error"] and world.over_limit["supervise"] == 1
 
 
+def test_lockstep_holds_a_lost_token_unless_the_launcher_reported_the_exit():
+    """A started lockstep run holds a token lost other than by a scripted fault (LINK_GRACE):
+    the agent stays in, and its token coming back changes nothing. A token lost after the
+    launcher's exit report (the report came first) drops the agent at once."""
+    world, _ = open_world()
+    join(world, 1)
+    join(world, 2)
+    world.started = True
+    _leave(world, 1)
+    assert 1 in world.core.active_ids() and 1 in world.lost_after_stall
+    world._on_alive(wire.agent_key(RUN, 1, "alive"), zenoh.SampleKind.PUT, None)
+    assert 1 in world.core.active_ids() and not world.lost_after_stall and world.disturbed == 1
+    assert _admin(world, wire.encode_agent_exit(2, 102, -9, False, "", []))["ok"]
+    _leave(world, 2)
+    world.drain(None, 0)
+    assert world.core.active_ids() == [1]
+    assert [e["kind"] for e in world.engine.events if e["agent"] == 2][-2:] == ["drop", "exit"]
+    assert world.irreproducible == [f"agent 2 dropped at tick {world.core.tick}, not by a scripted fault"]
+
+
 def test_a_report_on_a_live_agent_never_reaches_the_record(monkeypatch):
     """A crash reported for an agent that stays in the world is refused once the wait is
     over; a fault_done for a fault the clock is not waiting for is refused; neither report

@@ -185,7 +185,8 @@ class Inbox:
         LINK_GRACE s to come back (a link lease run out under load; an agent host's link)
         before the agent is dropped; the launcher's exit report of its process drops it at
         once (`_on_agent_exit`). The clock waits for it meanwhile."""
-        return self.cfg.clock == "lockstep" and self.started and aid != self.carrying
+        return (self.cfg.clock == "lockstep" and self.started and aid != self.carrying
+                and aid not in (self.exit_reports or {}))  # its exit was reported first: no link to wait for
 
     def _churn_quiet(self, aid: int) -> bool:
         """One more join, rejoin or drop of `aid`: True when it is past CHURN_EVENTS (counted,
