@@ -138,6 +138,8 @@ class ProgressLine:
 
         now = time.monotonic()
         still = p["tick"] == self.tick and self.wall > 0
+        if p.get("paused") and self.wall > 0:  # the rate after the pause counts from its end
+            still, self.tick, self.wall = True, p["tick"], p["wall"]
         if still and now - self.last < 1.0:
             return  # no new tick: said again at most once a second (the rate falls, or "paused")
         if not self.tty and now - self.last < 1.0 and p["tick"] < p["ticks"] - 1:

@@ -297,6 +297,9 @@ def test_progress_line_says_paused(monkeypatch, capsys):
     out = capsys.readouterr().out.strip().splitlines()
     assert "2 ticks/s" in out[1] and "paused" in out[-1] and "ticks/s" not in out[-1], out
     assert len(out) == 3  # said once while it stays paused (not a tty: a log)
+    now[0] += 1.5
+    line.show({**fig, "tick": 202, "wall": 7.0})  # resumed: 100 ticks in the 2 s since the last paused figures
+    assert "50 ticks/s" in capsys.readouterr().out
     paused = Paused()
     assert not paused([{"kind": "start"}])
     assert paused([{"kind": "start"}, {"kind": "pause"}])
