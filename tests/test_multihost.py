@@ -230,6 +230,7 @@ def test_lockstep_over_veth_links_equals_sim(machines):
         np.testing.assert_array_equal(traj[key], sim[key], err_msg=key)
     summary = json.loads((m.out / "summary.json").read_text())
     assert summary["completed"] is True and summary["garbage_messages"] == 0
+    assert summary["reproducible"] is True, summary["not_reproducible"]
     for h, ids in HOSTS.items():  # each agent was the process its host started, and joined once
         for aid in ids:
             ag = summary["agents"][str(aid)]

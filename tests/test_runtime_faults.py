@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from runtime_helpers import (SCENARIOS, Runtime, agent_cmd, agent_info, check_time_column, events_of, has_started,
-                             observe_world, replay_events, start_ticking, start_up, swarm_cmd)
+                             observe_world, replay_events, run_sim, start_ticking, start_up, swarm_cmd)
 from swarm.procs import wait_until
 
 pytestmark = pytest.mark.slow
@@ -252,6 +252,27 @@ def test_agents_exit_when_the_world_vanishes(rt, tmp_path):
         assert exits[i] < 1.5, f"agent {i} took {exits[i]:.2f} s to notice"
         assert "vanished" in a.text(), a.text()
     rt.tracker.assert_none_left(timeout=5)
+
+
+# --- a frozen world: lockstep stays lockstep (issue 22) ----------------------------------------------
+def test_a_world_stopped_5_s_mid_run_still_equals_sim(rt, tmp_path):
+    """SIGSTOP to the world for 5 s mid-run: its stall is not the agents' (no missed tick),
+    the tick's frames go again, and the run equals `swarm sim` to the bit, reproducible."""
+    up, _, _ = start_ticking(rt.tracker, tmp_path / "run", 40)
+    world = rt.tracker.world_pid(up.launcher)
+    os.kill(world, signal.SIGSTOP)
+    try:
+        time.sleep(5.0)  # the fault itself; nothing is timed
+    finally:
+        os.kill(world, signal.SIGCONT)
+    summ, traj = up.results(180)
+    sim, _ = run_sim(rt.tracker, SCENARIOS / "case2.toml", tmp_path / "sim", "--duration", "40")
+    assert summ["ticks"] == 4000
+    for key in ("t", "x", "y", "heading", "u", "out", "alive"):
+        np.testing.assert_array_equal(traj[key], sim[key], err_msg=key)
+    assert summ["reproducible"] is True, summ["not_reproducible"]
+    assert all(a["missed_ticks"] == 0 and a["drops"] == 0 for a in summ["agents"].values()), summ["agents"]
+    assert summ["deadline_restarts"] >= 1, "the world did not notice its own stall"
 
 
 # --- 9. a frozen agent ----------------------------------------------------------------------------
