@@ -8,6 +8,10 @@ $SWARM_CREDENTIALS), that file's run; otherwise the local runs in the runtime di
 ($SWARM_RUNTIME_DIR or /tmp/swarm-<uid>), those on --connect EP if given. With --run
 ID, that run; otherwise the only one found. --run and --connect default to $SWARM_RUN and
 $SWARM_CONNECT (swarm/live_cli.py), so a user with several runs can export one.
+A local run on tcp/ or tls/ is dialled at its local door (a Unix socket of its hub in the
+runtime dir: strangers at the network port do not hold it) unless --connect names an
+endpoint. A session the hub did not let in is said as such, naming the endpoint
+(`door_message`), never as a run not found (docs/resilience.md, "Strangers at the door").
 
 Queries end as soon as what was asked for has answered (the world's one reply; every live
 agent's status), never waiting for the query's timeout: a queryable's final answer can
@@ -30,8 +34,8 @@ from swarm.contracts import credentials, wire
 from swarm.contracts.credentials import Credentials
 from swarm.contracts.identities import OPERATOR, CredentialsError
 from swarm.contracts.lifeline import endpoint_refuses
-from swarm.contracts.transport import (QUERY_TIMEOUT, dial_endpoint, open_client, query_statuses, runtime_dir,
-                                      socket_path)
+from swarm.contracts.transport import (QUERY_TIMEOUT, dial_endpoint, local_door, open_client, query_statuses,
+                                      runtime_dir, socket_path)
 from swarm.errors import NoRunError
 
 ENDED_FAILURES = 3  # failed reads in a row, ...
@@ -46,6 +50,21 @@ class RunRef:
     run: str
     endpoint: str
     creds: Credentials | None = None
+    door: str | None = None  # the run's own local door, dialled instead of `endpoint` (transport.local_door)
+
+    @property
+    def dial(self) -> str:
+        """The endpoint sessions to the run are opened on."""
+        return self.door or self.endpoint
+
+
+def _with_door(ref: RunRef) -> RunRef:
+    """`ref` with the run's local door if its hub has one on this machine and it answers."""
+    if socket_path(ref.endpoint) is not None:
+        return ref
+    door = local_door(ref.run)
+    path = socket_path(door)
+    return RunRef(ref.run, ref.endpoint, ref.creds, door) if path.exists() and _socket_answers(path) else ref
 
 
 def _socket_answers(path) -> bool:
@@ -60,29 +79,79 @@ def _socket_answers(path) -> bool:
         s.close()
 
 
-def _probe(ref: RunRef, timeout: float = 0.5):
-    """A session to the world of `ref` if it is alive on its endpoint (and lets these
-    credentials in), else None."""
-    path = socket_path(ref.endpoint)
-    if path is not None and not _socket_answers(path):
-        return None
+OPEN_TIMEOUT_S = 3.0  # for a session to a listening hub (it takes ms; strangers at the door: docs/resilience.md)
+
+
+def _closes_at_once(endpoint: str, wait: float = 0.3) -> bool:
+    """Whether the listener under `endpoint` closes a new connection before it says anything
+    (zenoh does so when its places for connections in their handshake are all taken)."""
+    kind, _, rest = endpoint.partition("/")
+    rest = rest.split("#")[0].split("?")[0]
     try:
-        ses = open_client(ref.endpoint, timeout_ms=int(timeout * 1000), creds=ref.creds)
+        if kind == "unixsock-stream":
+            s, addr = so.socket(so.AF_UNIX, so.SOCK_STREAM), rest
+        elif kind in ("tcp", "tls"):
+            host, _, port = rest.rpartition(":")
+            host = host.strip("[]")
+            s, addr = so.socket(so.AF_INET6 if ":" in host else so.AF_INET, so.SOCK_STREAM), (host, int(port))
+        else:
+            return False
+    except (ValueError, OSError):
+        return False
+    s.settimeout(wait)
+    try:
+        s.connect(addr)
+        return s.recv(1) == b""
+    except (ConnectionResetError, ConnectionAbortedError, BrokenPipeError):
+        return True
+    except OSError:  # no answer within `wait` (it waits for the handshake), or no connection at all
+        return False
+    finally:
+        s.close()
+
+
+def door_message(endpoint: str, waited: float) -> str:
+    """One line on a session the hub at `endpoint` (which accepts connections) did not let in."""
+    if _closes_at_once(endpoint):
+        return f"the hub at {endpoint} refused the session (it closes new connections at once: too many waiting?)"
+    return f"the hub at {endpoint} did not answer within {waited:g} s (or refused these credentials)"
+
+
+def _listens(endpoint: str, tls_too: bool = False) -> bool:
+    """Whether something accepts connections on `endpoint`. A tls/ one is taken to (unless
+    `tls_too`): a connection that leaves before its TLS handshake stalls zenoh's TLS
+    listener for 100 ms (eclipse-zenoh/zenoh#2685), so it is only probed once a session failed."""
+    path = socket_path(endpoint)
+    if path is not None:
+        return _socket_answers(path)
+    if endpoint.startswith("tls/") and not tls_too:
+        return True
+    return not endpoint_refuses(endpoint, timeout=0.3)
+
+
+def _probe(ref: RunRef, timeout: float = 0.5, open_timeout: float = OPEN_TIMEOUT_S):
+    """(a session to the world of `ref` if it is alive on its endpoint and lets these
+    credentials in, else None; why not, in one line, when its hub listens but did not let
+    the session in, else None)."""
+    if not _listens(ref.dial):
+        return None, None
+    try:
+        ses = open_client(ref.dial, timeout_ms=int(open_timeout * 1000), creds=ref.creds, door=False)
     except Exception:
-        return None
+        return None, door_message(ref.dial, open_timeout) if _listens(ref.dial, tls_too=True) else None
     try:
         replies = ses.liveliness().get(wire.world_alive_key(ref.run), timeout=timeout)
         if any(r.ok is not None for r in replies):
-            return ses
+            return ses, None
     except Exception:
         pass
     ses.close()
-    return None
+    return None, None
 
 
 def world_answers(ref: RunRef, timeout: float = 0.5) -> bool:
     """Whether the world of `ref` is alive on its endpoint (and lets these credentials in)."""
-    ses = _probe(ref, timeout)
+    ses, _ = _probe(ref, timeout)
     if ses is not None:
         ses.close()
     return ses is not None
@@ -94,9 +163,11 @@ def candidates(connect: str | None = None, creds_file: Path | None = None) -> li
     given = credentials.read(creds_file) if creds_file is not None else credentials.from_environment()
     if given is not None:
         given.identity(OPERATOR)  # a file of one agent's cannot run the live commands
-        return [RunRef(given.run, connect or given.endpoint, given)]
+        ref = RunRef(given.run, connect or given.endpoint, given)
+        return [ref if connect else _with_door(ref)]
     dial = None if connect is None else dial_endpoint(connect)
-    return [RunRef(c.run, c.endpoint, c) for c in credentials.local_runs() if dial is None or c.endpoint == dial]
+    return [RunRef(c.run, c.endpoint, c) if dial else _with_door(RunRef(c.run, c.endpoint, c))
+            for c in credentials.local_runs() if dial is None or c.endpoint == dial]
 
 
 def _candidates(connect: str | None, creds_file: Path | None, run: str | None) -> list[RunRef]:
@@ -131,13 +202,17 @@ def open_run_session(connect: str | None = None, run: str | None = None,
         except wire.WireError as e:
             raise NoRun(str(e)) from None
     where = where_looked(connect, creds_file)
-    found = []
+    found, refused = [], []
     for ref in _candidates(connect, creds_file, run):
-        ses = _probe(ref)
+        ses, why = _probe(ref)
         if ses is not None:
             found.append((ref, ses))
+        elif why is not None:
+            refused.append(f"run {ref.run}: {why}")
     for _, ses in found[1:] if len(found) == 1 else found:
         ses.close()
+    if not found and refused:
+        raise NoRun("; ".join(refused))
     if not found:
         what = f"run {run!r}" if run else "no swarm is running"
         raise NoRun(f"{what} not found: looked at {where}" if run else f"{what}: looked at {where} "
@@ -171,9 +246,12 @@ class LiveRun:
         if self.session is not None:
             return self
         try:
-            self.session = open_client(self.ref.endpoint, timeout_ms=1000, creds=self.ref.creds)
-        except Exception as e:
-            raise NoRun(f"cannot connect to {self.ref.endpoint}: {e}") from None
+            self.session = open_client(self.ref.dial, timeout_ms=int(OPEN_TIMEOUT_S * 1000), creds=self.ref.creds,
+                                       door=False)
+        except Exception:
+            if not _listens(self.ref.dial, tls_too=True):
+                raise NoRun(f"nothing listens on {self.ref.dial} (the run {self.ref.run} has ended?)") from None
+            raise NoRun(door_message(self.ref.dial, OPEN_TIMEOUT_S)) from None
         return self
 
     def __exit__(self, *exc) -> None:

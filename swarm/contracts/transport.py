@@ -5,6 +5,8 @@ connected to it, either directly or through the router of its agent host (`swarm
 a router-mode session on the agent's machine, connected to the hub as `host`). Multicast
 scouting is off everywhere (two runs on defaults hear each other), and every process sets its own link lease so that a frozen process is noticed
 within about a second. Never open a session at import time, never fork after opening.
+Routers keep their door open to the run's own processes while strangers crowd it (`DOOR`,
+`listen_endpoint`), and a hub on tcp/ or tls/ has a local door too (`local_door`).
 """
 
 from __future__ import annotations
@@ -37,6 +39,50 @@ ROUTER_QUEUE = {
 }
 
 
+# The door (docs/resilience.md, "Strangers at the door"): zenoh gives a connection that has
+# not finished its handshake one of `accept_pending` places (default 100) for up to
+# `accept_timeout` (default 10 s) and closes any that comes while they are all taken. 300 idle
+# TCP connections from a stranger (reopened as soon as closed) kept every place taken: the
+# run's own CLI and agents were shut out for as long as they were held. With more places than
+# that and a 2 s limit the run's own sessions (a handshake of a few ms on loopback, well
+# under 2 s on any link we support) got in within 2 s throughout. A place costs an open file
+# and a small task; the hub's limit on open files is raised to fit (raise_open_files).
+ACCEPT_PENDING = 4096
+ACCEPT_TIMEOUT_MS = 2000
+# TLS links do their TLS handshake before zenoh's places (tls-listener, every handshake at
+# once), and zenoh's TLS acceptor sleeps 100 ms after *each* failed handshake, one at a time
+# (eclipse-zenoh/zenoh#2685; not configurable in 1.10): with the default 10 s handshake limit
+# 300 idle connections failed 30 handshakes a second, which kept it asleep. Idle strangers
+# that are left waiting fail none; those that give up still cost 100 ms each (measured:
+# docs/resilience.md).
+TLS_HANDSHAKE_TIMEOUT_MS = 600_000
+DOOR = {
+    "transport/unicast/accept_pending": ACCEPT_PENDING,
+    "transport/unicast/accept_timeout": ACCEPT_TIMEOUT_MS,
+}
+
+
+def listen_endpoint(listen: str) -> str:
+    """`listen` as a router is told to listen on it: a tls/ endpoint with its handshake limit."""
+    if not listen.startswith("tls/") or "tls_handshake_timeout_ms" in listen:
+        return listen
+    return listen + (";" if "#" in listen else "#") + f"tls_handshake_timeout_ms={TLS_HANDSHAKE_TIMEOUT_MS}"
+
+
+def raise_open_files(want: int = ACCEPT_PENDING + 1024) -> None:
+    """Lift this process's soft limit on open files towards `want` (never past the hard one):
+    a router holds one per waiting connection."""
+    import resource
+
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    target = want if hard == resource.RLIM_INFINITY else min(want, hard)
+    if soft != resource.RLIM_INFINITY and soft < target:
+        try:
+            resource.setrlimit(resource.RLIMIT_NOFILE, (target, hard))
+        except (ValueError, OSError):
+            pass
+
+
 def _config(settings: dict):
     import zenoh
 
@@ -65,16 +111,17 @@ def open_hub_requested() -> bool:
     return os.environ.get(ENV_OPEN_HUB, "") not in ("", "0")
 
 
-def hub_config(listen: str, auth: HubAuth | None = None, dictionary: Path | None = None):
+def hub_config(listen: str, auth: HubAuth | None = None, dictionary: Path | None = None, door: str | None = None):
     settings = {
         "mode": "router",
-        "listen/endpoints": [listen],
+        "listen/endpoints": [listen_endpoint(listen)] + ([door] if door else []),
         "scouting/multicast/enabled": False,
         "scouting/delay": 0,
         "transport/link/tx/lease": LEASE_MS,
         # Small messages over loopback: the 16 MB shared-memory pool would only add RSS.
         "transport/shared_memory/enabled": False,
         **ROUTER_QUEUE,
+        **DOOR,
     }
     if auth is not None:
         run = auth.creds.run
@@ -112,15 +159,51 @@ def open_hub(listen: str, auth: HubAuth | None = None):
     at open: it lives in a private file for that moment only."""
     import zenoh
 
+    raise_open_files()
     if auth is None:
         return zenoh.open(hub_config(listen))
     dictionary = runtime_dir() / f".{auth.creds.run}.users"
     write_private(dictionary, access.user_dictionary(auth.creds.secret, auth.creds.run, auth.agent_ids,
                                                      host=True, supervisor=auth.supervisor).encode())
+    door = local_door(auth.creds.run) if socket_path(listen) is None else None
     try:
+        if door is not None and len(str(socket_path(door))) <= 100:  # (Unix socket paths: < 108 bytes)
+            try:
+                return zenoh.open(hub_config(listen, auth, dictionary, door))
+            except zenoh.ZError:
+                pass  # its own door could not open: the run listens on `listen` only
         return zenoh.open(hub_config(listen, auth, dictionary))
     finally:
         dictionary.unlink(missing_ok=True)
+
+
+def door_of(connect: str, creds: Credentials | None) -> str | None:
+    """The local door of the run of `creds` if `connect` is that run's own tcp/ or tls/
+    endpoint and the door answers on this machine, else None."""
+    if creds is None or socket_path(connect) is not None or not connect.startswith(("tcp/", "tls/")):
+        return None
+    if dial_endpoint(connect) != dial_endpoint(creds.endpoint):
+        return None
+    door = local_door(creds.run)
+    path = socket_path(door)
+    if not path.exists():
+        return None
+    import socket
+
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+        s.settimeout(0.2)
+        try:
+            s.connect(str(path))
+        except OSError:
+            return None
+    return door
+
+
+def local_door(run: str) -> str:
+    """The run's door on its own machine: a Unix socket in the (private) runtime dir that the hub
+    of a run on tcp/ or tls/ listens on too, with the same checks, so that the commands and
+    agents started there never queue behind strangers at the network port (docs/resilience.md)."""
+    return f"unixsock-stream/{runtime_dir() / (run + '.door.sock')}"
 
 
 def host_router_config(listen: str, upstream: str, run: str, identity: tuple[str, str] | None = None,
@@ -130,13 +213,14 @@ def host_router_config(listen: str, upstream: str, run: str, identity: tuple[str
     `dictionary` and `acl`, only its agents get in, each confined as at the hub."""
     settings = {
         "mode": "router",
-        "listen/endpoints": [listen],
+        "listen/endpoints": [listen_endpoint(listen)],
         "connect/endpoints": [upstream],
         "scouting/multicast/enabled": False,
         "scouting/delay": 0,
         "transport/link/tx/lease": LEASE_MS,
         "transport/shared_memory/enabled": False,
         **ROUTER_QUEUE,
+        **DOOR,
     }
     if identity is not None:
         usrpwd = {"user": identity[0], "password": identity[1]}
@@ -154,12 +238,20 @@ def host_router_config(listen: str, upstream: str, run: str, identity: tuple[str
 
 
 def open_client(connect: str, timeout_ms: int = CONNECT_TIMEOUT_MS, creds: Credentials | None = None,
-                user: str = OPERATOR):
+                user: str = OPERATOR, door: bool = True):
     """Open a client session as `user` (with `creds`; without, only an open hub lets it in);
-    raises zenoh.ZError when the endpoint does not answer or refuses the identity."""
+    raises zenoh.ZError when the endpoint does not answer or refuses the identity. With
+    `door`, a session to its run's own endpoint goes through the run's local door when the
+    hub has one on this machine (`local_door`), falling back to `connect`."""
     import zenoh
 
     identity = creds.identity(user) if creds is not None and not creds.hub_is_open else None
+    via = door_of(connect, creds) if door else None
+    if via is not None:
+        try:
+            return zenoh.open(client_config(via, timeout_ms, identity))
+        except zenoh.ZError:
+            pass
     tls = _client_tls(creds) if creds is not None and connect.startswith("tls/") else None
     return zenoh.open(client_config(connect, timeout_ms, identity, tls))
 
