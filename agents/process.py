@@ -30,6 +30,7 @@ from swarm.contracts import credentials
 from swarm.contracts.identities import CredentialsError, agent_user
 from swarm.contracts.laws import trusted_laws
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV, endpoint_refuses, tie_to_launcher
+from swarm.contracts.stop_signals import StopSignals
 from swarm.contracts.transport import CONNECT_TIMEOUT_MS, open_client
 
 WORLD_GRACE = 10.0  # s an agent waits for a world that stopped answering (--world-grace)
@@ -41,8 +42,8 @@ EXIT_CRASH = 1  # and EXIT_OK = 0 (agents/node.py), EXIT_REFUSED = 3 and EXIT_NO
 _RUST_SOURCE = re.compile(r"\s+at /\S+?\.rs:\d+\.?")  # zenoh errors name their source line: not for users
 
 
-def _raise_exit(signum, _frame):
-    raise AgentExit(128 + signum, "")
+def _stopped(signum: int) -> AgentExit:
+    return AgentExit(128 + signum, "")
 
 
 def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: bool = False,
@@ -51,19 +52,22 @@ def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: b
     """Entry point of an agent process; returns its exit code. It connects as `agent-<id>`
     with the run's credentials (`creds_file`, else $SWARM_CREDENTIALS, else the local run's
     file in the runtime directory) and imports only a law that is built in or trusted."""
-    signal.signal(signal.SIGTERM, _raise_exit)
-    signal.signal(signal.SIGINT, _raise_exit)
+    # SIGTERM/SIGINT raise AgentExit, held back while the session opens: once open, it is
+    # closed however the agent ends (an open one hangs the exit: swarm/contracts/stop_signals.py)
+    stops = StopSignals(_stopped).install()
+    session, code = None, EXIT_CRASH
     try:
-        tie_to_launcher()  # started by `swarm up`: SIGTERM when the launcher dies
-        opened = _connect(agent_id, connect, run, creds_file, world_wait)
-    except AgentExit as e:  # a signal before the session is open
-        _log(f"swarm agent {agent_id}: stopped by {signal.Signals(e.code - 128).name} while connecting to {connect}")
-        return e.code
-    if isinstance(opened, int):
-        return opened
-    session, creds = opened
-    code = EXIT_CRASH
-    try:
+        try:
+            tie_to_launcher()  # started by `swarm up`: SIGTERM when the launcher dies
+            with stops.held():  # a signal meanwhile is raised once `session` holds the session
+                opened = _connect(agent_id, connect, run, creds_file, world_wait, stops)
+                if isinstance(opened, int):
+                    return opened
+                session, creds = opened
+        except AgentExit as e:  # a signal before it joined
+            _log(f"swarm agent {agent_id}: stopped by {signal.Signals(e.code - 128).name} while connecting to {connect}")
+            code = e.code
+            return code
         run = run or creds.run
         reply = claim(session, run, agent_id, spec=spec)
         node = AgentNode(session, run, agent_id, reply, wait_world, connect, world_grace, trusted_laws(trust))
@@ -78,19 +82,22 @@ def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: b
 
         traceback.print_exc()
     finally:
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        _close(session, code)
+        stops.ignore()
+        if session is not None:
+            _close(session, code)
     return code
 
 
-def _connect(agent_id: int, connect: str, run: str | None, creds_file: Path | None, world_wait: float):
+def _connect(agent_id: int, connect: str, run: str | None, creds_file: Path | None, world_wait: float,
+             stops: StopSignals):
     """(session, credentials) of agent `agent_id` on `connect`, or the exit code, said in one
     line: EXIT_NO_WORLD when nothing listens there (started before its world, which it waits
     for as long as a connection may take), EXIT_REFUSED when there are no usable credentials
-    or what listens there refuses the session."""
+    or what listens there refuses the session. Called with the stop signals held: a signal
+    while it waits for a world or in the open ends the wait at once (no session is open yet)."""
     t_end = time.monotonic() + world_wait  # a world starting meanwhile is waited for
     while endpoint_refuses(connect):  # no socket file, or a refused connection: no world (yet)
+        stops.check()
         if time.monotonic() > t_end:
             _log(f"swarm agent {agent_id}: no world at {connect}: nothing listened there for "
                  f"{world_wait:g} s (start the run first: swarm up, or swarm world)")
@@ -106,8 +113,10 @@ def _connect(agent_id: int, connect: str, run: str | None, creds_file: Path | No
         return EXIT_REFUSED
     launched = bool(os.environ.get(LAUNCHER_PID_ENV))
     try:
-        session = open_client(connect, LAUNCHED_CONNECT_TIMEOUT_MS if launched else CONNECT_TIMEOUT_MS,
-                              creds=creds, user=user)
+        # a stop while it connects ends the wait at once (the open looks at signals itself)
+        session = stops.interruptible(open_client, connect,
+                                      LAUNCHED_CONNECT_TIMEOUT_MS if launched else CONNECT_TIMEOUT_MS,
+                                      creds=creds, user=user)
     except Exception as e:
         why = " ".join(_RUST_SOURCE.sub("", str(e)).split())
         _log(f"swarm agent {agent_id}: cannot connect to {connect} as {user} of run {creds.run}: {why} "

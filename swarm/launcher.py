@@ -9,7 +9,8 @@ is their subreaper). The launcher watches the run over zenoh like any observer w
 events), reports progress, and once told to `stop(signum)` (by whoever handles Ctrl-C/SIGTERM:
 swarm/api_launch.py) stops the world first with that signal (so the results are written,
 and say which signal), then the agents, then anything left in the group. Each child's
-output goes to `<out>/logs/`.
+output goes to `<out>/logs/`. The agents start once the world has said that it listens
+(its own word on a pipe, swarm/contracts/startup.py), never after a fixed wait.
 
 It supervises: an agent process that exits by itself is reported live, sent to the world
 (an `agent_exit` request on the world's supervise key, which only the launcher's own
@@ -37,6 +38,7 @@ from swarm.contracts.identities import ENV_SUPERVISOR, SUPERVISOR
 from swarm.contracts.laws import ENV_LAW_PATH, ENV_TRUSTED_LAWS, with_law_path, with_trusted_laws
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV
 from swarm.contracts.scenario import Scenario
+from swarm.contracts.startup import ENV_READY_FD, ReadyWait
 from swarm.contracts.transport import default_endpoint, dial_endpoint, open_client
 from swarm.forks import AgentStarter
 from swarm.procs import Group, Reaper, wait_until
@@ -44,6 +46,10 @@ from swarm.supervision import AgentExitReport, agent_exit, send_report, world_fa
 from swarm.up_progress import AddedSpec, added_specs, truth_progress
 
 EXIT_WORLD_FAILED = 1
+# The world says when it listens (swarm/contracts/startup.py); these bounds are last resorts
+# only, for a world that neither gets there nor exits, and for our own session after that.
+READY_DEADLINE = 300.0
+CONNECT_DEADLINE = 60.0
 
 
 def _say(msg: str) -> None:
@@ -94,6 +100,7 @@ class Launcher:
         self.added: dict[int, AddedSpec] = {}  # agents added at run time (`swarm spawn`), for the progress line
         self.unknown_added: set[int] = set()  # added agents whose spec is still to be asked for
         self.starter: AgentStarter | None = None  # starts the agents (forked, or exec'd)
+        self.ready_wait: ReadyWait | None = None  # the world's start-up pipe (start_world)
         # The supervisor's password (swarm/contracts/access.py): this process and its world
         # alone have it; only with it may the world be told of agent exits and faults done.
         self.supervisor_password = secrets.token_hex(16)
@@ -118,9 +125,34 @@ class Launcher:
             args += ["--clock", c.clock]
         if c.foxglove is not None:
             args += ["--foxglove", "--foxglove-host", c.foxglove[0], "--foxglove-port", str(c.foxglove[1])]
-        with open(self.logs / "world.log", "ab") as log:
-            self.world = self.group.start(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
-                                          env={**self._env(), ENV_SUPERVISOR: self.supervisor_password})
+        # the world says on this pipe what it is doing, and `ready` once it listens (wait_ready)
+        r, w = os.pipe()
+        try:
+            with open(self.logs / "world.log", "ab") as log:
+                self.world = self.group.start(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
+                                              pass_fds=(w,), env={**self._env(), ENV_SUPERVISOR: self.supervisor_password,
+                                                                  ENV_READY_FD: str(w)})
+        except BaseException:
+            os.close(r)
+            raise
+        finally:
+            os.close(w)
+        self.ready_wait = ReadyWait(r)
+
+    def wait_ready(self, timeout: float = READY_DEADLINE) -> bool:
+        """Wait for the world's own word that it listens (swarm/contracts/startup.py): True.
+        False when it exited first (the run loop reports its exit), when the run is stopped,
+        or, the last resort, after `timeout` s (then `failure` says what it was still doing)."""
+        w = self.ready_wait
+        if w.wait(timeout, lambda: self.stop_signal is not None):
+            return True
+        if w.ended:  # it exited (or closed its end and exits): its exit code comes in a moment
+            wait_until(lambda: self.world_exit_code() is not None, 5.0, 0.02)
+        elif self.stop_signal is None and self.world_exit_code() is None:
+            self.failure = (f"the world (pid {self.world.pid}) did not get ready within {timeout:g} s: it was "
+                            f"still {w.doing()} (see {self.logs / 'world.log'})")
+            self.failed = True
+        return False
 
     def start_starter(self) -> None:
         """What starts the agents (swarm/forks.py: a fork server, which imports meanwhile); after
@@ -158,8 +190,9 @@ class Launcher:
         self.group.stop(grace=3.0)
 
     # -- observing -------------------------------------------------------------------------------
-    def connect(self, timeout: float = 15.0):
-        """Open an observer session once the world listens; None if the world died first."""
+    def connect(self, timeout: float = CONNECT_DEADLINE):
+        """Open an observer session (the world listens); None if the world died first, the
+        run was stopped, or it did not let us in within `timeout` s."""
         opened = []
 
         def ready() -> bool:  # True: connected, or no point in trying any more
@@ -213,7 +246,8 @@ class Launcher:
         try:
             self.start_world()
             self.start_starter()  # the fork server imports while the world starts
-            session = self.connect()  # agents start once the world listens
+            # agents start once the world listens: its own word on the pipe, then our session
+            session = self.connect() if self.wait_ready() else None
             if session is not None:
                 self.listening = True
                 self._subs = [session.declare_subscriber(wire.truth_key(self.cfg.run), self._on_truth),
@@ -222,8 +256,9 @@ class Launcher:
                                                          lambda s: self.notices.append(s.payload.to_bytes()))]
                 for a in self.cfg.scenario.agents:
                     self.start_agent(a.id)
-            elif self.stop_signal is None and self.world_exit_code() is None:
-                self.failure = f"cannot reach the world at {self.endpoint} (see {self.logs / 'world.log'})"
+            elif not self.failed and self.stop_signal is None and self.world_exit_code() is None:
+                self.failure = (f"the world listens on {self.endpoint} but did not let the launcher in within "
+                                f"{CONNECT_DEADLINE:g} s (see {self.logs / 'world.log'})")
                 self.failed = True
             t0 = time.monotonic()
             while self.stop_signal is None and not self.failed:
@@ -240,6 +275,8 @@ class Launcher:
                 self.supervise(None)  # exits just before the world ended (the world has ended)
         finally:
             reaper.stop()
+            if self.ready_wait is not None:
+                self.ready_wait.close()
             if self.starter is not None:
                 self.starter.close()
             if session is not None:

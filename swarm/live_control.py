@@ -177,29 +177,52 @@ def _new_spec(info: dict, run: str, agent_id: int, given: dict) -> dict:
     return spec
 
 
+def spawn_log(info: dict, run: str, agent_id: int) -> Path:
+    """Where a spawned agent writes its output: `agent-<id>.log` in the run's own `logs/`
+    (beside the agents `swarm up` started) when the world runs on this machine and says
+    where its results go (`out` in its info); otherwise a file of its own in the runtime
+    dir's `logs/` (a world elsewhere, or one started without --out)."""
+    out = info.get("out")
+    if isinstance(out, str) and out and info.get("host") == socket.gethostname():
+        logs = Path(out) / "logs"
+        try:
+            logs.mkdir(parents=True, exist_ok=True)
+            if os.access(logs, os.W_OK):
+                return logs / f"agent-{agent_id}.log"
+        except OSError:
+            pass
+    from swarm.contracts.transport import runtime_dir
+
+    logs = runtime_dir() / "logs"
+    logs.mkdir(mode=0o700, parents=True, exist_ok=True)
+    return logs / f"{run}-agent-{agent_id}-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.log"
+
+
 def spawn_agent(live, agent_id: int, spec: dict | None = None, trust_law: tuple[str, ...] = (),
                 timeout: float = SPAWN_DEADLINE) -> Spawned:
-    """Start agent `agent_id` on this machine (detached, its output in a log file of the
-    runtime dir) and wait until the world shows it live. An id the run knows rejoins (no
-    `spec` then); a new one joins with `spec` (x, y, heading, speed, role, orbit_radius,
-    direction, follow, max_turn_rate)."""
+    """Start agent `agent_id` on this machine (detached, its output in `spawn_log`) and wait
+    until the world shows it live. An id the run knows rejoins if it is not live (no `spec`
+    then; a live one is refused at once); a new one joins with `spec` (x, y, heading,
+    speed, role, orbit_radius, direction, follow, max_turn_rate)."""
     from swarm.contracts.credentials import ENV_CREDENTIALS
     from swarm.contracts.identities import CredentialsError, agent_user
     from swarm.contracts.laws import ENV_TRUSTED_LAWS, with_trusted_laws
-    from swarm.contracts.transport import runtime_dir
+    from swarm.errors import NoRunError
 
     given = {k: v for k, v in (spec or {}).items() if v is not None}
     info, ref = live.info(), live.ref
     new = None
-    if str(agent_id) in info["agents"]:
+    known = info["agents"].get(str(agent_id))
+    if known is not None:
         if given:
             raise UsageError(f"agent {agent_id} is already in run {ref.run}: it rejoins from where it dropped; "
                              f"--{'/--'.join(k.replace('_', '-') for k in given)} only apply to a new id")
+        if known.get("alive"):
+            raise LiveError(f"agent {agent_id} is already live in run {ref.run} (pid {known.get('pid')} on "
+                            f"{known.get('host')}): nothing started")
     else:
         new = _new_spec(info, ref.run, agent_id, given)
-    logs = runtime_dir() / "logs"
-    logs.mkdir(mode=0o700, parents=True, exist_ok=True)
-    log_path = logs / f"{ref.run}-agent-{agent_id}-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.log"
+    log_path = spawn_log(info, ref.run, agent_id)
     args = [sys.executable, "-m", "agents.process", str(agent_id), ref.endpoint, ref.run]
     if new is not None:
         args.append(json.dumps(new))
@@ -219,7 +242,10 @@ def spawn_agent(live, agent_id: int, spec: dict | None = None, trust_law: tuple[
         rc = proc.poll()
         if rc is not None:
             return ("exited", rc)
-        a = live.info()["agents"].get(str(agent_id))
+        try:
+            a = live.info()["agents"].get(str(agent_id))
+        except NoRunError:  # a read the world missed under load: asked again until the deadline
+            return None
         return ("live", 0) if a is not None and a["alive"] and a["pid"] == proc.pid else None
 
     got = wait_until(started, timeout, 0.05)

@@ -1,10 +1,14 @@
 """The world process from start to end: `run_world`, what `swarm world` runs.
 
-In order: SIGTERM/SIGINT become `Stop` from the first moment; the run's credentials are
-written (world/hub_auth.py) and removed at the end however it ends; a stale Unix socket
-of a crashed run is removed (a live one belongs to another run: refused); the `World`
-(world/process.py) listens, runs its ticks and writes its results, which are written
-even when it is stopped, after a disk-full error or a bug, so nothing recorded is lost.
+In order: SIGTERM/SIGINT become `Stop` from the first moment (held back while the hub
+opens, so that the session, once open, is always closed: an open one hangs the exit);
+the files of killed worlds are swept from the runtime dir (swarm/contracts/runtime_sweep.py);
+the run's credentials are written (world/hub_auth.py) and removed at the end however it
+ends; a stale Unix socket of a crashed run is removed (a live one belongs to another run:
+refused); the `World` (world/process.py) listens, says `ready` to the launcher (a pipe,
+swarm/contracts/startup.py, with each step before), runs its ticks and writes its
+results, which are written even when it is stopped, after a disk-full error or a bug, so
+nothing recorded is lost.
 Exit codes: 0 the run completed, 128+signal stopped, 2 cannot listen (the endpoint in
 use or unusable, or the --foxglove port in use) or write the credentials, 3 agents did
 not join in time, 1 an internal error, EXIT_NO_SPACE the recording or the results could
@@ -13,11 +17,13 @@ not be written, EXIT_DESERTED (world/clock.py) no agent was left.
 
 from __future__ import annotations
 
-import signal
 import sys
 
 from swarm.contracts.identities import CredentialsError
-from swarm.contracts.transport import socket_path
+from swarm.contracts.runtime_sweep import sweep_stale
+from swarm.contracts.startup import Announcer
+from swarm.contracts.stop_signals import StopSignals
+from swarm.contracts.transport import open_hub, runtime_dir, socket_path
 from world.hub_auth import forget_run, run_auth
 from world.process import World, WorldConfig
 from world.recording import EXIT_NO_SPACE, RecordingError
@@ -32,56 +38,62 @@ class Stop(BaseException):
         self.signum = signum
 
 
-def _raise_stop(signum, _frame):
-    # One Stop only: a second Ctrl-C (or a SIGTERM after it) must not interrupt the
-    # writing of the results that the first one started.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    raise Stop(signum)
-
-
 def run_world(cfg: WorldConfig) -> int:
     """Run a world to the end; exit code 0 when the run completed, 128+signal when stopped,
     EXIT_NO_SPACE when the recording or the results could not be written."""
     # Stop (SIGTERM/SIGINT) from the first moment: the run's credentials, once written,
-    # must go with it however early it is stopped.
-    old = {sig: signal.signal(sig, _raise_stop) for sig in (signal.SIGTERM, signal.SIGINT)}
+    # must go with it however early it is stopped; held back while the hub opens
+    # (swarm/contracts/stop_signals.py), so that an open session is always closed.
+    stops = StopSignals(Stop).install()
+    tell = Announcer.from_environment()  # the launcher's pipe (swarm/contracts/startup.py)
     try:
+        tell.say("credentials")
         try:
-            cfg.auth = run_auth(cfg.run, cfg.listen, cfg.scenario)
+            with stops.held():  # no stop half-way through writing a file (its temporary would stay)
+                sweep_stale(runtime_dir())  # files of worlds that were killed (their pid is gone)
+                cfg.auth = run_auth(cfg.run, cfg.listen, cfg.scenario)
         except (CredentialsError, OSError) as e:
             print(f"swarm world: {e if isinstance(e, CredentialsError) else f'cannot write the run credentials: {e}'}",
                   file=sys.stderr)
             return 2
-        return _run_world(cfg)
+        return _run_world(cfg, stops, tell)
     except Stop as s:  # before the world listened: nothing recorded
         return 128 + s.signum
     finally:
+        stops.ignore()
         forget_run(cfg.run, cfg.listen)
-        for sig, h in old.items():
-            signal.signal(sig, h)
+        tell.close()
+        stops.restore()
 
 
-def _run_world(cfg: WorldConfig) -> int:
+def _free_socket(sock) -> bool:
+    """Remove a stale socket of a crashed run; False when a live one (another run's) answers."""
+    if sock is None or not sock.exists():
+        return True
+    import socket as so
+
+    s = so.socket(so.AF_UNIX, so.SOCK_STREAM)
+    try:
+        s.connect(str(sock))
+        return False
+    except OSError:
+        sock.unlink(missing_ok=True)
+        return True
+    finally:
+        s.close()
+
+
+def _run_world(cfg: WorldConfig, stops: StopSignals, tell: Announcer) -> int:
     sock = socket_path(cfg.listen)
-    if sock is not None and sock.exists():
-        # A stale socket from a crashed run blocks listening; a live one belongs to a run.
-        import socket as so
-
-        s = so.socket(so.AF_UNIX, so.SOCK_STREAM)
-        try:
-            s.connect(str(sock))
-            s.close()
-            print(f"swarm world: {cfg.listen} is in use by another run", file=sys.stderr)
-            return 2
-        except OSError:
-            sock.unlink(missing_ok=True)
+    if not _free_socket(sock):
+        print(f"swarm world: {cfg.listen} is in use by another run", file=sys.stderr)
+        return 2
+    tell.say("recording")
     try:
         world = World(cfg)
     except RecordingError as e:
         print(f"swarm world: {e}", file=sys.stderr)
         return EXIT_NO_SPACE
-    code = 0  # SIGTERM/SIGINT raise Stop here (run_world installed the handlers)
     live = None  # the --foxglove server (world/live_view.py)
     try:
         if cfg.foxglove is not None:  # before listening: a port in use stops the run before it starts
@@ -93,60 +105,74 @@ def _run_world(cfg: WorldConfig) -> int:
                 world.discard_recording()
                 print(f"swarm world: {e}", file=sys.stderr)
                 return 2
+        tell.say("listening")
         try:
-            world._open()
-        except Stop as s:  # stopped before it listened: nothing to record
+            with stops.held():  # a stop comes in the open, or once the session is the world's, to be closed
+                world._open(stops.interruptible(open_hub, cfg.listen, cfg.auth))
+        except Stop as s:  # stopped while it opened: nothing to record; a session made is closed again
+            stops.ignore()
             world.discard_recording()
+            if getattr(world, "session", None) is not None:
+                world._close()
             return 128 + s.signum
         except Exception as e:  # zenoh.ZError: endpoint unusable
             world.discard_recording()
             print(f"swarm world: cannot listen on {cfg.listen}: {e}", file=sys.stderr)
             return 2
+        try:
+            return _serve(world, cfg, live, stops, tell)
+        finally:  # however it ends (a stop while handling another ending too), the session closes
+            stops.ignore()
+            world._close()
+    finally:
+        if live is not None:
+            live.stop()
+        if sock is not None:
+            sock.unlink(missing_ok=True)
+
+
+def _serve(world: World, cfg: WorldConfig, live, stops: StopSignals, tell: Announcer) -> int:
+    """The run, listening, from its first tick to its results; its exit code."""
+    code = 0
+    try:
+        tell.ready()
         if cfg.progress:
             if live is not None:
                 from world.live_view import open_hint
 
                 print(f"[world] {open_hint(*cfg.foxglove)}", file=sys.stderr, flush=True)
             print(f"[world] run {cfg.run} listening on {cfg.listen}", file=sys.stderr, flush=True)
-        try:
-            code = world.run()
-        except Stop as s:
-            world.stopped_by = s.signum
-            code = 128 + s.signum
-        except TimeoutError as e:
+        code = world.run()
+    except Stop as s:
+        world.stopped_by = s.signum
+        code = 128 + s.signum
+    except TimeoutError as e:
+        print(f"swarm world: {e}", file=sys.stderr)
+        code = 3
+    except RecordingError as e:  # disk full mid-run: what reached the disk stays readable
+        print(f"swarm world: {e}; stopping the run", file=sys.stderr)
+        world.stopped_by = -1
+        code = EXIT_NO_SPACE
+    except Exception:  # a bug: say so, but still write what was recorded and close cleanly
+        import traceback
+
+        traceback.print_exc()
+        print("swarm world: internal error; results so far are written", file=sys.stderr)
+        world.stopped_by = -1
+        code = 1
+    # Results are written even when stopped: nothing recorded is lost.
+    stops.ignore()
+    try:
+        world.finish()
+    except RecordingError as e:
+        if code != EXIT_NO_SPACE:
             print(f"swarm world: {e}", file=sys.stderr)
-            code = 3
-        except RecordingError as e:  # disk full mid-run: what reached the disk stays readable
-            print(f"swarm world: {e}; stopping the run", file=sys.stderr)
-            world.stopped_by = -1
-            code = EXIT_NO_SPACE
-        except Exception:  # a bug: say so, but still write what was recorded and close cleanly
-            import traceback
+        code = EXIT_NO_SPACE
+    except Exception:  # a bug in writing the results: say so, and still close (end notice)
+        import traceback
 
-            traceback.print_exc()
-            print("swarm world: internal error; results so far are written", file=sys.stderr)
-            world.stopped_by = -1
-            code = 1
-        # Results are written even when stopped: nothing recorded is lost.
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        try:
-            world.finish()
-        except RecordingError as e:
-            if code != EXIT_NO_SPACE:
-                print(f"swarm world: {e}", file=sys.stderr)
-            code = EXIT_NO_SPACE
-        except Exception:  # a bug in writing the results: say so, and still close (end notice)
-            import traceback
-
-            traceback.print_exc()
-            print(f"swarm world: internal error writing the results; recording.mcap in {cfg.out_dir} "
-                  "keeps the run (swarm export)", file=sys.stderr)
-            code = 1
-        world._close()
-    finally:
-        if live is not None:
-            live.stop()
-        if sock is not None:
-            sock.unlink(missing_ok=True)
+        traceback.print_exc()
+        print(f"swarm world: internal error writing the results; recording.mcap in {cfg.out_dir} "
+              "keeps the run (swarm export)", file=sys.stderr)
+        code = 1
     return code

@@ -97,10 +97,16 @@ class World(Inbox, Joins, Clock):
     # -- zenoh plumbing (callbacks: enqueue only) -----------------------------------------
     def _open(self, session=None):
         """Declare the world's keys on `session` (default: a new hub on cfg.listen; tests
-        pass a fake one, tests/fakes.py)."""
-        run = self.cfg.run
+        pass a fake one, tests/fakes.py); a failure closes the session again."""
         self.session = session if session is not None else open_hub(self.cfg.listen, self.cfg.auth)
-        ses = self.session
+        try:
+            self._declare(self.session)
+        except BaseException:  # an open session left behind would hang the exit
+            self.session.close()
+            raise
+
+    def _declare(self, ses) -> None:
+        run = self.cfg.run
         put = self.enqueue
         self._subs = [
             ses.declare_subscriber(wire.agent_key(run, "*", "cmd"),
@@ -126,6 +132,13 @@ class World(Inbox, Joins, Clock):
         except Exception:
             pass
         self.session.close()
+
+    def info(self, sensing: bool = False) -> dict:
+        """The world's view (world/inbox.py), with where its results go (`out`, absolute;
+        None without --out): `swarm spawn` puts an agent's log in its `logs/`."""
+        d = super().info(sensing)
+        d["out"] = str(self.cfg.out_dir.resolve()) if self.cfg.out_dir is not None else None
+        return d
 
     # -- events -----------------------------------------------------------------------------
     def event(self, kind: str, agent: int | None, reason: str, **more) -> None:

@@ -25,6 +25,7 @@ from pathlib import Path
 from swarm.contracts import wire
 from swarm.contracts.identities import HOST, CredentialsError, agent_user, check_host_name, password_for
 from swarm.contracts.runtime_dir import dial_endpoint, pid_alive, read_private, runtime_dir, write_private
+from swarm.contracts.runtime_sweep import sweep_stale
 
 ENV_CREDENTIALS = "SWARM_CREDENTIALS"  # path of a credentials file (remote agents, CI)
 SUFFIX = ".cred"
@@ -247,9 +248,12 @@ def run_file(run: str) -> Path:
 
 
 def local_runs() -> list[Credentials]:
-    """The credentials of every local run whose world still exists (stale files are skipped)."""
+    """The credentials of every local run whose world still exists; the files of those whose
+    world is gone are removed on the way (swarm/contracts/runtime_sweep.py)."""
     out = []
-    for p in sorted(runtime_dir().glob(f"*{SUFFIX}")):
+    d = runtime_dir()
+    sweep_stale(d)
+    for p in sorted(d.glob(f"*{SUFFIX}")):
         try:
             c = read(p)
         except CredentialsError:
