@@ -94,7 +94,7 @@ def _connect(agent_id: int, connect: str, run: str | None, creds_file: Path | No
     line: EXIT_NO_WORLD when nothing listens there (started before its world, which it waits
     for as long as a connection may take), EXIT_REFUSED when there are no usable credentials
     or what listens there refuses the session. Called with the stop signals held: a signal
-    while it waits for a world or in the open ends the wait at once (no session is open yet)."""
+    while it waits for a world ends the wait at once, one in the open as the open ends."""
     t_end = time.monotonic() + world_wait  # a world starting meanwhile is waited for
     while endpoint_refuses(connect):  # no socket file, or a refused connection: no world (yet)
         stops.check()
@@ -113,7 +113,8 @@ def _connect(agent_id: int, connect: str, run: str | None, creds_file: Path | No
         return EXIT_REFUSED
     launched = bool(os.environ.get(LAUNCHER_PID_ENV))
     try:
-        # a stop while it connects ends the wait at once (the open looks at signals itself)
+        # a stop while it connects is raised as the open returns or fails (zenoh.open runs to
+        # its connect timeout); a session it had just made, with nothing declared, just goes
         session = stops.interruptible(open_client, connect,
                                       LAUNCHED_CONNECT_TIMEOUT_MS if launched else CONNECT_TIMEOUT_MS,
                                       creds=creds, user=user)

@@ -47,7 +47,8 @@ def one_try(point: str, deadline: float) -> tuple[bool, list[str], int | None]:
             for line in p.stderr:  # "run bench on ...", "[world] run bench listening on ..."
                 if mark in line:
                     break
-            time.sleep(float(point.partition("+")[2] or 0))
+            if point.partition("+")[2]:  # "ready" itself: at once (the window before the fix was microseconds)
+                time.sleep(float(point.partition("+")[2]))
         else:
             time.sleep(float(point))
         p.send_signal(signal.SIGTERM)

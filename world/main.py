@@ -23,7 +23,7 @@ from swarm.contracts.identities import CredentialsError
 from swarm.contracts.runtime_sweep import sweep_stale
 from swarm.contracts.startup import Announcer
 from swarm.contracts.stop_signals import StopSignals
-from swarm.contracts.transport import open_hub, runtime_dir, socket_path
+from swarm.contracts.transport import runtime_dir, socket_path
 from world.hub_auth import forget_run, run_auth
 from world.process import World, WorldConfig
 from world.recording import EXIT_NO_SPACE, RecordingError
@@ -107,13 +107,14 @@ def _run_world(cfg: WorldConfig, stops: StopSignals, tell: Announcer) -> int:
                 return 2
         tell.say("listening")
         try:
-            with stops.held():  # a stop comes in the open, or once the session is the world's, to be closed
-                world._open(stops.interruptible(open_hub, cfg.listen, cfg.auth))
-        except Stop as s:  # stopped while it opened: nothing to record; a session made is closed again
+            # a stop comes once the session is the world's, to be closed (the hub opens in
+            # milliseconds; its user dictionary file is written and removed meanwhile)
+            with stops.held():
+                world._open()
+        except Stop as s:  # stopped while it opened: nothing to record; the session is closed again
             stops.ignore()
             world.discard_recording()
-            if getattr(world, "session", None) is not None:
-                world._close()
+            world._close()
             return 128 + s.signum
         except Exception as e:  # zenoh.ZError: endpoint unusable
             world.discard_recording()
