@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Iterable
 
 from swarm.api_record import Record
-from swarm.errors import NoRunError, StoppedAnswering, SwarmError, one_line
+from swarm.errors import NoRunError, StoppedAnswering, SwarmError, UsageError, one_line
 
 __all__ = ["Live", "LiveState", "connect", "runs"]
 
@@ -33,6 +33,17 @@ ENV_CONNECT = "SWARM_CONNECT"  # their default endpoint
 def _env(value: str | None, name: str) -> str | None:
     """`value`, else the variable `name` (an empty one counts as unset)."""
     return value if value is not None else (os.environ.get(name) or None)
+
+
+def _endpoint(value: str | None) -> str | None:
+    """`connect=` (else $SWARM_CONNECT), checked: UsageError "not an endpoint: ..." (one line)."""
+    from swarm.contracts.endpoints import EndpointError, check_endpoint
+
+    ep = _env(value, ENV_CONNECT)
+    try:
+        return None if ep is None else check_endpoint(ep, what="connect")
+    except EndpointError as e:
+        raise UsageError(str(e)) from None
 
 
 @contextmanager
@@ -210,7 +221,7 @@ def connect(run: str | None = None, connect: str | None = None, credentials: str
     from swarm.live import open_run_session
 
     with talking():
-        return Live(open_run_session(_env(connect, ENV_CONNECT), _env(run, ENV_RUN),
+        return Live(open_run_session(_endpoint(connect), _env(run, ENV_RUN),
                                      None if credentials is None else Path(credentials)))
 
 
@@ -221,7 +232,7 @@ def runs(run: str | None = None, connect: str | None = None, credentials: str | 
 
     creds = None if credentials is None else Path(credentials)
     with talking():
-        found = find_runs(_env(connect, ENV_CONNECT), creds, _env(run, ENV_RUN))
+        found = find_runs(_endpoint(connect), creds, _env(run, ENV_RUN))
     docs = []
     for ref in found:
         doc = {"run": ref.run, "endpoint": ref.endpoint, "scenario": None, "clock": None, "paused": None,

@@ -152,6 +152,9 @@ def _new_spec(info: dict, run: str, agent_id: int, given: dict) -> dict:
     """The spec of a new agent from the options given, checked against the run's range for
     added agents and the scenario schema; UsageError naming what is wrong."""
     lo, hi = info.get("added_ids", (None, None))
+    if lo is not None and lo > hi:
+        raise UsageError(f"run {run} has no id left for an added agent (its scenario uses the largest "
+                         "id the wire carries)")
     if lo is not None and not lo <= agent_id <= hi:
         raise UsageError(f"--id {agent_id}: agents added to run {run} take ids {lo}..{hi} "
                          "(the hub's access rules are made for those ids before the run starts)")

@@ -304,3 +304,14 @@ def test_progress_line_says_paused(monkeypatch, capsys):
     assert not paused([{"kind": "start"}])
     assert paused([{"kind": "start"}, {"kind": "pause"}])
     assert not paused([{"kind": "start"}, {"kind": "pause"}, {"kind": "switch"}, {"kind": "resume"}])
+
+
+def test_the_python_api_says_not_an_endpoint():
+    """swarm.connect / swarm.runs with connect="foo/bar": UsageError, one line (not "no run")."""
+    import swarm
+    from swarm.errors import UsageError
+
+    for call in (swarm.connect, swarm.runs):
+        with pytest.raises(UsageError) as e:
+            call(connect="foo/bar")
+        assert str(e.value).startswith("connect: not an endpoint: 'foo/bar'") and "\n" not in str(e.value)

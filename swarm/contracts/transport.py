@@ -163,10 +163,10 @@ def open_hub(listen: str, auth: HubAuth | None = None):
     if auth is None:
         return zenoh.open(hub_config(listen))
     dictionary = runtime_dir() / f".{auth.creds.run}.users"
-    write_private(dictionary, access.user_dictionary(auth.creds.secret, auth.creds.run, auth.agent_ids,
-                                                     host=True, supervisor=auth.supervisor).encode())
     door = local_door(auth.creds.run) if socket_path(listen) is None else None
     try:
+        write_private(dictionary, access.user_dictionary(auth.creds.secret, auth.creds.run, auth.agent_ids,
+                                                         host=True, supervisor=auth.supervisor).encode())
         if door is not None and len(str(socket_path(door))) <= 100:  # (Unix socket paths: < 108 bytes)
             try:
                 return zenoh.open(hub_config(listen, auth, dictionary, door))
