@@ -22,6 +22,7 @@ from swarm.contracts.lifeline import tie_to_launcher
 from swarm.contracts.transport import answer
 from world.core import ACTIVE
 from world.faults import fault_event
+from world.memory import Trimmer
 
 DESERTED_GRACE = 5.0  # s of wall time a started run may go on with no agent at all
 STALL_GRACE = 3.0  # s the agents get to answer after a stall of the world (their links come back in ~0.5 s)
@@ -196,6 +197,12 @@ class Clock:
             if left <= 0:
                 break
             self.drain(None, left)
+        # Behind the clock (a starved world catching up) the loop above takes nothing: what
+        # came meanwhile is handled all the same, or the inbox (and the native memory under
+        # it, world/memory.py) grows with every tick until the world has caught up.
+        for _ in range(self.inbox.qsize()):
+            if not self.drain(None, 0):
+                break
         for aid in self.core.active_ids():
             b = self.book[aid]
             stale = tick - b.last_cmd_tick if b.last_cmd_tick >= 0 else tick + 1
@@ -214,6 +221,7 @@ class Clock:
         self.started = True
         t_next = time.monotonic() + period
         t0_ticks = time.monotonic()
+        self.trimmer = Trimmer()  # freed native memory back to the system (world/memory.py)
         while self.core.tick < self.ticks:
             if self.deserted():
                 self.event("deserted", None, f"no agent process for {DESERTED_GRACE:g} s of wall time; "
@@ -248,6 +256,7 @@ class Clock:
             self.record_and_step()
             self.ticking = False
             now = time.monotonic()
+            self.trimmer.maybe(now)
             if self.cfg.progress and now - last_note > 2.0:
                 last_note = now
                 rate = self.core.tick / max(now - t0_ticks, 1e-9)

@@ -25,6 +25,7 @@ from swarm.contracts.startup import Announcer
 from swarm.contracts.stop_signals import StopSignals
 from swarm.contracts.transport import runtime_dir, socket_path
 from world.hub_auth import forget_run, run_auth
+from world.memory import limit_arenas
 from world.process import World, WorldConfig
 from world.recording import EXIT_NO_SPACE, RecordingError
 
@@ -41,6 +42,7 @@ class Stop(BaseException):
 def run_world(cfg: WorldConfig) -> int:
     """Run a world to the end; exit code 0 when the run completed, 128+signal when stopped,
     EXIT_NO_SPACE when the recording or the results could not be written."""
+    limit_arenas()  # before zenoh's and foxglove's threads start (world/memory.py)
     # Stop (SIGTERM/SIGINT) from the first moment: the run's credentials, once written,
     # must go with it however early it is stopped; held back while the hub opens
     # (swarm/contracts/stop_signals.py), so that an open session is always closed.
