@@ -65,7 +65,8 @@ def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: b
                     return opened
                 session, creds = opened
         except AgentExit as e:  # a signal before it joined
-            _log(f"swarm agent {agent_id}: stopped by {signal.Signals(e.code - 128).name} while connecting to {connect}")
+            name = signal.Signals(e.code - 128).name
+            _log(f"swarm agent {agent_id}: stopped by {name} while connecting to {connect}")
             code = e.code
             return code
         run = run or creds.run

@@ -139,7 +139,8 @@ def summary(rows: list[tuple[bool, float, str]]) -> str:
     fast = sum(1 for o, t, _ in rows if o and t <= OK_S)
     first_fail = next((m for o, _, m in rows if not o), "")
     return (f"{len(rows):3d} calls, {ok:3d} ok, {fast:3d} ok within {OK_S:g} s, "
-            f"median {statistics.median(lat):5.2f} s, max {max(lat):5.2f} s" + (f"; first failure: {first_fail}" if first_fail else ""))
+            f"median {statistics.median(lat):5.2f} s, max {max(lat):5.2f} s"
+            + (f"; first failure: {first_fail}" if first_fail else ""))
 
 
 def bench(kind: str, conns: int, attack_s: float, after_s: float, before_s: float) -> None:

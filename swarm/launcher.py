@@ -129,9 +129,9 @@ class Launcher:
         r, w = os.pipe()
         try:
             with open(self.logs / "world.log", "ab") as log:
+                env = {**self._env(), ENV_SUPERVISOR: self.supervisor_password, ENV_READY_FD: str(w)}
                 self.world = self.group.start(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
-                                              pass_fds=(w,), env={**self._env(), ENV_SUPERVISOR: self.supervisor_password,
-                                                                  ENV_READY_FD: str(w)})
+                                              pass_fds=(w,), env=env)
         except BaseException:
             os.close(r)
             raise

@@ -124,8 +124,8 @@ def attach_hints(run_id: str, dial: str, s) -> list[str]:
              f"add an agent by hand: no new id ({s.added_ids_text()}); a dropped agent rejoins with "
              f"swarm spawn --id N{pick}"]
     if not dial.startswith("unixsock"):
-        lines.append(f"from another machine: swarm credentials --agent N{pick}, there swarm agent --id N --connect {dial} "
-                     "--credentials FILE (docs/resilience.md, \"Agents on other machines\")")
+        lines.append(f"from another machine: swarm credentials --agent N{pick}, there swarm agent --id N "
+                     f"--connect {dial} --credentials FILE (docs/resilience.md, \"Agents on other machines\")")
     return lines
 
 

@@ -225,7 +225,8 @@ def test_one_keys_flood_costs_no_other_agent_a_command():
     events = []
     world.engine.on_event = events.append
     for _ in range(PER_KEY_MAX + 500):
-        world.enqueue(("cmd", wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd_fields(2, 0, 0.1, None, "track", None, k2)))
+        cmd = wire.encode_cmd_fields(2, 0, 0.1, None, "track", None, k2)
+        world.enqueue(("cmd", wire.agent_key(RUN, 2, "cmd"), cmd))
     world.enqueue(("cmd", wire.agent_key(RUN, 1, "cmd"), wire.encode_cmd_fields(1, 0, 0.1, None, "track", None, k1)))
     pending = {1, 2}
     while world.drain(pending, 0):

@@ -23,7 +23,7 @@ import psutil
 import pytest
 from typer.testing import CliRunner
 
-from runtime_helpers import (SCENARIOS, Runtime, agent_cmd, live_swarm, short_runtime_dir, start_up, swarm_cmd,
+from runtime_helpers import (SCENARIOS, Runtime, agent_cmd, live_swarm, short_runtime_dir, swarm_cmd,
                              wait_for)
 from swarm.contracts.runtime_sweep import sweep_stale
 from swarm.contracts.startup import ENV_READY_FD, READY, Announcer, ReadyWait

@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from world.memory import Trimmer, limit_arenas
+from world.memory import Trimmer
 
 
 @pytest.mark.skipif(platform.libc_ver()[0] != "glibc", reason="glibc's mallopt and malloc_trim only")

@@ -8,9 +8,9 @@ handlers that raise `make(signum)`; inside `with stops.held():` a signal is only
 and raised when the block ends (once the session is stored) or at a `check()`, so the
 code around it has exactly one place to close it. The open itself may be `interruptible`:
 a session with nothing declared on it does not hang the exit (the callbacks of declared
-subscribers and queryables do), so a stop during the open is raised as it returns. (Blocking the signals with `pthread_sigmask` would not do:
-another thread, zenoh's or a BLAS library's, may take them, and Python then runs the
-handler on the main thread anyway.)
+subscribers and queryables do), so a stop during the open is raised as it returns.
+(Blocking the signals with `pthread_sigmask` would not do: another thread, zenoh's or a
+BLAS library's, may take them, and Python then runs the handler on the main thread anyway.)
 """
 
 from __future__ import annotations

@@ -3,8 +3,8 @@
 The world is the hub: a router-mode session that listens; everything else is a client
 connected to it, either directly or through the router of its agent host (`swarm host`:
 a router-mode session on the agent's machine, connected to the hub as `host`). Multicast
-scouting is off everywhere (two runs on defaults hear each other), and every process sets its own link lease so that a frozen process is noticed
-within about a second. Never open a session at import time, never fork after opening.
+scouting is off everywhere (two runs on defaults hear each other), and every process sets
+its own link lease so that a frozen process is noticed within about a second. Never open a session at import time, never fork after opening.
 Routers keep their door open to the run's own processes while strangers crowd it (`DOOR`,
 `listen_endpoint`), and a hub on tcp/ or tls/ has a local door too (`local_door`).
 """
