@@ -20,7 +20,7 @@ from __future__ import annotations
 import sys
 
 from swarm.contracts.identities import CredentialsError
-from swarm.contracts.runtime_sweep import sweep_stale
+from swarm.contracts.runtime_sweep import sweep_stale, unix_socket_answers
 from swarm.contracts.startup import Announcer
 from swarm.contracts.stop_signals import StopSignals
 from swarm.contracts.transport import runtime_dir, socket_path
@@ -72,17 +72,10 @@ def _free_socket(sock) -> bool:
     """Remove a stale socket of a crashed run; False when a live one (another run's) answers."""
     if sock is None or not sock.exists():
         return True
-    import socket as so
-
-    s = so.socket(so.AF_UNIX, so.SOCK_STREAM)
-    try:
-        s.connect(str(sock))
+    if unix_socket_answers(sock):
         return False
-    except OSError:
-        sock.unlink(missing_ok=True)
-        return True
-    finally:
-        s.close()
+    sock.unlink(missing_ok=True)
+    return True
 
 
 def _run_world(cfg: WorldConfig, stops: StopSignals, tell: Announcer) -> int:

@@ -45,22 +45,25 @@ def _run_live(directory: Path, run: str) -> bool:
     return pid is False or pid is None or pid_alive(pid)
 
 
+def unix_socket_answers(sock: Path) -> bool:
+    """Whether something accepts connections on the Unix socket `sock` (a live listener)."""
+    s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        s.connect(str(sock))
+        return True
+    except OSError:
+        return False
+    finally:
+        s.close()
+
+
 def _socket_free(sock: Path, lock: Path) -> int | None | bool:
     """An fd holding `lock` (to be closed after the removal) when nobody listens on `sock`;
     None when there is no lock file and the socket refuses connections; False otherwise."""
     try:
         fd = os.open(lock, os.O_RDONLY | os.O_NOFOLLOW)
     except FileNotFoundError:
-        if not sock.exists():
-            return None
-        s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        try:
-            s.connect(str(sock))
-            return False
-        except OSError:
-            return None
-        finally:
-            s.close()
+        return False if sock.exists() and unix_socket_answers(sock) else None
     except OSError:
         return False
     try:
