@@ -200,7 +200,7 @@ def test_join_claims_are_rate_limited_per_agent_with_one_event_and_a_count():
 
 
 def test_a_full_inbox_drops_commands_and_queries_but_never_liveliness(monkeypatch):
-    import world.inbox as inbox_mod
+    import world.fairness as inbox_mod
 
     monkeypatch.setattr(inbox_mod, "INBOX_MAX", 3)
     world, _ = open_world()
@@ -218,7 +218,7 @@ def test_a_full_inbox_drops_commands_and_queries_but_never_liveliness(monkeypatc
 def test_one_keys_flood_costs_no_other_agent_a_command():
     """Agent 2's command key flooded far past its share: every command of agent 1's gets in,
     agent 2's excess is dropped and counted to agent 2 (flooded_messages), one event."""
-    from world.inbox import PER_KEY_MAX
+    from world.fairness import PER_KEY_MAX
 
     world, _ = open_world()
     k1, k2 = join(world, 1), join(world, 2)

@@ -130,7 +130,7 @@ def test_a_report_on_a_live_agent_never_reaches_the_record(monkeypatch):
     """A crash reported for an agent that stays in the world is refused once the wait is
     over; a fault_done for a fault the clock is not waiting for is refused; neither report
     is accepted on the operator's admin key at all."""
-    import world.inbox as inbox_mod
+    import world.reports as inbox_mod
 
     monkeypatch.setattr(inbox_mod, "EXIT_REPORT_WAIT", 0.0)
     world, _ = open_world()

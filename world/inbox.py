@@ -2,7 +2,7 @@
 
 Commands (admission by claim key, stale or duplicate ticks, fault-plan losses),
 liveliness (join and drop), info queries (the live view) and admin queries (pause,
-resume, fault done, agent exit); join queries are world/joins.py's. zenoh callbacks only
+resume); join queries are world/joins.py's. zenoh callbacks only
 enqueue; these run on the world's main thread. A mixin of `World` (world/process.py),
 whose state it reads and changes.
 
@@ -14,13 +14,10 @@ token lost not by a scripted fault is held LINK_GRACE s the same way (the clock 
 it), unless the launcher reports the agent's process ended: a link lease that ran out under
 load is ridden out, and the run stays what `swarm sim` gives.
 
-Fairness: no identity's messages may cost another's. Liveliness changes are coalesced
-per key (the main thread sees the latest state of each token, however fast it flaps);
-every other message counts against its key (one agent's command key, one query key),
-and past PER_KEY_MAX waiting on one key that key's new messages are dropped and counted
-to it (`flooded_messages`), whatever the others send. An agent's join, rejoin and drop
-events past CHURN_EVENTS (world/roster.py) are counted, not written, so one identity's
-churn cannot grow the run's record without bound.
+Fairness: no identity's messages may cost another's (how messages wait: world/fairness.py).
+An agent's join, rejoin and drop events past CHURN_EVENTS (world/roster.py) are counted,
+not written, so one identity's churn cannot grow the run's record without bound. The
+launcher's reports (agent exits, faults done) are world/reports.py's.
 """
 
 from __future__ import annotations
@@ -29,56 +26,27 @@ import os
 import queue
 import socket
 import sys
-import threading
 import time
 
 from swarm.contracts import wire
-from swarm.contracts.lifeline import exit_status
 from swarm.contracts.transport import answer
 from world.core import ACTIVE
 from world.engine import LOST, REFUSED
+from world.fairness import Fairness
 from world.report import run_info
+from world.reports import Reports
 from world.roster import CHURN_EVENTS
 
 STALL_S = 0.8  # s the world's main thread may go without reaching its inbox (the link lease is 1 s)
 REJOIN_WAIT = 2.0  # s a token lost just after a stall of the world has to come back
 LINK_GRACE = 5.0  # s a token lost in a lockstep run has to come back (`rides_out`)
-EXIT_REPORT_WAIT = 10.0  # s an agent_exit report waits for its agent to leave the world
-INBOX_MAX = 100_000  # messages waiting for the main thread; commands and queries past it are dropped
-PER_KEY_MAX = 256  # messages waiting on one key (a command every tick needs 1 to 2)
-_FAIR_INIT = threading.Lock()
 
 
-class _Fair:
-    """What the zenoh callbacks and the main thread share: messages waiting per key, the
-    latest state of each liveliness token not yet handled, drops per key."""
-
-    def __init__(self):
-        self.lock = threading.Lock()
-        self.waiting: dict[str, int] = {}
-        self.alive: dict[str, object] = {}
-        self.flooded: dict[str, int] = {}
-        self.noted: set[str] = set()  # keys whose drops have had their `limit` event
-
-
-def _key_of(item) -> str:
-    """The key a queued message counts against: its sample's key, or its query's."""
-    if item[0] in ("cmd", "alive"):
-        return item[1]
-    try:
-        return str(item[1].key_expr)
-    except Exception:
-        return item[0]
-
-
-class Inbox:
-    inbox_dropped = 0  # messages dropped by the callbacks with the inbox full
+class Inbox(Fairness, Reports):
     drained_at = 0.0  # monotonic s the main thread last came back from its inbox
     stall_seen = -1e9  # monotonic s a stall of the world itself was last noticed
     disturbed = 0  # stalls of the world and links back: each sends the tick's frames again (lockstep)
     lost_after_stall: dict | None = None  # agent -> monotonic s its drop is due (token lost after a stall)
-    exit_reports: dict | None = None  # agent -> (agent_exit report, monotonic s it is kept until)
-    fault_awaited: int | None = None  # index of the scripted fault the clock waits for (world/clock.py)
 
     def handle(self, item, pending: set[int] | None) -> None:
         kind = item[0]
@@ -220,74 +188,6 @@ class Inbox:
                 del self.lost_after_stall[aid]
                 self._drop(aid, pending, "liveliness token lost (and not back in time)")
 
-    def _note_inbox_dropped(self) -> None:
-        """Messages the zenoh callbacks dropped (see `enqueue`): counted to the agent whose
-        key they came on, and one `limit` event per key the first time."""
-        fair = self.fair
-        with fair.lock:
-            flooded, fair.flooded = fair.flooded, {}
-        self.over_limit["inbox"] = self.inbox_dropped
-        for key, n in flooded.items():
-            try:
-                aid = wire.agent_of_key(key)
-            except wire.WireError:
-                aid = None
-            b = self.book.get(aid) if aid is not None else None
-            if b is not None:
-                b.flooded += n
-            if key not in fair.noted:
-                fair.noted.add(key)
-                self.event("limit", aid, f"more than {PER_KEY_MAX} messages waiting on {key} (or {INBOX_MAX} in "
-                                         "all): its messages dropped, no one else's", limit="inbox", key=key)
-
-    @property
-    def fair(self) -> _Fair:
-        st = self.__dict__.get("_fair")
-        if st is None:
-            with _FAIR_INIT:
-                st = self.__dict__.setdefault("_fair", _Fair())
-        return st
-
-    def enqueue(self, item, droppable: bool = True) -> None:
-        """What a zenoh callback does with a message: queue it for the main thread. A
-        liveliness change replaces the one of the same token still waiting (never dropped);
-        past PER_KEY_MAX waiting on its key, or INBOX_MAX in all, a message is dropped and
-        counted (see the module)."""
-        fair = self.fair
-        key = _key_of(item)
-        if item[0] == "alive":
-            with fair.lock:
-                first = key not in fair.alive
-                fair.alive[key] = item[2]
-            if first:
-                self.inbox.put(("alive", key))
-            return
-        with fair.lock:
-            n = fair.waiting.get(key, 0)
-            if droppable and (n >= PER_KEY_MAX or self.inbox.qsize() >= INBOX_MAX):
-                fair.flooded[key] = fair.flooded.get(key, 0) + 1
-                self.inbox_dropped += 1
-                return
-            fair.waiting[key] = n + 1
-        self.inbox.put(item)
-
-    def _latest_alive(self, key: str):
-        with self.fair.lock:
-            return self.fair.alive.pop(key)
-
-    def _taken(self, item) -> None:
-        """The main thread took `item` off the inbox: one less waiting on its key."""
-        if item[0] == "alive":
-            return
-        fair = self.fair
-        key = _key_of(item)
-        with fair.lock:
-            n = fair.waiting.get(key, 0) - 1
-            if n > 0:
-                fair.waiting[key] = n
-            else:
-                fair.waiting.pop(key, None)
-
     def limited(self, what: str, reason: str) -> None:
         """Something over a limit: counted each time, one event the first time."""
         self.over_limit[what] = self.over_limit.get(what, 0) + 1
@@ -327,59 +227,6 @@ class Inbox:
             self.garbage += 1
             reply = wire.encode_admin_reply(False, error=str(e))
         answer(query, wire.world_admin_key(self.cfg.run), reply)
-
-    def _on_supervise(self, query) -> None:
-        """The launcher's reports (only its `supervisor` identity reaches this key): a
-        scripted fault carried out, an agent process that exited. Each is checked against
-        what the world knows: only the fault the clock is waiting for can be done; an exit
-        is written only for an agent that has left (its token gone)."""
-        try:
-            req = wire.decode_admin(query.payload.to_bytes() if query.payload else b"", wire.SUPERVISE_CMDS)
-            if req["cmd"] == "fault_done":
-                if req["index"] != self.fault_awaited:
-                    raise wire.WireError(f"fault_done: fault {req['index']} is not being carried out")
-                self.faults_done.add(req["index"])
-            else:
-                self._on_agent_exit(req)
-            reply = wire.encode_admin_reply(True)
-        except wire.WireError as e:
-            self.limited("supervise", f"a supervision report refused: {e}")
-            reply = wire.encode_admin_reply(False, error=str(e))
-        answer(query, wire.world_supervise_key(self.cfg.run), reply)
-
-    def _on_agent_exit(self, req: dict) -> None:
-        """The launcher saw an agent process it started exit by itself: a `crash` event (a
-        failure of the agent: the run does not count as converged) or an `exit` event. An
-        agent still in the world (the report came before its token went) has its report
-        kept until it drops, for EXIT_REPORT_WAIT s at most."""
-        aid = req["id"]
-        if aid not in self.core.index:
-            raise wire.WireError(f"agent_exit: agent {aid} is not in the run")
-        if self.lost_after_stall and self.lost_after_stall.pop(aid, None) is not None:
-            self._drop(aid, None, "liveliness token lost (its process exited)")
-        if self.core.state[self.core.index[aid]] == ACTIVE:
-            self.exit_reports = {**(self.exit_reports or {}), aid: (req, time.monotonic() + EXIT_REPORT_WAIT)}
-            return
-        self._exit_event(req)
-
-    def _exit_event(self, req: dict) -> None:
-        status = exit_status(req["code"])
-        self.event("crash" if req["crash"] else "exit", req["id"],
-                   f"process {req['pid']} ended ({status})" + (f": {req['cause']}" if req["cause"] else ""),
-                   code=req["code"], pid=req["pid"], cause=req["cause"], log=req["log"])
-
-    def _due_exit_reports(self) -> None:
-        """Exit reports kept for agents still in the world: written once they have left;
-        refused (counted) when they are still there EXIT_REPORT_WAIT s later."""
-        now = time.monotonic()
-        for aid, (req, until) in list(self.exit_reports.items()):
-            if self.core.state[self.core.index[aid]] != ACTIVE:
-                del self.exit_reports[aid]
-                self._exit_event(req)
-            elif now > until:
-                del self.exit_reports[aid]
-                self.limited("supervise", f"a supervision report refused: agent {aid} reported ended "
-                                          f"but still in the world after {EXIT_REPORT_WAIT:g} s")
 
     def drain(self, pending: set[int] | None, timeout: float | None) -> bool:
         """Handle one inbox item, waiting up to `timeout` s; False when none came."""
