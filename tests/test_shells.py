@@ -237,6 +237,27 @@ def test_one_keys_flood_costs_no_other_agent_a_command():
     assert not world.fair.waiting, "the count of waiting messages went astray"
 
 
+def test_a_rogues_flood_on_an_agents_key_costs_that_agent_nothing():
+    """Forged commands (no claim key) on agent 2's key far past its share: counted as rogue,
+    never queued, and agent 2's own command still gets in."""
+    from world.fairness import PER_KEY_MAX
+
+    world, _ = open_world()
+    join(world, 1)
+    k2 = join(world, 2)
+    for _ in range(4 * PER_KEY_MAX):
+        world.enqueue(("cmd", wire.agent_key(RUN, 2, "cmd"),
+                       wire.encode_cmd_fields(2, 0, 5.0, None, "track", None, k2 ^ 1)))
+    world.enqueue(("cmd", wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd_fields(2, 0, 0.1, None, "track", None, k2)))
+    assert world.inbox.qsize() == 1
+    pending = {2}
+    while world.drain(pending, 0):
+        pass
+    b = world.book[2]
+    assert (b.commands, b.flooded, b.rogue) == (1, 0, 4 * PER_KEY_MAX) and not pending
+    assert [e["kind"] for e in world.engine.events].count("rogue") == 1
+
+
 def test_a_flapping_token_is_seen_at_its_latest_state_and_its_churn_is_capped():
     """100,000 toggles of agent 2's token while the world is busy: one inbox entry, the
     latest state; churn past CHURN_EVENTS is counted, not written."""

@@ -5,7 +5,9 @@ Liveliness changes are coalesced per key (the main thread sees the latest state 
 token, however fast it flaps); every other message counts against its key (one agent's
 command key, one query key), and past PER_KEY_MAX waiting on one key that key's new
 messages are dropped and counted to it (`flooded_messages`), whatever the others send;
-past INBOX_MAX waiting in all, any droppable message is.
+past INBOX_MAX waiting in all, any droppable message is. A well-formed command without
+its owner's claim key (a rogue's) is counted in the callback and never queued, so that a
+session flooding an agent's key with forged commands takes none of that agent's places.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ class _Fair:
         self.alive: dict[str, object] = {}
         self.flooded: dict[str, int] = {}
         self.noted: set[str] = set()  # keys whose drops have had their `limit` event
+        self.rogue: dict[int, int] = {}  # agent -> commands without its owner's claim key, not yet counted
 
 
 def _key_of(item) -> str:
@@ -50,6 +53,11 @@ class Fairness:
         fair = self.fair
         with fair.lock:
             flooded, fair.flooded = fair.flooded, {}
+            rogue, fair.rogue = fair.rogue, {}
+        for aid, n in rogue.items():
+            self.count_rogue(aid, n)
+        if not flooded:
+            return
         self.over_limit["inbox"] = self.inbox_dropped
         for key, n in flooded.items():
             try:
@@ -86,6 +94,8 @@ class Fairness:
             if first:
                 self.inbox.put(("alive", key))
             return
+        if item[0] == "cmd" and self._rogue(key, item[2]):
+            return
         with fair.lock:
             n = fair.waiting.get(key, 0)
             if droppable and (n >= PER_KEY_MAX or self.inbox.qsize() >= INBOX_MAX):
@@ -94,6 +104,23 @@ class Fairness:
                 return
             fair.waiting[key] = n + 1
         self.inbox.put(item)
+
+    def _rogue(self, key: str, payload: bytes) -> bool:
+        """A well-formed command on an agent's key without the claim key of the process that
+        owns the id (a rogue session's, or a stale process's): counted here and not queued,
+        so that a rogue's flood never takes its owner's place in the inbox (the main thread
+        only counts it: `_note_inbox_dropped`)."""
+        try:
+            cmd = wire.decode_cmd(payload)
+            aid = wire.agent_of_key(key)
+        except wire.WireError:
+            return False  # garbage: the main thread counts it
+        b = self.book.get(aid)
+        if b is None or b.key is None or cmd.key == b.key or cmd.agent != aid:
+            return False
+        with self.fair.lock:
+            self.fair.rogue[aid] = self.fair.rogue.get(aid, 0) + 1
+        return True
 
     def _latest_alive(self, key: str):
         with self.fair.lock:

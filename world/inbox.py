@@ -90,10 +90,7 @@ class Inbox(Fairness, Reports):
         b = self.book[aid]
         if b.key is None or cmd.key != b.key:
             # Not from the process that claimed this id (a rogue session, or a stale process).
-            b.rogue += 1
-            if time.monotonic() - b.rogue_noted > 1.0:
-                b.rogue_noted = time.monotonic()
-                self.event("rogue", aid, f"command without the owner's claim key ignored ({b.rogue} so far)")
+            self.count_rogue(aid, 1)
             return
         if cmd.tick <= b.last_cmd_tick:
             self.ignored += 1  # duplicate or late
@@ -113,6 +110,15 @@ class Inbox(Fairness, Reports):
         b.last_cmd_wall = time.monotonic()
         if pending is not None and cmd.tick == self.core.tick:
             pending.discard(aid)
+
+    def count_rogue(self, aid: int, n: int) -> None:
+        """`n` commands on agent `aid`'s key without its owner's claim key: counted, and a
+        `rogue` event at most once a second."""
+        b = self.book[aid]
+        b.rogue += n
+        if time.monotonic() - b.rogue_noted > 1.0:
+            b.rogue_noted = time.monotonic()
+            self.event("rogue", aid, f"command without the owner's claim key ignored ({b.rogue} so far)")
 
     def _on_alive(self, key: str, kind, pending: set[int] | None) -> None:
         import zenoh
@@ -241,7 +247,7 @@ class Inbox(Fairness, Reports):
         self.drained_at = time.monotonic()
         if item is not None:
             self._taken(item)
-        if self.fair.flooded:
+        if self.fair.flooded or self.fair.rogue:
             self._note_inbox_dropped()
         if timeout is not None and self.drained_at - t0 > max(timeout, 0.0) + STALL_S:
             self.stall_seen = self.drained_at  # stopped while waiting
