@@ -15,6 +15,7 @@ from __future__ import annotations
 import threading
 
 from swarm.contracts import wire
+from world.core import ACTIVE
 
 INBOX_MAX = 100_000  # messages waiting for the main thread; commands and queries past it are dropped
 PER_KEY_MAX = 256  # messages waiting on one key (a command every tick needs 1 to 2)
@@ -115,9 +116,13 @@ class Fairness:
             aid = wire.agent_of_key(key)
         except wire.WireError:
             return False  # garbage: the main thread counts it
-        b = self.book.get(aid)
+        b, core = self.book.get(aid), self.core
         if b is None or b.key is None or cmd.key == b.key or cmd.agent != aid:
             return False
+        k = core.index.get(aid)
+        if (cmd.out is not None and (cmd.out == aid or cmd.out not in core.index)) or k is None \
+                or core.state[k] != ACTIVE or cmd.tick > core.tick:
+            return False  # garbage or ignored, as the main thread says (world/inbox.py, _on_cmd)
         with self.fair.lock:
             self.fair.rogue[aid] = self.fair.rogue.get(aid, 0) + 1
         return True
