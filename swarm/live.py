@@ -33,7 +33,7 @@ from typing import Iterable
 from swarm.contracts import credentials, wire
 from swarm.contracts.credentials import Credentials
 from swarm.contracts.identities import OPERATOR, CredentialsError
-from swarm.contracts.lifeline import endpoint_refuses
+from swarm.contracts.lifeline import endpoint_refuses, endpoint_socket
 from swarm.contracts.transport import (QUERY_TIMEOUT, dial_endpoint, local_door, open_client, query_statuses,
                                       runtime_dir, socket_path)
 from swarm.errors import NoRunError
@@ -85,20 +85,10 @@ OPEN_TIMEOUT_S = 3.0  # for a session to a listening hub (it takes ms; strangers
 def _closes_at_once(endpoint: str, wait: float = 0.3) -> bool:
     """Whether the listener under `endpoint` closes a new connection before it says anything
     (zenoh does so when its places for connections in their handshake are all taken)."""
-    kind, _, rest = endpoint.partition("/")
-    rest = rest.split("#")[0].split("?")[0]
-    try:
-        if kind == "unixsock-stream":
-            s, addr = so.socket(so.AF_UNIX, so.SOCK_STREAM), rest
-        elif kind in ("tcp", "tls"):
-            host, _, port = rest.rpartition(":")
-            host = host.strip("[]")
-            s, addr = so.socket(so.AF_INET6 if ":" in host else so.AF_INET, so.SOCK_STREAM), (host, int(port))
-        else:
-            return False
-    except (ValueError, OSError):
+    made = endpoint_socket(endpoint, wait)
+    if made is None:
         return False
-    s.settimeout(wait)
+    s, addr = made
     try:
         s.connect(addr)
         return s.recv(1) == b""

@@ -95,8 +95,11 @@ class Fairness:
             if first:
                 self.inbox.put(("alive", key))
             return
-        if item[0] == "cmd" and self._rogue(key, item[2]):
-            return
+        if item[0] == "cmd":
+            decoded = self._decoded(key, item[2])
+            if decoded is not None and self._rogue(*decoded):
+                return
+            item = ("cmd", key, item[2], decoded)  # decoded once, here (world/inbox.py, _on_cmd)
         with fair.lock:
             n = fair.waiting.get(key, 0)
             if droppable and (n >= PER_KEY_MAX or self.inbox.qsize() >= INBOX_MAX):
@@ -106,18 +109,23 @@ class Fairness:
             fair.waiting[key] = n + 1
         self.inbox.put(item)
 
-    def _rogue(self, key: str, payload: bytes) -> bool:
+    @staticmethod
+    def _decoded(key: str, payload: bytes):
+        """(agent id of the key, the command) when both decode and agree; None: garbage,
+        which the main thread counts."""
+        try:
+            aid, cmd = wire.agent_of_key(key), wire.decode_cmd(payload)
+        except wire.WireError:
+            return None
+        return (aid, cmd) if cmd.agent == aid else None
+
+    def _rogue(self, aid: int, cmd) -> bool:
         """A well-formed command on an agent's key without the claim key of the process that
         owns the id (a rogue session's, or a stale process's): counted here and not queued,
         so that a rogue's flood never takes its owner's place in the inbox (the main thread
         only counts it: `_note_inbox_dropped`)."""
-        try:
-            cmd = wire.decode_cmd(payload)
-            aid = wire.agent_of_key(key)
-        except wire.WireError:
-            return False  # garbage: the main thread counts it
         b, core = self.book.get(aid), self.core
-        if b is None or b.key is None or cmd.key == b.key or cmd.agent != aid:
+        if b is None or b.key is None or cmd.key == b.key:
             return False
         k = core.index.get(aid)
         if (cmd.out is not None and (cmd.out == aid or cmd.out not in core.index)) or k is None \

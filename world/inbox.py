@@ -51,7 +51,7 @@ class Inbox(Fairness, Reports):
     def handle(self, item, pending: set[int] | None) -> None:
         kind = item[0]
         if kind == "cmd":
-            self._on_cmd(item[1], item[2], pending)
+            self._on_cmd(item[1], item[2], pending, item[3] if len(item) > 3 else None)
         elif kind == "alive":
             self._on_alive(item[1], item[2] if len(item) > 2 else self._latest_alive(item[1]), pending)
         elif kind == "join":
@@ -70,16 +70,21 @@ class Inbox(Fairness, Reports):
         if b is not None:
             b.garbage += 1
 
-    def _on_cmd(self, key: str, payload: bytes, pending: set[int] | None) -> None:
-        aid = None
-        try:
-            aid = wire.agent_of_key(key)
-            cmd = wire.decode_cmd(payload)
-            if cmd.agent != aid:
-                raise wire.WireError(f"command for agent {cmd.agent} on agent {aid}'s key")
-        except wire.WireError:
-            self._garbage_on(aid)
-            return
+    def _on_cmd(self, key: str, payload: bytes, pending: set[int] | None, decoded=None) -> None:
+        """`decoded`: (agent id, command) as the callback decoded them (world/fairness.py);
+        None: decoded here (a malformed one is garbage)."""
+        if decoded is None:
+            aid = None
+            try:
+                aid = wire.agent_of_key(key)
+                cmd = wire.decode_cmd(payload)
+                if cmd.agent != aid:
+                    raise wire.WireError(f"command for agent {cmd.agent} on agent {aid}'s key")
+            except wire.WireError:
+                self._garbage_on(aid)
+                return
+        else:
+            aid, cmd = decoded
         if cmd.out is not None and (cmd.out == aid or cmd.out not in self.core.index):
             self._garbage_on(aid)
             return

@@ -56,27 +56,36 @@ def exit_status(code: int) -> str:
         return f"killed by signal {-code}"
 
 
-def endpoint_refuses(endpoint: str, timeout: float = 0.5) -> bool:
-    """True when a connection to `endpoint` (tcp/HOST:PORT, tls/HOST:PORT, probed as the TCP
-    listener under it, or unixsock-stream/PATH) is refused or its socket file is gone;
-    False when it connects, times out or cannot be parsed (nothing proves the world is gone)."""
+def endpoint_socket(endpoint: str, timeout: float):
+    """(a plain socket, the address to connect it to) for the listener under `endpoint`
+    (tcp/HOST:PORT and tls/HOST:PORT: its TCP listener; unixsock-stream/PATH), with
+    `timeout`; None when `endpoint` cannot be parsed."""
     kind, _, rest = endpoint.partition("/")
     rest = rest.split("#")[0].split("?")[0]
     try:
         if kind == "unixsock-stream":
-            s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-            addr: object = rest
+            s, addr = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM), rest
         elif kind in ("tcp", "tls"):
             host, _, port = rest.rpartition(":")
             host = host.strip("[]")
-            fam = socket.AF_INET6 if ":" in host else socket.AF_INET
-            s = socket.socket(fam, socket.SOCK_STREAM)
             addr = (host, int(port))
+            s = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM)
         else:
-            return False
+            return None
     except (ValueError, OSError):
-        return False
+        return None
     s.settimeout(timeout)
+    return s, addr
+
+
+def endpoint_refuses(endpoint: str, timeout: float = 0.5) -> bool:
+    """True when a connection to `endpoint` (tcp/HOST:PORT, tls/HOST:PORT, probed as the TCP
+    listener under it, or unixsock-stream/PATH) is refused or its socket file is gone;
+    False when it connects, times out or cannot be parsed (nothing proves the world is gone)."""
+    made = endpoint_socket(endpoint, timeout)
+    if made is None:
+        return False
+    s, addr = made
     try:
         s.connect(addr)
         return False
