@@ -27,10 +27,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents import batch_maths as bm
-from agents.batch_leader import BatchLeaders
-from agents.batch_select import NONE, select
-from agents.batch_sticky import BatchSticky
+from swarm.agents import batch_maths as bm
+from swarm.agents.batch_leader import BatchLeaders
+from swarm.agents.batch_select import NONE, select
+from swarm.agents.batch_sticky import BatchSticky
 
 
 @dataclass

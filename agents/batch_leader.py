@@ -1,9 +1,9 @@
 """Leaders (AgentBrain._leader) for many members at once.
 
-Each leader plans its circle-circle path with agents.cc_plan.plan_cc at its first frame,
+Each leader plans its circle-circle path with swarm.agents.cc_plan.plan_cc at its first frame,
 exactly as AgentBrain does (the same call, the same arguments: one plan per leader),
 then every tick commands the path's turn rate averaged over the tick until the path
-ends, and agents.leader.on_orbit_command after. Both are written here over arrays of
+ends, and swarm.agents.leader.on_orbit_command after. Both are written here over arrays of
 leaders with the same operations in the same order, the `math` functions per element
 (agents/batch_maths.py), so the turn rates equal the per-agent brain's to the bit (with
 SCALAR_MAX leaders or fewer on their orbits, on_orbit_command itself is called: quicker).
@@ -16,9 +16,9 @@ import math
 
 import numpy as np
 
-from agents import batch_maths as bm
-from agents.cc_plan import plan_cc
-from agents.leader import K_HEADING, K_RADIAL, _HOLD_DEADBAND, on_orbit_command
+from swarm.agents import batch_maths as bm
+from swarm.agents.cc_plan import plan_cc
+from swarm.agents.leader import K_HEADING, K_RADIAL, _HOLD_DEADBAND, on_orbit_command
 
 SCALAR_MAX = 8  # leaders on their orbits: up to this many, one on_orbit_command call each
 
@@ -87,7 +87,7 @@ def _overlap(a, b, lo, hi):
 
 
 def on_orbit(x, y, heading, v, radius, s, limit) -> np.ndarray:
-    """agents.leader.on_orbit_command over arrays of leaders (inputs already checked)."""
+    """swarm.agents.leader.on_orbit_command over arrays of leaders (inputs already checked)."""
     r = bm.hypot(x, y)
     theta = bm.atan2(y, x)
     e = (r - radius) / radius

@@ -4,9 +4,9 @@ Most ticks of most followers are a plain *keep*: the committed out-neighbour is 
 and advertises a path, and the follower keeps it. That step is done here over arrays
 (`keep`, then `sight`, which records the sighting the follower's Tracker and
 SearchMemory would). Every other follower-tick (acquiring, holding, coasting, lost,
-shadowing, searching) goes through the follower's own agents.sticky_follower
+shadowing, searching) goes through the follower's own swarm.agents.sticky_follower
 .StickyFollower, the very code AgentBrain runs (`rest`), fed the contacts its frame
-would hold; its law is agents.laws.bearing's arithmetic, or the search. A follower's
+would hold; its law is swarm.agents.laws.bearing's arithmetic, or the search. A follower's
 scalar object is brought up to date from the arrays before it steps after keeps, and
 the arrays from it after: the two never disagree on what the next tick needs.
 
@@ -19,12 +19,12 @@ import math
 
 import numpy as np
 
-from agents import batch_maths as bm
-from agents.batch_select import NONE
-from agents.coast import Sighting
-from agents.laws import bearing_law
-from agents.leader import on_orbit_command
-from agents.sticky_follower import StickyFollower
+from swarm.agents import batch_maths as bm
+from swarm.agents.batch_select import NONE
+from swarm.agents.coast import Sighting
+from swarm.agents.laws import bearing_law
+from swarm.agents.leader import on_orbit_command
+from swarm.agents.sticky_follower import StickyFollower
 
 
 class BatchSticky:
@@ -133,7 +133,7 @@ class BatchSticky:
 
 
 class _Sightings:
-    """agents.coast.Sighting over (B, N) arrays (`valid` False: None)."""
+    """swarm.agents.coast.Sighting over (B, N) arrays (`valid` False: None)."""
 
     FIELDS = ("time", "range", "bearing", "heading", "own")
 

@@ -14,9 +14,9 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from agents.laws import agent_law, law_params
-from agents.selection import select
-from agents.sticky_follower import StickyFollower
+from swarm.agents.laws import agent_law, law_params
+from swarm.agents.selection import select
+from swarm.agents.sticky_follower import StickyFollower
 from swarm.contracts.frames import SensorFrame
 from swarm.contracts.observation import Observation
 

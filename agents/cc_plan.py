@@ -45,7 +45,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from agents.cc_grid import D_EPS, best_cc, geomspace, linspace, snap
+from swarm.agents.cc_grid import D_EPS, best_cc, geomspace, linspace, snap
 from swarm.contracts.orbits import TAU, wrap
 
 #: Without a turn-rate limit the smallest admissible arc radius is this fraction of R,

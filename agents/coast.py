@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from agents.search import anchor_point, drift
+from swarm.agents.search import anchor_point, drift
 from swarm.contracts.frames import Contact
 from swarm.contracts.orbits import wrap
 

@@ -3,8 +3,8 @@ needs forks every agent of a run, so N agents pay for the interpreter's start an
 imports once instead of N times (an agent's CPU until it has joined: 0.11 s exec'd; see
 docs/performance.md for what forking saves).
 
-`swarm up` starts it (`python -m agents.forkserver`) in the run's process group, with the
-agents' environment, once it has made itself a child subreaper (swarm/forks.py). One JSON
+`swarm up` starts it (`python -m swarm.agents.forkserver`) in the run's process group, with the
+agents' environment, once it has made itself a child subreaper (swarm/runtime/forks.py). One JSON
 line each way on stdin / stdout:
 
     request   {"argv": ["7", "unixsock-stream//...", "case2-734b0c", "--world-grace", "10"],
@@ -13,7 +13,7 @@ line each way on stdin / stdout:
 
 and, once, before any reply: {"ready": true} when the imports are done.
 
-`argv` is what `python -m agents.process` takes; `env` (optional) is added to the server's
+`argv` is what `python -m swarm.agents.process` takes; `env` (optional) is added to the server's
 environment, which is the agents' (`swarm host` gives each agent its own credentials file).
 Each agent is forked twice: the middle process exits at once, so the agent is re-parented
 to the launcher (the subreaper), which waits for it, reads its exit status and reaps it as
@@ -36,10 +36,10 @@ import signal
 import sys
 import time
 
-import agents.brain  # noqa: F401  (imported here so that no agent has to)
-import agents.laws  # noqa: F401
-import agents.leader  # noqa: F401
-import agents.process
+import swarm.agents.brain  # noqa: F401  (imported here so that no agent has to)
+import swarm.agents.laws  # noqa: F401
+import swarm.agents.leader  # noqa: F401
+import swarm.agents.process
 
 REPARENT_WAIT = 5.0  # s an agent waits to be re-parented (its middle process exits at once)
 
@@ -70,7 +70,7 @@ def serve(stdin=None, stdout=None) -> int:
 
 
 def fork_agent(argv: list[str], log: str, env: dict[str, str] | None = None) -> int:
-    """Fork an agent running `python -m agents.process *argv` (its output to `log`, `env`
+    """Fork an agent running `python -m swarm.agents.process *argv` (its output to `log`, `env`
     added to its environment), through a middle process that exits at once; its pid."""
     r, w = os.pipe()
     middle = os.fork()
@@ -129,10 +129,10 @@ def _become_agent(argv: list[str], log: str, env: dict[str, str], middle: int) -
         os.dup2(out, 2)
         os.close(null)
         os.close(out)
-        _set_title([sys.executable, "-m", "agents.process", *argv])
-        sys.argv = [agents.process.__file__, *argv]
+        _set_title([sys.executable, "-m", "swarm.agents.process", *argv])
+        sys.argv = [swarm.agents.process.__file__, *argv]
         try:
-            agents.process.main(argv)
+            swarm.agents.process.main(argv)
             code = 0
         except SystemExit as e:
             code = e.code if isinstance(e.code, int) else (0 if e.code is None else 1)

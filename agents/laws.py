@@ -23,7 +23,7 @@ import math
 from types import MappingProxyType
 from typing import Callable
 
-from agents.leader import on_orbit_command
+from swarm.agents.leader import on_orbit_command
 from swarm.contracts.laws import FOLLOWER, GAINS, LEADER, LawError, follower_law_name, resolve_law
 from swarm.contracts.observation import Observation
 from swarm.contracts.orbits import wrap

@@ -4,7 +4,7 @@
 The leader is a unicycle  x' = v cos g,  y' = v sin g,  g' = u  (speed v in m/s,
 turn rate u in rad/s, heading g in rad, counter-clockwise positive).  It reaches the
 circular orbit of radius R (m) around a target, flown in direction s = +1 (ccw) or
-s = -1 (cw), along the two tangent arcs of :func:`agents.cc_plan.plan_cc` (Lemma 1 of
+s = -1 (cw), along the two tangent arcs of :func:`swarm.agents.cc_plan.plan_cc` (Lemma 1 of
 Rao 2024), and then holds that orbit with :func:`on_orbit_command`, here.  `cc_law` plans
 the path on its first call and keeps it in `obs.state`.
 
@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 
-from agents.cc_plan import check_inputs, plan_cc
+from swarm.agents.cc_plan import check_inputs, plan_cc
 from swarm.contracts.observation import Observation
 from swarm.contracts.orbits import wrap
 
@@ -68,7 +68,7 @@ def cc_law(obs: Observation) -> float:
     """The built-in leader law ("cc"): the CC path planned from the first observation, flown
     arc by arc, then orbit hold (rad/s, before the agent's own saturation).
 
-    obs.state keeps "cc_path" (an agents.cc_plan.CCPath), "path_tick" (the tick it was
+    obs.state keeps "cc_path" (an swarm.agents.cc_plan.CCPath), "path_tick" (the tick it was
     planned at) and "phase" ("arc1" | "arc2" | "orbit", the phase the agent reports). The
     tick on which an arc ends gets the time-weighted average of the turn rates over it:
     the switch between arcs rarely falls on a tick.

@@ -27,9 +27,9 @@ import socket
 import threading
 import time
 
-from agents.joining import EXIT_REFUSED, AgentExit, claim
-from agents.joining import log as _log
-from agents.world_link import NEW_WORLD, WorldLink
+from swarm.agents.joining import EXIT_REFUSED, AgentExit, claim
+from swarm.agents.joining import log as _log
+from swarm.agents.world_link import NEW_WORLD, WorldLink
 from swarm.contracts import wire
 from swarm.contracts.laws import LawError, check_trusted, trusted_laws
 from swarm.contracts.transport import answer
@@ -73,7 +73,7 @@ class AgentNode:
         self.spec = self.conf.agent
         self.key = reply["key"]  # checked by wire.decode_join_reply
         if self.brain.is_leader:
-            import agents.leader  # noqa: F401  (load the planner before the first frame)
+            import swarm.agents.leader  # noqa: F401  (load the planner before the first frame)
         self.inbox: queue.SimpleQueue = queue.SimpleQueue()
         self.commands = 0
         self.garbage = 0
@@ -90,7 +90,7 @@ class AgentNode:
         self.answering = True  # False while (re)claiming the id of a new world, and after a crash
 
     def new_brain(self):
-        from agents.brain import AgentBrain
+        from swarm.agents.brain import AgentBrain
 
         c = self.conf
         return AgentBrain(c.agent, c.gains, c.sensing, c.dt, c.n_agents, c.law)

@@ -22,10 +22,10 @@ import sys
 import time
 from pathlib import Path
 
-from agents.joining import EXIT_NO_WORLD, EXIT_REFUSED, AgentExit, claim
-from agents.joining import log as _log
-from agents.node import AgentNode
-from agents.world_link import EXIT_WORLD_SILENT
+from swarm.agents.joining import EXIT_NO_WORLD, EXIT_REFUSED, AgentExit, claim
+from swarm.agents.joining import log as _log
+from swarm.agents.node import AgentNode
+from swarm.agents.world_link import EXIT_WORLD_SILENT
 from swarm.contracts import credentials
 from swarm.contracts.identities import CredentialsError, agent_user
 from swarm.contracts.laws import trusted_laws
@@ -146,7 +146,7 @@ def _close(session, code: int) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     """Lean entry for launchers (no typer/rich):
-    `python -m agents.process ID ENDPOINT [RUN [SPEC_JSON]] [--world-grace S]`."""
+    `python -m swarm.agents.process ID ENDPOINT [RUN [SPEC_JSON]] [--world-grace S]`."""
     import json
 
     args = list(sys.argv[1:] if argv is None else argv)

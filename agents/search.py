@@ -23,7 +23,7 @@ ground truth:
 - **Closing in.** A rooted agent it senses but may not take yet (out of reach, or not
   feasible) becomes home, anew every tick, with a tight circle (SEEN x rho0): the
   follower closes in on it until it may take it.
-- **Flying it.** The law's built-in answer to `obs.out is None` (agents.laws.search) is
+- **Flying it.** The law's built-in answer to `obs.out is None` (swarm.agents.laws.search) is
   the leaders' orbit hold (agents/leader.on_orbit_command) about home at that radius, in
   the direction the follower was turning when it lost contact: from far away that is a
   straight run back to home, then the spiral.

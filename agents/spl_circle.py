@@ -52,7 +52,7 @@ from swarm.contracts.observation import Observation
 def spl_circle(obs: Observation) -> float:
     """u_k (rad/s) of the circular control law with phase coupling (module docstring)."""
     if obs.target is None:
-        raise ValueError("agents.spl_circle:spl_circle needs the target: name it as a leader law ([law] leader)")
+        raise ValueError("swarm.agents.spl_circle:spl_circle needs the target: name it as a leader law ([law] leader)")
     w0 = obs.direction * obs.speed / obs.orbit_radius
     kappa = obs.params.get("kappa", 1.0 / obs.orbit_radius)
     k_phase = obs.params.get("k_phase", 0.5 * abs(w0))

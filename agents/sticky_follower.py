@@ -10,9 +10,9 @@ Pure: no I/O.
 
 from __future__ import annotations
 
-from agents.coast import Tracker, coast_ticks
-from agents.search import SearchMemory
-from agents.selection import HOLD_TICKS, Choice, Sticky, cone, nearest, reach
+from swarm.agents.coast import Tracker, coast_ticks
+from swarm.agents.search import SearchMemory
+from swarm.agents.selection import HOLD_TICKS, Choice, Sticky, cone, nearest, reach
 from swarm.contracts.frames import Contact
 from swarm.contracts.observation import Search
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import time
 
-from agents.joining import AgentExit, log
+from swarm.agents.joining import AgentExit, log
 from swarm.contracts import wire
 from swarm.contracts.lifeline import endpoint_refuses
 

@@ -1,4 +1,4 @@
-"""The batch engine (swarm/batch.py) against `swarm sim`'s per-agent engine (swarm/sim.py):
+"""The batch engine (swarm/offline/batch.py) against `swarm sim`'s per-agent engine (swarm/offline/sim.py):
 agent-ticks per second of each, their ratio, and how far apart their trajectories are.
 
     .venv/bin/python benchmarks/bench_batch.py            # case2, a 30-agent swarm, a 200-seed study
@@ -31,11 +31,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from swarm.batch import run_batch  # noqa: E402
-from swarm.batch_study import run_swarm_chunk, swarm_chunks  # noqa: E402
+from swarm.offline.batch import run_batch  # noqa: E402
+from swarm.study.batch import run_swarm_chunk, swarm_chunks  # noqa: E402
 from swarm.contracts.scenario import load_scenario  # noqa: E402
-from swarm.sim import run_sim  # noqa: E402
-from swarm.study import SwarmSetting, cut_off_at_start, random_swarm, swarm_row  # noqa: E402
+from swarm.offline.sim import run_sim  # noqa: E402
+from swarm.study.swarms import SwarmSetting, cut_off_at_start, random_swarm, swarm_row  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 

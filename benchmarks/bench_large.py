@@ -11,7 +11,7 @@ expected radii after 130 s), and prints:
 - the time from Popen of `swarm up` to the first tick, and the world's own startup_s;
 - lockstep ticks/s over the run, converged or not (summary.json), the worst relative error;
 - RSS of every agent process while ticking (followers and leaders apart) and of the world;
-- the largest difference of the trajectory from the batch engine's (swarm/batch.py) on the
+- the largest difference of the trajectory from the batch engine's (swarm/offline/batch.py) on the
   same scenario: lockstep `swarm up` equals `swarm sim`, so it should be 0;
 - what is left after `swarm up` exits: processes of its group (should be none).
 
@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench_runtime import PY, MemSampler, Tracked, is_agent, is_world, log, scenario_toml, world_started  # noqa: E402
 
-from swarm.procs import wait_until  # noqa: E402
+from swarm.runtime.procs import wait_until  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -55,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import numpy as np
 
-    from swarm.batch import run_batch
+    from swarm.offline.batch import run_batch
     from swarm.contracts.scenario import parse_scenario
 
     rt = tempfile.mkdtemp(prefix="sw", dir="/tmp")

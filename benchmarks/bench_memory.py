@@ -31,7 +31,7 @@ sys.path.insert(0, str(ROOT))
 from swarm.contracts import wire  # noqa: E402
 from swarm.contracts import credentials  # noqa: E402
 from swarm.contracts.transport import open_client  # noqa: E402
-from swarm.procs import Group, wait_until  # noqa: E402
+from swarm.runtime.procs import Group, wait_until  # noqa: E402
 
 
 def rss_mb(pid: int) -> float:

@@ -39,7 +39,7 @@ REPO = BENCH.parent
 sys.path[:0] = [str(REPO), str(BENCH), str(REPO / "tests")]
 
 from bench_runtime import Tracked, log, scenario_toml, wait_quiet  # noqa: E402
-from swarm.procs import wait_until  # noqa: E402
+from swarm.runtime.procs import wait_until  # noqa: E402
 from test_multihost import Lan, LanError, why_no_lan  # noqa: E402
 
 PY = sys.executable

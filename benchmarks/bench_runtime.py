@@ -59,7 +59,7 @@ import psutil
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from swarm.procs import Group, agent_id_of, stop_groups, wait_until  # noqa: E402  (the repository, not an installed copy)
+from swarm.runtime.procs import Group, agent_id_of, stop_groups, wait_until  # noqa: E402  (the repository, not an installed copy)
 
 BENCH = Path(__file__).resolve().parent
 PY = sys.executable
@@ -87,7 +87,7 @@ def log(msg: str) -> None:
 
 # -- processes -----------------------------------------------------------------------------------
 class Tracked:
-    """Everything one measurement started: its process groups (swarm.procs) and the descendants
+    """Everything one measurement started: its process groups (swarm.runtime.procs) and the descendants
     seen of them."""
 
     def __init__(self):
@@ -362,7 +362,7 @@ def sensing_range(n: int, neighbours: int | None, ticks: int = 1500) -> float | 
         return _RANGES[(n, neighbours, ticks)]
     import tomllib
 
-    from swarm.batch import run_batch
+    from swarm.offline.batch import run_batch
     from swarm.contracts.scenario import parse_scenario
 
     r = 2 * RING_M * math.sin(math.pi * ((neighbours + 1) // 2 + 0.5) / n)  # that many at the start

@@ -40,7 +40,7 @@ sys.path.insert(0, str(ROOT))
 from swarm.contracts import credentials, wire
 from swarm.contracts.scenario import load_scenario
 from swarm.contracts.transport import open_client
-from swarm.procs import Group, wait_until
+from swarm.runtime.procs import Group, wait_until
 
 
 def rss_kb(pid: int) -> int:

@@ -30,10 +30,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench_runtime import scenario_toml  # noqa: E402
 
-from agents.brain import AgentBrain  # noqa: E402
+from swarm.agents.brain import AgentBrain  # noqa: E402
 from swarm.contracts import wire  # noqa: E402
 from swarm.contracts.scenario import parse_scenario  # noqa: E402
-from world.engine import Engine  # noqa: E402
+from swarm.world.engine import Engine  # noqa: E402
 
 
 def measure(n: int, neighbours: int | None, ticks: int) -> dict:

@@ -1,20 +1,22 @@
 """swarm: an agent-per-process runtime for bearing-based circumnavigation over zenoh.
 
-`import swarm` is the Python API (swarm/api.py, README "Python API"): `swarm.load`,
+`import swarm` is the Python API (swarm/api/runs.py, README "Python API"): `swarm.load`,
 `swarm.from_dict`, `swarm.Builder`, `swarm.simulate`, `swarm.open_run`, `swarm.up`,
-`swarm.launch`, `swarm.Results`..., and a live run: `swarm.connect`, `swarm.runs` (swarm/api_live.py); the
-errors are swarm/errors.py's. Every name is imported on first use (module `__getattr__`), so
+`swarm.launch`, `swarm.Results`..., and a live run: `swarm.connect`, `swarm.runs` (swarm/api/live.py); the
+errors are swarm/contracts/errors.py's. Every name is imported on first use (module `__getattr__`), so
 `import swarm.contracts.wire` in an agent process still costs nothing more than it did.
 """
 
+__version__ = "0.1.0"  # the one place the version is written (pyproject.toml reads it)
+
 _EXPORTS = {
-    "api": ("Builder", "OutDirError", "Record", "Recovery", "Results", "RunReadError", "Scenario", "ScenarioError",
-            "Summary", "AgentTrack", "open_run", "simulate", "up"),
-    "api_launch": ("Launch", "UpOutcome", "launch"),
-    "api_scenario": ("from_dict", "load", "to_toml"),
-    "api_live": ("Live", "LiveState", "connect", "runs"),
-    "api_up": ("UpRun",),
-    "errors": ("LiveError", "NoRunError", "StoppedAnswering", "SwarmError", "UpError", "UsageError"),
+    "api.runs": ("Builder", "OutDirError", "Record", "Recovery", "Results", "RunReadError", "Scenario", "ScenarioError",
+            "Summary", "AgentTrack", "open_run", "simulate"),
+    "api.launch": ("Launch", "UpOutcome", "launch"),
+    "api.scenario": ("from_dict", "load", "to_toml"),
+    "api.live": ("Live", "LiveState", "connect", "runs"),
+    "api.up": ("UpRun", "up"),
+    "contracts.errors": ("LiveError", "NoRunError", "StoppedAnswering", "SwarmError", "UpError", "UsageError"),
 }
 _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 

@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from agents.cc_plan import CCPath
+from swarm.agents.cc_plan import CCPath
 from swarm.contracts.orbits import TAU, wrap
 
 #: Without a turn-rate limit the smallest admissible arc radius is this fraction of R,

@@ -92,7 +92,7 @@ def shipped_sim(tmp_path_factory):
     the `swarm up` equivalence tests share it)."""
     from typer.testing import CliRunner
 
-    from swarm.cli import app
+    from swarm.cli.main import app
 
     scenarios = Path(__file__).resolve().parent.parent / "scenarios"
     cache: dict[str, tuple] = {}

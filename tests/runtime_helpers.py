@@ -2,17 +2,17 @@
 
 Everything here drives real processes over real zenoh; nothing is mocked. A run is
 observed as any client of it would: while it goes, through the world's info query over a
-zenoh client session of this test process (`Observer`, the client of swarm/live.py) and
+zenoh client session of this test process (`Observer`, the client of swarm/live/client.py) and
 the launcher's output; once it has ended, through its results (summary.json with every
 event, trajectory.npz); and through psutil. The world's log is only ever shown when a
 test fails, never read for events. Processes are only ever started with subprocess
 (fork + exec), so an open zenoh session in this process does not matter to them.
 
-- `ProcessTracker` starts every process in its own session (a `swarm.procs.Group`, so its
+- `ProcessTracker` starts every process in its own session (a `swarm.runtime.procs.Group`, so its
   pgid is its pid), records every descendant (pid + create time) while they run, and at
   the end kills only the groups it created and the descendants it recorded.
 - `wait_for` is the only way to wait: a condition polled until a deadline
-  (`swarm.procs.wait_until`), failing with what was awaited.
+  (`swarm.runtime.procs.wait_until`), failing with what was awaited.
 - `replay_events` rebuilds the `out` and `alive` columns a run must have recorded from
   its event list (the world applies a tick's events before recording that tick).
 """
@@ -39,7 +39,7 @@ import psutil
 import pytest
 
 from swarm.contracts.scenario import load_scenario
-from swarm.procs import Group, agent_id_of, wait_until
+from swarm.runtime.procs import Group, agent_id_of, wait_until
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = REPO / "scenarios"
@@ -55,7 +55,7 @@ def swarm_cmd(*args) -> list[str]:
 
 
 def agent_cmd(agent_id: int, endpoint: str, run: str) -> list[str]:
-    return [sys.executable, "-m", "agents.process", str(agent_id), endpoint, run]
+    return [sys.executable, "-m", "swarm.agents.process", str(agent_id), endpoint, run]
 
 
 def wait_for(cond: Callable[[], object], timeout: float, what: str, interval: float = 0.01):
@@ -360,12 +360,12 @@ def has_started(info: dict) -> bool:
 
 class Observer:
     """This test process as an observer of a live run (as `swarm agents` is): the world's
-    info query, through swarm/live.py. Events of the run are read from summary.json once it
+    info query, through swarm/live/client.py. Events of the run are read from summary.json once it
     has ended; while it goes, the world's counters (joins, drops, alive, tick) tell."""
 
     def __init__(self, endpoint: str, run: str, timeout: float = 30.0, check: Callable[[], None] | None = None,
                  runtime_dir: str | None = None):
-        from swarm.live import LiveRun, NoRun, RunRef
+        from swarm.live.client import LiveRun, NoRun, RunRef
 
         def attempt():
             if check is not None:
@@ -621,7 +621,7 @@ def live_swarm(base: Path, scenario: Path | str, n: int, *up_args, timeout: floa
     the launcher). At the end: Ctrl-C, exit 130, and no process left, spawned agents included."""
     from typer.testing import CliRunner
 
-    from swarm.cli import app
+    from swarm.cli.main import app
 
     rt = Runtime(base)
     state = {"runtime": rt.dir, "tracker": rt.tracker, "extra_pids": []}

@@ -1,4 +1,4 @@
-"""The Python API (swarm/api.py, api_scenario.py, api_up.py; README "Python API"):
+"""The Python API (swarm/api/runs.py, api_scenario.py, api_up.py; README "Python API"):
 scenarios from files, dicts and the builder with the files' errors; `simulate` equal to
 `run_sim`; `open_run` round trips; `swarm.up` equal to `simulate` with no process left;
 the example notebook; and `import swarm` staying free for the agent processes."""
@@ -16,8 +16,8 @@ import pytest
 
 import swarm
 from swarm.contracts.scenario import ScenarioError, load_scenario, parse_scenario
-from swarm.procs import wait_until
-from swarm.sim import run_sim
+from swarm.runtime.procs import wait_until
+from swarm.offline.sim import run_sim
 
 REPO = Path(__file__).resolve().parent.parent
 SCENARIOS = REPO / "scenarios"
@@ -167,12 +167,12 @@ def test_up_refuses_before_starting_anything(base, tmp_path):
 def test_importing_the_contracts_stays_cheap():
     """An agent process imports swarm.contracts.*: the API must not add anything to that."""
     code = ("import sys, swarm.contracts.wire, swarm\n"
-            "heavy = [m for m in ('numpy', 'zenoh', 'matplotlib', 'pydantic', 'swarm.api', 'world', 'agents') "
+            "heavy = [m for m in ('numpy', 'zenoh', 'matplotlib', 'pydantic', 'swarm.api.runs', 'world', 'agents') "
             "if m in sys.modules]\n"
             "assert not heavy, heavy\n"
-            "assert 'simulate' in dir(swarm) and 'swarm.api' not in sys.modules\n")
+            "assert 'simulate' in dir(swarm) and 'swarm.api.runs' not in sys.modules\n")
     subprocess.run([sys.executable, "-c", code], check=True, cwd=REPO)
-    assert swarm.simulate is sys.modules["swarm.api"].simulate  # loaded on first use
+    assert swarm.simulate is sys.modules["swarm.api.runs"].simulate  # loaded on first use
     with pytest.raises(AttributeError, match="no attribute 'nope'"):
         swarm.nope
 
@@ -238,7 +238,7 @@ class Descendants:
 
     def assert_none_left(self, timeout: float = 10.0) -> None:
         """Nothing seen is alive within `timeout` s (a run that was seen whole: world + 6 agents)."""
-        from swarm.procs import wait_until
+        from swarm.runtime.procs import wait_until
 
         self.stop.set()
         self.thread.join()

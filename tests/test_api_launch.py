@@ -1,4 +1,4 @@
-"""`swarm.launch` (swarm/api_launch.py): `swarm up` in the calling process. Everything is
+"""`swarm.launch` (swarm/api/launch.py): `swarm up` in the calling process. Everything is
 checked before any process starts; case 2 in lockstep equals `swarm.simulate`; `stop()`
 from another thread ends a run with the signal's exit code, results written; called from
 a thread other than the main one it leaves the signal handlers alone; no process is left
@@ -14,7 +14,7 @@ import psutil
 import pytest
 
 import swarm
-from swarm.procs import wait_until
+from swarm.runtime.procs import wait_until
 from test_api import SCENARIOS, TICK_KEYS, Descendants, private_runtime, same_arrays  # noqa: F401 (a fixture)
 
 
@@ -44,7 +44,7 @@ def test_a_launch_that_never_runs_leaves_no_temporary_scenario(base, tmp_path):
     and dropped without running removes it too (as does a failed start, whose object goes)."""
     import gc
 
-    from swarm.api_launch import Launch
+    from swarm.api.launch import Launch
 
     launch = Launch(base, out=tmp_path / "never")
     tmp = launch.launcher.cfg.scenario_path.parent

@@ -1,5 +1,5 @@
-"""The live API (`swarm.connect`, `swarm.runs`: swarm/api_live.py) and the one place its errors
-become exit codes (swarm/cli_errors.py). Offline: the error classes, their codes, and what a
+"""The live API (`swarm.connect`, `swarm.runs`: swarm/api/live.py) and the one place its errors
+become exit codes (swarm/cli/errors.py). Offline: the error classes, their codes, and what a
 live command's process imports. Against a live run: case2 under `swarm up` (real processes,
 real zenoh) in a private runtime dir, read and acted on through the API, and the same answers
 as the commands print.
@@ -17,21 +17,21 @@ from typer.testing import CliRunner
 
 import swarm
 from runtime_helpers import SCENARIOS, live_swarm, short_runtime_dir, swarm_cmd
-from swarm.cli_errors import exit_code
+from swarm.cli.errors import exit_code
 
 
 def test_error_classes_and_their_exit_codes():
     from swarm.contracts.scenario import ScenarioError
-    from swarm.results import OutDirError
+    from swarm.offline.results import OutDirError
     from swarm.plots import PlotError
-    from world.run_reader import RunReadError
-    from world.stream import RecordingError
+    from swarm.world.run_reader import RunReadError
+    from swarm.world.stream import RecordingError
 
     assert issubclass(swarm.NoRunError, swarm.SwarmError) and issubclass(swarm.UpError, RuntimeError)
     assert issubclass(swarm.UsageError, ValueError)
-    from swarm.live import NoRun
+    from swarm.live.client import NoRun
 
-    assert NoRun is swarm.NoRunError  # what swarm/live.py raises is the API's class
+    assert NoRun is swarm.NoRunError  # what swarm/live/client.py raises is the API's class
     codes = {swarm.NoRunError: 1, swarm.LiveError: 1, swarm.UsageError: 2, swarm.UpError: 1, ScenarioError: 2,
              OutDirError: 2, RunReadError: 1, PlotError: 1, RecordingError: 74}
     assert {cls: exit_code(cls("x")) for cls in codes} == codes
@@ -42,8 +42,8 @@ def test_a_watcher_tells_a_world_that_ended_from_one_that_stopped_answering(monk
     """Live.again: the last reading while the world misses reads; NoRunError at once when it is
     gone (its end notice, its endpoint refusing); StoppedAnswering (a NoRunError, exit 1 too)
     after ENDED_FAILURES failed reads over ENDED_SILENT_S s of a world that is still there."""
-    import swarm.live as live_mod
-    from swarm.api_live import Live
+    import swarm.live.client as live_mod
+    from swarm.api.live import Live
 
     class FakeRun:
         gone_now = False
@@ -102,7 +102,7 @@ def test_connect_without_a_run_raises_one_line(empty_runtime, monkeypatch):
 
 def test_a_live_command_process_imports_only_its_group(empty_runtime):
     """`swarm pause` as a process: no scenario model, no numpy, none of the other command groups."""
-    code = ("import sys; sys.argv = ['swarm', 'pause']\nfrom swarm.cli import main\ntry:\n    main()\n"
+    code = ("import sys; sys.argv = ['swarm', 'pause']\nfrom swarm.cli.main import main\ntry:\n    main()\n"
             "except SystemExit as e:\n    code = e.code\n"
             "print(sorted(m for m in sys.modules if m.startswith(('swarm.', 'numpy', 'world')) or m == 'numpy'),"
             " code)")
@@ -111,8 +111,8 @@ def test_a_live_command_process_imports_only_its_group(empty_runtime):
     assert "no swarm is running" in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
     mods, rc = p.stdout.rsplit(" ", 1)
     assert rc.strip() == "1"
-    for heavy in ("numpy", "swarm.contracts.scenario", "swarm.up_cli", "swarm.run_cli", "swarm.study_cli",
-                  "swarm.offline_cli", "swarm.api", "world.recording"):
+    for heavy in ("numpy", "swarm.contracts.scenario", "swarm.cli.up", "swarm.cli.run", "swarm.cli.study",
+                  "swarm.cli.offline", "swarm.api.runs", "swarm.world.recording"):
         assert f"'{heavy}'" not in mods, (heavy, mods)
 
 
@@ -124,7 +124,7 @@ def live(tmp_path_factory):
 
 
 def _cli_json(*args):
-    from swarm.cli import app
+    from swarm.cli.main import app
 
     res = CliRunner().invoke(app, [str(a) for a in args])
     assert res.exit_code == 0, res.output

@@ -1,4 +1,4 @@
-"""The batch engine (issue 12, part 3: swarm/batch.py, world/batch.py, agents/batch*.py):
+"""The batch engine (issue 12, part 3: swarm/offline/batch.py, world/batch.py, agents/batch*.py):
 equal to `swarm sim`'s per-agent engine within 1e-9 m over whole runs (to the bit on this
 project's machines), with the same switch events and summaries; many seeds in one batch
 equal each seed run alone; `swarm sim --batch` and `swarm study --batch` write what the
@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from agents.batch_maths import wrap as batch_wrap
-from swarm.batch import BatchRefused, refusal, run_batch
-from swarm.cli import app
+from swarm.agents.batch_maths import wrap as batch_wrap
+from swarm.offline.batch import BatchRefused, refusal, run_batch
+from swarm.cli.main import app
 from swarm.contracts.orbits import wrap
 from swarm.contracts.scenario import load_scenario, parse_scenario
-from swarm.sim import run_sim
-from swarm.study import SwarmSetting, random_swarm
+from swarm.offline.sim import run_sim
+from swarm.study.swarms import SwarmSetting, random_swarm
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 TOL = 1e-9  # m, over the whole trajectory

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from swarm.cli import app
+from swarm.cli.main import app
 from swarm.contracts.scenario import load_scenario
 
 SCENARIOS = sorted((Path(__file__).resolve().parent.parent / "scenarios").glob("*.toml"))
@@ -240,7 +240,7 @@ def test_check_shows_the_added_agents(base, write_toml):
 
 
 def test_progress_line_sums_up_a_large_swarm():
-    from swarm.up_progress import progress_errors
+    from swarm.runtime.progress import progress_errors
 
     small = {"errors": {1: 0.0, 2: None, 3: 0.25}, "dropped": [4]}
     assert progress_errors(small) == "radial error 1:0.0% 2:- 3:25%  dropped 4"

@@ -268,7 +268,7 @@ def test_an_agent_the_hub_does_not_know_is_refused_before_connecting():
 def _cli(*args):
     from typer.testing import CliRunner
 
-    from swarm.cli import app
+    from swarm.cli.main import app
 
     return CliRunner().invoke(app, [str(a) for a in args])
 
@@ -317,7 +317,7 @@ def test_a_world_that_comes_back_keeps_its_runs_secret(rtdir, monkeypatch):
     """--wait-world: agents of a run whose world was killed get back in with the credentials
     they have; a world of the same run that still lives is not replaced."""
     from swarm.contracts.scenario import parse_scenario
-    from world.hub_auth import run_auth
+    from swarm.world.hub_auth import run_auth
 
     monkeypatch.delenv("SWARM_OPEN_HUB", raising=False)
     s = parse_scenario({"gains": {"c1": 1.0, "c2": 0.5}, "agents": [

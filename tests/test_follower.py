@@ -1,4 +1,4 @@
-"""Follower laws (agents.laws), the follower side of AgentBrain, and the follower
+"""Follower laws (swarm.agents.laws), the follower side of AgentBrain, and the follower
 equilibrium R_i = (v_i / v_j) R_j through the engine."""
 
 from __future__ import annotations
@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.brain import AgentBrain, saturate
-from agents.laws import bearing_law, make_follower_law
+from swarm.agents.brain import AgentBrain, saturate
+from swarm.agents.laws import bearing_law, make_follower_law
 from swarm.contracts.laws import LawError, resolve_law
 from swarm.contracts.scenario import parse_scenario
-from swarm.sim import run_sim
-from world.sensing import Contact, SensorFrame
+from swarm.offline.sim import run_sim
+from swarm.world.sensing import Contact, SensorFrame
 
 TESTS = Path(__file__).resolve().parent
 
@@ -55,7 +55,7 @@ def test_bearing_law_zero_on_aligned_pursuit():
 def test_registry_and_lookup():
     assert resolve_law("bearing") is bearing_law
     assert resolve_law("bearing") is bearing_law
-    assert resolve_law("agents.laws:bearing_law") is bearing_law
+    assert resolve_law("swarm.agents.laws:bearing_law") is bearing_law
 
 
 def test_module_function_lookup(law_module):

@@ -1,4 +1,4 @@
-"""The agents' fork server (agents/forkserver.py, swarm/forks.py).
+"""The agents' fork server (agents/forkserver.py, swarm/runtime/forks.py).
 
 Fast: the server's protocol (a bad request is an error reply, the end of its stdin ends
 it), the launcher's handle of an adopted child (exit codes, signals, two threads polling),
@@ -21,12 +21,12 @@ import psutil
 import pytest
 
 from runtime_helpers import SCENARIOS, events_of, start_up
-from swarm.forks import Forked
-from swarm.procs import agent_id_of, command_words
+from swarm.runtime.forks import Forked
+from swarm.runtime.procs import agent_id_of, command_words
 
 
 def _server():
-    return subprocess.Popen([sys.executable, "-m", "agents.forkserver"], stdin=subprocess.PIPE,
+    return subprocess.Popen([sys.executable, "-m", "swarm.agents.forkserver"], stdin=subprocess.PIPE,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 
 
@@ -71,19 +71,19 @@ def test_forked_kill_is_a_negative_code_and_a_timeout_raises():
 
 
 def test_an_agent_waits_only_while_its_parent_is_the_middle_process():
-    from agents.forkserver import reparented
+    from swarm.agents.forkserver import reparented
 
     assert reparented(os.getppid() + 10**6, timeout=5.0)  # another pid than the parent: at once
     assert not reparented(os.getppid(), timeout=0.05)  # still the middle's: gives up at the timeout
 
 
 def test_command_words_of_exec_d_and_titled_agents():
-    exec_d = [sys.executable, "-m", "agents.process", "12", "unixsock-stream//x.sock", "run-1", ""]
+    exec_d = [sys.executable, "-m", "swarm.agents.process", "12", "unixsock-stream//x.sock", "run-1", ""]
     titled = [" ".join(exec_d[:-1]), "", "", ""]
     assert command_words(exec_d) == command_words(titled) == exec_d[:-1]
     assert agent_id_of(exec_d) == agent_id_of(titled) == 12
     assert agent_id_of([sys.executable, "-m", "swarm", "world"]) is None
-    assert agent_id_of([sys.executable, "-m", "agents.process"]) is None
+    assert agent_id_of([sys.executable, "-m", "swarm.agents.process"]) is None
 
 
 FAULTS = """
@@ -112,13 +112,13 @@ def test_agents_are_forked_and_a_dead_fork_server_falls_back_to_exec(rt, tmp_pat
         assert proc.ppid() == up.launcher.pid, f"agent {aid}: parent {proc.ppid()}, not the launcher"
         raw = open(f"/proc/{pid}/cmdline", "rb").read()
         assert b"\0agents.process\0" not in raw and agent_id_of(proc.cmdline()) == aid, raw  # titled, not exec'd
-    (server,) = [c for c in psutil.Process(up.launcher.pid).children() if "agents.forkserver" in c.cmdline()]
+    (server,) = [c for c in psutil.Process(up.launcher.pid).children() if "swarm.agents.forkserver" in c.cmdline()]
     os.kill(server.pid, signal.SIGKILL)  # before the scripted kill (t = 3 s)
     assert up.info()["time"] < 2.5
 
     summ, _ = up.results(120)
     assert summ["completed"] is True
-    from agents.forkserver import REPARENT_WAIT
+    from swarm.agents.forkserver import REPARENT_WAIT
 
     (start,) = events_of(summ, "start")  # no agent waited out its re-parenting (a bug once did)
     assert start["startup_s"] < REPARENT_WAIT, start

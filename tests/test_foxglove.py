@@ -1,7 +1,7 @@
 """The Foxglove side of a run: the recording's topics, and `--foxglove`, the live view served
 over Foxglove's WebSocket protocol by the world (world/live_view.py) or by an observer of a
-live run (`swarm watch --foxglove`, swarm/watch_foxglove.py), watched by a real WebSocket
-client (a minimal one, standard library only, below); `--foxglove [PORT]` (swarm/cli.py)."""
+live run (`swarm watch --foxglove`, swarm/live/foxglove.py), watched by a real WebSocket
+client (a minimal one, standard library only, below); `--foxglove [PORT]` (swarm/cli/main.py)."""
 
 from __future__ import annotations
 
@@ -18,9 +18,9 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from swarm.cli import app, foxglove_argv
+from swarm.cli.main import app, foxglove_argv
 from swarm.contracts.scenario import load_scenario
-from world.live_view import LIVE_TOPICS, LiveViewError, start_live_view
+from swarm.world.live_view import LIVE_TOPICS, LiveViewError, start_live_view
 
 REPO = Path(__file__).resolve().parents[1]
 CASE2 = REPO / "scenarios" / "case2.toml"
@@ -43,7 +43,7 @@ def free_port() -> int:
 def test_recording_lists_the_topics(tmp_path):
     from mcap.reader import make_reader
 
-    from swarm.sim import run_sim
+    from swarm.offline.sim import run_sim
 
     path = tmp_path / "recording.mcap"
     run_sim(load_scenario(CASE2), 6.0, None, path)  # long enough for a trails message
@@ -76,7 +76,7 @@ def test_port_in_use_is_one_line():
 
 
 def test_world_bind_failure_is_one_line(tmp_path):
-    from world.stream import StreamWriter
+    from swarm.world.stream import StreamWriter
 
     held, port = busy_port()
     w = StreamWriter(tmp_path / "r.mcap", load_scenario(CASE2), 10)
@@ -107,8 +107,8 @@ def test_foxglove_takes_an_optional_port(argv, expected):
 def test_the_world_stops_before_listening_when_the_port_is_in_use(tmp_path, monkeypatch, capsys):
     """world/main.py's own check (after `swarm world`'s): one line, exit 2, no recording left,
     and nothing listened on the endpoint."""
-    from world.main import run_world
-    from world.process import WorldConfig
+    from swarm.world.main import run_world
+    from swarm.world.process import WorldConfig
 
     monkeypatch.setenv("SWARM_RUNTIME_DIR", str(tmp_path / "rt"))
     held, port = busy_port()

@@ -19,8 +19,8 @@ import pytest
 
 from runtime_helpers import REPO, SCENARIOS, live_swarm, swarm_cmd
 from swarm.contracts import credentials
-from swarm.errors import NoRunError
-from swarm.live import open_run_session
+from swarm.contracts.errors import NoRunError
+from swarm.live.client import open_run_session
 
 
 def free_port() -> int:

@@ -1,4 +1,4 @@
-"""world.kinematics: exact arc integration of the unicycle, and angle wrapping."""
+"""swarm.world.kinematics: exact arc integration of the unicycle, and angle wrapping."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from world.kinematics import step, step_one, wrap
+from swarm.world.kinematics import step, step_one, wrap
 
 
 def _rk4(x, y, g, v, u, t, n):
@@ -155,7 +155,7 @@ def test_step_one_gives_nan_where_step_does():
 
 def test_small_and_large_swarms_step_alike(monkeypatch):
     """WorldCore.step agent by agent equals the array step, with agents active, coasting and gone."""
-    import world.core as core_mod
+    import swarm.world.core as core_mod
     from swarm.contracts.scenario import load_scenario
 
     scenario = load_scenario(Path(__file__).resolve().parent.parent / "scenarios" / "case2.toml")

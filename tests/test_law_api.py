@@ -15,17 +15,17 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from agents.brain import AgentBrain
-from agents.laws import bearing, bearing_law, loiter, search
-from agents.leader import on_orbit_command
-from swarm.batch import refusal
-from swarm.cli import app
+from swarm.agents.brain import AgentBrain
+from swarm.agents.laws import bearing, bearing_law, loiter, search
+from swarm.agents.leader import on_orbit_command
+from swarm.offline.batch import refusal
+from swarm.cli.main import app
 from swarm.contracts.brain_config import BrainConf
 from swarm.contracts.laws import ENV_LAW_PATH, law_dirs, with_law_path
 from swarm.contracts.observation import Observation, Search
 from swarm.contracts.scenario import ScenarioError, load_scenario, parse_scenario
-from swarm.sim import run_sim
-from world.sensing import Contact, SensorFrame
+from swarm.offline.sim import run_sim
+from swarm.world.sensing import Contact, SensorFrame
 from test_follower import law_module  # noqa: F401  (fixture: tests/helpers_law.py importable)
 
 
@@ -208,8 +208,8 @@ def test_the_join_reply_carries_the_laws(base, law_module):
 
 
 def test_an_untrusted_leader_law_is_refused_without_importing_it(tmp_path, monkeypatch):
-    from agents.joining import EXIT_REFUSED, AgentExit
-    from agents.node import AgentNode
+    from swarm.agents.joining import EXIT_REFUSED, AgentExit
+    from swarm.agents.node import AgentNode
     from fakes import FakeSession
     from test_shells import RUN, claim, open_world
 

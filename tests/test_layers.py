@@ -1,13 +1,20 @@
-"""The layers of the tree (docs/architecture.md, "How it is built"), checked on every import statement,
-at module level or inside functions:
+"""The layers of the tree (docs: design/architecture.md, "Layers"), checked on every import
+statement, at module level or inside functions:
 
-    swarm.contracts   scenario, laws, observation, frames, wire, brain_config, transport: imports none of the others
-    world             physics, sensors, the engine, the world process: world + contracts
-    agents            laws, selection, the brain, the agent process: agents + contracts
-    swarm (the rest)  the shells and tools (sim, launcher, CLI, plots, study): anything
+    contracts  scenario, laws, wire, transport, vocabulary, errors...: imports none of the others
+    world      physics, sensors, the engine, the world process (swarm.world, the world/ folder)
+    agents     laws, selection, the brain, the agent process (swarm.agents, the agents/ folder)
+    runtime    launcher, supervision, process groups, fork server client, agent hosts
+    offline    swarm sim, the batch engine, a run's output directory, CSV export
+    plots      a run's figures
+    live       a live run seen from a terminal: client, data, control, views, watch, Foxglove
+    study      batch studies
+    api        the Python API (`import swarm`)
+    cli        the command line
 
-A law named in a scenario is imported by name at run time (swarm/contracts/laws.py), not
-by an import statement, so it is no arrow.
+A package may import only the packages `MAY_IMPORT` lists for it; no module may be part of an
+import cycle. A law named in a scenario is imported by name at run time
+(swarm/contracts/laws.py), not by an import statement, so it is no arrow.
 """
 
 from __future__ import annotations
@@ -18,73 +25,183 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-ALLOWED = {
+BELOW_THE_SHELLS = {"contracts", "world", "agents"}
+MAY_IMPORT = {
     "contracts": {"contracts"},
     "world": {"world", "contracts"},
     "agents": {"agents", "contracts"},
-    "top": {"top", "world", "agents", "contracts"},
+    "runtime": {"runtime", "contracts", "world"},
+    "offline": {"offline"} | BELOW_THE_SHELLS,
+    "plots": {"plots", "offline"} | BELOW_THE_SHELLS,
+    "live": {"live", "runtime"} | BELOW_THE_SHELLS,
+    "study": {"study", "offline"} | BELOW_THE_SHELLS,
+    "api": {"api", "runtime", "offline", "plots", "live"} | BELOW_THE_SHELLS,
+    "cli": {"cli", "root", "api", "runtime", "offline", "plots", "live", "study"} | BELOW_THE_SHELLS,
+    "root": {"root", "cli", "api", "contracts"},  # swarm/__init__.py (its exports), swarm/__main__.py
 }
+PACKAGES = set(MAY_IMPORT) - {"root"}
+FOLDERS = {"swarm": "swarm", "agents": "swarm.agents", "world": "swarm.world"}  # folder -> import name
 
 
-def layer_of_module(name: str) -> str | None:
-    if name == "swarm.contracts" or name.startswith("swarm.contracts."):
-        return "contracts"
-    head = name.split(".")[0]
-    return {"world": "world", "agents": "agents", "swarm": "top"}.get(head)
+def module_of_file(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    parts[0] = FOLDERS[parts[0]]
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
 
 
-def layer_of_file(path: Path) -> str:
-    rel = path.relative_to(ROOT).with_suffix("")
-    return layer_of_module(".".join(rel.parts))
+def package_of(module: str) -> str | None:
+    """The layer of a module of this project (None for anything else)."""
+    parts = module.split(".")
+    if parts[0] != "swarm":
+        return None
+    return parts[1] if len(parts) > 1 and parts[1] in PACKAGES else "root"
 
 
-def imports_of(path: Path) -> list[tuple[int, str]]:
-    """(line, module) for every import in the file; `from swarm import x` counts as swarm.x."""
+def imports_of(path: Path, here: str | None = None) -> list[tuple[int, str, bool]]:
+    """(line, module, inside a function) for every import in the file (module `here`, by
+    default the file's own); `from swarm.x import y` counts as swarm.x.y when swarm/x/y is a
+    module, and relative imports are resolved."""
+    here = here or module_of_file(path)
     found = []
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
-        if isinstance(node, ast.Import):
-            found += [(node.lineno, a.name) for a in node.names]
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            found.append((node.lineno, node.module))
-            found += [(node.lineno, f"{node.module}.{a.name}") for a in node.names]
+
+    def visit(node, in_function):
+        for child in ast.iter_child_nodes(node):
+            inner = in_function or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))
+            if isinstance(child, ast.Import):
+                found.extend((child.lineno, a.name, in_function) for a in child.names)
+            elif isinstance(child, ast.ImportFrom):
+                if child.level:
+                    base = here.split(".")[: len(here.split(".")) - child.level + (path.name == "__init__.py")]
+                    module = ".".join(base + ([child.module] if child.module else []))
+                else:
+                    module = child.module or ""
+                found.append((child.lineno, module, in_function))
+                found.extend((child.lineno, f"{module}.{a.name}", in_function) for a in child.names
+                             if f"{module}.{a.name}" in MODULES)
+            visit(child, inner)
+
+    visit(ast.parse(path.read_text(), str(path)), False)
     return found
 
 
 def project_files() -> list[Path]:
-    return sorted(p for d in ("swarm", "world", "agents") for p in (ROOT / d).rglob("*.py"))
+    return sorted(p for d in FOLDERS for p in (ROOT / d).rglob("*.py"))
+
+
+MODULES = {module_of_file(p) for p in project_files()}
 
 
 @pytest.mark.parametrize("path", project_files(), ids=lambda p: str(p.relative_to(ROOT)))
 def test_imports_follow_the_layers(path):
-    here = layer_of_file(path)
-    bad = []
-    for line, mod in imports_of(path):
-        there = layer_of_module(mod)
-        if there is not None and there not in ALLOWED[here]:
-            bad.append(f"{path.relative_to(ROOT)}:{line} ({here}) imports {mod} ({there})")
+    here = package_of(module_of_file(path))
+    bad = [f"{path.relative_to(ROOT)}:{line} ({here}) imports {mod} ({package_of(mod)})"
+           for line, mod, _ in imports_of(path)
+           if package_of(mod) is not None and package_of(mod) not in MAY_IMPORT[here]]
     assert not bad, "\n".join(bad)
 
 
-def folder_graph() -> dict[tuple[str, str], int]:
-    """Import statements between layers (the README's picture, counted)."""
+def test_no_project_module_imports_the_folders_by_their_folder_names():
+    """`agents` and `world` are folders of the repository, installed as swarm.agents and
+    swarm.world: importing them by the folder name works only from the repository's root."""
+    bad = [f"{p.relative_to(ROOT)}:{line} imports {mod}" for p in project_files() + sorted(
+        (ROOT / "tests").glob("*.py")) for line, mod, _ in imports_of_any(p) if mod.split(".")[0] in ("agents", "world")]
+    assert not bad, "\n".join(bad)
+
+
+def imports_of_any(path: Path) -> list[tuple[int, str, bool]]:
+    """imports_of for files outside the packages too (tests): absolute imports only."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name, False) for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            out.append((node.lineno, node.module, False))
+    return out
+
+
+def module_graph() -> dict[str, set[str]]:
+    """Module -> the project modules it imports (at module level or inside functions)."""
+    graph: dict[str, set[str]] = {}
+    for p in project_files():
+        here = module_of_file(p)
+        deps = graph.setdefault(here, set())
+        for _, mod, _ in imports_of(p):
+            while mod and mod not in MODULES:  # `from swarm.x import name`: the module swarm.x
+                mod = mod.rpartition(".")[0]
+            if mod and mod != here and not here.startswith(mod + "."):  # a package's own __init__ is no cycle
+                deps.add(mod)
+    return graph
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    out: list[list[str]] = []
+
+    def strong(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                strong(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            strong(v)
+    return out
+
+
+def test_no_import_cycle():
+    found = cycles(module_graph())
+    assert not found, "import cycles:\n" + "\n".join(" <-> ".join(c) for c in found)
+
+
+def test_the_cycle_finder_finds_one():
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert cycles({"a": {"b"}, "b": set()}) == []
+
+
+def package_graph() -> dict[tuple[str, str], int]:
+    """Import statements between packages (the picture in the architecture page, counted)."""
     edges: dict[tuple[str, str], int] = {}
     for path in project_files():
-        here = layer_of_file(path)
-        for _, mod in imports_of(path):
-            there = layer_of_module(mod)
+        here = package_of(module_of_file(path))
+        for _, mod, _ in imports_of(path):
+            there = package_of(mod)
             if there is not None and there != here:
                 edges[(here, there)] = edges.get((here, there), 0) + 1
     return edges
 
 
 def test_no_arrow_between_world_and_agents_and_none_up_from_the_contracts():
-    edges = folder_graph()
-    print("\nimports between layers:", {f"{a} -> {b}": n for (a, b), n in sorted(edges.items())})
+    edges = package_graph()
+    print("\nimports between packages:", {f"{a} -> {b}": n for (a, b), n in sorted(edges.items())})
     assert ("world", "agents") not in edges and ("agents", "world") not in edges
     assert not [e for e in edges if e[0] == "contracts"]
 
 
 def test_the_checker_sees_imports_inside_functions(tmp_path):
     p = tmp_path / "m.py"
-    p.write_text("def f():\n    from agents.brain import AgentBrain\n    import world.core\n")
-    assert {m for _, m in imports_of(p)} >= {"agents.brain", "agents.brain.AgentBrain", "world.core"}
+    p.write_text("import json\ndef f():\n    from swarm.agents.brain import AgentBrain\n    import swarm.world.core\n")
+    found = {(m, inside) for _, m, inside in imports_of(p, "swarm.contracts.m")}
+    assert {("json", False), ("swarm.agents.brain", True), ("swarm.world.core", True)} <= found
+    assert package_of("swarm.agents.brain") not in MAY_IMPORT["contracts"]

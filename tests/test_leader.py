@@ -1,4 +1,4 @@
-"""Tests for agents.leader: Lemma 1 CC paths onto the orbit and orbit hold."""
+"""Tests for swarm.agents.leader: Lemma 1 CC paths onto the orbit and orbit hold."""
 
 from __future__ import annotations
 
@@ -14,15 +14,15 @@ import numpy as np
 import pytest
 
 import cc_reference
-from agents.cc_plan import (
+from swarm.agents.cc_plan import (
     CCPath,
     cc_coefficients,
     cc_radius_b,
     plan_cc,
 )
-from agents.leader import on_orbit_command
+from swarm.agents.leader import on_orbit_command
 from swarm.contracts.orbits import wrap
-from world.kinematics import step
+from swarm.world.kinematics import step
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -303,7 +303,7 @@ _BIT_EXACT = """
 import json, math, sys
 sys.path.insert(0, "tests")
 import cc_reference
-from agents.cc_plan import plan_cc
+from swarm.agents.cc_plan import plan_cc
 cases = json.loads(sys.argv[1])
 print(sum(cc_reference.plan_cc(*c) != plan_cc(*c) for c in cases))
 """
@@ -325,11 +325,11 @@ def test_plan_cc_port_bit_exact_without_avx512_numpy():
 
 @pytest.mark.slow  # a Python process of its own
 def test_importing_the_leader_does_not_load_numpy():
-    """Leader processes stay as light as followers: agents.leader is numpy-free."""
-    code = "import sys, agents.leader; sys.exit('numpy' in sys.modules)"
+    """Leader processes stay as light as followers: swarm.agents.leader is numpy-free."""
+    code = "import sys, swarm.agents.leader; sys.exit('numpy' in sys.modules)"
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
                        cwd=ROOT)
-    assert p.returncode == 0, p.stderr[-2000:] or "agents.leader imported numpy"
+    assert p.returncode == 0, p.stderr[-2000:] or "swarm.agents.leader imported numpy"
 
 
 # --- degenerate cases -------------------------------------------------------------------

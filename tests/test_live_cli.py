@@ -1,7 +1,7 @@
 """Live inspection and control (`swarm runs/agents/graph/kill/spawn/pause/resume/watch`).
 
-The drawing maths of `swarm watch` (swarm/watch.py) and the pure data and views
-(swarm/live_data.py, swarm/live_views.py) are tested offline. Everything else runs
+The drawing maths of `swarm watch` (swarm/live/watch.py) and the pure data and views
+(swarm/live/data.py, swarm/live/views.py) are tested offline. Everything else runs
 against a live multi-process swarm: one `swarm up` of case2 (real processes, real zenoh)
 shared by the module, in a private runtime dir so that commands without --connect/--run
 find exactly that run.
@@ -32,11 +32,11 @@ import pytest
 from typer.testing import CliRunner
 
 from runtime_helpers import SCENARIOS, live_swarm, reaped, ring_scenario, run_credentials, swarm_cmd, wait_for
-from swarm.procs import wait_until
-from swarm import watch as W
-from swarm.cli import app
-from swarm.live_data import graph_of, merge_agents
-from swarm.live_views import graph_dot
+from swarm.runtime.procs import wait_until
+from swarm.live import watch as W
+from swarm.cli.main import app
+from swarm.live.data import graph_of, merge_agents
+from swarm.live.views import graph_dot
 
 LIVE_COMMANDS = [["runs"], ["runs", "--json"], ["agents"], ["agents", "--json"], ["graph", "--json"],
                  ["graph", "--dot"], ["graph", "--watch"], ["kill", "3"], ["spawn", "--id", "3"],
@@ -136,7 +136,7 @@ def test_dot_parser_rejects_garbage():
             parse_dot(bad)
 
 
-# --- swarm/watch.py: pure drawing maths -------------------------------------------------------------
+# --- swarm/live/watch.py: pure drawing maths -------------------------------------------------------------
 def _adjacent(a, b):
     return max(abs(a[0] - b[0]), abs(a[1] - b[1])) == 1
 
@@ -253,7 +253,7 @@ def test_draw_scene_picture():
     W.draw_scene((0.0, 0.0), [], 10, 4)
 
 
-# --- swarm/live_data.py, swarm/live_views.py: pure parts -----------------------------------------
+# --- swarm/live/data.py, swarm/live/views.py: pure parts -----------------------------------------
 def _fake_info():
     def agent(i, role, alive, out, pid):
         return {"id": i, "role": role, "state": "active" if alive else "gone", "alive": alive, "pid": pid,
@@ -311,7 +311,7 @@ def _json(*args):
 
 
 def _statuses(state):
-    from swarm.live import LiveRun, RunRef
+    from swarm.live.client import LiveRun, RunRef
 
     with LiveRun(RunRef(state["run"], state["endpoint"], run_credentials(state["endpoint"], state["run"]))) as lv:
         return lv.statuses(), lv.info()
@@ -393,7 +393,7 @@ def test_graph_matches_the_agents(live):
 
 @pytest.mark.slow
 def test_pause_and_resume(live):
-    from swarm.live import LiveRun, RunRef
+    from swarm.live.client import LiveRun, RunRef
 
     t0 = time.perf_counter()
     res = invoke("pause")
@@ -522,9 +522,9 @@ def test_kill_stopped_and_remote(live, monkeypatch):
     live["extra_pids"].append((pid4, psutil.Process(pid4).create_time()))
 
     # an agent on "another host": the signal goes over zenoh; SIGCONT cannot
-    import swarm.live_control
+    import swarm.live.control
 
-    monkeypatch.setattr(swarm.live_control.socket, "gethostname", lambda: "elsewhere.invalid")
+    monkeypatch.setattr(swarm.live.control.socket, "gethostname", lambda: "elsewhere.invalid")
     res = invoke("kill", "5", "--signal", "CONT")
     assert res.exit_code == 1 and "cannot be delivered over zenoh" in res.stderr, res.output
     pid5 = {r["id"]: r for r in _json("agents", "--json")["agents"]}[5]["pid"]
@@ -560,7 +560,7 @@ def test_up_hint_adds_run_when_another_run_is_up(monkeypatch):
 
     import swarm.contracts.credentials as creds
     from swarm.contracts.scenario import load_scenario
-    from swarm.up_cli import attach_hints
+    from swarm.cli.up import attach_hints
 
     s = load_scenario(SCENARIOS / "case2.toml")
     monkeypatch.setattr(creds, "local_runs", lambda: [SimpleNamespace(run="other-1a2b3c")])
@@ -633,8 +633,8 @@ def test_environment_picks_one_of_two_runs(live, tmp_path, capsys):
     assert f"the world of run {two} ended" in watcher.text()
     for a in agents:
         assert a.wait(10) in (0, 4), a.text()[-2000:]
-    # `swarm world` prints the same table as `swarm up` (swarm.run_cli.print_summary, one function)
-    from swarm.run_cli import print_summary
+    # `swarm world` prints the same table as `swarm up` (swarm.cli.run.print_summary, one function)
+    from swarm.cli.output import print_summary
 
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["stopped_by_signal"] == signal.SIGINT
@@ -792,11 +792,11 @@ def test_a_stalled_world_is_not_an_ended_one(live):
 
 @pytest.mark.slow
 def test_a_world_that_stops_answering_is_not_an_ended_one(live, tmp_path):
-    """A world stopped for longer than the watchers' patience (swarm.live.ENDED_SILENT_S), with
+    """A world stopped for longer than the watchers' patience (swarm.live.client.ENDED_SILENT_S), with
     its endpoint still there, has not ended: `swarm graph --watch` and `swarm watch` (piped)
     exit 1 saying it stopped answering, where a world that ended gives 0 (a world of its own,
     no agents: it answers queries while it waits for them)."""
-    from swarm.live import ENDED_SILENT_S
+    from swarm.live.client import ENDED_SILENT_S
 
     tr = live["tracker"]
     run, endpoint = "silent", f"unixsock-stream/{live['runtime']}/silent.sock"

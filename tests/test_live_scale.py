@@ -22,7 +22,7 @@ import pytest
 from typer.testing import CliRunner
 
 from runtime_helpers import live_swarm, reaped, ring_scenario, run_credentials, swarm_cmd, wait_for
-from swarm.cli import app
+from swarm.cli.main import app
 
 N = 30
 
@@ -45,7 +45,7 @@ def timed(fn, repeat: int = 5) -> tuple[float, float, object]:
 def test_progress_line_counts_added_agents(tmp_path):
     from swarm.contracts import wire
     from swarm.contracts.scenario import load_scenario
-    from swarm.up_progress import AddedSpec, added_spec, progress_errors, truth_progress
+    from swarm.runtime.progress import AddedSpec, added_spec, progress_errors, truth_progress
 
     s = load_scenario(ring_scenario(tmp_path / "ring.toml", N))
     ids = list(range(1, N + 2))  # agent 31 was added at run time (`swarm spawn`)
@@ -75,8 +75,8 @@ def many(tmp_path_factory):
 
 @pytest.mark.slow
 def test_live_commands_at_30_agents(many):
-    from swarm.live import LiveRun, RunRef
-    from swarm.live_data import snapshot
+    from swarm.live.client import LiveRun, RunRef
+    from swarm.live.data import snapshot
 
     with LiveRun(RunRef(many["run"], many["endpoint"], run_credentials(many["endpoint"], many["run"]))) as lv:
         # before: the status query waited for its own timeout (1 s; an agent's final answer comes late)

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from swarm.cli import app
+from swarm.cli.main import app
 
 ROOT = Path(__file__).resolve().parent.parent
 CASE2 = ROOT / "scenarios" / "case2.toml"
@@ -125,7 +125,7 @@ def test_endpoints_that_are_endpoints_pass():
 # -- item 9: the cause of an exit -------------------------------------------------------------------
 
 def test_a_killed_world_is_not_given_its_last_progress_line_as_cause(tmp_path):
-    from swarm.supervision import world_failure
+    from swarm.runtime.supervision import world_failure
 
     log = tmp_path / "world.log"
     log.write_text("[world] run r listening on unixsock-stream//tmp/x.sock\n"
@@ -141,7 +141,7 @@ def test_a_killed_world_is_not_given_its_last_progress_line_as_cause(tmp_path):
 
 
 def test_a_crash_line_quotes_no_unrelated_log_line(tmp_path):
-    from swarm.supervision import agent_exit
+    from swarm.runtime.supervision import agent_exit
 
     log = tmp_path / "agent-2.log"
     log.write_text("[agent 2] tick 1: out-neighbour 1 -> 3 (nearest)\n")
@@ -162,7 +162,7 @@ def test_a_crash_line_quotes_no_unrelated_log_line(tmp_path):
 
 
 def test_killed_by_sigkill_is_said_once(tmp_path):
-    from swarm.supervision import agent_exit
+    from swarm.runtime.supervision import agent_exit
 
     r = agent_exit(3, 43, -signal.SIGKILL, tmp_path / "none.log", before_start=False)
     assert r.line() == "agent 3 (pid 43) exited (killed by SIGKILL)"
@@ -253,7 +253,7 @@ def test_one_switch_is_one_switch(tmp_path):
 
 
 def test_no_id_left_to_add_is_said_so(base, write_toml):
-    from swarm.up_cli import attach_hints
+    from swarm.cli.up import attach_hints
 
     base["agents"][-1]["id"] = 2**31 - 1
     path = write_toml(base)
@@ -282,7 +282,7 @@ def test_agent_has_one_option_named_after_waiting_for_the_world():
 def test_progress_line_says_paused(monkeypatch, capsys):
     import time as time_module
 
-    from swarm.up_progress import Paused, ProgressLine
+    from swarm.runtime.progress import Paused, ProgressLine
 
     now = [100.0]
     monkeypatch.setattr(time_module, "monotonic", lambda: now[0])
@@ -309,7 +309,7 @@ def test_progress_line_says_paused(monkeypatch, capsys):
 def test_the_python_api_says_not_an_endpoint():
     """swarm.connect / swarm.runs with connect="foo/bar": UsageError, one line (not "no run")."""
     import swarm
-    from swarm.errors import UsageError
+    from swarm.contracts.errors import UsageError
 
     for call in (swarm.connect, swarm.runs):
         with pytest.raises(UsageError) as e:

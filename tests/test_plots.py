@@ -310,8 +310,8 @@ def test_control_range_clips_the_leaders_start_on_case2(tmp_path: Path) -> None:
     from swarm.contracts.scenario import load_scenario
     from swarm.plots.clipping import clip_text, control_range
     from swarm.plots.palette import agent_looks
-    from swarm.sim import run_sim
-    from world.recording import write_run
+    from swarm.offline.sim import run_sim
+    from swarm.world.recording import write_run
 
     scenario = load_scenario(Path(__file__).resolve().parent.parent / "scenarios" / "case2.toml")
     write_run(run_sim(scenario, duration=3.0), tmp_path)
@@ -347,7 +347,7 @@ def test_labels_and_markers_are_kept_apart() -> None:
 def test_export_csv_matches_the_trajectory(tmp_path: Path) -> None:
     import csv
 
-    from swarm.run_csv import COLUMNS, csv_name, write_agent_csvs
+    from swarm.offline.csv_export import COLUMNS, csv_name, write_agent_csvs
 
     run_dir = make_run(tmp_path / "run", ticks=40, drop=(1, 20))
     paths = write_agent_csvs(run_dir)
@@ -371,7 +371,7 @@ def test_export_csv_matches_the_trajectory(tmp_path: Path) -> None:
 def test_cli_refuses_a_bad_format_and_exports_csv(tmp_path: Path) -> None:
     from typer.testing import CliRunner
 
-    from swarm.cli import app
+    from swarm.cli.main import app
 
     run_dir = make_run(tmp_path / "run", ticks=20)
     res = CliRunner().invoke(app, ["plot", str(run_dir), "--format", "png,jpg"])

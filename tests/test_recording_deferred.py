@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from world.recording import DeferredRecorder
+from swarm.world.recording import DeferredRecorder
 
 
 class Calls:

@@ -1,5 +1,5 @@
 """The recording as it goes (world/stream.py, world/recording.py) and the run directory
-rules (swarm/results.py): exact round trips, files cut short by a crash, atomic result
+rules (swarm/offline/results.py): exact round trips, files cut short by a crash, atomic result
 files, `--out` never overwritten, a full disk as one line."""
 
 from __future__ import annotations
@@ -15,14 +15,14 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from swarm.cli import app
+from swarm.cli.main import app
 from swarm.contracts.scenario import load_scenario
 from swarm.contracts.scenario_tables import AgentSpec
-from swarm.results import OutDirError, claim_out_dir, needs_export
-from swarm.sim import run_sim
-from world.recording import EXIT_NO_SPACE, Recorder, StreamRecorder, recover_run, write_run
-from world.run_reader import load_run
-from world.stream import decode_tick, encode_tick, read_recording
+from swarm.offline.results import OutDirError, claim_out_dir, needs_export
+from swarm.offline.sim import run_sim
+from swarm.world.recording import EXIT_NO_SPACE, Recorder, StreamRecorder, recover_run, write_run
+from swarm.world.run_reader import load_run
+from swarm.world.stream import decode_tick, encode_tick, read_recording
 
 ROOT = Path(__file__).resolve().parent.parent
 FAULTS = ROOT / "scenarios" / "faults.toml"
@@ -91,9 +91,9 @@ def test_added_agents_are_columns_of_their_own(tmp_path):
 def test_a_file_cut_short_reads_up_to_its_tear(tmp_path, monkeypatch):
     """What a SIGKILL leaves: no footer, a torn last chunk. Every complete chunk is read,
     the rows are a prefix of the run, and recover_run makes a valid run directory."""
-    import world.stream
+    import swarm.world.stream
 
-    monkeypatch.setattr(world.stream, "FLUSH_PERIOD", -1.0)  # a chunk per tick, whatever the machine's speed
+    monkeypatch.setattr(swarm.world.stream, "FLUSH_PERIOD", -1.0)  # a chunk per tick, whatever the machine's speed
     s = load_scenario(CASE2)
     full = tmp_path / "full"
     full.mkdir()
@@ -161,7 +161,7 @@ def test_full_disk_is_one_line_and_leaves_no_half_file(tmp_path):
     before = {p.name: p.read_bytes() for p in done.iterdir()}
     code = ("import resource, signal, sys; signal.signal(signal.SIGXFSZ, signal.SIG_IGN); "
             "resource.setrlimit(resource.RLIMIT_FSIZE, (200_000, 200_000)); "
-            "from swarm.cli import main; sys.argv = ['swarm'] + sys.argv[1:]; main()")
+            "from swarm.cli.main import main; sys.argv = ['swarm'] + sys.argv[1:]; main()")
     out = tmp_path / "full"
     p = subprocess.run([sys.executable, "-c", code, "sim", str(CASE2), "--out", str(out), "--no-plots"],
                        capture_output=True, text=True, timeout=120, cwd=ROOT)
@@ -223,7 +223,7 @@ def test_full_disk_under_swarm_up(rt, tmp_path):
 
     code = ("import resource, signal, sys; signal.signal(signal.SIGXFSZ, signal.SIG_IGN); "
             "resource.setrlimit(resource.RLIMIT_FSIZE, (300_000, 300_000)); "
-            "from swarm.cli import main; sys.argv = ['swarm'] + sys.argv[1:]; main()")
+            "from swarm.cli.main import main; sys.argv = ['swarm'] + sys.argv[1:]; main()")
     out = tmp_path / "run"
     p = rt.tracker.spawn([sys.executable, "-c", code, "up", str(CASE2), "--out", str(out), "--no-plots",
                           "--clock", "lockstep"], "up")
@@ -242,7 +242,7 @@ def test_full_disk_under_swarm_up(rt, tmp_path):
 def test_agent_added_to_a_fixed_graph_run_keeps_the_results(tmp_path):
     """An agent added at run time is read back from the recording as the world added it
     (its spec checked by itself), and the results are written."""
-    from world.engine import Engine
+    from swarm.world.engine import Engine
 
     s = load_scenario(ROOT / "scenarios" / "case2-fixed.toml")
     eng = Engine(s, 5, recording=tmp_path / "recording.mcap")
@@ -257,8 +257,8 @@ def test_agent_added_to_a_fixed_graph_run_keeps_the_results(tmp_path):
 
 def test_a_fixed_graph_run_refuses_a_follower_without_follow():
     from swarm.contracts.wire import WireError
-    from world.core import WorldCore
-    from world.roster import new_agent_spec
+    from swarm.world.core import WorldCore
+    from swarm.world.roster import new_agent_spec
 
     core = WorldCore(load_scenario(ROOT / "scenarios" / "case2-fixed.toml"))
     with pytest.raises(WireError, match="needs --follow"):

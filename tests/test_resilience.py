@@ -46,7 +46,7 @@ from malformed import (
     _truth_bad,
 )
 from swarm.contracts import wire
-from swarm.graph import analyse
+from swarm.contracts.graph import analyse
 
 pytestmark = pytest.mark.slow
 

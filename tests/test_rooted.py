@@ -5,11 +5,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.brain import AgentBrain
+from swarm.agents.brain import AgentBrain
 from swarm.contracts.frames import Contact, SensorFrame
 from swarm.contracts.scenario import load_scenario
-from swarm.graph import analyse
-from swarm.sim import run_sim
+from swarm.contracts.graph import analyse
+from swarm.offline.sim import run_sim
 
 ROOTED = Path(__file__).resolve().parent.parent / "scenarios" / "rooted.toml"
 

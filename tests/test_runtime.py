@@ -261,7 +261,7 @@ def encode_truth(*a, **k):
     return orig(*a, **k)
 wire.encode_truth = encode_truth
 sys.argv = ["swarm"] + sys.argv[1:]
-from swarm.cli import main
+from swarm.cli.main import main
 main()
 """
 

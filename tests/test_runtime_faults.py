@@ -16,7 +16,7 @@ import pytest
 
 from runtime_helpers import (SCENARIOS, Runtime, agent_cmd, agent_info, check_time_column, events_of, has_started,
                              observe_world, replay_events, run_sim, start_ticking, start_up, swarm_cmd)
-from swarm.procs import wait_until
+from swarm.runtime.procs import wait_until
 
 pytestmark = pytest.mark.slow
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from swarm.cli import app
+from swarm.cli.main import app
 from swarm.contracts import scenario as scenario_module
 from swarm.contracts.scenario import Scenario, ScenarioError, load_scenario, parse_scenario
 from swarm.contracts.wire import MAX_AGENT_ID, MAX_AGENTS

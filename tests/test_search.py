@@ -13,15 +13,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.coast import Tracker
-from agents.search import SearchMemory, drift, radius
-from agents.selection import LOSS_CHANGES
-from swarm.batch import run_batch
+from swarm.agents.coast import Tracker
+from swarm.agents.search import SearchMemory, drift, radius
+from swarm.agents.selection import LOSS_CHANGES
+from swarm.offline.batch import run_batch
 from swarm.contracts.frames import Contact
 from swarm.contracts.scenario import load_scenario
-from swarm.study import SwarmSetting, random_swarm
-from world.kinematics import step_one
-from world.metrics import switch_ticks
+from swarm.study.swarms import SwarmSetting, random_swarm
+from swarm.world.kinematics import step_one
+from swarm.world.metrics import switch_ticks
 
 DT = 0.05
 

@@ -1,4 +1,4 @@
-"""world.sensing (who senses whom, frames) and agents.selection (out-neighbour choice)."""
+"""swarm.world.sensing (who senses whom, frames) and swarm.agents.selection (out-neighbour choice)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from agents.selection import nearest, select
-from world.sensing import Contact, build_frames, sensing_matrix
+from swarm.agents.selection import nearest, select
+from swarm.world.sensing import Contact, build_frames, sensing_matrix
 
 # Agent 0 at the origin heading +x; 1 ahead at 1 m, 2 to the left at 2 m, 3 behind at 3 m,
 # 4 ahead-right at 45 deg and sqrt(8) m.

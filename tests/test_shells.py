@@ -10,8 +10,8 @@ import zenoh
 from fakes import FakeQuery, FakeSession
 from swarm.contracts import wire
 from swarm.contracts.scenario import parse_scenario
-from world.engine import Engine
-from world.process import World, WorldConfig
+from swarm.world.engine import Engine
+from swarm.world.process import World, WorldConfig
 
 RUN = "shells"
 SCENARIO = {
@@ -130,7 +130,7 @@ def test_world_info_reports_expected_radius_through_the_chosen_graph():
 
 
 def test_agent_answers_its_frames_with_commands_and_counts_garbage():
-    from agents.node import AgentNode
+    from swarm.agents.node import AgentNode
 
     world, _ = open_world()
     reply = claim(world, 2)
@@ -187,7 +187,7 @@ def test_added_agents_take_reserved_ids_up_to_the_cap():
 def test_join_claims_are_rate_limited_per_agent_with_one_event_and_a_count():
     """A burst of claims on one agent's key, then one per s: that agent's flood does not
     use up another agent's claims."""
-    from world.joins import JOIN_BURST
+    from swarm.world.joins import JOIN_BURST
 
     world, _ = open_world()
     events = []
@@ -200,7 +200,7 @@ def test_join_claims_are_rate_limited_per_agent_with_one_event_and_a_count():
 
 
 def test_a_full_inbox_drops_commands_and_queries_but_never_liveliness(monkeypatch):
-    import world.fairness as inbox_mod
+    import swarm.world.fairness as inbox_mod
 
     monkeypatch.setattr(inbox_mod, "INBOX_MAX", 3)
     world, _ = open_world()
@@ -218,7 +218,7 @@ def test_a_full_inbox_drops_commands_and_queries_but_never_liveliness(monkeypatc
 def test_one_keys_flood_costs_no_other_agent_a_command():
     """Agent 2's command key flooded far past its share: every command of agent 1's gets in,
     agent 2's excess is dropped and counted to agent 2 (flooded_messages), one event."""
-    from world.fairness import PER_KEY_MAX
+    from swarm.world.fairness import PER_KEY_MAX
 
     world, _ = open_world()
     k1, k2 = join(world, 1), join(world, 2)
@@ -240,7 +240,7 @@ def test_one_keys_flood_costs_no_other_agent_a_command():
 def test_a_rogues_flood_on_an_agents_key_costs_that_agent_nothing():
     """Forged commands (no claim key) on agent 2's key far past its share: counted as rogue,
     never queued, and agent 2's own command still gets in."""
-    from world.fairness import PER_KEY_MAX
+    from swarm.world.fairness import PER_KEY_MAX
 
     world, _ = open_world()
     join(world, 1)
@@ -261,7 +261,7 @@ def test_a_rogues_flood_on_an_agents_key_costs_that_agent_nothing():
 def test_a_flapping_token_is_seen_at_its_latest_state_and_its_churn_is_capped():
     """100,000 toggles of agent 2's token while the world is busy: one inbox entry, the
     latest state; churn past CHURN_EVENTS is counted, not written."""
-    from world.roster import CHURN_EVENTS
+    from swarm.world.roster import CHURN_EVENTS
 
     world, _ = open_world()
     join(world, 1)
@@ -290,8 +290,8 @@ def test_a_law_from_the_join_reply_is_not_imported_unless_trusted(tmp_path, monk
 
     import pytest
 
-    from agents.joining import EXIT_REFUSED, AgentExit
-    from agents.node import AgentNode
+    from swarm.agents.joining import EXIT_REFUSED, AgentExit
+    from swarm.agents.node import AgentNode
 
     marker = tmp_path / "imported"
     (tmp_path / "evil_law.py").write_text(

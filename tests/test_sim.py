@@ -1,5 +1,5 @@
-"""The in-process engine (swarm.sim), its recording (world.recording), the world core
-(world.core) and the run metrics (world.metrics)."""
+"""The in-process engine (swarm.offline.sim), its recording (swarm.world.recording), the world core
+(swarm.world.core) and the run metrics (swarm.world.metrics)."""
 
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ import pytest
 
 from swarm.contracts.orbits import root_of, roots
 from swarm.contracts.scenario import load_scenario, parse_scenario
-from swarm.sim import run_sim
-from world.core import ACTIVE, COASTING, GONE, WorldCore
-from world.metrics import agent_metrics, angular_rate, converged, settling_time
-from world.recording import write_run
+from swarm.offline.sim import run_sim
+from swarm.world.core import ACTIVE, COASTING, GONE, WorldCore
+from swarm.world.metrics import agent_metrics, angular_rate, converged, settling_time
+from swarm.world.recording import write_run
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 KEYS = {"ids", "role", "speed", "orbit_radius", "target", "dt", "t", "x", "y", "heading", "u",
@@ -59,7 +59,7 @@ def test_recording_layout(base):
 
 
 def test_recorded_rows_are_consistent_with_kinematics(base):
-    from world.kinematics import step
+    from swarm.world.kinematics import step
 
     a = run_sim(parse_scenario(base), duration=1.0).recorder.arrays()
     for k in range(len(a["t"]) - 1):

@@ -11,12 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.spl_circle import spl_circle
-from swarm.batch import refusal
+from swarm.agents.spl_circle import spl_circle
+from swarm.offline.batch import refusal
 from swarm.contracts.frames import Contact
 from swarm.contracts.observation import Observation
 from swarm.contracts.scenario import load_scenario
-from swarm.sim import run_sim
+from swarm.offline.sim import run_sim
 
 SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "spl-splay.toml"
 V, R, N = 2.0, 10.0, 5
@@ -59,7 +59,7 @@ def test_it_is_a_leader_law():
 @pytest.mark.slow  # a whole run in-process: the long tier
 def test_swarm_sim_reaches_the_documented_equilibrium():
     s = load_scenario(SCENARIO)
-    assert s.law.leader == "agents.spl_circle:spl_circle" and all(a.role == "leader" for a in s.agents)
+    assert s.law.leader == "swarm.agents.spl_circle:spl_circle" and all(a.role == "leader" for a in s.agents)
     assert "leader law" in refusal(s)  # a law of one's own: per-agent engine only
     res = run_sim(s)
     a = res.recorder.arrays()

@@ -28,7 +28,7 @@ from runtime_helpers import (SCENARIOS, Runtime, agent_cmd, live_swarm, short_ru
 from swarm.contracts.runtime_sweep import sweep_stale
 from swarm.contracts.startup import ENV_READY_FD, READY, Announcer, ReadyWait
 from swarm.contracts.stop_signals import StopSignals
-from swarm.procs import wait_until
+from swarm.runtime.procs import wait_until
 
 REPO = Path(__file__).resolve().parents[1]
 EXIT_DEADLINE = 30.0  # s for a stopped process to exit: an outcome, not a timing
@@ -162,7 +162,7 @@ def test_killed_world_files_are_swept_by_swarm_runs(monkeypatch):
     them, and leaves those of a live world alone."""
     rt = short_runtime_dir()
     monkeypatch.setenv("SWARM_RUNTIME_DIR", rt)
-    from swarm.cli import app
+    from swarm.cli.main import app
 
     with world_process(rt, "dead") as (p, wait), world_process(rt, "alive") as (q, qwait):
         assert wait.wait(60) and qwait.wait(60)

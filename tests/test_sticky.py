@@ -15,13 +15,13 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from agents.brain import AgentBrain
-from agents.selection import HOLD_TICKS, LOSS_CHANGES, Sticky
+from swarm.agents.brain import AgentBrain
+from swarm.agents.selection import HOLD_TICKS, LOSS_CHANGES, Sticky
 from swarm.contracts.frames import Contact, SensorFrame
-from swarm.graph import analyse
-from swarm.sim import run_sim
-from swarm.study import SwarmSetting, random_swarm
-from world.metrics import switch_ticks
+from swarm.contracts.graph import analyse
+from swarm.offline.sim import run_sim
+from swarm.study.swarms import SwarmSetting, random_swarm
+from swarm.world.metrics import switch_ticks
 
 
 def C(i, r, hops):

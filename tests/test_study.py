@@ -14,10 +14,10 @@ import psutil
 import pytest
 from typer.testing import CliRunner
 
-from swarm.cli import app
-from swarm.procs import Group, wait_until
-from swarm.study import SwarmSetting, cut_off_at_start, random_swarm, summarise_swarms
-from swarm.study_gains import GainJob, run_gain
+from swarm.cli.main import app
+from swarm.runtime.procs import Group, wait_until
+from swarm.study.swarms import SwarmSetting, cut_off_at_start, random_swarm, summarise_swarms
+from swarm.study.gains import GainJob, run_gain
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -49,7 +49,7 @@ def test_swarms_study_compares_rules_on_the_same_swarms(tmp_path):
 @pytest.mark.slow  # a whole run in-process: the long tier
 def test_on_a_known_swarm_sticky_settles_where_rooted_chatters_and_nearest_cycles():
     # seed 0 of the default setting (10 agents, 2 leaders, unlimited sensing), 120 s
-    from swarm.study import run_swarm
+    from swarm.study.swarms import run_swarm
 
     base = dict(n=10, leaders=2, duration=120.0)
     sticky, rooted, nearest = (run_swarm((SwarmSetting(selection=r, **base), 0))
@@ -87,7 +87,7 @@ def test_gain_map_finds_where_the_law_settles():
 
 @pytest.mark.slow  # a whole run in-process
 def test_gain_map_batches_give_the_per_agent_rows():
-    from swarm.batch_study import gain_chunks, run_gain_chunk
+    from swarm.study.batch import gain_chunks, run_gain_chunk
 
     jobs = [GainJob(1.0, c2, q, k, duration=40.0) for c2 in (0.5, 3.0) for q in (0.6, 2.0) for k in range(2)]
     chunks = gain_chunks(jobs, workers=1)

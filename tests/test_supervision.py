@@ -18,7 +18,7 @@ import zenoh
 from fakes import FakeQuery, FakeSession
 from swarm.contracts import wire
 from swarm.contracts.lifeline import endpoint_refuses, exit_status
-from swarm.supervision import agent_exit, cause_of, is_crash, tail
+from swarm.runtime.supervision import agent_exit, cause_of, is_crash, tail
 from test_shells import RUN, join, open_world
 
 # -- classifying an exit ----------------------------------------------------------------------------
@@ -130,7 +130,7 @@ def test_a_report_on_a_live_agent_never_reaches_the_record(monkeypatch):
     """A crash reported for an agent that stays in the world is refused once the wait is
     over; a fault_done for a fault the clock is not waiting for is refused; neither report
     is accepted on the operator's admin key at all."""
-    import world.reports as inbox_mod
+    import swarm.world.reports as inbox_mod
 
     monkeypatch.setattr(inbox_mod, "EXIT_REPORT_WAIT", 0.0)
     world, _ = open_world()
@@ -160,10 +160,10 @@ def test_non_finite_law_output_is_counted_and_held(tmp_path, monkeypatch):
         "    calls.append(1)\n"
         "    return math.nan if len(calls) % 2 == 0 else 0.25\n")
     monkeypatch.syspath_prepend(str(tmp_path))
-    from agents.brain import AgentBrain
+    from swarm.agents.brain import AgentBrain
     from swarm.contracts.brain_config import BrainConf
     from swarm.contracts.scenario import parse_scenario
-    from world.engine import Engine
+    from swarm.world.engine import Engine
     from test_shells import SCENARIO
 
     sc = {**SCENARIO, "gains": {"c1": 1.0, "c2": 0.5, "law": "nanlaw_mod:law"},
@@ -178,7 +178,7 @@ def test_non_finite_law_output_is_counted_and_held(tmp_path, monkeypatch):
 
 
 def test_agent_status_carries_the_non_finite_count():
-    from agents.node import AgentNode
+    from swarm.agents.node import AgentNode
     from test_shells import claim
 
     world, _ = open_world()
@@ -197,7 +197,7 @@ def test_agent_status_carries_the_non_finite_count():
 
 
 def test_world_rides_out_its_own_stall():
-    from world import inbox
+    from swarm.world import inbox
 
     world, _ = open_world()
     join(world, 1)
@@ -218,7 +218,7 @@ def test_world_rides_out_its_own_stall():
 
 
 def test_deserted_run_ends_unless_a_restart_is_scripted(monkeypatch):
-    from world import clock
+    from swarm.world import clock
 
     world, _ = open_world()
     join(world, 1)
@@ -235,7 +235,7 @@ def test_deserted_run_ends_unless_a_restart_is_scripted(monkeypatch):
 
 
 def _link(tmp_path, endpoint, grace=0.2, wait_world=False):
-    from agents.world_link import WorldLink
+    from swarm.agents.world_link import WorldLink
 
     link = WorldLink(FakeSession(), RUN, 2, endpoint, grace, wait_world)
     link.still_there = lambda timeout: False  # the fake hub never answers
@@ -243,7 +243,7 @@ def _link(tmp_path, endpoint, grace=0.2, wait_world=False):
 
 
 def test_agent_exits_4_when_the_world_is_gone(tmp_path):
-    from agents.joining import AgentExit
+    from swarm.agents.joining import AgentExit
 
     link = _link(tmp_path, f"unixsock-stream/{tmp_path}/gone.sock")
     with pytest.raises(AgentExit) as e:
@@ -252,8 +252,8 @@ def test_agent_exits_4_when_the_world_is_gone(tmp_path):
 
 
 def test_agent_waits_for_a_silent_world_then_exits_5(tmp_path):
-    from agents.joining import AgentExit
-    from agents.world_link import RESUMED, WAITING
+    from swarm.agents.joining import AgentExit
+    from swarm.agents.world_link import RESUMED, WAITING
 
     path = tmp_path / "w.sock"
     srv = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)

@@ -10,7 +10,7 @@ import pytest
 
 from swarm.contracts import wire
 from swarm.contracts.transport import open_client, open_hub, query_statuses
-from swarm.procs import wait_until
+from swarm.runtime.procs import wait_until
 
 RUN = "two-sessions"
 

@@ -41,7 +41,7 @@ def test_frames_encoded_all_at_once_are_the_frames_built_one_by_one():
     that senses nobody, range-limited sensing."""
     import numpy as np
 
-    from world.sensing import build_frames, sensing_matrix
+    from swarm.world.sensing import build_frames, sensing_matrix
 
     rng = np.random.default_rng(5)
     n = 9
@@ -70,7 +70,7 @@ def test_frames_built_pair_by_pair_are_the_matrix_frames(sense_range, fov):
     and the field of view to the bit, absent agents, an agent that senses nobody."""
     import numpy as np
 
-    from world.sensing import encode_frames_pairwise, sensing_matrix
+    from swarm.world.sensing import encode_frames_pairwise, sensing_matrix
 
     for seed in range(40):
         rng = np.random.default_rng(seed)

@@ -9,12 +9,12 @@ import sys
 
 import pytest
 
-from world.memory import Trimmer
+from swarm.world.memory import Trimmer
 
 
 @pytest.mark.skipif(platform.libc_ver()[0] != "glibc", reason="glibc's mallopt and malloc_trim only")
 def test_arenas_capped_in_a_fresh_process():
-    code = "from world.memory import limit_arenas; print(limit_arenas())"
+    code = "from swarm.world.memory import limit_arenas; print(limit_arenas())"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "True"
 

@@ -108,7 +108,7 @@ def test_an_agent_behind_its_host_router_is_confined_at_both_routers(layout):
 @pytest.fixture
 def swarm_layout(tmp_path, monkeypatch):
     """The layout as `swarm world` and `swarm host` make it (swarm/contracts/transport.py,
-    access.py, swarm/host.py's settings): a hub with the run's identities (agents 1-4 and
+    access.py, swarm/runtime/host.py's settings): a hub with the run's identities (agents 1-4 and
     `host`), two host routers connected as `host` (a: agents 1, 2; b: agents 3, 4)."""
     import zenoh
 

@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from swarm.contracts.frames import Contact
-from world.kinematics import step, wrap
+from swarm.world.kinematics import step, wrap
 
 NONE = -1
 
@@ -27,7 +27,7 @@ def _take(a: np.ndarray, j: np.ndarray) -> np.ndarray:
 
 
 def sensing_matrices(x, y, heading, sense_range, fov, fov_on):
-    """world.sensing.sensing_matrix for M members with everybody present: (S, range),
+    """swarm.world.sensing.sensing_matrix for M members with everybody present: (S, range),
     both (M, N, N); sense_range (M,) (inf: unlimited), fov (M,) applied where fov_on."""
     dx = x[:, None, :] - x[:, :, None]
     dy = y[:, None, :] - y[:, :, None]

@@ -20,9 +20,9 @@ import time
 from swarm.contracts import wire
 from swarm.contracts.lifeline import tie_to_launcher
 from swarm.contracts.transport import answer
-from world.core import ACTIVE
-from world.faults import fault_event
-from world.memory import Trimmer
+from swarm.world.core import ACTIVE
+from swarm.world.faults import fault_event
+from swarm.world.memory import Trimmer
 
 DESERTED_GRACE = 5.0  # s of wall time a started run may go on with no agent at all
 STALL_GRACE = 3.0  # s the agents get to answer after a stall of the world (their links come back in ~0.5 s)

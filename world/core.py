@@ -21,8 +21,8 @@ import math
 import numpy as np
 
 from swarm.contracts.scenario import Scenario
-from world.kinematics import step, step_one
-from world.sensing import SensorFrame, build_frames, sensing_matrix
+from swarm.world.kinematics import step, step_one
+from swarm.world.sensing import SensorFrame, build_frames, sensing_matrix
 
 ACTIVE, COASTING, GONE = "active", "coasting", "gone"
 STEP_ONE_BY_ONE = 32  # agents: up to this many, `step` goes agent by agent (world/kinematics.py)

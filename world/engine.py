@@ -5,7 +5,7 @@ events -> record -> integrate.
 plan, each agent's chosen out-neighbour, the events and the recording. A shell decides
 only how frames reach the agents and how their commands come back:
 
-- `swarm sim` (swarm/sim.py): in-process `AgentBrain`s, called in scenario order;
+- `swarm sim` (swarm/offline/sim.py): in-process `AgentBrain`s, called in scenario order;
 - the world process (world/process.py): agent processes over zenoh, with a lockstep
   deadline or the wall clock.
 
@@ -26,9 +26,9 @@ import numpy as np
 
 from swarm.contracts.frames import SensorFrame
 from swarm.contracts.scenario import Scenario
-from world.core import ACTIVE, WorldCore
-from world.faults import FaultPlan, fault_event
-from world.recording import Recorder, RunResult, StreamRecorder
+from swarm.world.core import ACTIVE, WorldCore
+from swarm.world.faults import FaultPlan, fault_event
+from swarm.world.recording import Recorder, RunResult, StreamRecorder
 
 # What became of a command (`Engine.command`).
 LATCHED, LOST, REFUSED = "latched", "lost", "refused"

@@ -15,7 +15,7 @@ from __future__ import annotations
 import threading
 
 from swarm.contracts import wire
-from world.core import ACTIVE
+from swarm.world.core import ACTIVE
 
 INBOX_MAX = 100_000  # messages waiting for the main thread; commands and queries past it are dropped
 PER_KEY_MAX = 256  # messages waiting on one key (a command every tick needs 1 to 2)

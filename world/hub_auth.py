@@ -4,7 +4,7 @@ removed when it ends, and the hub's rules built from them.
 The world writes `<runtime dir>/<run>.cred` (mode 0600: the run's secret, endpoint, its
 pid, the agent ids the hub knows and, for a `tls/` endpoint, the certificate authority
 made for the run). Every local process of the same user finds it there; other machines
-get one identity each from `swarm credentials` (swarm/access_cli.py).
+get one identity each from `swarm credentials` (swarm/cli/access.py).
 """
 
 from __future__ import annotations

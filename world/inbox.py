@@ -30,12 +30,12 @@ import time
 
 from swarm.contracts import wire
 from swarm.contracts.transport import answer
-from world.core import ACTIVE
-from world.engine import LOST, REFUSED
-from world.fairness import Fairness
-from world.report import run_info
-from world.reports import Reports
-from world.roster import CHURN_EVENTS
+from swarm.world.core import ACTIVE
+from swarm.world.engine import LOST, REFUSED
+from swarm.world.fairness import Fairness
+from swarm.world.report import run_info
+from swarm.world.reports import Reports
+from swarm.world.roster import CHURN_EVENTS
 
 STALL_S = 0.8  # s the world's main thread may go without reaching its inbox (the link lease is 1 s)
 REJOIN_WAIT = 2.0  # s a token lost just after a stall of the world has to come back

@@ -16,7 +16,7 @@ import time
 from swarm.contracts import wire
 from swarm.contracts.brain_config import BrainConf, LawConf
 from swarm.contracts.transport import answer
-from world.roster import AgentBook, admit, new_agent_spec
+from swarm.world.roster import AgentBook, admit, new_agent_spec
 
 # Join claims are limited per agent id (the hub lets agent k claim on its own key only, so
 # one agent cannot use up another's): a burst, then a claim per s. Keys of ids the run

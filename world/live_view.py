@@ -8,7 +8,7 @@ it serves exactly the recording's channels, as they are logged, with nothing log
 draw) is left out. Without --foxglove this module is not imported and nothing runs.
 
 `swarm watch --foxglove` serves the same channels from an observer of a live run
-(swarm/watch_foxglove.py), with `serve` on a context of its own.
+(swarm/live/foxglove.py), with `serve` on a context of its own.
 """
 
 from __future__ import annotations

@@ -24,10 +24,10 @@ from swarm.contracts.runtime_sweep import sweep_stale, unix_socket_answers
 from swarm.contracts.startup import Announcer
 from swarm.contracts.stop_signals import StopSignals
 from swarm.contracts.transport import runtime_dir, socket_path
-from world.hub_auth import forget_run, run_auth
-from world.memory import limit_arenas
-from world.process import World, WorldConfig
-from world.recording import EXIT_NO_SPACE, RecordingError
+from swarm.world.hub_auth import forget_run, run_auth
+from swarm.world.memory import limit_arenas
+from swarm.world.process import World, WorldConfig
+from swarm.world.recording import EXIT_NO_SPACE, RecordingError
 
 
 class Stop(BaseException):
@@ -92,7 +92,7 @@ def _run_world(cfg: WorldConfig, stops: StopSignals, tell: Announcer) -> int:
     live = None  # the --foxglove server (world/live_view.py)
     try:
         if cfg.foxglove is not None:  # before listening: a port in use stops the run before it starts
-            from world.live_view import LiveViewError, start_live_view
+            from swarm.world.live_view import LiveViewError, start_live_view
 
             try:
                 live = start_live_view(world.engine.rec.writer, cfg.run, *cfg.foxglove)
@@ -134,7 +134,7 @@ def _serve(world: World, cfg: WorldConfig, live, stops: StopSignals, tell: Annou
         tell.ready()
         if cfg.progress:
             if live is not None:
-                from world.live_view import open_hint
+                from swarm.world.live_view import open_hint
 
                 print(f"[world] {open_hint(*cfg.foxglove)}", file=sys.stderr, flush=True)
             print(f"[world] run {cfg.run} listening on {cfg.listen}", file=sys.stderr, flush=True)

@@ -26,13 +26,13 @@ import numpy as np
 from swarm.contracts import wire
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.transport import HubAuth, open_hub, query_statuses
-from world.clock import Clock
-from world.engine import Engine
-from world.inbox import Inbox
-from world.joins import Joins, TokenBucket
-from world.recording import RECORDING_FILE, DeferredRecorder, RecordingError, write_run
-from world.roster import AgentBook, agent_figures
-from world.sensing import encode_frames_pairwise
+from swarm.world.clock import Clock
+from swarm.world.engine import Engine
+from swarm.world.inbox import Inbox
+from swarm.world.joins import Joins, TokenBucket
+from swarm.world.recording import RECORDING_FILE, DeferredRecorder, RecordingError, write_run
+from swarm.world.roster import AgentBook, agent_figures
+from swarm.world.sensing import encode_frames_pairwise
 
 FRAMES_PAIRWISE = 8  # agents: up to this many, frames are built pair by pair (world/sensing.py)
 TRUTH_PERIOD = 0.02  # s of wall time between ground-truth messages (observers, not the recording)

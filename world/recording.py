@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from swarm.contracts.scenario import Scenario
-from world.metrics import agent_metrics, converged, recovery, relative_errors, switch_ticks
-from world.stream import RECORDING_FILE, Recording, RecordingError, StreamWriter, read_recording
+from swarm.world.metrics import agent_metrics, converged, recovery, relative_errors, switch_ticks
+from swarm.world.stream import RECORDING_FILE, Recording, RecordingError, StreamWriter, read_recording
 
 TRAJECTORY_FILE = "trajectory.npz"
 SUMMARY_FILE = "summary.json"

@@ -11,8 +11,8 @@ import time
 import numpy as np
 
 from swarm.contracts.orbits import expected_radius, root_of
-from world.core import ACTIVE
-from world.engine import Engine
+from swarm.world.core import ACTIVE
+from swarm.world.engine import Engine
 
 
 def run_info(engine: Engine, books: dict, header: dict, sensing: bool = False) -> dict:

@@ -13,7 +13,7 @@ import time
 from swarm.contracts import wire
 from swarm.contracts.lifeline import exit_status
 from swarm.contracts.transport import answer
-from world.core import ACTIVE
+from swarm.world.core import ACTIVE
 
 EXIT_REPORT_WAIT = 10.0  # s an agent_exit report waits for its agent to leave the world
 

@@ -13,7 +13,7 @@ import secrets
 from dataclasses import dataclass
 
 from swarm.contracts import wire
-from world.core import ACTIVE, WorldCore
+from swarm.world.core import ACTIVE, WorldCore
 
 CLAIM_TTL = 10.0  # s: an accepted join claim waits this long for the agent's token
 CHURN_EVENTS = 500  # join/rejoin/drop events written per agent; later ones are counted only

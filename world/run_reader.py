@@ -9,6 +9,8 @@ file (swarm.plots re-exports it as `PlotError`).
 
 from __future__ import annotations
 
+from swarm.contracts.vocabulary import Coded, ExitCode
+
 import json
 import math
 from dataclasses import dataclass, field
@@ -18,8 +20,8 @@ from typing import Any
 import numpy as np
 
 from swarm.contracts.orbits import root_of
-from world.metrics import switch_ticks
-from world.recording import SUMMARY_FILE, TRAJECTORY_FILE
+from swarm.world.metrics import switch_ticks
+from swarm.world.recording import SUMMARY_FILE, TRAJECTORY_FILE
 
 __all__ = [
     "RunReadError", "RunData", "RunEvent", "load_run", "final_graph", "switch_count", "switch_counts",
@@ -33,8 +35,10 @@ REQUIRED_KEYS = ("ids", "role", "target", "t", "x", "y", "u", "out", "alive")
 EVENT_KINDS = ("drop", "rejoin", "fault")
 
 
-class RunReadError(Exception):
+class RunReadError(Coded):
     """A run directory cannot be read; the message names the offending file."""
+
+    exit_code = ExitCode.FAILED
 
 
 @dataclass
@@ -156,7 +160,7 @@ def last_alive(alive_col: np.ndarray) -> int | None:
 
 
 def switch_counts(run: RunData) -> list[int]:
-    """Per column: out-neighbour changes while alive (see `world.metrics.switch_ticks`)."""
+    """Per column: out-neighbour changes while alive (see `swarm.world.metrics.switch_ticks`)."""
     return [len(k) for k in switch_ticks(run.out, run.alive)]
 
 
@@ -191,7 +195,7 @@ def final_graph(run: RunData) -> tuple[dict[int, int], set[int], set[int]]:
 
 
 def expected_radii(run: RunData) -> list[float]:
-    """Distinct expected orbit radii: summary's expected_radius (world.metrics computes it
+    """Distinct expected orbit radii: summary's expected_radius (swarm.world.metrics computes it
     with `swarm.contracts.orbits.expected_radius`), else the leaders' orbit_radius."""
     radii: list[float] = []
     agents = run.summary.get("agents")

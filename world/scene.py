@@ -1,6 +1,6 @@
 """What Foxglove draws and plots of a run, built from one tick's arrays, and the channels it is
 logged on (`SceneChannels`): world/stream.py logs it to the recording (and so, with --foxglove,
-to the world's live view, world/live_view.py); `swarm watch --foxglove` (swarm/watch_foxglove.py)
+to the world's live view, world/live_view.py); `swarm watch --foxglove` (swarm/live/foxglove.py)
 builds the same from the ground truth an observer of a live run receives.
 
 - `/swarm/scene`  foxglove.SceneUpdate: agents as arrows (leaders red, followers blue),

@@ -13,7 +13,7 @@ import numpy as np
 from swarm.contracts import wire
 from swarm.contracts.frames import Contact, SensorFrame
 from swarm.contracts.orbits import wrap as wrap_one
-from world.kinematics import wrap
+from swarm.world.kinematics import wrap
 
 __all__ = ["Contact", "SensorFrame", "sensing_matrix", "build_frames", "encode_frames_pairwise"]
 

@@ -29,6 +29,8 @@ kept but the chunk being filled.
 
 from __future__ import annotations
 
+from swarm.contracts.vocabulary import Coded, ExitCode
+
 import json
 import time
 from dataclasses import dataclass, field
@@ -38,7 +40,7 @@ import numpy as np
 
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.scenario_tables import AgentSpec
-from world.scene import SCENE_RATE, SceneChannels, log_time
+from swarm.world.scene import SCENE_RATE, SceneChannels, log_time
 
 RECORDING_FILE = "recording.mcap"
 TICK_ENCODING = "swarm-tick-v1"
@@ -46,8 +48,10 @@ FLUSH_PERIOD = 0.5  # s of wall time between flushes (a SIGKILL loses at most ab
 _HEAD = np.dtype([("tick", "<i8"), ("time", "<f8"), ("n", "<i8"), ("missed", "<i8")])
 
 
-class RecordingError(Exception):
+class RecordingError(Coded):
     """The recording cannot be written (disk full, file too large, I/O error)."""
+
+    exit_code = ExitCode.NO_SPACE
 
 
 def encode_tick(tick: int, t: float, ids, x, y, heading, u, out, alive, missed: int) -> bytes:

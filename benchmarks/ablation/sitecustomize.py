@@ -32,7 +32,7 @@ TICK_AT = struct.calcsize("<BBBBi")  # where a frame's tick is (wire.SENSE_HEAD:
 
 
 def _null_agents() -> None:
-    from agents.node import AgentNode
+    from swarm.agents.node import AgentNode
     from swarm.contracts import wire
 
     tick_of = struct.Struct("<q").unpack_from
@@ -51,7 +51,7 @@ def _null_agents() -> None:
 
 
 def _frozen_world() -> None:
-    from world.process import World
+    from swarm.world.process import World
 
     patch = struct.Struct("<qd").pack_into
     real_publish = World.publish_frames
@@ -92,7 +92,7 @@ class _Capture:
 
 
 def _no_recording() -> None:
-    from world.recording import DeferredRecorder
+    from swarm.world.recording import DeferredRecorder
 
     DeferredRecorder.record = lambda self, *args, **kwargs: None
 

@@ -16,6 +16,8 @@ resolves a name or touches the network.
 
 from __future__ import annotations
 
+from swarm.contracts.vocabulary import Coded, ExitCode
+
 import re
 
 KINDS = ("tcp", "tls", "unixsock-stream")
@@ -23,8 +25,10 @@ FORMS = "tcp/HOST:PORT, tls/HOST:PORT or unixsock-stream/PATH"
 _HOST = re.compile(r"^(\[[0-9A-Fa-f:.%\w]+\]|[A-Za-z0-9._-]+)$")
 
 
-class EndpointError(ValueError):
+class EndpointError(Coded, ValueError):
     """A string that is not an endpoint; the message is one line naming it and why."""
+
+    exit_code = ExitCode.USAGE
 
 
 def check_endpoint(endpoint: str, listen: bool = False, what: str = "") -> str:

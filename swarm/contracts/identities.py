@@ -19,7 +19,7 @@ import re
 
 OPERATOR = "operator"
 WORLD = "world"
-HOST = "host"  # the router of an agent host (swarm/host.py)
+HOST = "host"  # the router of an agent host (swarm/runtime/host.py)
 SUPERVISOR = "supervisor"  # the launcher (`swarm up`) alone: reports agent exits and faults done
 # The supervisor's password: made by the launcher, given to its world in this environment
 # variable, never written to a file (so no credentials file, and no operator, holds it).

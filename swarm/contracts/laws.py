@@ -34,11 +34,11 @@ Law = Callable[..., float]  # [law] follower / leader: law(obs) -> u
 
 GAINS, FOLLOWER, LEADER = "gains", "follower", "leader"  # where a law is named: its kind
 # Registered names -> "module:function", per kind.
-LAW_NAMES: dict[str, str] = {"bearing": "agents.laws:bearing_law"}
+LAW_NAMES: dict[str, str] = {"bearing": "swarm.agents.laws:bearing_law"}
 REGISTRY: dict[str, dict[str, str]] = {
     GAINS: LAW_NAMES,
-    FOLLOWER: {"bearing": "agents.laws:bearing"},
-    LEADER: {"cc": "agents.leader:cc_law"},
+    FOLLOWER: {"bearing": "swarm.agents.laws:bearing"},
+    LEADER: {"cc": "swarm.agents.leader:cc_law"},
 }
 DEFAULT = {FOLLOWER: "bearing", LEADER: "cc", GAINS: "bearing"}
 MAX_LAW_PARAMS = 64  # entries of [law.params]

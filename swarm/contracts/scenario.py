@@ -10,6 +10,8 @@ large for memory (see `Scenario._limits`).
 
 from __future__ import annotations
 
+from swarm.contracts.vocabulary import Coded, ExitCode
+
 import re
 import tomllib
 from pathlib import Path
@@ -184,8 +186,10 @@ def _at_most(m: int) -> str:
     return f"{m} or fewer" if m > 0 else f"{m}"
 
 
-class ScenarioError(Exception):
+class ScenarioError(Coded):
     """A scenario that cannot be used; the message names the file and the field."""
+
+    exit_code = ExitCode.USAGE
 
 
 def _loc(loc: tuple) -> str:

@@ -1,6 +1,6 @@
 """The world's start-up, told to the launcher on a pipe: what it is doing, and when it listens.
 
-The launcher (swarm/launcher.py) makes a pipe, hands the world its writing end (the fd
+The launcher (swarm/runtime/launcher.py) makes a pipe, hands the world its writing end (the fd
 number in $SWARM_READY_FD) and reads the other. The world writes one word a line as it
 goes (`STEPS`), `ready` once its hub listens, and closes its end; its exit closes it too.
 So the launcher waits for exactly what it needs: `ready`, or the end of the pipe (the

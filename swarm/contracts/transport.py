@@ -208,7 +208,7 @@ def local_door(run: str) -> str:
 
 def host_router_config(listen: str, upstream: str, run: str, identity: tuple[str, str] | None = None,
                        dictionary: Path | None = None, acl: dict | None = None, tls: dict | None = None):
-    """An agent host's router (swarm/host.py): listens on `listen` for its own agents and
+    """An agent host's router (swarm/runtime/host.py): listens on `listen` for its own agents and
     connects to the run's hub at `upstream`, as `identity` (the run's `host`). With
     `dictionary` and `acl`, only its agents get in, each confined as at the hub."""
     settings = {

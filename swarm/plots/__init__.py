@@ -35,8 +35,8 @@ matplotlib.use("Agg")
 from swarm.plots.animate import ANIMATION_FILE, render_animation  # noqa: E402
 from swarm.plots.render import FORMATS, PLOT_FILES, check_formats, render_plots  # noqa: E402
 from swarm.plots.style import MAX_POINTS  # noqa: E402
-from world.run_reader import RunData, final_graph, load_run, switch_count  # noqa: E402
-from world.run_reader import RunReadError as PlotError  # noqa: E402
+from swarm.world.run_reader import RunData, final_graph, load_run, switch_count  # noqa: E402
+from swarm.world.run_reader import RunReadError as PlotError  # noqa: E402
 
 __all__ = ["PlotError", "RunData", "load_run", "render_plots", "render_animation", "final_graph", "switch_count",
            "MAX_POINTS", "PLOT_FILES", "FORMATS", "ANIMATION_FILE", "check_formats"]

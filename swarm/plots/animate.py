@@ -28,8 +28,8 @@ from PIL import Image
 from swarm.plots.context import GROUP_ABOVE, Ctx, make_context
 from swarm.plots.palette import LEADER_MARKER
 from swarm.plots.style import DEAD_COLOUR, EXPECTED_COLOUR, TARGET_COLOUR, size_for
-from world.metrics import switch_ticks
-from world.run_reader import expected_radii, load_run
+from swarm.world.metrics import switch_ticks
+from swarm.world.run_reader import expected_radii, load_run
 
 ANIMATION_FILE = "animation.gif"
 MAX_FRAMES = 200

@@ -19,7 +19,7 @@ from matplotlib.transforms import Transform, offset_copy
 
 from swarm.plots.palette import Looks
 from swarm.plots.placement import axes_size_pt, stack_offsets
-from world.run_reader import RunData
+from swarm.world.run_reader import RunData
 
 START_S = 5.0  # "the first seconds": this long, or the first START_FRACTION of a short run
 START_FRACTION = 0.5

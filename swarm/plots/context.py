@@ -9,8 +9,8 @@ import numpy as np
 
 from swarm.plots.palette import Looks, agent_looks
 from swarm.plots.style import MAX_POINTS, decimation_rows
-from swarm.run_csv import expected_by_column
-from world.run_reader import RunData, RunEvent, run_events
+from swarm.offline.csv_export import expected_by_column
+from swarm.world.run_reader import RunData, RunEvent, run_events
 
 #: Above this many agents the time series are drawn as small multiples, a panel per tree.
 GROUP_ABOVE = 12

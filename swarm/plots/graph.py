@@ -16,7 +16,7 @@ from matplotlib.patches import FancyArrowPatch
 
 from swarm.plots.context import Ctx
 from swarm.plots.style import DEAD_COLOUR, FLAG_COLOUR, size_for
-from world.run_reader import final_graph, switch_count, switch_counts
+from swarm.world.run_reader import final_graph, switch_count, switch_counts
 
 MAX_LISTED = 12  # ids listed in the graph's 'no path to a leader' note
 

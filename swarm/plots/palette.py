@@ -18,7 +18,7 @@ import matplotlib.pyplot as plt
 from matplotlib.lines import Line2D
 
 from swarm.contracts.orbits import root_of
-from world.run_reader import RunData, final_graph
+from swarm.world.run_reader import RunData, final_graph
 
 LEADER_MARKER = "*"
 FOLLOWER_MARKER = "o"

@@ -18,11 +18,11 @@ from swarm.plots.style import DPI, MAX_POINTS
 from swarm.plots.timeseries import panel_control, panel_distance
 from swarm.plots.trajectories import figure_size as trajectories_size
 from swarm.plots.trajectories import panel_trajectories
-from swarm.results import PLOT_NAMES
-from world.run_reader import RunData, load_run
+from swarm.offline.results import PLOT_NAMES
+from swarm.world.run_reader import RunData, load_run
 
 #: Files written by `render_plots` (as PNG), in the order they are returned.
-PLOT_FILES = PLOT_NAMES  # the list lives with the rest of a run directory's layout (swarm/results.py)
+PLOT_FILES = PLOT_NAMES  # the list lives with the rest of a run directory's layout (swarm/offline/results.py)
 
 #: The formats `render_plots` can write, by file suffix.
 FORMATS = ("png", "pdf", "svg")

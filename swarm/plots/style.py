@@ -14,7 +14,7 @@ from matplotlib.axes import Axes
 from matplotlib.lines import Line2D
 from matplotlib.transforms import offset_copy
 
-from world.run_reader import RunData
+from swarm.world.run_reader import RunData
 
 #: Upper bound on the number of points drawn per line.
 MAX_POINTS = 4000

@@ -15,8 +15,8 @@ from swarm.plots.clipping import ControlRange, control_range, mark_clips
 from swarm.plots.context import Ctx
 from swarm.plots.placement import axes_size_pt, spread_1d, stack_offsets
 from swarm.plots.style import DEAD_COLOUR, EVENT_COLOURS, EXPECTED_COLOUR, envelope, key_legend, size_for, split_alive
-from world.metrics import switch_ticks
-from world.run_reader import RunEvent, first_alive
+from swarm.world.metrics import switch_ticks
+from swarm.world.run_reader import RunEvent, first_alive
 
 MAX_EVENT_LABELS = 30
 MAX_SWITCH_MARKS = 2000  # switch markers drawn on the distance plot

@@ -15,7 +15,7 @@ from swarm.plots.context import GROUP_ABOVE, Ctx
 from swarm.plots.palette import FOLLOWER_MARKER, LEADER_MARKER, tree_legend_handles
 from swarm.plots.placement import axes_size_pt, ha_va, place_point_labels
 from swarm.plots.style import DEAD_COLOUR, EXPECTED_COLOUR, TARGET_COLOUR, key_legend, size_for, split_alive
-from world.run_reader import expected_radii, first_alive, last_alive
+from swarm.world.run_reader import expected_radii, first_alive, last_alive
 
 
 def final_position(ctx: Ctx, j: int) -> tuple[float, float] | None:

@@ -1,0 +1,235 @@
+"""`swarm.connect(...)` and `swarm.runs(...)`: a live run from Python, as the live commands
+see it (`swarm agents / graph / pause / resume / kill / spawn / runs / watch` are made of
+these; docs/cli.md has the shapes of what they return).
+
+    with swarm.connect() as live:               # the only local run (or run=ID, connect=EP, credentials=FILE)
+        rows = live.agents()                    # `swarm agents --json`'s rows
+        g = live.graph()                        # `swarm graph --json`'s document
+        live.pause(); live.resume()             # the tick the world stopped / went on at
+        live.kill(3)                            # SIGKILL, then the tick the world dropped it at
+
+Everything goes over zenoh (swarm/live/client.py), so a run on another machine works the same
+with its credentials. What cannot be done raises one of swarm/contracts/errors.py's classes, one
+line each: `NoRunError` (no run, or its world stopped answering), `LiveError` (an unknown
+agent, a spawned agent that did not join...), `UsageError` (a bad argument).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Iterable
+
+from swarm.api.record import Record
+from swarm.live.client import talking
+from swarm.contracts.errors import NoRunError, StoppedAnswering, UsageError
+
+__all__ = ["Live", "LiveState", "connect", "runs"]
+
+ENV_RUN = "SWARM_RUN"  # the default run id of swarm.connect and the live commands
+ENV_CONNECT = "SWARM_CONNECT"  # their default endpoint
+
+
+def _env(value: str | None, name: str) -> str | None:
+    """`value`, else the variable `name` (an empty one counts as unset)."""
+    return value if value is not None else (os.environ.get(name) or None)
+
+
+def _endpoint(value: str | None) -> str | None:
+    """`connect=` (else $SWARM_CONNECT), checked: UsageError "not an endpoint: ..." (one line)."""
+    from swarm.contracts.endpoints import EndpointError, check_endpoint
+
+    ep = _env(value, ENV_CONNECT)
+    try:
+        return None if ep is None else check_endpoint(ep, what="connect")
+    except EndpointError as e:
+        raise UsageError(str(e)) from None
+
+
+class LiveState(Record):
+    """One reading of a live run: `tick`, `time`, `started`, `paused`, `agents` (by int id:
+    role, alive, x, y, heading, out, root, hops, radial_error...: the rows of `swarm
+    agents`), `graph` (`swarm graph --json`'s document) and `info` (the world's as it came)."""
+
+    @property
+    def poses(self) -> dict[int, tuple[float, float, float]]:
+        """(x, y, heading) of every agent, by id."""
+        return {aid: (a["x"], a["y"], a["heading"]) for aid, a in self.agents.items()}
+
+
+class Live:
+    """An open session to one live run (`swarm.connect`); close it, or use it in a `with`
+    block. `run` and `endpoint` say which run it is."""
+
+    def __init__(self, lr):
+        self._lr = lr  # a swarm.live.client.LiveRun, open
+        self._patience = None
+
+    @property
+    def run(self) -> str:
+        return self._lr.ref.run
+
+    @property
+    def endpoint(self) -> str:
+        return self._lr.ref.endpoint
+
+    @property
+    def ref(self):
+        """The run's `swarm.live.client.RunRef` (run id, endpoint, credentials)."""
+        return self._lr.ref
+
+    def close(self) -> None:
+        self._lr.__exit__(None, None, None)
+
+    def __enter__(self) -> "Live":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"Live(run {self.run!r} on {self.endpoint})"
+
+    # -- reading ----------------------------------------------------------------------------------
+    def info(self, sensing: bool = False) -> dict:
+        """The world's info: tick, clock, paused, and per agent pose, state, out, errors...
+        (`sensing`: who senses whom too)."""
+        with talking():
+            return self._lr.info(sensing=sensing)
+
+    def statuses(self, expected: Iterable[int] | None = None) -> dict[int, dict]:
+        """Each live agent's own status by id (ends once every id of `expected` answered)."""
+        with talking():
+            return self._lr.statuses(expected)
+
+    def snapshot(self, sensing: bool = False) -> dict:
+        """{"info": the world's info, "agents": the merged rows}, read now (swarm/live/data.py)."""
+        from swarm.live.data import snapshot
+
+        with talking():
+            return snapshot(self._lr, sensing)
+
+    def agents(self) -> list[dict]:
+        """One row per agent, sorted by id: `swarm agents --json`'s `agents`."""
+        return self.snapshot()["agents"]
+
+    def graph(self, sensing: bool = False) -> dict:
+        """The communication graph: `swarm graph --json`'s document."""
+        from swarm.live.data import graph_of
+
+        return graph_of(self.snapshot(sensing), sensing)
+
+    def state(self) -> LiveState:
+        """The live run now, as a `LiveState` (agents, poses, graph)."""
+        from swarm.live.data import graph_of
+
+        snap = self.snapshot()
+        info = snap["info"]
+        return LiveState({"run": info.get("run"), "tick": info.get("tick"), "time": info.get("time"),
+                          "started": info.get("started"), "paused": info.get("paused"),
+                          "agents": {int(r["id"]): r for r in snap["agents"]}, "graph": graph_of(snap),
+                          "info": info})
+
+    def again(self, read, last):
+        """`read()` of a watching loop (`swarm watch`, `swarm graph --watch`): its value, or
+        `last` while the world does not answer; NoRunError once the world has ended for sure
+        (its end notice, its endpoint refusing connections), StoppedAnswering (a NoRunError)
+        after several failed reads over several seconds of a world that has not ended
+        (`swarm.live.client.Patience`)."""
+        from swarm.live.client import ENDED_SILENT_S, Patience
+
+        if self._patience is None:
+            self._patience = Patience(self._lr)
+        try:
+            value = read()
+        except NoRunError:
+            if not self._patience.ended():
+                return last
+            if self._patience.silent:
+                raise StoppedAnswering(f"the world of run {self.run} stopped answering for {ENDED_SILENT_S:g} s "
+                                       "or more without ending (stalled, starved, or cut off from here)") from None
+            raise
+        self._patience.answered()
+        return value
+
+    # -- acting -----------------------------------------------------------------------------------
+    def admin(self, cmd: str, by: str = "swarm cli") -> dict:
+        """The world's reply to admin request `cmd` (NoRunError with the world's error if refused)."""
+        with talking():
+            return self._lr.admin(cmd, by=by)
+
+    def pause(self) -> int:
+        """Hold the world's clock; the tick it stopped at (no error if paused already)."""
+        return self.admin("pause").get("tick")
+
+    def resume(self) -> int:
+        """Restart the world's clock; the tick it goes on from (no error if it runs)."""
+        return self.admin("resume").get("tick")
+
+    def signal(self, agent_id: int, signal: str = "KILL"):
+        """Send `signal` (KILL, TERM, STOP, CONT) to agent `agent_id`'s process, without
+        waiting: a `swarm.live.control.Signalled` (`drops`: whether the world is to drop it)."""
+        from swarm.live.control import signal_agent
+
+        with talking():
+            return signal_agent(self._lr, agent_id, signal)
+
+    def wait_dropped(self, done, timeout: float | None = None) -> int:
+        """The tick the world dropped the agent `done` (from `signal`) at; LiveError after `timeout` s."""
+        from swarm.live.control import DROP_DEADLINE, wait_dropped
+
+        with talking():
+            return wait_dropped(self._lr, done, DROP_DEADLINE if timeout is None else timeout)
+
+    def kill(self, agent_id: int, signal: str = "KILL") -> int | None:
+        """`signal`, then the tick the world dropped the agent at (None: no drop to wait for)."""
+        done = self.signal(agent_id, signal)
+        return self.wait_dropped(done) if done.drops else None
+
+    def spawn(self, agent_id: int, trust_law: Iterable[str] = (), **spec):
+        """Start agent `agent_id` on this machine and wait until it is live: a dropped id
+        rejoins; a new one needs x, y, heading, speed (role, orbit_radius, direction, follow,
+        max_turn_rate optional). A `swarm.live.control.Spawned` (pid, log)."""
+        from swarm.live.control import spawn_agent
+
+        with talking():
+            return spawn_agent(self._lr, agent_id, spec, tuple(trust_law))
+
+
+def connect(run: str | None = None, connect: str | None = None, credentials: str | Path | None = None) -> Live:
+    """The live run `run` (default $SWARM_RUN, else the only one found) on endpoint `connect`
+    (default $SWARM_CONNECT, else the local runs), with `credentials` (default
+    $SWARM_CREDENTIALS, else the local runs' own files); NoRunError with one line if there
+    is no such run, or several."""
+    from swarm.live.client import open_run_session
+
+    with talking():
+        return Live(open_run_session(_endpoint(connect), _env(run, ENV_RUN),
+                                     None if credentials is None else Path(credentials)))
+
+
+def runs(run: str | None = None, connect: str | None = None, credentials: str | Path | None = None) -> list[dict]:
+    """The live runs reachable (`swarm runs --json`'s documents, sorted as found); [] if none.
+    A run that ends while it is asked is listed with what is known (its other fields None)."""
+    from swarm.live.client import LiveRun, find_runs
+
+    creds = None if credentials is None else Path(credentials)
+    with talking():
+        found = find_runs(_endpoint(connect), creds, _env(run, ENV_RUN))
+    docs = []
+    for ref in found:
+        doc = {"run": ref.run, "endpoint": ref.endpoint, "scenario": None, "clock": None, "paused": None,
+               "tick": None, "ticks": None, "time": None, "agents_live": None, "agents_total": None,
+               "host": None, "pid": None}
+        try:
+            with LiveRun(ref) as lr:
+                info = lr.info()
+            agents = info.get("agents", {})
+            doc.update({k: info.get(k) for k in ("scenario", "clock", "paused", "tick", "ticks", "time",
+                                                 "host", "pid")},
+                       agents_live=sum(1 for a in agents.values() if a.get("alive")),
+                       agents_total=len(agents))
+        except Exception:
+            pass  # it ended between the two questions (NoRun): listed with what is known
+        docs.append(doc)
+    return docs

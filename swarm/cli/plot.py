@@ -1,0 +1,137 @@
+"""`swarm plot` and `swarm export`: a finished (or crashed) run's figures, animation and
+CSV files, from its run directory (registered with the offline commands). Both open it with
+`swarm.open_run` (which rebuilds a crashed run from its recording: `Results.recovered`, said
+in one line) and draw with `Results.plot` / write with `Results.write_csv`."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from swarm.cli.errors import fail
+from swarm.cli.output import say_plots
+
+RunDirArg = Annotated[Path, typer.Argument(help="a run directory written by swarm sim / swarm up")]
+FORMAT_HELP = "figure format: png, pdf or svg; repeat it or give a comma list (-f png,pdf)"
+
+
+def plot_formats(values: Optional[list[str]]) -> tuple[str, ...]:
+    """The formats of --format (repeated and/or comma lists); exit 2 naming a bad one."""
+    from swarm.plots import check_formats
+
+    try:
+        return check_formats([f for v in (values or ["png"]) for f in v.split(",") if f.strip()])
+    except ValueError as e:
+        raise fail(f"--format: {e}", 2) from None
+
+
+def _run_dir(run_dir: Path) -> None:
+    if not run_dir.is_dir():
+        raise fail(f"{run_dir}: not a directory", 2)
+
+
+def open_results(run_dir: Path):
+    """`swarm.open_run(run_dir)`, saying what was rebuilt from the recording (if anything)."""
+    from swarm.api.runs import open_run
+
+    results = open_run(run_dir)
+    if results.recovered is not None:
+        typer.echo(results.recovered.line())
+    return results
+
+
+def render_animation_cli(run_dir: Path, frames: int) -> None:
+    """animation.gif with a progress bar (on a terminal); a read failure exits 1."""
+    from rich.progress import BarColumn, Progress, TextColumn
+
+    from swarm.plots import PlotError, render_animation
+    from swarm.plots.animate import FPS
+
+    try:
+        with Progress(TextColumn("animation"), BarColumn(), TextColumn("{task.completed}/{task.total} frames"),
+                      transient=True, disable=not sys.stderr.isatty()) as bar:
+            task = bar.add_task("animation", total=None)
+            path = render_animation(run_dir, max_frames=frames,
+                                    progress=lambda i, n: bar.update(task, completed=i, total=n))
+    except PlotError as e:
+        raise fail(str(e), 1) from None
+    from swarm.plots.animate import gif_frames
+
+    n = gif_frames(path)
+    typer.echo(f"animation: {path.name} ({n} frames, {n / FPS:.1f} s at {FPS} frames/s)")
+
+
+def plot(
+    run_dir: RunDirArg,
+    format: Annotated[Optional[list[str]], typer.Option("--format", "-f", help=FORMAT_HELP,
+                                                        show_default="png")] = None,
+    animate: Annotated[bool, typer.Option("--animate", help="also write animation.gif: trails, graph edges and "
+                                          "switches over the run")] = False,
+    frames: Annotated[int, typer.Option(help="at most this many animation frames, evenly spaced over the run")] = 200,
+) -> None:
+    """Re-render the figures of a run from its trajectory.npz and summary.json.
+
+    A run whose world died before writing them is first rebuilt from its recording.mcap
+    (as `swarm export` does).
+
+    Example: swarm plot runs/case2 -f png,pdf --animate
+    """
+    formats = plot_formats(format)
+    if frames < 2:
+        raise fail(f"--frames: {frames} is too few (at least 2)", 2)
+    _run_dir(run_dir)
+    say_plots(open_results(run_dir).plot(formats=formats))
+    if animate:
+        render_animation_cli(run_dir, frames)
+
+
+def write_csvs(results) -> None:
+    """csv/agent-<id>.csv for every agent of `results` (a read failure: RunReadError, exit 1)."""
+    from swarm.offline.csv_export import CSV_DIR
+
+    try:
+        paths = results.write_csv()
+    except OSError as e:
+        raise fail(f"{results.run_dir / CSV_DIR}: {e.strerror or e}", 1) from None
+    typer.echo(f"csv: {len(paths)} files in {CSV_DIR}/ ({paths[0].name} ... {paths[-1].name})")
+
+
+def export(
+    run_dir: RunDirArg,
+    plots: Annotated[bool, typer.Option(help="render PNG plots too")] = True,
+    csv: Annotated[bool, typer.Option("--csv", help="also write csv/agent-<id>.csv: one CSV per agent, a row per "
+                                      "tick (columns: docs/outputs.md, 'Outputs of a run')")] = False,
+) -> None:
+    """Rebuild trajectory.npz and summary.json of a run from its recording.mcap; with --csv,
+    write its trajectory as one CSV per agent.
+
+    Results already written are kept. For a run whose world was killed: everything that reached the disk (all but the last
+    second at most) becomes a valid run directory; the summary says "complete": false.
+
+    Example: swarm export runs/case2-1a2b3c --csv
+    """
+    from swarm.offline.results import needs_export
+
+    _run_dir(run_dir)
+    recover = needs_export(run_dir)
+    if not recover:
+        if (run_dir / "recording.mcap").is_file():
+            typer.echo(f"{run_dir}: trajectory.npz and summary.json are already there; nothing to recover")
+        elif not csv:
+            raise fail(f"{run_dir}: no recording.mcap to export from", 1)
+    if not (recover or csv or plots):
+        return
+    results = open_results(run_dir)
+    if csv:
+        write_csvs(results)
+    if plots:
+        say_plots(results.plot())
+
+
+def register(app: typer.Typer) -> None:
+    """Add `swarm plot` and `swarm export` to the main app."""
+    app.command("plot")(plot)
+    app.command("export")(export)

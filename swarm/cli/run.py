@@ -1,0 +1,190 @@
+"""Commands that run a scenario (`swarm sim / world / agent`, and `swarm up` in
+swarm/cli/up.py): the options they share are declared once, below, as `Annotated` types."""
+
+from __future__ import annotations
+
+import os
+from typing import Annotated, Optional
+
+import typer
+
+from swarm.contracts.lifeline import LAUNCHER_PID_ENV
+from swarm.contracts.wire import MAX_AGENT_ID
+from swarm.cli.errors import fail
+from swarm.cli.options import (
+    ClockOpt, CredentialsOpt, DurationOpt, EndPlotsOpt, FoxgloveHostOpt, FoxgloveOpt, FoxglovePortOpt, ForceOpt,
+    ScenarioArg, SimOutOpt, TimeScaleOpt, TrustLawOpt, WorldOutOpt, check_clock, check_duration, check_foxglove,
+    check_runtime_dir, claim_out, default_out, read_scenario,
+)
+from swarm.cli.output import _progress_bar, print_summary, render_run_plots
+
+
+def sim(
+    scenario: ScenarioArg,
+    out: SimOutOpt = None,
+    duration: DurationOpt = None,
+    plots: Annotated[bool, typer.Option(help="render PNG plots")] = True,
+    force: ForceOpt = False,
+    batch: Annotated[bool, typer.Option("--batch", help="step all agents as arrays (the batch engine: the "
+                                        "same results, faster for many agents); refuses scenarios with "
+                                        "faults or a law of one's own (follower or leader)")] = False,
+) -> None:
+    """Run a scenario in one process (the reference engine) and write its results.
+
+    Streams recording.mcap into --out as it runs, then writes trajectory.npz, summary.json
+    and PNG plots. With --batch the batch engine runs it (summary.json says
+    "engine": "sim-batch"; everything else is the same).
+
+    Example: swarm sim scenarios/case2.toml --out runs/case2
+    """
+    from swarm.api.runs import simulate
+    from swarm.world.recording import EXIT_NO_SPACE, RecordingError
+
+    s = read_scenario(scenario)
+    check_duration(s, duration, scenario)
+    if batch:
+        from swarm.offline.batch import refusal
+
+        why = refusal(s)
+        if why is not None:
+            raise fail(f"swarm sim --batch: {scenario}: {why}; run it without --batch", 2)
+    out = out or default_out(scenario, "sim")
+    total = int(round((duration or s.run.duration) / s.run.dt))
+    try:
+        with _progress_bar(f"sim {scenario.stem}") as prog:
+            task = prog.add_task("sim", total=total)
+            results = simulate(s, duration, out, force=force, batch=batch,
+                               progress=lambda k, n: prog.update(task, completed=k))
+    except RecordingError as e:
+        raise fail(f"swarm sim: {e}", EXIT_NO_SPACE) from None
+    summary, wall = results.summary.to_dict(), results.summary["wall_time"]
+    print_summary(summary, out)
+    typer.echo(f"speed: {total * s.run.dt / wall:.1f} simulated s per wall s ({total / wall:.0f} ticks/s)")
+    if plots:
+        render_run_plots(out)
+    crashes = [e for e in summary["events"] if e["kind"] == "crash"]
+    if crashes:  # as swarm up: results written, one line, exit 4
+        from swarm.api.launch import EXIT_AGENT_FAILED
+
+        e = crashes[0]
+        raise fail(f"swarm sim: {len(crashes)} agent(s) failed: agent {e['agent']} at t = {e['time']:g} s: "
+                   f"its law raised {e['cause']} (results in {out})", EXIT_AGENT_FAILED)
+
+
+def world(
+    scenario: ScenarioArg,
+    listen: Annotated[Optional[str], typer.Option(help="zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 "
+                                                  "or unixsock-stream/PATH (default: a Unix socket in "
+                                                  "$SWARM_RUNTIME_DIR or /tmp/swarm-<uid>)")] = None,
+    run: Annotated[Optional[str], typer.Option(help="run id: the key prefix (default <scenario>-<random>)")] = None,
+    out: WorldOutOpt = None,
+    duration: Annotated[Optional[float], typer.Option(help="simulated seconds")] = None,
+    clock: ClockOpt = None,
+    time_scale: TimeScaleOpt = 1.0,
+    join_timeout: Annotated[Optional[float], typer.Option(help="give up if not every agent joined "
+                                                          "within this many s (default: wait)")] = None,
+    plots: EndPlotsOpt = True,
+    force: ForceOpt = False,
+    foxglove: FoxgloveOpt = False,
+    foxglove_port: FoxglovePortOpt = 8765,
+    foxglove_host: FoxgloveHostOpt = "127.0.0.1",
+) -> None:
+    """Run the world of a scenario by hand: the hub, physics, sensors and the recording.
+
+    Agents join with `swarm agent --id N --connect ENDPOINT` from any terminal or machine.
+    With --out, the end prints the summary table `swarm up` prints.
+
+    Example: swarm world scenarios/case2.toml --listen tcp/0.0.0.0:7447 --out runs/case2
+    """
+    from swarm.contracts.transport import default_endpoint
+    from swarm.contracts.wire import WireError, check_run_id
+    from swarm.world.clock import EXIT_DESERTED
+    from swarm.world.main import run_world
+    from swarm.world.process import WorldConfig
+
+    s = read_scenario(scenario)
+    check_duration(s, duration, scenario)
+    check_runtime_dir()
+    if not run:
+        from swarm.api.launch import new_run_id
+
+        run = new_run_id(scenario)
+    try:
+        check_run_id(run)
+    except WireError as e:
+        raise fail(str(e), 2) from None
+    clock = clock or s.run.clock
+    check_clock(clock)
+    listen = listen or default_endpoint(run)
+    if foxglove:
+        if out is None:
+            raise fail("--foxglove needs --out: the live view serves the run's recording as it is written", 2)
+        check_foxglove(foxglove_host, foxglove_port)
+    if out is not None:
+        claim_out(out, force)
+    typer.echo(f"run {run} on {listen}; " + (f"results in {out}" if out else "no results kept (no --out)"), err=True)
+    code = run_world(WorldConfig(s, run, listen, out, clock, time_scale, duration, join_timeout,
+                                 foxglove=(foxglove_host, foxglove_port) if foxglove else None))
+    summary = out / "summary.json" if out is not None else None
+    # the table `swarm up` prints; not when the launcher runs us (it prints its own, and reads a
+    # world's failure from the last line of its log)
+    launched = bool(os.environ.get(LAUNCHER_PID_ENV))
+    if summary is not None and not launched and code in (0, 130, 143, EXIT_DESERTED) and summary.exists():
+        import json
+
+        print_summary(json.loads(summary.read_text()), out)  # the table `swarm up` prints
+    if plots and out is not None and code in (0, 130, 143) and (out / "trajectory.npz").exists():
+        render_run_plots(out)
+    raise typer.Exit(code)
+
+
+def agent(
+    id: Annotated[int, typer.Option("--id", help="the agent's id in the scenario", min=0, max=MAX_AGENT_ID)],
+    connect: Annotated[str, typer.Option(help="the world's endpoint, e.g. tcp/HOST:7447 or "
+                                         "unixsock-stream/PATH")],
+    run: Annotated[Optional[str], typer.Option(help="run id (default: the only run on the endpoint)")] = None,
+    wait_world: Annotated[bool, typer.Option(help="keep waiting when the world vanishes (for a new world "
+                                             "of the run) instead of exiting 4")] = False,
+    world_grace: Annotated[float, typer.Option(help="s to wait for a world that stopped answering (a "
+                                               "frozen or cut-off world; exit 5 after that)", min=0.0)] = 10.0,
+    connect_timeout: Annotated[float, typer.Option(help="s to wait for a world to listen on --connect before "
+                                                   "giving up (exit 6)", min=0.0)] = 10.0,
+    world_wait: Annotated[Optional[float], typer.Option(
+        "--world-wait", hidden=True, min=0.0, help="the old name of --connect-timeout (deprecated)")] = None,
+    credentials: CredentialsOpt = None,
+    trust_law: TrustLawOpt = None,
+) -> None:
+    """Run one agent process; it takes its initial state from the world, so only its id is needed.
+
+    It connects as agent-ID with the run's credentials: --credentials FILE, else
+    $SWARM_CREDENTIALS, else the local run's file in the runtime directory. On another
+    machine, use a file from `swarm credentials --agent ID` (see docs/resilience.md, "Agents on other
+    machines").
+
+    Exit codes: 0 the run ended, 1 crashed (e.g. an exception in its law), 3 refused,
+    4 the world vanished (unless --wait-world), 5 the world did not answer within
+    --world-grace, 6 no world to join (nothing listened on --connect for --connect-timeout
+    s), 130/143 stopped.
+
+    Example: swarm agent --id 3 --connect tcp/10.0.0.5:7447 --credentials agent-3.cred
+    """
+    from swarm.agents.process import run_agent
+
+    if credentials is not None:  # a file that cannot be used: said now, not after waiting for the world
+        from swarm.contracts import credentials as C
+        from swarm.contracts.identities import CredentialsError
+
+        try:
+            C.read(credentials)
+        except CredentialsError as e:
+            raise fail(f"swarm agent {id}: {e}", 3) from None
+    wait = connect_timeout if world_wait is None else world_wait
+    raise typer.Exit(run_agent(id, connect, run, wait_world, world_grace=world_grace, creds_file=credentials,
+                               trust=tuple(trust_law or ()), world_wait=wait))
+
+
+def register(app: typer.Typer) -> None:
+    """Add the run commands to the main app (`swarm up`: swarm/cli/up.py)."""
+    app.command("sim")(sim)
+    app.command("world")(world)
+    app.command("agent")(agent)

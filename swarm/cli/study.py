@@ -1,0 +1,271 @@
+"""`swarm study swarms|gains`: the batch studies of swarm/study/swarms.py and swarm/study/gains.py
+as commands, with a progress bar, a printed table, CSV files and a plot; Ctrl-C keeps
+every finished row."""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Annotated, Callable, Optional
+
+import typer
+
+study_app = typer.Typer(
+    help="Batch studies with the in-process engine: does the law converge for my kind of swarm?",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+def _fail(message: str, code: int = 2) -> typer.Exit:
+    typer.secho(message, err=True, fg=typer.colors.RED)
+    return typer.Exit(code)
+
+
+def _floats(option: str, text: str, *, positive: bool = True, allow_inf: bool = False) -> list[float]:
+    """'1,2.5' -> [1.0, 2.5]; 'inf' where allowed; a clear message naming the option."""
+    out = []
+    for part in text.split(","):
+        part = part.strip()
+        try:
+            v = float(part)
+        except ValueError:
+            raise _fail(f"{option}: {part!r} is not a number (give a comma-separated list, e.g. 1,2.5)") from None
+        if math.isnan(v) or (math.isinf(v) and not allow_inf) or (positive and v <= 0):
+            raise _fail(f"{option}: {part!r} must be a {'positive ' if positive else ''}finite number"
+                        + (" or inf" if allow_inf else ""))
+        out.append(v)
+    return out
+
+
+def _ints(option: str, text: str, minimum: int) -> list[int]:
+    out = []
+    for part in text.split(","):
+        try:
+            v = int(part.strip())
+        except ValueError:
+            raise _fail(f"{option}: {part.strip()!r} is not a whole number") from None
+        if v < minimum:
+            raise _fail(f"{option}: {v} must be at least {minimum}")
+        out.append(v)
+    return out
+
+
+def _run(worker, jobs: list, jobs_n: int, csv_path: Path, columns: list[str], label: str,
+         total: int) -> tuple[list[dict], bool]:
+    """Run jobs (`total` runs: a job may be a batch of them) with a progress bar, streaming
+    rows to csv_path; (rows, interrupted)."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    from swarm.study.pool import CsvSink, run_rows
+
+    rows: list[dict] = []
+    sink = CsvSink(csv_path, columns)
+    tty = sys.stderr.isatty()
+    last = [time.monotonic()]
+    prog = Progress(TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+                    transient=True, disable=not tty)
+
+    def on_row(row: dict) -> None:
+        sink(row)
+        rows.append(row)
+        prog.update(task, completed=len(rows))
+        if not tty and (time.monotonic() - last[0] > 10 or len(rows) == total):
+            last[0] = time.monotonic()
+            typer.echo(f"{label}: {len(rows)}/{total} runs", err=True)
+
+    interrupted = False
+    with prog:
+        task = prog.add_task(label, total=total)
+        try:
+            run_rows(worker, jobs, jobs_n, on_row)
+        except KeyboardInterrupt:
+            interrupted = True
+        finally:
+            sink.close()
+    if interrupted:
+        typer.echo(f"stopped: {len(rows)} of {total} runs finished, kept in {csv_path}", err=True)
+    return rows, interrupted
+
+
+def _study(kind: str, worker, job_list: list, columns: list[str], summarise: Callable, jobs: int,
+           out: Optional[Path], what: str, total: int) -> tuple[Path, list[dict], list[dict], bool]:
+    """Run a study's jobs (`total` runs) into out/runs.csv and its summary into
+    out/summary.csv; (out, rows, summary, interrupted)."""
+    from swarm.study.pool import write_csv
+
+    out = out or Path("runs") / f"study-{kind}-{time.strftime('%Y%m%d-%H%M%S')}"
+    typer.echo(f"{what} on {jobs or os.cpu_count()} process(es); rows -> {out / 'runs.csv'}")
+    rows, stopped = _run(worker, job_list, jobs or os.cpu_count() or 1, out / "runs.csv", columns, f"study {kind}",
+                         total)
+    summary = summarise(rows)
+    write_csv(out / "summary.csv", summary)
+    return out, rows, summary, stopped
+
+
+def _done(out: Path, stopped: bool) -> None:
+    """The last line; exit 130 when Ctrl-C cut the study short."""
+    typer.echo(f"results: {out}")
+    if stopped:
+        raise typer.Exit(130)
+
+
+def _table(rows: list[dict], columns: list[tuple[str, str, Callable]]) -> None:
+    widths = [max(len(h), *(len(fmt(r[k])) for r in rows)) if rows else len(h) for h, k, fmt in columns]
+    typer.echo("  ".join(h.rjust(w) for (h, _, _), w in zip(columns, widths)))
+    for r in rows:
+        typer.echo("  ".join(fmt(r[k]).rjust(w) for (_, k, fmt), w in zip(columns, widths)))
+
+
+def _num(fmt: str) -> Callable:
+    return lambda v: "-" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, fmt)
+
+
+DtOpt = Annotated[float, typer.Option(help="step (s)", min=1e-4)]
+JobsOpt = Annotated[int, typer.Option("--jobs", "-j", min=0, help="worker processes (0: one per core)")]
+OutOpt = Annotated[Optional[Path], typer.Option("--out", "-o", help="output directory "
+                                                "(default runs/study-<kind>-<time>)")]
+BatchOpt = Annotated[bool, typer.Option("--batch/--per-agent", help="run many runs per worker as arrays (the "
+                                        "batch engine, same rows) or each run through swarm sim's per-agent "
+                                        "engine")]
+
+
+@study_app.command()
+def swarms(
+    n: Annotated[str, typer.Option(help="agents per swarm (a comma-separated list: one setting each)")] = "10",
+    leaders: Annotated[str, typer.Option(help="leaders per swarm (list)")] = "2",
+    selection: Annotated[str, typer.Option(help="selection rules (list of sticky, rooted, nearest)")] = "sticky",
+    sensing_range: Annotated[str, typer.Option("--range", help="sensing ranges in m, inf = unlimited (list)")] = "inf",
+    fov: Annotated[Optional[float], typer.Option(help="field of view (rad, default all round)", min=0.01,
+                                                 max=2 * math.pi)] = None,
+    seeds: Annotated[int, typer.Option(help="random swarms per setting (seeds 0..N-1)", min=1)] = 50,
+    area: Annotated[float, typer.Option(help="side of the square the agents start in (m)", min=1.0)] = 120.0,
+    speeds: Annotated[str, typer.Option(help="speed range MIN,MAX (m/s)")] = "15,40",
+    omega: Annotated[float, typer.Option(help="leaders' angular rate on their orbits (rad/s): R_L = v_L/omega",
+                                         min=1e-6)] = 1.0,
+    c1: Annotated[float, typer.Option(help="gain C1", min=1e-9)] = 1.0,
+    c2: Annotated[float, typer.Option(help="gain C2", min=1e-9)] = 0.5,
+    duration: Annotated[float, typer.Option(help="simulated s per run: converged means by then", min=0.1)] = 500.0,
+    dt: DtOpt = 0.05,
+    jobs: JobsOpt = 0,
+    out: OutOpt = None,
+    plot: Annotated[bool, typer.Option(help="write study.png")] = True,
+    batch: BatchOpt = True,
+) -> None:
+    """Random swarms through the in-process engine: converged fraction, settling, switches.
+
+    One setting per combination of the list options (--n, --leaders, --selection, --range).
+
+    Every run counts in the converged share. Swarms whose followers cannot all reach a
+    leader in the sensing graph at t = 0 (a range or field of view cuts them off) are
+    also shown apart (`cut off`, and how many of those converged). Writes runs.csv (one
+    row per run, as it finishes), summary.csv and study.png.
+
+    By default each worker runs a batch of seeds at once as arrays (the batch engine,
+    equal to swarm sim's per-agent engine: the same rows); --per-agent runs them one by one.
+
+    Example: swarm study swarms --selection sticky,rooted,nearest --seeds 200
+    """
+    from swarm.study.swarms import SwarmSetting, run_swarm, summarise_swarms, swarm_columns, swarm_jobs
+
+    rules = [r.strip() for r in selection.split(",")]
+    for r in rules:
+        if r not in ("sticky", "rooted", "nearest"):
+            raise _fail(f"--selection: {r!r} is not one of sticky, rooted, nearest")
+    vmin, vmax = (_floats("--speeds", speeds) + [math.nan])[:2]
+    if not (len(speeds.split(",")) == 2 and vmin <= vmax):
+        raise _fail("--speeds: give MIN,MAX with MIN <= MAX, e.g. 15,40")
+    ns, ls = _ints("--n", n, 2), _ints("--leaders", leaders, 1)
+    settings = [SwarmSetting(n=a, leaders=b, selection=r, range=rg, fov=fov or 2 * math.pi, area=area,
+                             speed_min=vmin, speed_max=vmax, omega=omega, c1=c1, c2=c2, duration=duration, dt=dt)
+                for a in ns for b in ls for r in rules
+                for rg in _floats("--range", sensing_range, allow_inf=True) if b < a]
+    if not settings:
+        raise _fail("--leaders: every setting has as many leaders as agents; a swarm needs a follower")
+    runs = len(settings) * seeds
+    if batch:
+        from swarm.study.batch import run_swarm_chunk, swarm_chunks
+
+        worker, job_list = run_swarm_chunk, swarm_chunks(settings, range(seeds), jobs or os.cpu_count() or 1)
+    else:
+        worker, job_list = run_swarm, swarm_jobs(settings, range(seeds))
+    out, rows, summary, stopped = _study(
+        "swarms", worker, job_list, swarm_columns(), summarise_swarms, jobs, out,
+        f"{len(settings)} setting(s) x {seeds} seeds = {runs} runs of {duration:g} s (dt {dt:g} s), "
+        + (f"{len(job_list)} batches" if batch else "per-agent engine"), runs)
+    _table(summary, [("setting", "setting", str), ("runs", "runs", str),
+                     ("converged", "converged_fraction", _num(".1%")),
+                     ("cut off (conv.)", "cut_off", str), ("", "cut_off_converged", lambda v: f"({v})"),
+                     ("settle med s", "settling_median_s", _num(".0f")),
+                     ("settle p90 s", "settling_p90_s", _num(".0f")),
+                     ("switches med", "switches_median", _num("g")), ("p90", "switches_p90", _num("g")),
+                     ("max", "switches_max", _num("g")),
+                     ("search med s", "searching_median_s", _num(".1f")),
+                     ("per loss max", "loss_switches_max", _num("g"))])
+    typer.echo("converged: share of all runs in which every agent ends within 1% of its expected radius; "
+               "cut off: runs with a follower that has no sensing path to a leader at t = 0; switches: "
+               "per follower; search: s a follower spends with nobody to steer by (median over runs of "
+               "the mean per follower); per loss: the most switches one loss of an out-neighbour cost")
+    if plot and summary:
+        from swarm.study.figures import plot_swarms
+
+        typer.echo(f"plot: {plot_swarms(summary, rows, out / 'study.png')}")
+    _done(out, stopped)
+
+
+@study_app.command()
+def gains(
+    c1: Annotated[str, typer.Option(help="values of C1 / omega (list)")] = "0.5,1,2",
+    c2: Annotated[str, typer.Option(help="values of C2 / omega (list)")] = "0.2,0.3,0.5,1,2",
+    ratios: Annotated[str, typer.Option(help="follower / out-neighbour speed ratios (list)")] =
+    "0.4,0.6,0.8,1,1.25,1.5,2,2.5,3,4",
+    starts: Annotated[int, typer.Option(help="random starts per cell (the worst counts)", min=1)] = 3,
+    duration: Annotated[float, typer.Option(help="simulated s per run, in units of 1/omega", min=1.0)] = 300.0,
+    dt: DtOpt = 0.05,
+    jobs: JobsOpt = 0,
+    out: OutOpt = None,
+    plot: Annotated[bool, typer.Option(help="write gains.png")] = True,
+    batch: BatchOpt = True,
+) -> None:
+    """Where does the follower law settle? A map of (C1, C2) against speed ratio.
+
+    One follower behind a leader already on its orbit (omega = 1 rad/s), for every
+    (C1, C2, speed ratio), from a few random starts: the worst time into the 2% band, or
+    never. Writes runs.csv, summary.csv, gains.png.
+
+    Example: swarm study gains --c1 0.5,1,2 --c2 0.2,0.5,1 --starts 3
+    """
+    from swarm.study.gains import gain_columns, gain_jobs, run_gain, summarise_gains
+
+    runs = gain_jobs(_floats("--c1", c1), _floats("--c2", c2), _floats("--ratios", ratios), starts, duration, dt)
+    if batch:
+        from swarm.study.batch import gain_chunks, run_gain_chunk
+
+        worker, job_list = run_gain_chunk, gain_chunks(runs, jobs or os.cpu_count() or 1)
+    else:
+        worker, job_list = run_gain, runs
+    out, rows, summary, stopped = _study("gains", worker, job_list, gain_columns(), summarise_gains, jobs, out,
+                                         f"{len(runs)} runs of {duration:g} s, "
+                                         + (f"{len(job_list)} batches" if batch else "per-agent engine"), len(runs))
+    _gain_table(summary)
+    if plot and summary:
+        from swarm.study.figures import plot_gains
+
+        typer.echo(f"plot: {plot_gains(summary, out / 'gains.png', duration)}")
+    _done(out, stopped)
+
+
+def _gain_table(summary: list[dict]) -> None:
+    """Rows (C1, C2), columns speed ratio: worst settling time (s), '-' for never."""
+    ratios = sorted({r["ratio"] for r in summary})
+    cells = {(r["c1"], r["c2"], r["ratio"]): r["worst_settling_s"] for r in summary}
+    pairs = sorted({(r["c1"], r["c2"]) for r in summary})
+    typer.echo("worst time into the 2% band (s; '-': never), rows C1, C2; columns follower/leader speed ratio")
+    typer.echo(f"{'C1':>5} {'C2':>5} " + " ".join(f"{q:>6g}" for q in ratios))
+    for a, b in pairs:
+        vals = [cells.get((a, b, q), math.nan) for q in ratios]
+        typer.echo(f"{a:>5g} {b:>5g} " + " ".join(f"{v:>6.0f}" if math.isfinite(v) else f"{'-':>6}" for v in vals))

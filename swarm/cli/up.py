@@ -1,0 +1,135 @@
+"""`swarm up`: a scenario as a distributed system, from the command line: it checks the
+options, calls `swarm.launch` (swarm/api/launch.py: the launcher, swarm/runtime/launcher.py, in
+this process; SIGINT and SIGTERM stop it) and renders what it reports: the run id and how
+to attach, the progress line while it runs (swarm/runtime/progress.py), then one line on how it
+ended, the summary, the plots, the agents that failed, and the exit code. The options it
+shares with the other run commands are swarm/cli/run.py's."""
+
+from __future__ import annotations
+
+import sys
+from typing import Annotated, Optional
+
+import typer
+
+from swarm.cli.output import print_summary, render_run_plots
+from swarm.cli.options import (
+    ScenarioArg,
+    read_scenario,
+    ClockOpt,
+    DurationOpt,
+    EndPlotsOpt,
+    FoxgloveHostOpt,
+    FoxgloveOpt,
+    FoxglovePortOpt,
+    ForceOpt,
+    TimeScaleOpt,
+    check_clock,
+    check_duration,
+    check_foxglove,
+    check_runtime_dir,
+    out_option,
+)
+from swarm.runtime.progress import Paused, ProgressLine
+
+UpOutOpt = out_option("output directory (default runs/<run id>); one that already holds results is "
+                      "refused unless --force")
+
+
+def up(
+    scenario: ScenarioArg,
+    out: UpOutOpt = None,
+    duration: DurationOpt = None,
+    clock: ClockOpt = None,
+    time_scale: TimeScaleOpt = 1.0,
+    listen: Annotated[Optional[str], typer.Option(help="endpoint of the run (default: a Unix socket in "
+                                                  "$SWARM_RUNTIME_DIR or /tmp/swarm-<uid>)")] = None,
+    plots: EndPlotsOpt = True,
+    force: ForceOpt = False,
+    world_grace: Annotated[float, typer.Option(help="s the agents wait for a world that stopped answering "
+                                               "(a stalled, not a vanished, world)", min=0.0)] = 10.0,
+    foxglove: FoxgloveOpt = False,
+    foxglove_port: FoxglovePortOpt = 8765,
+    foxglove_host: FoxgloveHostOpt = "127.0.0.1",
+) -> None:
+    """Run a scenario as a distributed system: a world process and one OS process per agent.
+
+    Prints the endpoint and run id (so another terminal can attach), live progress, and a
+    summary; writes summary.json, trajectory.npz, plots and logs/ into --out. Ctrl-C stops
+    cleanly: results written, no process left behind, exit 130 (143 for SIGTERM).
+
+    Example: swarm up scenarios/case2.toml --out runs/case2
+    """
+    from swarm.api.launch import launch
+
+    s = read_scenario(scenario)
+    check_clock(clock)
+    check_duration(s, duration, scenario)
+    check_runtime_dir()
+    live = (foxglove_host, foxglove_port) if foxglove else None
+    if live is not None:
+        check_foxglove(*live)
+
+    launched = []
+
+    def started(run) -> None:  # checked, nothing started yet: what another terminal needs
+        launched.append(run)
+        typer.echo(f"run {run.run_id}  endpoint {run.endpoint}  agents {len(s.agents)}  "
+                   f"clock {clock or s.run.clock}")
+        for line in attach_hints(run.run_id, run.dial, s):
+            typer.echo(line)
+        if live is not None:
+            from swarm.world.live_view import open_hint
+
+            typer.echo(open_hint(*live))
+
+    line, paused = ProgressLine(sys.stdout.isatty()), Paused()
+
+    def progress(p: dict) -> None:  # "paused" from the world's pause/resume events the launcher heard
+        line.show({**p, "paused": paused(launched[0].launcher.events) if launched else False})
+
+    o = launch(scenario, out, force=force, duration=duration, clock=clock, time_scale=time_scale, listen=listen,
+               foxglove=live, world_grace=world_grace, progress=progress, on_start=started)  # SIGINT/TERM: stop
+    line.end()
+    err = dict(err=True, fg=typer.colors.RED)
+    if o.words is not None:
+        typer.secho(o.words, **(err if o.failed else {}))
+    if o.recovered is not None:  # a world that died before writing its results: rebuilt from its recording
+        typer.echo(o.recovered.line())
+    elif o.recovery_error is not None:  # said why in one line; the exit code stays the run's
+        typer.secho(o.recovery_error, **err)
+    if o.summary is not None:
+        print_summary(o.summary.to_dict(), o.out)
+        if plots:
+            render_run_plots(o.out)
+    for r in o.exits if o.failure is None else []:
+        typer.echo(f"  {r.line()}" + ("" if r.sent else "  (not in summary.json: the world did not hear of it)"))
+    raise typer.Exit(o.exit_code)
+
+
+def attach_hints(run_id: str, dial: str, s) -> list[str]:
+    """What to type in another terminal: watch the run (with --run when other runs are up,
+    so the command cannot pick the wrong one), and add an agent by hand."""
+    from swarm.contracts.credentials import local_runs
+
+    try:
+        others = any(c.run != run_id for c in local_runs())
+    except Exception:  # an unreadable runtime dir: swarm up says so itself
+        others = True
+    pick = f" --run {run_id}" if others else ""
+    ids = s.added_id_range
+    lines = [f"watch it from another terminal: swarm watch{pick}  (table: swarm agents{pick}; graph: "
+             f"swarm graph{pick}" + (f"; or export SWARM_RUN={run_id} once" if others else "") + ")",
+             f"add an agent by hand: swarm spawn --id N{pick} (a new id, {ids.start}..{ids.stop - 1}, with "
+             "--x --y --heading --speed)" if ids else
+             f"add an agent by hand: no new id ({s.added_ids_text()}); a dropped agent rejoins with "
+             f"swarm spawn --id N{pick}"]
+    if not dial.startswith("unixsock"):
+        lines.append(f"from another machine: swarm credentials --agent N{pick}, there swarm agent --id N "
+                     f"--connect {dial} --credentials FILE (docs/resilience.md, \"Agents on other machines\")")
+    return lines
+
+
+def register(app: typer.Typer) -> None:
+    """Add `swarm up` to the main app."""
+    app.command("up")(up)

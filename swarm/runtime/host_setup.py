@@ -1,0 +1,166 @@
+"""Setting up an agent host (swarm/runtime/host.py), before any of its agents starts.
+
+In order: find the credentials (from `swarm credentials --host`, or the local run's own)
+and check that they hold every identity the host needs, claim a private directory (the
+router's socket, the agents' files) that no other host of the same name and run is
+using, learn the hub's zenoh id (a short client session as `host`), then open the router
+on its Unix socket, with its own rules (its agents confined as at the hub, its upstream
+link let in by the hub's zenoh id), and wait until the world's token is seen through it.
+A mixin of `Host`, whose state it fills in; `HostError` says what is wrong, in one line.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+from pathlib import Path
+
+from swarm.contracts import access, credentials, wire
+from swarm.contracts.identities import HOST, CredentialsError, agent_user, check_host_name
+from swarm.contracts.lifeline import endpoint_refuses
+from swarm.contracts.runtime_dir import pid_alive, private_dir, runtime_dir, write_private
+from swarm.contracts.transport import client_tls, host_router_config, open_client, socket_path
+from swarm.runtime.procs import wait_until
+
+EXIT_FAILED, EXIT_USAGE = 1, 2  # and EXIT_OK = 0, EXIT_AGENT_FAILED = 4 (swarm/runtime/host.py)
+
+
+class HostError(Exception):
+    """The host cannot start; one line, and the exit code."""
+
+    def __init__(self, message: str, code: int = EXIT_FAILED):
+        super().__init__(message)
+        self.code = code
+
+
+class HostSetup:
+    """What `Host` does before its agents start (a mixin: the state is Host's)."""
+
+    def prepare(self) -> None:
+        """Credentials, agent ids, name, endpoints, directories; HostError says what is wrong."""
+        c = self.cfg
+        try:
+            creds = credentials.find(c.run, c.connect, c.creds_file)
+            ids = c.agents or creds.host_agents() or creds.ids
+            if not ids:
+                raise CredentialsError("no agents to run: give --agents (e.g. 3,4,5 or 3-5)")
+            for aid in ids:
+                creds.check_agent(aid)
+                creds.identity(agent_user(aid))
+            if not creds.hub_is_open:
+                creds.identity(HOST)
+            self.name = check_host_name(c.name or creds.host or _host_name())
+            d = private_dir(runtime_dir() / f"{creds.run}-host-{self.name}")
+        except CredentialsError as e:
+            raise HostError(str(e), EXIT_USAGE) from None
+        self.creds, self.ids = creds, tuple(ids)
+        self.upstream = c.connect or creds.endpoint
+        self.local = c.listen or f"unixsock-stream/{d / 'router.sock'}"
+        other = _pid_in(d / "pid")
+        if other is not None and other != os.getpid() and pid_alive(other):
+            raise HostError(f"host {self.name} of run {creds.run} is already running here (pid {other}); give "
+                            "another --name", EXIT_USAGE)
+        sock = socket_path(self.local)
+        if sock is not None and sock.exists():
+            if not endpoint_refuses(self.local):
+                raise HostError(f"{self.local} is in use", EXIT_USAGE)
+            sock.unlink()  # left by a host that was killed
+        write_private(d / "pid", f"{os.getpid()}\n".encode())
+        self.dir = d  # ours from here on (removed at the end)
+        self.logs = c.logs or Path("runs") / f"{creds.run}-host-{self.name}"
+        try:
+            self.logs.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise HostError(f"cannot create the log directory {self.logs}: {e.strerror or e}", EXIT_USAGE) from None
+
+    def probe_hub(self) -> str:
+        """The hub's zenoh id, from a short client session as `host` (retried for cfg.wait s
+        until the world answers); the host router lets its upstream link in by that id."""
+        creds, run = self.creds, self.creds.run
+        found: list[str] = []
+        last = ["no answer"]
+
+        def attempt() -> bool:
+            if self.stop_signal is not None:
+                return True
+            try:
+                ses = open_client(self.upstream, timeout_ms=1000, creds=creds, user=HOST)
+            except Exception as e:  # not up yet, or refused
+                last[0] = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+                return False
+            try:
+                zids = [str(z) for z in ses.info.routers_zid()]
+                world = any(r.ok is not None for r in ses.liveliness().get(wire.world_alive_key(run), timeout=1.0))
+                if zids and world:
+                    found.append(zids[0])
+                    return True
+                last[0] = f"no world of run {run} there"
+                return False
+            finally:
+                ses.close()
+
+        wait_until(attempt, self.cfg.wait, 0.2)
+        if self.stop_signal is not None:
+            raise HostError("stopped", 128 + self.stop_signal)
+        if not found:
+            raise HostError(f"cannot reach the world of run {run} at {self.upstream} as {HOST!r} within "
+                            f"{self.cfg.wait:g} s ({last[0]}; no world there, or it refused these credentials)")
+        return found[0]
+
+    def open_router(self) -> None:
+        import zenoh
+
+        creds, run = self.creds, self.creds.run
+        tls = client_tls(creds) if self.upstream.startswith("tls/") else None
+        if creds.hub_is_open:  # the hub checks nothing: nor does its host
+            cfg = host_router_config(self.local, self.upstream, run, tls=tls)
+            self.router = _open(zenoh, cfg, self.local)
+        else:
+            users = self.dir / "users"  # read once by zenoh at open, then removed
+            write_private(users, access.host_dictionary(
+                creds.identity(agent_user(a)) for a in self.ids).encode())
+            try:
+                cfg = host_router_config(self.local, self.upstream, run, creds.identity(HOST), users,
+                                         access.host_router_access(run, self.ids, self.hub_zid), tls)
+                self.router = _open(zenoh, cfg, self.local)
+            finally:
+                users.unlink(missing_ok=True)
+        put = self.events.put
+        self.router.liveliness().declare_subscriber(wire.world_alive_key(run), lambda s: put(("alive", s.kind)),
+                                                    history=True)
+        self.router.declare_subscriber(wire.world_control_key(run), lambda s: put(("control", s.payload.to_bytes())))
+
+        def linked() -> bool:
+            if self.stop_signal is not None:
+                return True
+            return any(r.ok is not None for r in
+                       self.router.liveliness().get(wire.world_alive_key(run), timeout=0.5))
+
+        if not wait_until(linked, self.cfg.wait, 0.1):
+            raise HostError(f"the host router reached no world of run {run} at {self.upstream} within "
+                            f"{self.cfg.wait:g} s (did the world restart meanwhile?)")
+        if self.stop_signal is not None:
+            raise HostError("stopped", 128 + self.stop_signal)
+
+
+def _pid_in(path: Path) -> int | None:
+    try:
+        return int(path.read_text().strip())
+    except (OSError, ValueError):
+        return None
+
+
+def _host_name() -> str:
+    """This machine's host name as a host name of ours (first label, other characters as -)."""
+    import re
+
+    name = re.sub(r"[^A-Za-z0-9_.-]", "-", socket.gethostname().split(".")[0])[:32]
+    return name or "host"
+
+
+def _open(zenoh, cfg, local: str):
+    try:
+        return zenoh.open(cfg)
+    except Exception as e:
+        raise HostError(f"cannot open the host router on {local}: {str(e).strip().splitlines()[0]}") from None
+

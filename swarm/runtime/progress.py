@@ -1,0 +1,181 @@
+"""`swarm up`'s progress line, from the latest ground truth the launcher heard.
+
+Each live agent's radial error: its distance to the target against the radius expected
+from its path to a leader (swarm/contracts/orbits.py), or none without a path; then the
+line's text, agent by agent for a small swarm, summed up for a large one: how many agents
+are settled (radial error within the settling band, 2%), how many are not and the worst
+few of those, how many have no leader, which (or how many) dropped. Agents added at run time (`swarm spawn`) count
+once the launcher knows their spec (`AddedSpec`, from the world's info). `ProgressLine`
+draws the line from the figures `swarm.launch` reports; while the world's clock is paused
+(`swarm pause`: the figures' "paused", from the world's pause and resume events,
+`Paused`) it says "paused" where the tick rate goes, and a world that does not tick
+otherwise shows 0 ticks/s, not the last rate it had.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from swarm.contracts import wire
+from swarm.contracts.orbits import expected_radius, root_of
+
+if TYPE_CHECKING:  # annotations only: `swarm up` imports this module for every command's app
+    from swarm.contracts.scenario import Scenario
+
+PROGRESS_AGENTS = 12  # more agents than this: the progress line sums them up
+WORST_SHOWN = 3  # unsettled agents named on a summed-up line
+
+
+@dataclass(frozen=True)
+class AddedSpec:
+    """What the progress line needs of an agent added at run time (the world's info has it)."""
+
+    id: int
+    role: str
+    speed: float
+    orbit_radius: float | None = None
+
+
+def added_spec(row: dict) -> AddedSpec | None:
+    """An `AddedSpec` from one agent's row of the world's info (None if it lacks a field)."""
+    try:
+        return AddedSpec(int(row["id"]), str(row["role"]), float(row["speed"]),
+                         None if row.get("orbit_radius") is None else float(row["orbit_radius"]))
+    except (KeyError, TypeError, ValueError):
+        return None
+
+
+def added_specs(session, run: str, ids: set[int]) -> dict[int, AddedSpec]:
+    """The specs of agents `ids`, added at run time, from the world's info (those it knows;
+    none if it does not answer now)."""
+    import zenoh
+
+    try:
+        for r in session.get(wire.world_info_key(run), timeout=1.0, consolidation=zenoh.ConsolidationMode.NONE):
+            if r.ok is not None:
+                rows = wire.decode_info(r.ok.payload.to_bytes()).get("agents", {})
+                found = {i: added_spec(rows[str(i)]) for i in ids if str(i) in rows}
+                return {i: a for i, a in found.items() if a is not None}
+    except Exception:  # the world ended meanwhile, or its info is malformed: asked again next time
+        pass
+    return {}
+
+
+def truth_progress(buf: bytes | None, s: "Scenario", added: dict[int, AddedSpec] | None = None) -> dict | None:
+    """Figures for the progress line from a ground-truth message (None: none, or unreadable).
+    `added`: the specs of agents added at run time; one not (yet) known is left out."""
+    if buf is None:
+        return None
+    try:
+        tick, t, recs = wire.decode_truth(buf)
+    except wire.WireError:
+        return None
+    spec = {a.id: a for a in s.agents} | dict(added or {})
+    recs = [r for r in recs if int(r["id"]) in spec]
+    leaders = {i for i, a in spec.items() if a.role == "leader"}
+    alive = {int(r["id"]) for r in recs if r["state"] == 0}
+    out = {int(r["id"]): (int(r["out"]) if r["out"] >= 0 else None) for r in recs}
+    errs = {}
+    for r in recs:
+        aid = int(r["id"])
+        if aid not in alive:
+            continue
+        root, _ = root_of(aid, out, leaders & alive)
+        if root is None:
+            errs[aid] = None
+            continue
+        L, me = spec[root], spec[aid]
+        R = expected_radius(me.speed, L.speed, L.orbit_radius)
+        errs[aid] = abs(math.hypot(r["x"] - s.target.x, r["y"] - s.target.y) - R) / R
+    return {"tick": tick, "time": t, "errors": errs, "dropped": sorted(set(out) - alive)}
+
+
+def _pct(e: float) -> str:
+    """A relative error as a short percentage: 0.4%, 12%, 480%."""
+    p = 100 * e
+    return f"{p:.1f}%" if p < 10 else f"{p:.0f}%"
+
+
+def progress_errors(p: dict) -> str:
+    """The progress line's radial errors: one per agent for a small swarm; for a large one
+    how many are settled, the worst few of the others, how many have no leader to follow
+    and how many dropped."""
+    from swarm.world.metrics import SETTLING_BAND  # (numpy: not at import, for the other commands' sake)
+
+    errs, dropped = p["errors"], p["dropped"]
+    gone = f"dropped {', '.join(map(str, dropped))}" if dropped else ""
+    if len(errs) + len(dropped) <= PROGRESS_AGENTS:
+        text = " ".join(f"{i}:{'-' if e is None else _pct(e)}" for i, e in sorted(errs.items()))
+        return f"radial error {text}" + (f"  {gone}" if gone else "")
+    rooted = [(e, i) for i, e in errs.items() if e is not None]
+    off = sorted(((e, i) for e, i in rooted if not e <= SETTLING_BAND), key=lambda x: (-x[0], x[1]))
+    text = f"{len(errs)} live: {len(rooted) - len(off)} settled"
+    if off:
+        text += f", {len(off)} not (worst {' '.join(f'{i}:{_pct(e)}' for e, i in off[:WORST_SHOWN])})"
+    if len(rooted) < len(errs):
+        text += f", {len(errs) - len(rooted)} without a leader"
+    if dropped:
+        text += "; " + (gone if len(dropped) <= WORST_SHOWN else f"{len(dropped)} dropped")
+    return text
+
+
+class ProgressLine:
+    """`swarm up`'s progress line, from the figures `swarm.launch` reports (`show`): at most
+    one a second when stdout is not a terminal (and the last tick's); on a terminal, one
+    row rewritten in place (`end` moves past it)."""
+
+    def __init__(self, tty: bool):
+        self.tty = tty
+        self.last, self.tick, self.wall = 0.0, 0, 0.0
+        self.clock = ""  # the rate (or "paused") last shown
+
+    def show(self, p: dict) -> None:
+        import time
+
+        import typer
+
+        now = time.monotonic()
+        still = p["tick"] == self.tick and self.wall > 0
+        if p.get("paused") and self.wall > 0:  # the rate after the pause counts from its end
+            still, self.tick, self.wall = True, p["tick"], p["wall"]
+        if still and now - self.last < 1.0:
+            return  # no new tick: said again at most once a second (the rate falls, or "paused")
+        if not self.tty and now - self.last < 1.0 and p["tick"] < p["ticks"] - 1:
+            return
+        rate = (p["tick"] - self.tick) / max(p["wall"] - self.wall, 1e-9)
+        clock = "paused" if p.get("paused") else f"{rate:6.0f} ticks/s"
+        if still and not self.tty and clock == self.clock:
+            return  # a log gets a line when something changed
+        self.last, self.tick, self.wall, self.clock = now, p["tick"], p["wall"], clock
+        line = f"t={p['time']:7.2f}s tick {p['tick']}/{p['ticks']} {clock}  " + progress_errors(p)
+        if self.tty:  # one terminal row: a wrapped line would not be cleared by the next one
+            import shutil
+
+            typer.echo("\r\033[K" + line[:max(20, shutil.get_terminal_size().columns - 1)], nl=False)
+        else:
+            typer.echo(line)
+
+    def end(self) -> None:
+        if self.tty:
+            import typer
+
+            typer.echo("")
+
+
+
+class Paused:
+    """Whether the world's clock is paused, from the events the launcher heard (a list that
+    only grows): the last `pause` or `resume`. Each call reads only the new events."""
+
+    def __init__(self):
+        self.seen, self.paused = 0, False
+
+    def __call__(self, events: list[dict]) -> bool:
+        n = len(events)
+        for ev in events[self.seen:n]:
+            if ev.get("kind") in ("pause", "resume"):
+                self.paused = ev["kind"] == "pause"
+        self.seen = n
+        return self.paused

@@ -1,0 +1,203 @@
+"""`swarm study`: does the law converge for my kind of swarm? Batch runs of the in-process
+engine on a process pool, rows streamed to CSV as they finish: by default many runs per
+job through the batch engine (swarm/study/batch.py), or one run per job through
+`swarm sim`'s per-agent engine (`run_swarm`, `run_gain`); the rows are the same.
+
+Two studies:
+
+- **swarms** (here): random swarms drawn from a few options (agents, leaders, area,
+  speeds, sensing range and field of view, selection rule, gains), one run per (setting,
+  seed). A swarm depends only on (seed, n, leaders, area, speeds, omega), so every
+  selection rule and sensing range of one study meets the same swarms.
+- **gains** (swarm/study/gains.py): one follower behind a leader that is already on its
+  orbit, for a grid of (C1, C2) and speed ratios: where does the law settle, and how fast?
+
+Generation, the workers and the summaries are pure functions of their arguments;
+swarm/study/pool.py runs jobs on a process pool and writes the tables.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+import time
+from dataclasses import asdict, dataclass, fields
+from typing import Iterable
+
+import numpy as np
+
+from swarm.contracts.scenario import Scenario, parse_scenario
+from swarm.world.metrics import switch_ticks
+
+
+@dataclass(frozen=True)
+class SwarmSetting:
+    """One setting of the swarms study (every field a CSV column)."""
+
+    n: int = 10  # agents
+    leaders: int = 2
+    selection: str = "sticky"
+    range: float = math.inf  # sensing range (m); inf: unlimited
+    fov: float = 2 * math.pi  # field of view (rad)
+    area: float = 120.0  # side of the square the agents start in (m), centred on the target
+    speed_min: float = 15.0  # m/s
+    speed_max: float = 40.0
+    omega: float = 1.0  # every leader's angular rate on its orbit (rad/s): R_L = v_L / omega
+    c1: float = 1.0
+    c2: float = 0.5
+    duration: float = 500.0  # s
+    dt: float = 0.05  # s
+
+    def label(self) -> str:
+        rng = "unlimited" if math.isinf(self.range) else f"{self.range:g} m"
+        fov = "" if self.fov >= 2 * math.pi else f", fov {self.fov:.2f}"
+        return f"N={self.n} L={self.leaders} {self.selection} range {rng}{fov}"
+
+
+def random_swarm(setting: SwarmSetting, seed: int) -> Scenario:
+    """The random swarm `seed` of a setting: ids 1..n, leaders first, uniform positions in
+    the area, uniform headings and speeds, leaders orbiting ccw at R_L = v_L / omega."""
+    rng = np.random.default_rng([seed, setting.n, setting.leaders])
+    half = setting.area / 2
+    xy = rng.uniform(-half, half, size=(setting.n, 2))
+    heading = rng.uniform(-math.pi, math.pi, size=setting.n)
+    speed = rng.uniform(setting.speed_min, setting.speed_max, size=setting.n)
+    agents = []
+    for k in range(setting.n):
+        a = {"id": k + 1, "role": "leader" if k < setting.leaders else "follower",
+             "x": float(xy[k, 0]), "y": float(xy[k, 1]), "heading": float(heading[k]), "speed": float(speed[k])}
+        if k < setting.leaders:
+            a["orbit_radius"] = float(speed[k]) / setting.omega
+        agents.append(a)
+    sensing: dict = {"selection": setting.selection}
+    if math.isfinite(setting.range):
+        sensing["range"] = setting.range
+    if setting.fov < 2 * math.pi:
+        sensing["fov"] = setting.fov
+    return parse_scenario({
+        "name": f"study-{seed}",
+        "run": {"dt": setting.dt, "duration": setting.duration, "seed": seed},
+        "gains": {"c1": setting.c1, "c2": setting.c2},
+        "sensing": sensing,
+        "agents": agents,
+    }, f"random swarm (seed {seed})")
+
+
+def cut_off_at_start(s: Scenario) -> bool:
+    """Some follower has no path to a leader in the sensing graph at t = 0: it cannot be
+    rooted before it moves (only possible with a range or field of view)."""
+    from swarm.world.core import WorldCore
+
+    sensed = WorldCore(s).sensing()[0]
+    reach = {k for k, a in enumerate(s.agents) if a.role == "leader"}
+    grew = True
+    while grew:
+        new = {i for i in range(len(s.agents)) if i not in reach and any(sensed[i, j] for j in reach)}
+        reach |= new
+        grew = bool(new)
+    return len(reach) < len(s.agents)
+
+
+@dataclass(frozen=True)
+class SwarmRow:
+    """The outcome of one run (a CSV row, after the setting's columns)."""
+
+    seed: int
+    converged: bool  # every live agent within 1% of its expected radius at the end
+    cut_off: bool  # see cut_off_at_start: counted like every run, and also shown apart
+    settling_time: float  # s, the last agent into the 2% band for good; nan if not settled
+    switches: int  # all followers' out-neighbour changes
+    switches_max: int  # the most any one follower made
+    switch_counts: str  # per follower, ';'-separated (for medians over agents)
+    unrooted: int  # followers with no path to a live leader at the end
+    searching_s: float  # s a follower spent with nobody to steer by, mean over followers
+    searching_max_s: float  # ... the most any one follower spent
+    losses: int  # all followers' losses of a committed out-neighbour (selection "sticky")
+    loss_switches_max: int  # the most changes of out-neighbour any one loss cost
+    wall_s: float
+
+
+def run_swarm(job: tuple[SwarmSetting, int]) -> dict:
+    """Worker: one random swarm through `swarm sim`'s engine; a flat dict for the CSV."""
+    from swarm.offline.sim import run_sim
+
+    setting, seed = job
+    t0 = time.perf_counter()
+    s = random_swarm(setting, seed)
+    cut = cut_off_at_start(s)
+    res = run_sim(s)
+    return swarm_row(setting, seed, cut, res, time.perf_counter() - t0)
+
+
+def swarm_row(setting: SwarmSetting, seed: int, cut: bool, res, wall: float) -> dict:
+    """The CSV row of one run's RunResult (either engine's)."""
+    summary = res.summary()
+    a = res.recorder.arrays()
+    follower = a["role"] == "follower"
+    counts = [len(k) for k, f in zip(switch_ticks(a["out"], a["alive"]), follower) if f]
+    agents = summary["agents"].values()
+    settle = [v["settling_time"] for v in agents]
+    dt = float(a["t"][1] - a["t"][0]) if len(a["t"]) > 1 else 0.0
+    searching = ((a["out"][:-1] < 0) & a["alive"][:-1]).sum(axis=0)[follower] * dt  # the last row is the end
+    fol = [v for v in agents if v["role"] == "follower"]
+    row = SwarmRow(seed, bool(summary["converged"]), cut,
+                   max(settle) if settle and None not in settle else math.nan,
+                   sum(counts), max(counts, default=0), ";".join(map(str, counts)),
+                   sum(1 for v in fol if v["root"] is None),
+                   float(searching.mean()) if searching.size else 0.0, float(searching.max(initial=0.0)),
+                   sum(v.get("losses", 0) for v in fol), max((v.get("loss_switches_max", 0) for v in fol), default=0),
+                   wall)
+    return {**asdict(setting), **asdict(row)}
+
+
+def swarm_jobs(settings: Iterable[SwarmSetting], seeds: Iterable[int]) -> list[tuple[SwarmSetting, int]]:
+    seeds = list(seeds)
+    return [(st, sd) for st in settings for sd in seeds]
+
+
+def swarm_columns() -> list[str]:
+    return [f.name for f in fields(SwarmSetting)] + [f.name for f in fields(SwarmRow)]
+
+
+def setting_of(row: dict) -> tuple:
+    return tuple(row[f.name] for f in fields(SwarmSetting))
+
+
+def summarise_swarms(rows: list[dict]) -> list[dict]:
+    """One line per setting: runs, converged fraction over every run (and, apart, how
+    many were cut off at t = 0 and how those fared), settling times, switches per
+    follower, time spent searching and the worst loss's switches."""
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        groups.setdefault(setting_of(r), []).append(r)
+    out = []
+    for key, rs in groups.items():
+        setting = SwarmSetting(*key)
+        cut = [r for r in rs if is_true(r["cut_off"])]
+        conv = [r for r in rs if is_true(r["converged"])]
+        settle = sorted(float(r["settling_time"]) for r in conv if math.isfinite(float(r["settling_time"])))
+        per_agent = [int(c) for r in rs for c in str(r["switch_counts"]).split(";") if c != ""]
+        search = sorted(float(r.get("searching_s", math.nan)) for r in rs)
+        out.append({
+            "setting": setting.label(),
+            "runs": len(rs),
+            "cut_off": len(cut),
+            "cut_off_converged": sum(1 for r in cut if is_true(r["converged"])),
+            "converged": len(conv),
+            "converged_fraction": len(conv) / len(rs) if rs else math.nan,
+            "settling_median_s": statistics.median(settle) if settle else math.nan,
+            "settling_p90_s": settle[min(len(settle) - 1, int(0.9 * len(settle)))] if settle else math.nan,
+            "switches_median": statistics.median(per_agent) if per_agent else math.nan,
+            "switches_p90": sorted(per_agent)[int(0.9 * (len(per_agent) - 1))] if per_agent else math.nan,
+            "switches_max": max(per_agent, default=0),
+            "searching_median_s": statistics.median(search) if search else math.nan,
+            "searching_max_s": max((float(r.get("searching_max_s", math.nan)) for r in rs), default=math.nan),
+            "losses": sum(int(r.get("losses", 0)) for r in rs),
+            "loss_switches_max": max((int(r.get("loss_switches_max", 0)) for r in rs), default=0),
+            **{k: getattr(setting, k) for k in ("n", "leaders", "selection", "range", "fov")},
+        })
+    return out
+
+
+def is_true(v) -> bool:
+    return v is True or str(v) == "True"
