@@ -58,8 +58,10 @@ class BatchBrains:
         self.limit = np.array([[a.max_turn_rate or math.inf for a in row] for row in specs], dtype=float)
         self.follower = np.array([[a.role == "follower" for a in row] for row in specs], dtype=bool)
         col = [{a.id: k for k, a in enumerate(row)} for row in specs]
-        self.pinned = np.array([[col[b][a.follow] if a.follow is not None else NONE for a in row]
-                                for b, row in enumerate(specs)], dtype=np.int64)
+        self.pinned = np.array(
+            [[col[b][a.follow] if a.follow is not None else NONE for a in row] for b, row in enumerate(specs)],
+            dtype=np.int64,
+        )
         self.leaders = BatchLeaders(specs, dt)
         self.sticky = BatchSticky(specs, gains, sensing, dt, max_hops) if self.mode == "sticky" else None
         self.out = np.full(shape, NONE, dtype=np.int64)  # AgentBrain.out
@@ -90,8 +92,9 @@ class BatchBrains:
 
     def _rooted_candidates(self, hops: np.ndarray, m: np.ndarray) -> np.ndarray:
         """selection.select's rooted filter with AgentBrain._below: (|m|, N, N)."""
-        below = np.where(self.hops[m] >= 0, self.hops[m],
-                         np.where(self.unrooted[m] < self.max_hops, self.feasible[m], NONE))[..., None]
+        below = np.where(
+            self.hops[m] >= 0, self.hops[m], np.where(self.unrooted[m] < self.max_hops, self.feasible[m], NONE)
+        )[..., None]
         hj = hops[:, None, :]
         current = np.arange(hops.shape[1])[None, None, :] == self.out[m][..., None]
         return (hj >= 0) & ((below < 0) | (hj < below) | current)

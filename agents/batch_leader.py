@@ -18,7 +18,7 @@ import numpy as np
 
 from swarm.agents import batch_maths as bm
 from swarm.agents.cc_plan import plan_cc
-from swarm.agents.leader import K_HEADING, K_RADIAL, _HOLD_DEADBAND, on_orbit_command
+from swarm.agents.leader import _HOLD_DEADBAND, K_HEADING, K_RADIAL, on_orbit_command
 
 SCALAR_MAX = 8  # leaders on their orbits: up to this many, one on_orbit_command call each
 
@@ -45,8 +45,10 @@ class BatchLeaders:
 
     def plan(self, tick: int, px: np.ndarray, py: np.ndarray, heading: np.ndarray) -> None:
         """plan_cc for every leader from its first frame (own position relative to the target)."""
-        paths = [plan_cc(float(x), float(y), float(g), a.speed, a.orbit_radius, a.direction_sign, a.max_turn_rate)
-                 for x, y, g, a in zip(px.tolist(), py.tolist(), heading.tolist(), self.specs)]
+        paths = [
+            plan_cc(float(x), float(y), float(g), a.speed, a.orbit_radius, a.direction_sign, a.max_turn_rate)
+            for x, y, g, a in zip(px.tolist(), py.tolist(), heading.tolist(), self.specs)
+        ]
         self.t1 = np.array([p.t1 for p in paths], dtype=float)
         self.t2 = np.array([p.t2 for p in paths], dtype=float)
         self.u1 = np.array([p.u1 for p in paths], dtype=float)
@@ -69,14 +71,16 @@ class BatchLeaders:
         if arc.any():
             t1, t12a = self.t1[arc], t12[arc]
             u_orbit = self.sign[arc] * self.v[arc] / self.radius[arc]
-            u[arc] = (self.u1[arc] * _overlap(a, b, 0.0, t1) + self.u2[arc] * _overlap(a, b, t1, t12a)
-                      + u_orbit * _overlap(a, b, t12a, math.inf)) / dt
+            u[arc] = (
+                self.u1[arc] * _overlap(a, b, 0.0, t1)
+                + self.u2[arc] * _overlap(a, b, t1, t12a)
+                + u_orbit * _overlap(a, b, t12a, math.inf)
+            ) / dt
         k = np.flatnonzero(orbit)
         if 0 < len(k) <= SCALAR_MAX:  # a few leaders: the brain's own function is quicker
             for j, x, y, g in zip(k.tolist(), px[k].tolist(), py[k].tolist(), heading[k].tolist()):
                 spec = self.specs[j]
-                u[j] = on_orbit_command(x, y, g, spec.speed, spec.orbit_radius, spec.direction_sign,
-                                        spec.max_turn_rate)
+                u[j] = on_orbit_command(x, y, g, spec.speed, spec.orbit_radius, spec.direction_sign, spec.max_turn_rate)
         elif len(k):
             u[k] = on_orbit(px[k], py[k], heading[k], self.v[k], self.radius[k], self.sign[k], self.limit[k])
         return bm.saturate(u, self.limit)

@@ -48,4 +48,3 @@ def select(cand: np.ndarray, rng: np.ndarray, ids, current: np.ndarray, hysteres
     r_cur = np.take_along_axis(rng, c[..., None], axis=-1)[..., 0]
     hold = (h > 0.0) & (best >= 0) & (current != best) & cur_cand & (r_best > (1.0 - h) * r_cur)
     return np.where(hold, current, best)
-

@@ -37,8 +37,12 @@ class BatchSticky:
         self.specs = specs
         self.gains = gains
         self.col = [{a.id: k for k, a in enumerate(row)} for row in specs]
-        self.agents = {(b, i): StickyFollower(a, gains[b], sensing[b], dt, max_hops)
-                       for b, row in enumerate(specs) for i, a in enumerate(row) if a.role == "follower"}
+        self.agents = {
+            (b, i): StickyFollower(a, gains[b], sensing[b], dt, max_hops)
+            for b, row in enumerate(specs)
+            for i, a in enumerate(row)
+            if a.role == "follower"
+        }
         self.out = np.full(shape, NONE, dtype=np.int64)  # Sticky.out (a column)
         self.committed = np.zeros(shape, dtype=bool)
         self.feasible = np.full(shape, NONE, dtype=np.int64)
@@ -68,12 +72,28 @@ class BatchSticky:
         dx, dy = frames.offsets(out)
         same = self.last.valid & (self.last.col == out)
         self.prev.assign(kept, self.last, same)
-        self.last.put(kept, out, tick * self.dt, np.hypot(dx, dy), lam, bm.take(frames.heading, out),
-                      bm.take(frames.hops, out), frames.heading)
+        self.last.put(
+            kept,
+            out,
+            tick * self.dt,
+            np.hypot(dx, dy),
+            lam,
+            bm.take(frames.heading, out),
+            bm.take(frames.hops, out),
+            frames.heading,
+        )
 
     # -- everybody else, one by one -----------------------------------------------------------------
-    def rest(self, tick: int, frames, need: np.ndarray, last_u: np.ndarray, choice: np.ndarray, u: np.ndarray,
-             hops: np.ndarray) -> None:
+    def rest(
+        self,
+        tick: int,
+        frames,
+        need: np.ndarray,
+        last_u: np.ndarray,
+        choice: np.ndarray,
+        u: np.ndarray,
+        hops: np.ndarray,
+    ) -> None:
         """StickyFollower.step and the law for the followers `need`, written into choice, u,
         hops (B, N) in place."""
         if not need.any():
@@ -88,15 +108,26 @@ class BatchSticky:
                 if not self.fresh[b, i]:
                     self._load(f, b, i)
                 heading = float(frames.heading[b, i])
-                ch, search = f.step(frames.contacts(b, i, sensed[k, i], rng[k, i]), heading, time,
-                                    float(last_u[b, i]), tick)
+                ch, search = f.step(
+                    frames.contacts(b, i, sensed[k, i], rng[k, i]), heading, time, float(last_u[b, i]), tick
+                )
                 self._store(f, b, i, col)
                 c, g = ch.contact, self.gains[b]
                 if c is None:
                     spec = self.specs[b][i]
-                    u[b, i] = math.copysign(g.c2, float(last_u[b, i]) or 1.0) if search is None else \
-                        on_orbit_command(-search.x, -search.y, heading, spec.speed, search.radius, search.direction,
-                                         spec.max_turn_rate)
+                    u[b, i] = (
+                        math.copysign(g.c2, float(last_u[b, i]) or 1.0)
+                        if search is None
+                        else on_orbit_command(
+                            -search.x,
+                            -search.y,
+                            heading,
+                            spec.speed,
+                            search.radius,
+                            search.direction,
+                            spec.max_turn_rate,
+                        )
+                    )
                     choice[b, i], hops[b, i] = NONE, NONE
                 else:
                     u[b, i] = bearing_law(heading, c.heading, c.bearing, g.c1, g.c2)
@@ -151,7 +182,7 @@ class _Sightings:
         for name, v in zip(self.FIELDS, (time, rng, bearing, heading, own)):
             setattr(self, name, np.where(where, v, getattr(self, name)))
 
-    def assign(self, where, other: "_Sightings", same) -> None:
+    def assign(self, where, other: _Sightings, same) -> None:
         """self = other where `where` and `same`, None where `where` and not `same`."""
         take = where & same
         self.valid = np.where(where, take & other.valid, self.valid)
@@ -163,9 +194,15 @@ class _Sightings:
     def get(self, b: int, i: int, specs) -> Sighting | None:
         if not self.valid[b, i]:
             return None
-        return Sighting(specs[int(self.col[b, i])].id, float(self.time[b, i]), float(self.range[b, i]),
-                        float(self.bearing[b, i]), float(self.heading[b, i]), int(self.hops[b, i]),
-                        float(self.own[b, i]))
+        return Sighting(
+            specs[int(self.col[b, i])].id,
+            float(self.time[b, i]),
+            float(self.range[b, i]),
+            float(self.bearing[b, i]),
+            float(self.heading[b, i]),
+            int(self.hops[b, i]),
+            float(self.own[b, i]),
+        )
 
     def set(self, b: int, i: int, s: Sighting | None, col: dict) -> None:
         self.valid[b, i] = s is not None
@@ -173,4 +210,3 @@ class _Sightings:
             self.col[b, i], self.hops[b, i] = col[s.id], s.hops
             for name in self.FIELDS:
                 getattr(self, name)[b, i] = getattr(s, name)
-

@@ -74,9 +74,30 @@ class AgentBrain:
     def _observe(self, frame: SensorFrame, out, search) -> Observation:
         s, g = self.spec, self.gains
         # tuple.__new__ straight away: a third of the cost of Observation(...) (0.2 against 0.6 us)
-        return _new(Observation, (s.id, s.role, frame.tick, frame.time, self.dt, s.speed, frame.heading,
-                                  s.max_turn_rate, frame.contacts, out, frame.target, s.orbit_radius, self.sign,
-                                  g.c1, g.c2, self.params, self.state, self.last_u, search))
+        return _new(
+            Observation,
+            (
+                s.id,
+                s.role,
+                frame.tick,
+                frame.time,
+                self.dt,
+                s.speed,
+                frame.heading,
+                s.max_turn_rate,
+                frame.contacts,
+                out,
+                frame.target,
+                s.orbit_radius,
+                self.sign,
+                g.c1,
+                g.c2,
+                self.params,
+                self.state,
+                self.last_u,
+                search,
+            ),
+        )
 
     def _command(self, frame: SensorFrame, out, search=None) -> float:
         """The law's turn rate, saturated; NaN or inf is counted (the agent reports it in its
@@ -102,8 +123,14 @@ class AgentBrain:
         if self.sticky is not None:
             choice, search = self.sticky.step(frame.contacts, frame.heading, frame.time, self.last_u, frame.tick)
         else:
-            choice = select(frame.contacts, mode=self.sensing.selection, pinned=self.spec.follow,
-                            current=self.out, hysteresis=self.sensing.hysteresis, below=self._below())
+            choice = select(
+                frame.contacts,
+                mode=self.sensing.selection,
+                pinned=self.spec.follow,
+                current=self.out,
+                hysteresis=self.sensing.hysteresis,
+                below=self._below(),
+            )
         self.out = choice.out
         c = choice.contact
         u = self._command(frame, c, search)

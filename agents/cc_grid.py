@@ -15,11 +15,11 @@ import math
 
 from swarm.contracts.orbits import TAU
 
-D_EPS = 1e-12           # alpha == beta (D ~ 0): no CC path through the Lemma 1 hyperbola
-_ANGLE_SNAP = 1e-10     # an arc angle within this of 2 pi is a rounding of 0 (rad) ...
-_LENGTH_SNAP = 1e-10    # ... if the arc length dropped is below this times the scene size
-_MIN_GAP = 1e-6         # |r_A + r_B| below this times max(|r_A|, |r_B|, |a|, R): near-coincident
-_TANGENCY_TOL = 1e-9    # relative residual of |o_A - o_B| = |r_A + r_B| accepted
+D_EPS = 1e-12  # alpha == beta (D ~ 0): no CC path through the Lemma 1 hyperbola
+_ANGLE_SNAP = 1e-10  # an arc angle within this of 2 pi is a rounding of 0 (rad) ...
+_LENGTH_SNAP = 1e-10  # ... if the arc length dropped is below this times the scene size
+_MIN_GAP = 1e-6  # |r_A + r_B| below this times max(|r_A|, |r_B|, |a|, R): near-coincident
+_TANGENCY_TOL = 1e-9  # relative residual of |o_A - o_B| = |r_A + r_B| accepted
 _BOUNDARY_NUDGE = 1e-9  # radii placed exactly on r_min are pushed out by this fraction
 
 
@@ -60,7 +60,7 @@ def geomspace(start: float, stop: float, num: int) -> list[float]:
     last bits where numpy uses its own SIMD log10 / power (AVX-512 builds): harmless, the
     grid only seeds the search.
     """
-    out = [10.0 ** e for e in linspace(math.log10(start), math.log10(stop), num)]
+    out = [10.0**e for e in linspace(math.log10(start), math.log10(stop), num)]
     out[0] = start
     out[-1] = stop
     return out
@@ -142,7 +142,7 @@ def best_cc(px, py, alpha, radius, s, r_min, r_cap, phis, mags, n_best=1, n_ring
                 scale = arb
             if not abs(ssum) > min_gap * scale:
                 continue
-            dx = ax + ra * sa + rb * sb          # o_A - o_B
+            dx = ax + ra * sa + rb * sb  # o_A - o_B
             dy = ay - ra * ca - rb * cb
             if not abs(hypot(dx, dy) - abs(ssum)) <= tangency * scale:
                 continue
@@ -168,11 +168,11 @@ def best_cc(px, py, alpha, radius, s, r_min, r_cap, phis, mags, n_best=1, n_ring
     eligible = [length < inf for length in per_phi]
     if n_best > 1 and n_ring >= 3:
         for i in range(n_ring):
-            if eligible[i] and not (per_phi[i] <= per_phi[i - 1 if i else n_ring - 1]
-                                    and per_phi[i] <= per_phi[(i + 1) % n_ring]):
+            if eligible[i] and not (
+                per_phi[i] <= per_phi[i - 1 if i else n_ring - 1] and per_phi[i] <= per_phi[(i + 1) % n_ring]
+            ):
                 eligible[i] = False
     order = sorted((i for i, ok in enumerate(eligible) if ok), key=per_phi.__getitem__)[:n_best]
     if not order:
         return None
     return [(per_phi[i], best_ra[i], best_rb[i], phis[i]) for i in order]
-

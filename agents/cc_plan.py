@@ -52,8 +52,8 @@ from swarm.contracts.orbits import TAU, wrap
 #: i.e. the planned turn rates stay below 10x the orbit's own turn rate v / R.
 DEFAULT_MIN_RADIUS_FRACTION = 0.1
 
-_ON_ORBIT_TOL = 1e-9    # plan_cc: "already on the orbit" tolerance (relative radius / rad)
-_N_STARTS = 4           # plan_cc refines around this many of the best coarse entry angles
+_ON_ORBIT_TOL = 1e-9  # plan_cc: "already on the orbit" tolerance (relative radius / rad)
+_N_STARTS = 4  # plan_cc refines around this many of the best coarse entry angles
 
 
 @dataclass(frozen=True)
@@ -154,12 +154,22 @@ def _orbit_path(x, y, v, radius, s) -> CCPath:
     """Zero-length path for a leader already on the orbit (both arcs are the orbit)."""
     theta = math.atan2(y, x)
     entry = (radius * math.cos(theta), radius * math.sin(theta), wrap(theta + s * 0.5 * math.pi))
-    return CCPath(r_a=-s * radius, r_b=s * radius, u1=s * v / radius, u2=s * v / radius,
-                  t1=0.0, t2=0.0, entry=entry, length=0.0)
+    return CCPath(
+        r_a=-s * radius, r_b=s * radius, u1=s * v / radius, u2=s * v / radius, t1=0.0, t2=0.0, entry=entry, length=0.0
+    )
 
 
-def plan_cc(x: float, y: float, heading: float, v: float, radius: float, direction: int,
-            max_turn_rate: float | None = None, *, n_entry: int = 72) -> CCPath:
+def plan_cc(
+    x: float,
+    y: float,
+    heading: float,
+    v: float,
+    radius: float,
+    direction: int,
+    max_turn_rate: float | None = None,
+    *,
+    n_entry: int = 72,
+) -> CCPath:
     """Shortest circle-circle path (over a candidate grid) from a pose onto the orbit.
 
     x, y: leader position relative to the target (m); heading (rad); v: speed (m/s) > 0;
@@ -185,8 +195,10 @@ def plan_cc(x: float, y: float, heading: float, v: float, radius: float, directi
 
     r = math.hypot(x, y)
     theta = math.atan2(y, x)
-    if (abs(r - radius) < _ON_ORBIT_TOL * max(1.0, radius)
-            and abs(wrap(heading - theta - s * 0.5 * math.pi)) < _ON_ORBIT_TOL):
+    if (
+        abs(r - radius) < _ON_ORBIT_TOL * max(1.0, radius)
+        and abs(wrap(heading - theta - s * 0.5 * math.pi)) < _ON_ORBIT_TOL
+    ):
         return _orbit_path(x, y, v, radius, s)
 
     alpha = wrap(heading)
@@ -203,8 +215,7 @@ def plan_cc(x: float, y: float, heading: float, v: float, radius: float, directi
         step = TAU / n_phi
         phis = [i * step for i in range(n_phi)] + extra
         mags = [r_min * g for g in geomspace(1.0, max(2.0, top * big / r_min), n_mag)]
-        coarse = best_cc(x, y, alpha, radius, s, r_min, r_cap, phis, mags,
-                          n_best=_N_STARTS, n_ring=n_phi)
+        coarse = best_cc(x, y, alpha, radius, s, r_min, r_cap, phis, mags, n_best=_N_STARTS, n_ring=n_phi)
         if coarse is not None:
             break
         n_phi, n_mag, top = 4 * n_phi, 2 * n_mag, 10.0 * top
@@ -220,8 +231,7 @@ def plan_cc(x: float, y: float, heading: float, v: float, radius: float, directi
         for _ in range(3):
             _, ra_cur, _, phi_cur = cur
             phis = [phi_cur + e for e in linspace(-h, h, 21)]
-            mags = [m for m in (abs(ra_cur) * g for g in geomspace(1.0 / ratio, ratio, 15))
-                    if m >= r_min]
+            mags = [m for m in (abs(ra_cur) * g for g in geomspace(1.0 / ratio, ratio, 15)) if m >= r_min]
             cand = best_cc(x, y, alpha, radius, s, r_min, r_cap, phis, mags)
             if cand is not None and cand[0][0] < cur[0]:
                 cur = cand[0]
@@ -244,5 +254,4 @@ def plan_cc(x: float, y: float, heading: float, v: float, radius: float, directi
     d2 = 0.0 if snap(d2, rb, scene) else d2
     t1, t2 = abs(ra) * d1 / v, abs(rb) * d2 / v
     entry = (radius * math.cos(phi), radius * math.sin(phi), wrap(beta))
-    return CCPath(r_a=ra, r_b=rb, u1=-v / ra, u2=v / rb, t1=t1, t2=t2, entry=entry,
-                  length=abs(ra) * d1 + abs(rb) * d2)
+    return CCPath(r_a=ra, r_b=rb, u1=-v / ra, u2=v / rb, t1=t1, t2=t2, entry=entry, length=abs(ra) * d1 + abs(rb) * d2)

@@ -119,8 +119,12 @@ def _become_agent(argv: list[str], log: str, env: dict[str, str], middle: int) -
         os.environ.update(env)
         # the signals as a Python started afresh has them (SIGPIPE ignored: a write to a closed
         # socket is an error, not death); the agent installs its own SIGTERM / SIGINT handlers
-        for sig, handler in ((signal.SIGTERM, signal.SIG_DFL), (signal.SIGCHLD, signal.SIG_DFL),
-                             (signal.SIGINT, signal.default_int_handler), (signal.SIGPIPE, signal.SIG_IGN)):
+        for sig, handler in (
+            (signal.SIGTERM, signal.SIG_DFL),
+            (signal.SIGCHLD, signal.SIG_DFL),
+            (signal.SIGINT, signal.default_int_handler),
+            (signal.SIGPIPE, signal.SIG_IGN),
+        ):
             signal.signal(sig, handler)
         null = os.open(os.devnull, os.O_RDONLY)
         out = os.open(log, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)

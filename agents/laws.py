@@ -20,8 +20,8 @@ binds it, and the agent searches for it. Names resolve in swarm/contracts/laws.p
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from types import MappingProxyType
-from typing import Callable
 
 from swarm.agents.leader import on_orbit_command
 from swarm.contracts.laws import FOLLOWER, GAINS, LEADER, LawError, follower_law_name, resolve_law

@@ -30,8 +30,9 @@ K_HEADING = 5.0
 _HOLD_DEADBAND = 1e-12  # on_orbit_command: errors below this are rounding, not drift
 
 
-def on_orbit_command(x: float, y: float, heading: float, v: float, radius: float, direction: int,
-                     max_turn_rate: float | None = None) -> float:
+def on_orbit_command(
+    x: float, y: float, heading: float, v: float, radius: float, direction: int, max_turn_rate: float | None = None
+) -> float:
     """Orbit-hold turn rate (rad/s) for a leader near its orbit.
 
     x, y: position relative to the target (m); heading (rad); v (m/s); radius R (m);
@@ -88,5 +89,6 @@ def cc_law(obs: Observation) -> float:
         return on_orbit_command(px, py, obs.heading, obs.speed, obs.orbit_radius, sign, obs.max_turn_rate)
     u_orbit = sign * obs.speed / obs.orbit_radius
     st["phase"] = "arc1" if a < p.t1 else "arc2"
-    return (p.u1 * _overlap(a, b, 0.0, p.t1) + p.u2 * _overlap(a, b, p.t1, t12)
-            + u_orbit * _overlap(a, b, t12, math.inf)) / obs.dt
+    return (
+        p.u1 * _overlap(a, b, 0.0, p.t1) + p.u2 * _overlap(a, b, p.t1, t12) + u_orbit * _overlap(a, b, t12, math.inf)
+    ) / obs.dt

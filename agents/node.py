@@ -44,8 +44,17 @@ EXIT_OK = 0  # the run ended (agents/process.py has the other exit codes)
 class AgentNode:
     """The process shell around an AgentBrain."""
 
-    def __init__(self, session, run: str, agent_id: int, reply: dict, wait_world: bool,
-                 endpoint: str | None = None, world_grace: float = 0.0, trusted: set[str] | None = None):
+    def __init__(
+        self,
+        session,
+        run: str,
+        agent_id: int,
+        reply: dict,
+        wait_world: bool,
+        endpoint: str | None = None,
+        world_grace: float = 0.0,
+        trusted: set[str] | None = None,
+    ):
         import zenoh
 
         from swarm.contracts.brain_config import BrainConf
@@ -101,13 +110,12 @@ class AgentNode:
         self.status_pub = ses.declare_publisher(wire.agent_key(run, self.id, "status"))
         self.subs = [
             ses.declare_subscriber(wire.agent_key(run, self.id, "sense"), self.on_sense_sample),
-            ses.declare_subscriber(wire.world_control_key(run),
-                                   lambda s: put(("control", s.payload.to_bytes()))),
-            ses.declare_subscriber(wire.agent_key(run, self.id, "ctl"),
-                                   lambda s: put(("ctl", s.payload.to_bytes()))),
+            ses.declare_subscriber(wire.world_control_key(run), lambda s: put(("control", s.payload.to_bytes()))),
+            ses.declare_subscriber(wire.agent_key(run, self.id, "ctl"), lambda s: put(("ctl", s.payload.to_bytes()))),
             ses.declare_queryable(wire.agent_key(run, self.id, "status"), lambda q: put(("query", q))),
-            ses.liveliness().declare_subscriber(wire.world_alive_key(run),
-                                                lambda s: put(("world", s.kind)), history=True),
+            ses.liveliness().declare_subscriber(
+                wire.world_alive_key(run), lambda s: put(("world", s.kind)), history=True
+            ),
         ]
         self.token = ses.liveliness().declare_token(wire.agent_key(run, self.id, "alive"))
 
@@ -122,13 +130,20 @@ class AgentNode:
         d = self.last
         hops = self.hops()
         return {
-            "id": self.id, "role": self.spec.role, "pid": os.getpid(), "host": socket.gethostname(),
-            "out": None if d is None else d.out, "rooted": hops is not None, "hops": hops,
+            "id": self.id,
+            "role": self.spec.role,
+            "pid": os.getpid(),
+            "host": socket.gethostname(),
+            "out": None if d is None else d.out,
+            "rooted": hops is not None,
+            "hops": hops,
             "phase": None if d is None else d.phase,
             "fallback": False if d is None else d.fallback,
             "pinned": self.spec.follow,
             "u": None if d is None else d.u,
-            "commands": self.commands, "last_tick": self.last_tick, "garbage": self.garbage,
+            "commands": self.commands,
+            "last_tick": self.last_tick,
+            "garbage": self.garbage,
             "nonfinite": self.nonfinite(),
             **self.brain.figures_of_selection(),
         }
@@ -175,8 +190,7 @@ class AgentNode:
                 if not self.answering:
                     return
                 frame = self.decode_frame(payload)
-                if (frame is not None and self.on_sense(frame)
-                        and time.monotonic() - self.status_sent >= STATUS_MIN_GAP):
+                if frame is not None and self.on_sense(frame) and time.monotonic() - self.status_sent >= STATUS_MIN_GAP:
                     self.inbox.put(("status", None))
         except BaseException as e:  # noqa: BLE001 (re-raised in the main thread)
             self.answering = False
@@ -194,8 +208,10 @@ class AgentNode:
         d = brain.decide(frame)
         if brain.nonfinite != bad and time.monotonic() - self.nonfinite_noted > NONFINITE_NOTE_S:
             self.nonfinite_noted = time.monotonic()
-            _log(f"[agent {self.id}] tick {frame.tick}: the law {self.conf.law_names()[0]!r} returned "
-                 f"{brain.last_nonfinite}; the last turn rate is held ({self.nonfinite()} so far)")
+            _log(
+                f"[agent {self.id}] tick {frame.tick}: the law {self.conf.law_names()[0]!r} returned "
+                f"{brain.last_nonfinite}; the last turn rate is held ({self.nonfinite()} so far)"
+            )
         self.last_cmd = wire.encode_cmd_fields(self.id, frame.tick, d.u, d.out, d.phase, d.hops, self.key)
         self.cmd_pub.put(self.last_cmd)
         self.commands += 1
@@ -204,8 +220,11 @@ class AgentNode:
         if last is None:
             return True
         if d.out != last.out:
-            why = ("pinned out-neighbour not sensed, nearest used" if d.fallback
-                   else f"selection = {self.conf.sensing.selection}")
+            why = (
+                "pinned out-neighbour not sensed, nearest used"
+                if d.fallback
+                else f"selection = {self.conf.sensing.selection}"
+            )
             _log(f"[agent {self.id}] tick {frame.tick}: out-neighbour {last.out} -> {d.out} ({why})")
             return True
         return d.phase != last.phase or d.fallback != last.fallback or d.hops != last.hops

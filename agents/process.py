@@ -46,9 +46,17 @@ def _stopped(signum: int) -> AgentExit:
     return AgentExit(128 + signum, "")
 
 
-def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: bool = False,
-              spec: dict | None = None, world_grace: float = WORLD_GRACE, creds_file: Path | None = None,
-              trust: tuple[str, ...] = (), world_wait: float = CONNECT_TIMEOUT_MS / 1000) -> int:
+def run_agent(
+    agent_id: int,
+    connect: str,
+    run: str | None = None,
+    wait_world: bool = False,
+    spec: dict | None = None,
+    world_grace: float = WORLD_GRACE,
+    creds_file: Path | None = None,
+    trust: tuple[str, ...] = (),
+    world_wait: float = CONNECT_TIMEOUT_MS / 1000,
+) -> int:
     """Entry point of an agent process; returns its exit code. It connects as `agent-<id>`
     with the run's credentials (`creds_file`, else $SWARM_CREDENTIALS, else the local run's
     file in the runtime directory) and imports only a law that is built in or trusted."""
@@ -89,8 +97,9 @@ def run_agent(agent_id: int, connect: str, run: str | None = None, wait_world: b
     return code
 
 
-def _connect(agent_id: int, connect: str, run: str | None, creds_file: Path | None, world_wait: float,
-             stops: StopSignals):
+def _connect(
+    agent_id: int, connect: str, run: str | None, creds_file: Path | None, world_wait: float, stops: StopSignals
+):
     """(session, credentials) of agent `agent_id` on `connect`, or the exit code, said in one
     line: EXIT_NO_WORLD when nothing listens there (started before its world, which it waits
     for as long as a connection may take), EXIT_REFUSED when there are no usable credentials
@@ -100,8 +109,10 @@ def _connect(agent_id: int, connect: str, run: str | None, creds_file: Path | No
     while endpoint_refuses(connect):  # no socket file, or a refused connection: no world (yet)
         stops.check()
         if time.monotonic() > t_end:
-            _log(f"swarm agent {agent_id}: no world at {connect}: nothing listened there for "
-                 f"{world_wait:g} s (start the run first: swarm up, or swarm world)")
+            _log(
+                f"swarm agent {agent_id}: no world at {connect}: nothing listened there for "
+                f"{world_wait:g} s (start the run first: swarm up, or swarm world)"
+            )
             return EXIT_NO_WORLD
         time.sleep(0.1)
     user = agent_user(agent_id)
@@ -116,13 +127,19 @@ def _connect(agent_id: int, connect: str, run: str | None, creds_file: Path | No
     try:
         # a stop while it connects is raised as the open returns or fails (zenoh.open runs to
         # its connect timeout); a session it had just made, with nothing declared, just goes
-        session = stops.interruptible(open_client, connect,
-                                      LAUNCHED_CONNECT_TIMEOUT_MS if launched else CONNECT_TIMEOUT_MS,
-                                      creds=creds, user=user)
+        session = stops.interruptible(
+            open_client,
+            connect,
+            LAUNCHED_CONNECT_TIMEOUT_MS if launched else CONNECT_TIMEOUT_MS,
+            creds=creds,
+            user=user,
+        )
     except Exception as e:
         why = " ".join(_RUST_SOURCE.sub("", str(e)).split())
-        _log(f"swarm agent {agent_id}: cannot connect to {connect} as {user} of run {creds.run}: {why} "
-             "(something listens there, but it refused these credentials or is not this run's world)")
+        _log(
+            f"swarm agent {agent_id}: cannot connect to {connect} as {user} of run {creds.run}: {why} "
+            "(something listens there, but it refused these credentials or is not this run's world)"
+        )
         return EXIT_REFUSED
     return session, creds
 
@@ -154,10 +171,11 @@ def main(argv: list[str] | None = None) -> None:
     if "--world-grace" in args:
         i = args.index("--world-grace")
         grace = float(args[i + 1])
-        del args[i:i + 2]
+        del args[i : i + 2]
     spec = json.loads(args[3]) if len(args) > 3 else None
-    sys.exit(run_agent(int(args[0]), args[1], args[2] if len(args) > 2 and args[2] else None, spec=spec,
-                       world_grace=grace))
+    sys.exit(
+        run_agent(int(args[0]), args[1], args[2] if len(args) > 2 and args[2] else None, spec=spec, world_grace=grace)
+    )
 
 
 if __name__ == "__main__":

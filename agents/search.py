@@ -45,8 +45,9 @@ SEEN = 0.25  # the circle about a rooted agent it sees but may not take yet, in 
 MIN_TURN_MARGIN = 1.25  # radius at least this times v / max_turn_rate (the tightest circle)
 
 
-def pattern(sensing_range: float | None, speed: float, c2: float,
-            max_turn_rate: float | None) -> tuple[float, float, float]:
+def pattern(
+    sensing_range: float | None, speed: float, c2: float, max_turn_rate: float | None
+) -> tuple[float, float, float]:
     """(rho0, pitch, rho_min) of a follower's spiral (m): see the module docstring."""
     if sensing_range is None or not math.isfinite(sensing_range):
         rho0, pitch = speed / c2, 0.0
@@ -103,8 +104,7 @@ class SearchMemory:
         self.direction = 1
         self.prev: tuple[float, float] | None = None  # (heading, time) of the previous tick
 
-    def update(self, steer, seen, heading: float, time: float, last_u: float,
-               predicted: bool = False) -> Search | None:
+    def update(self, steer, seen, heading: float, time: float, last_u: float, predicted: bool = False) -> Search | None:
         """One tick. steer: the Contact it steers by (None: nobody), `predicted` when that
         is a coasting prediction (agents/coast.py: not a sighting, home is carried on);
         seen: with nobody to steer by, the nearest agent it senses with a path to a leader,
@@ -137,5 +137,9 @@ class SearchMemory:
         if seen is not None:  # close in on it: a tight circle about where it is now
             self.since = time
             return Search(self.home[0], self.home[1], max(self.rho_min, SEEN * self.rho0), self.direction)
-        return Search(self.home[0], self.home[1],
-                      radius(self.rho0, self.pitch, self.rho_min, self.speed, time - self.since), self.direction)
+        return Search(
+            self.home[0],
+            self.home[1],
+            radius(self.rho0, self.pitch, self.rho_min, self.speed, time - self.since),
+            self.direction,
+        )

@@ -21,7 +21,8 @@ per loss. Pure: no I/O.
 from __future__ import annotations
 
 import math
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 from swarm.contracts.frames import Contact
 from swarm.contracts.orbits import wrap
@@ -58,8 +59,15 @@ def nearest(contacts: tuple[Contact, ...]) -> Contact | None:
     return best
 
 
-def select(contacts: tuple[Contact, ...], *, mode: str, pinned: int | None, current: int | None,
-           hysteresis: float = 0.0, below: int | None = None) -> Choice:
+def select(
+    contacts: tuple[Contact, ...],
+    *,
+    mode: str,
+    pinned: int | None,
+    current: int | None,
+    hysteresis: float = 0.0,
+    below: int | None = None,
+) -> Choice:
     """Choose a follower's out-neighbour among `contacts`.
 
     rooted mode: candidates advertise hops >= 0 and, when `below` is given, hops < below
@@ -69,8 +77,7 @@ def select(contacts: tuple[Contact, ...], *, mode: str, pinned: int | None, curr
     distance-vector routing).
     """
     if mode == "rooted":
-        contacts = tuple(c for c in contacts if c.hops >= 0 and (below is None or c.hops < below
-                                                                 or c.id == current))
+        contacts = tuple(c for c in contacts if c.hops >= 0 and (below is None or c.hops < below or c.id == current))
     if mode == "fixed" and pinned is not None:
         for c in contacts:
             if c.id == pinned:
@@ -181,13 +188,44 @@ class Sticky:
     changing.
     """
 
-    __slots__ = ("wait_ticks", "drain_ticks", "hold_ticks", "coast_ticks", "quiet", "me", "reach", "out",
-                 "committed", "acquired", "feasible", "waited", "silent", "held", "coasted", "shadowed",
-                 "patience", "late", "cone", "heading", "losses", "in_loss", "loss_changes", "worst_loss")
+    __slots__ = (
+        "wait_ticks",
+        "drain_ticks",
+        "hold_ticks",
+        "coast_ticks",
+        "quiet",
+        "me",
+        "reach",
+        "out",
+        "committed",
+        "acquired",
+        "feasible",
+        "waited",
+        "silent",
+        "held",
+        "coasted",
+        "shadowed",
+        "patience",
+        "late",
+        "cone",
+        "heading",
+        "losses",
+        "in_loss",
+        "loss_changes",
+        "worst_loss",
+    )
 
-    def __init__(self, wait_ticks: int, drain_ticks: int, me: int | None = None, reach: float = math.inf,
-                 hold_ticks: int = HOLD_TICKS, coast_ticks: int = 0, late: bool = False,
-                 cone: float | None = None):
+    def __init__(
+        self,
+        wait_ticks: int,
+        drain_ticks: int,
+        me: int | None = None,
+        reach: float = math.inf,
+        hold_ticks: int = HOLD_TICKS,
+        coast_ticks: int = 0,
+        late: bool = False,
+        cone: float | None = None,
+    ):
         self.wait_ticks = wait_ticks
         self.hold_ticks = hold_ticks
         self.coast_ticks = coast_ticks
@@ -307,8 +345,9 @@ class Sticky:
                 return Choice(c.id, c, False, False)
         shadow = None
         if self.shadowed == 0 or not self.acquired:
-            shadow = nearest(tuple(c for c in contacts if c.hops >= 0 and self._reachable(c))) or \
-                nearest(tuple(c for c in contacts if self._shadow_ok(c) and self._reachable(c)))
+            shadow = nearest(tuple(c for c in contacts if c.hops >= 0 and self._reachable(c))) or nearest(
+                tuple(c for c in contacts if self._shadow_ok(c) and self._reachable(c))
+            )
         if shadow is None:
             self.out = None
             return Choice(None, None, False, False)

@@ -27,14 +27,22 @@ class StickyFollower:
         swarm.contracts.brain_config equivalents; max_hops: the deepest a path can be."""
         sensing_range, fov = getattr(sensing, "range", None), getattr(sensing, "fov", None)
         coast = coast_ticks(dt)  # holds last as long as coasts: a subtree waits out its root's coast
-        self.sticky = Sticky(max_hops, max_hops, spec.id, reach(sensing_range), hold_ticks=max(HOLD_TICKS, coast),
-                             coast_ticks=coast, cone=cone(fov))
+        self.sticky = Sticky(
+            max_hops,
+            max_hops,
+            spec.id,
+            reach(sensing_range),
+            hold_ticks=max(HOLD_TICKS, coast),
+            coast_ticks=coast,
+            cone=cone(fov),
+        )
         self.tracker = Tracker(sensing_range, fov, spec.speed)
         self.memory = SearchMemory(sensing_range, spec.speed, gains.c2, spec.max_turn_rate)
         self.fresh = True  # no frame yet
 
-    def step(self, contacts: tuple[Contact, ...], heading: float, time: float, last_u: float,
-             tick: int = 0) -> tuple[Choice, Search | None]:
+    def step(
+        self, contacts: tuple[Contact, ...], heading: float, time: float, last_u: float, tick: int = 0
+    ) -> tuple[Choice, Search | None]:
         """This tick's choice, and the search circle to fly when it has nobody to steer by.
         tick: the frame's; a follower whose first frame is not the run's first joined late."""
         if self.fresh:

@@ -68,18 +68,24 @@ class WorldLink:
         # After our own stall, our link reconnects within ~0.5 s; a dead world is still
         # noticed within ~0.6 s.
         if self.still_there(3.0 if stalled else 0.6):
-            log(f"[agent {self.agent}] lost the world's token but the world is still there "
-                f"(stalled {stalled:.1f} s before): carrying on")
+            log(
+                f"[agent {self.agent}] lost the world's token but the world is still there "
+                f"(stalled {stalled:.1f} s before): carrying on"
+            )
             return HERE
         if self.grace > 0 and not (self.endpoint and endpoint_refuses(self.endpoint)):
             self.lost_at = time.monotonic()
-            log(f"[agent {self.agent}] the world of run {self.run} stopped answering; waiting up to "
-                f"{self.grace:g} s for it (--world-grace)")
+            log(
+                f"[agent {self.agent}] the world of run {self.run} stopped answering; waiting up to "
+                f"{self.grace:g} s for it (--world-grace)"
+            )
             return WAITING
         self.alive = False
         if not self.wait_world:
-            raise AgentExit(EXIT_WORLD_GONE, f"agent {self.agent}: the world of run {self.run} vanished; "
-                                             "exiting (use --wait-world to wait for it)")
+            raise AgentExit(
+                EXIT_WORLD_GONE,
+                f"agent {self.agent}: the world of run {self.run} vanished; exiting (use --wait-world to wait for it)",
+            )
         log(f"[agent {self.agent}] the world vanished; waiting for it to come back")
         return GONE
 
@@ -107,7 +113,10 @@ class WorldLink:
         if self.lost_at is None or self.waited() <= self.grace:
             return
         if not self.wait_world:
-            raise AgentExit(EXIT_WORLD_SILENT, f"agent {self.agent}: the world of run {self.run} has not "
-                                               f"answered for {self.grace:g} s (--world-grace); exiting")
+            raise AgentExit(
+                EXIT_WORLD_SILENT,
+                f"agent {self.agent}: the world of run {self.run} has not "
+                f"answered for {self.grace:g} s (--world-grace); exiting",
+            )
         self.lost_at, self.alive = None, False
         log(f"[agent {self.agent}] the world has not answered for {self.grace:g} s; waiting for a world")

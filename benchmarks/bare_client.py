@@ -50,10 +50,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("endpoint")
     ap.add_argument("run")
     ap.add_argument("--timeout", type=float, default=300.0, help="exit after this many s in any case")
-    ap.add_argument("--handler", choices=("callback", "channel", "direct"), default="callback",
-                    help="callback: Python callback enqueues, the main thread answers; "
-                         "channel: zenoh's FIFO channel, the main thread blocks in recv(); "
-                         "direct: the callback answers (like agents/process.py)")
+    ap.add_argument(
+        "--handler",
+        choices=("callback", "channel", "direct"),
+        default="callback",
+        help="callback: Python callback enqueues, the main thread answers; "
+        "channel: zenoh's FIFO channel, the main thread blocks in recv(); "
+        "direct: the callback answers (like agents/process.py)",
+    )
     ap.add_argument("--creds", help="a run's credentials file: connect as agent-INDEX on swarm's keys")
     a = ap.parse_args(argv)
 
@@ -106,8 +110,7 @@ def main(argv: list[str] | None = None) -> int:
                 pass
             return 0
         subs = [  # noqa: F841 (kept alive until close)
-            session.declare_subscriber(key(a.run, a.index, "tick"),
-                                       lambda s: put(s.payload.to_bytes())),
+            session.declare_subscriber(key(a.run, a.index, "tick"), lambda s: put(s.payload.to_bytes())),
             session.declare_subscriber(key(a.run, None, "end"), lambda s: put(None)),
         ]
         token = session.liveliness().declare_token(key(a.run, a.index, "alive"))  # noqa: F841

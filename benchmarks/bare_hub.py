@@ -45,11 +45,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tick-timeout", type=float, default=5.0)
     ap.add_argument("--result", required=True)
     ap.add_argument("--ready", help="touch this file when every client joined (ticking starts)")
-    ap.add_argument("--linger", type=float, default=0.0,
-                    help="s to wait after writing the result before ending the clients (to sample their memory)")
-    ap.add_argument("--handler", choices=("callback", "channel"), default="callback",
-                    help="callback: Python callback enqueues (like world/process.py); "
-                         "channel: zenoh's FIFO channel, the main thread blocks in recv() (no tick timeout)")
+    ap.add_argument(
+        "--linger",
+        type=float,
+        default=0.0,
+        help="s to wait after writing the result before ending the clients (to sample their memory)",
+    )
+    ap.add_argument(
+        "--handler",
+        choices=("callback", "channel"),
+        default="callback",
+        help="callback: Python callback enqueues (like world/process.py); "
+        "channel: zenoh's FIFO channel, the main thread blocks in recv() (no tick timeout)",
+    )
     ap.add_argument("--creds", help="the run's credentials file: check clients as a world does")
     a = ap.parse_args(argv)
 
@@ -76,12 +84,16 @@ def main(argv: list[str] | None = None) -> int:
                 return ack_sub.recv().payload.to_bytes()
         else:
             ack_sub = session.declare_subscriber(key(a.run, "*", "ack"), lambda s: acks.put(s.payload.to_bytes()))
+
             def next_ack(timeout: float) -> bytes:
                 return acks.get(timeout=timeout)
+
         subs = [  # noqa: F841 (kept alive until close)
             session.liveliness().declare_subscriber(
                 key(a.run, "*", "alive"),
-                lambda s: joins.put((str(s.key_expr), s.kind == zenoh.SampleKind.PUT)), history=True),
+                lambda s: joins.put((str(s.key_expr), s.kind == zenoh.SampleKind.PUT)),
+                history=True,
+            ),
         ]
         pubs = [session.declare_publisher(key(a.run, i, "tick"), express=True) for i in range(a.n)]
         end = session.declare_publisher(key(a.run, None, "end"))
@@ -135,10 +147,14 @@ def main(argv: list[str] | None = None) -> int:
                 durations.append(time.perf_counter() - t_tick)
         wall = time.perf_counter() - t0
         durations.sort()
-        result.update(ok=True, wall_time=wall, ticks_per_second=a.ticks / wall,
-                      tick_ms_p50=1e3 * statistics.median(durations),
-                      tick_ms_p99=1e3 * durations[min(len(durations) - 1, int(0.99 * len(durations)))],
-                      tick_ms_max=1e3 * durations[-1])
+        result.update(
+            ok=True,
+            wall_time=wall,
+            ticks_per_second=a.ticks / wall,
+            tick_ms_p50=1e3 * statistics.median(durations),
+            tick_ms_p99=1e3 * durations[min(len(durations) - 1, int(0.99 * len(durations)))],
+            tick_ms_max=1e3 * durations[-1],
+        )
         write(a.result, result)
         time.sleep(a.linger)
         for p in pubs:

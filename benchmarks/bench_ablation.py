@@ -43,13 +43,21 @@ MODES = ("swarm", "recording", "world", "agents", "both")
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="6,20,50", help="agent counts, comma-separated (default 6,20,50)")
-    ap.add_argument("--neighbours", type=int, default=8,
-                    help="a sensing range under which each agent senses about this many others at the start "
-                         "(default 8; 0: unlimited sensing)")
+    ap.add_argument(
+        "--neighbours",
+        type=int,
+        default=8,
+        help="a sensing range under which each agent senses about this many others at the start "
+        "(default 8; 0: unlimited sensing)",
+    )
     ap.add_argument("--repeat", type=int, default=2, help="runs of each kind per N (default 2)")
     ap.add_argument("--swarm-seconds", type=float, default=3.0, help="aim for this many s of ticking per run")
-    ap.add_argument("--quiet-wait", type=float, default=20.0,
-                    help="before each run wait up to this many s for the machine to be quiet")
+    ap.add_argument(
+        "--quiet-wait",
+        type=float,
+        default=20.0,
+        help="before each run wait up to this many s for the machine to be quiet",
+    )
     ap.add_argument("--json", type=Path, help="write all results to this JSON file")
     a = ap.parse_args(argv)
     sizes = [int(x) for x in a.sizes.split(",") if x.strip()]
@@ -88,12 +96,16 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def report(results: dict) -> str:
-    sensing = ("unlimited sensing" if results["neighbours"] is None
-               else f"a range under which each agent senses about {results['neighbours']} others at the start")
-    lines = [f"lockstep ticks/s (best of {results['repeat']}), {sensing}; in brackets: against the floor",
-             "  N |  floor |          swarm |   no recording | world does nothing | agents decide nothing |"
-             "           both",
-             "-" * 115]
+    sensing = (
+        "unlimited sensing"
+        if results["neighbours"] is None
+        else f"a range under which each agent senses about {results['neighbours']} others at the start"
+    )
+    lines = [
+        f"lockstep ticks/s (best of {results['repeat']}), {sensing}; in brackets: against the floor",
+        "  N |  floor |          swarm |   no recording | world does nothing | agents decide nothing |           both",
+        "-" * 115,
+    ]
     for n in results["sizes"]:
         r = results["by_n"][str(n)]
         floor = (best(r["floor"]) or {}).get("ticks_per_second")
@@ -102,8 +114,10 @@ def report(results: dict) -> str:
             tps = (best(r[m]) or {}).get("ticks_per_second")
             ratio = f"({tps / floor:.2f})" if tps and floor else "(-)"
             cells.append(f"{fmt(tps):>6} {ratio:>6}")
-        lines.append(f"{n:>3} | {fmt(floor):>6} | {cells[0]:>14} | {cells[1]:>14} | {cells[2]:>18} | "
-                     f"{cells[3]:>21} | {cells[4]:>14}")
+        lines.append(
+            f"{n:>3} | {fmt(floor):>6} | {cells[0]:>14} | {cells[1]:>14} | {cells[2]:>18} | "
+            f"{cells[3]:>21} | {cells[4]:>14}"
+        )
     return "\n".join(lines)
 
 

@@ -31,10 +31,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from swarm.offline.batch import run_batch  # noqa: E402
-from swarm.study.batch import run_swarm_chunk, swarm_chunks  # noqa: E402
 from swarm.contracts.scenario import load_scenario  # noqa: E402
+from swarm.offline.batch import run_batch  # noqa: E402
 from swarm.offline.sim import run_sim  # noqa: E402
+from swarm.study.batch import run_swarm_chunk, swarm_chunks  # noqa: E402
 from swarm.study.swarms import SwarmSetting, cut_off_at_start, random_swarm, swarm_row  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -65,15 +65,19 @@ def one_run(label: str, s, duration: float | None) -> None:
     print(f"  per-agent (run_sim)  {agent_ticks / t_ref:>12,.0f} agent-ticks/s  ({t_ref:.2f} s)")
     print(f"  batch (run_batch)    {agent_ticks / t_got:>12,.0f} agent-ticks/s  ({t_got:.2f} s)")
     print(f"  ratio                {t_ref / t_got:>12.2f} x")
-    print(f"  max deviation        {deviation(ref, got):>12.3g} m   (bit-identical x, y, heading, u, out: "
-          f"{identical(ref, got)}; events equal: {got.events == ref.events}, {len(ref.events)} of them)")
+    print(
+        f"  max deviation        {deviation(ref, got):>12.3g} m   (bit-identical x, y, heading, u, out: "
+        f"{identical(ref, got)}; events equal: {got.events == ref.events}, {len(ref.events)} of them)"
+    )
 
 
 def study(seeds: int, baseline: int, setting: SwarmSetting) -> None:
     ticks = int(round(setting.duration / setting.dt))
     per_run = ticks * setting.n
-    print(f"\nstudy: {seeds} random swarms, {setting.label()}, {setting.duration:g} s at dt {setting.dt:g} s "
-          f"({per_run:,} agent-ticks each), one process")
+    print(
+        f"\nstudy: {seeds} random swarms, {setting.label()}, {setting.duration:g} s at dt {setting.dt:g} s "
+        f"({per_run:,} agent-ticks each), one process"
+    )
     chunks = swarm_chunks([setting], range(seeds), workers=1)
     t0 = time.perf_counter()
     rows = {}
@@ -81,8 +85,10 @@ def study(seeds: int, baseline: int, setting: SwarmSetting) -> None:
         for r in run_swarm_chunk(job):
             rows[r["seed"]] = r
     t_batch = time.perf_counter() - t0
-    print(f"  batch      {seeds} runs in {len(chunks)} chunks of {len(chunks[0][1])}: {t_batch:.1f} s, "
-          f"{seeds * per_run / t_batch:>12,.0f} agent-ticks/s")
+    print(
+        f"  batch      {seeds} runs in {len(chunks)} chunks of {len(chunks[0][1])}: {t_batch:.1f} s, "
+        f"{seeds * per_run / t_batch:>12,.0f} agent-ticks/s"
+    )
     refs, t_base, base_rows = [], 0.0, {}
     for sd in range(baseline):
         t0 = time.perf_counter()
@@ -93,14 +99,18 @@ def study(seeds: int, baseline: int, setting: SwarmSetting) -> None:
         t_base += time.perf_counter() - t0
         refs.append((s, res))
     rate = baseline * per_run / t_base
-    print(f"  per-agent  {baseline} runs (seeds 0..{baseline - 1}): {t_base:.1f} s, {rate:>12,.0f} agent-ticks/s "
-          f"(200 seeds at this rate: {seeds * per_run / rate / 60:.1f} min)")
+    print(
+        f"  per-agent  {baseline} runs (seeds 0..{baseline - 1}): {t_base:.1f} s, {rate:>12,.0f} agent-ticks/s "
+        f"(200 seeds at this rate: {seeds * per_run / rate / 60:.1f} min)"
+    )
     print(f"  ratio      {seeds * per_run / t_batch / rate:.1f} x")
     again = run_batch([s for s, _ in refs], lean=True)
     devs = [deviation(r, g) for (_, r), g in zip(refs, again)]
     same_rows = all({**rows[sd], "wall_s": 0} == {**base_rows[sd], "wall_s": 0} for sd in range(baseline))
-    print(f"  equality   max deviation over seeds 0..{baseline - 1}: {max(devs):.3g} m; "
-          f"rows equal (wall_s apart): {same_rows}")
+    print(
+        f"  equality   max deviation over seeds 0..{baseline - 1}: {max(devs):.3g} m; "
+        f"rows equal (wall_s apart): {same_rows}"
+    )
     conv = sum(1 for r in rows.values() if r["converged"])
     print(f"  outcome    converged {conv} / {seeds}")
 

@@ -138,9 +138,11 @@ def summary(rows: list[tuple[bool, float, str]]) -> str:
     ok = sum(1 for o, _, _ in rows if o)
     fast = sum(1 for o, t, _ in rows if o and t <= OK_S)
     first_fail = next((m for o, _, m in rows if not o), "")
-    return (f"{len(rows):3d} calls, {ok:3d} ok, {fast:3d} ok within {OK_S:g} s, "
-            f"median {statistics.median(lat):5.2f} s, max {max(lat):5.2f} s"
-            + (f"; first failure: {first_fail}" if first_fail else ""))
+    return (
+        f"{len(rows):3d} calls, {ok:3d} ok, {fast:3d} ok within {OK_S:g} s, "
+        f"median {statistics.median(lat):5.2f} s, max {max(lat):5.2f} s"
+        + (f"; first failure: {first_fail}" if first_fail else "")
+    )
 
 
 def bench(kind: str, conns: int, attack_s: float, after_s: float, before_s: float) -> None:
@@ -150,17 +152,35 @@ def bench(kind: str, conns: int, attack_s: float, after_s: float, before_s: floa
     env = {**os.environ, "SWARM_RUNTIME_DIR": rt}
     env.pop("SWARM_RUN", None), env.pop("SWARM_CONNECT", None), env.pop("SWARM_CREDENTIALS", None)
     log = open(out / "up.log", "wb")
-    up = subprocess.Popen(swarm("up", REPO / "scenarios/case2.toml", "--clock", "realtime", "--duration", "3600",
-                                "--listen", f"{kind}/127.0.0.1:{port}", "--out", out / "run", "--no-plots"),
-                          env=env, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                          start_new_session=True, cwd=REPO)
+    up = subprocess.Popen(
+        swarm(
+            "up",
+            REPO / "scenarios/case2.toml",
+            "--clock",
+            "realtime",
+            "--duration",
+            "3600",
+            "--listen",
+            f"{kind}/127.0.0.1:{port}",
+            "--out",
+            out / "run",
+            "--no-plots",
+        ),
+        env=env,
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        stdin=subprocess.DEVNULL,
+        start_new_session=True,
+        cwd=REPO,
+    )
     attacker = None
     try:
         run = wait_run(env, up)
         endpoint = f"{kind}/127.0.0.1:{port}"
         print(f"\n== {kind}: run {run} on {endpoint}, {conns} idle connections for {attack_s:g} s")
-        phases: dict[str, dict[str, list]] = {p: {"agents": [], "agents-net": [], "spawn": []}
-                                             for p in ("before", "attack", "after")}
+        phases: dict[str, dict[str, list]] = {
+            p: {"agents": [], "agents-net": [], "spawn": []} for p in ("before", "attack", "after")
+        }
         next_id, added = 7, set()
         t0 = time.monotonic()
         plan = [("before", before_s), ("attack", attack_s), ("after", after_s)]
@@ -174,14 +194,20 @@ def bench(kind: str, conns: int, attack_s: float, after_s: float, before_s: floa
                 for name, extra in (("agents", ()), ("agents-net", ("--connect", endpoint))):
                     r = timed(swarm("agents", "--run", run, *extra), env)
                     phases[phase][name].append(r)
-                    print(f"  t={time.monotonic() - t0:6.1f}s {phase:6s} {name:10s} {'ok  ' if r[0] else 'FAIL'} "
-                          f"{r[1]:5.2f} s" + ("" if r[0] else f"  {r[2]}"), flush=True)
+                    print(
+                        f"  t={time.monotonic() - t0:6.1f}s {phase:6s} {name:10s} {'ok  ' if r[0] else 'FAIL'} "
+                        f"{r[1]:5.2f} s" + ("" if r[0] else f"  {r[2]}"),
+                        flush=True,
+                    )
                 spec = () if next_id in added else ("--x", 5, "--y", 5, "--heading", 0, "--speed", 10)
                 r = timed(swarm("spawn", "--run", run, "--id", next_id, *spec), env)
                 added.add(next_id)
                 phases[phase]["spawn"].append(r)
-                print(f"  t={time.monotonic() - t0:6.1f}s {phase:6s} spawn {next_id:2d} "
-                      f"{'ok  ' if r[0] else 'FAIL'} {r[1]:5.2f} s" + ("" if r[0] else f"  {r[2]}"), flush=True)
+                print(
+                    f"  t={time.monotonic() - t0:6.1f}s {phase:6s} spawn {next_id:2d} "
+                    f"{'ok  ' if r[0] else 'FAIL'} {r[1]:5.2f} s" + ("" if r[0] else f"  {r[2]}"),
+                    flush=True,
+                )
                 if r[0]:
                     timed(swarm("kill", "--run", run, next_id), env)
                 next_id = 7 if next_id == 30 else next_id + 1  # past the cap: the dropped ids rejoin
@@ -189,8 +215,10 @@ def bench(kind: str, conns: int, attack_s: float, after_s: float, before_s: floa
                 print(f"  hub RSS under attack: {hub_rss(up.pid, port)}")
                 attacker.stop.set()
                 attacker.join(10)
-                print(f"  attacker: {attacker.opened} connections opened (at most {attacker.max_open} at once), "
-                      f"{attacker.closed_by_hub} closed by the hub, {attacker.failed} connects failed")
+                print(
+                    f"  attacker: {attacker.opened} connections opened (at most {attacker.max_open} at once), "
+                    f"{attacker.closed_by_hub} closed by the hub, {attacker.failed} connects failed"
+                )
         print(f"-- {kind}, {conns} idle connections:")
         for phase, _ in plan:
             for cmd in ("agents", "agents-net", "spawn"):
@@ -222,7 +250,7 @@ def main() -> None:
 
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     resource.setrlimit(resource.RLIMIT_NOFILE, (min(hard, max(soft, a.conns + 256)), hard))
-    for kind in (("tcp", "tls") if a.listen == "both" else (a.listen,)):
+    for kind in ("tcp", "tls") if a.listen == "both" else (a.listen,):
         bench(kind, a.conns, a.attack, a.after, a.before)
 
 

@@ -34,9 +34,15 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def _start(src: Path, rt: Path, out: Path, *args: str) -> subprocess.Popen:
     env = {**os.environ, "SWARM_RUNTIME_DIR": str(rt), "PYTHONPATH": str(src)}
-    return subprocess.Popen([sys.executable, "-m", "swarm", "up", "scenarios/case2.toml", "--out", str(out),
-                             "--no-plots", *args], cwd=src, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    return subprocess.Popen(
+        [sys.executable, "-m", "swarm", "up", "scenarios/case2.toml", "--out", str(out), "--no-plots", *args],
+        cwd=src,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
+    )
 
 
 def _credentials(rt: Path, up: subprocess.Popen):
@@ -88,8 +94,10 @@ def flap(src: Path, toggles: int, tmp: Path) -> None:
     up.communicate(timeout=600)
     s = json.loads((out / "summary.json").read_text())
     others = {k: a for k, a in s["agents"].items() if k != "3"}
-    print(f"exit {up.returncode}; summary.json {(out / 'summary.json').stat().st_size / 1e3:.0f} KB, "
-          f"{len(s['events'])} events; over_limit {s.get('over_limit')}")
+    print(
+        f"exit {up.returncode}; summary.json {(out / 'summary.json').stat().st_size / 1e3:.0f} KB, "
+        f"{len(s['events'])} events; over_limit {s.get('over_limit')}"
+    )
     print("others' staleness_max_ticks:", {k: a.get("staleness_max_ticks") for k, a in others.items()})
     print("others' commands dropped (flooded_messages):", {k: a.get("flooded_messages") for k, a in others.items()})
     a3 = s["agents"]["3"]
@@ -107,14 +115,32 @@ def stall(src: Path, stop: float, tmp: Path) -> None:
     os.kill(world, signal.SIGCONT)
     up.communicate(timeout=900)
     env = {**os.environ, "SWARM_RUNTIME_DIR": str(rt), "PYTHONPATH": str(src)}
-    subprocess.run([sys.executable, "-m", "swarm", "sim", "scenarios/case2.toml", "--out", str(sim), "--duration",
-                    "60", "--no-plots"], cwd=src, env=env, capture_output=True, check=True)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "swarm",
+            "sim",
+            "scenarios/case2.toml",
+            "--out",
+            str(sim),
+            "--duration",
+            "60",
+            "--no-plots",
+        ],
+        cwd=src,
+        env=env,
+        capture_output=True,
+        check=True,
+    )
     a, b = np.load(out / "trajectory.npz"), np.load(sim / "trajectory.npz")
     d = float(np.nanmax(np.hypot(a["x"] - b["x"], a["y"] - b["y"])))
     s = json.loads((out / "summary.json").read_text())
-    print(f"exit {up.returncode}; world stopped {stop:g} s; missed ticks "
-          f"{ {k: v['missed_ticks'] for k, v in s['agents'].items()} }; largest distance from swarm sim {d:.3g} m; "
-          f"reproducible {s.get('reproducible')} {s.get('not_reproducible') or ''}")
+    print(
+        f"exit {up.returncode}; world stopped {stop:g} s; missed ticks "
+        f"{ {k: v['missed_ticks'] for k, v in s['agents'].items()} }; largest distance from swarm sim {d:.3g} m; "
+        f"reproducible {s.get('reproducible')} {s.get('not_reproducible') or ''}"
+    )
 
 
 def main() -> None:

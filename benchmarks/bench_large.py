@@ -55,8 +55,8 @@ def main(argv: list[str] | None = None) -> int:
 
     import numpy as np
 
-    from swarm.offline.batch import run_batch
     from swarm.contracts.scenario import parse_scenario
+    from swarm.offline.batch import run_batch
 
     rt = tempfile.mkdtemp(prefix="sw", dir="/tmp")
     work = Path(tempfile.mkdtemp(prefix="swarm-large-"))
@@ -108,19 +108,25 @@ def main(argv: list[str] | None = None) -> int:
     start = next((e for e in summary.get("events", []) if e.get("kind") == "start"), {})
     agents = summary["agents"]
     rel = [v["relative_error"] for v in agents.values()]
-    res.update(first_tick_s=start.get("wall_time", t_popen) - t_popen, startup_s=start.get("startup_s"),
-               ticks=summary.get("ticks"), ticks_per_second=summary.get("ticks_per_second"),
-               converged=summary.get("converged"),
-               worst_relative_error=max((r for r in rel if r is not None), default=None),
-               without_leader=sum(r is None for r in rel))
+    res.update(
+        first_tick_s=start.get("wall_time", t_popen) - t_popen,
+        startup_s=start.get("startup_s"),
+        ticks=summary.get("ticks"),
+        ticks_per_second=summary.get("ticks_per_second"),
+        converged=summary.get("converged"),
+        worst_relative_error=max((r for r in rel if r is not None), default=None),
+        without_leader=sum(r is None for r in rel),
+    )
     roles = {int(k): v["role"] for k, v in agents.items()}
     by_role: dict[str, list[float]] = {"leader": [], "follower": []}
     for pid, rss in mem.rss.items():
         aid = next((int(k) for k, v in agents.items() if v.get("pid") == pid), None)
         if aid is not None:
             by_role[roles[aid]].append(rss)
-    res["rss_mb"] = {role: {"n": len(v), "mean": float(np.mean(v)) if v else None, "max": max(v) if v else None}
-                     for role, v in by_role.items()}
+    res["rss_mb"] = {
+        role: {"n": len(v), "mean": float(np.mean(v)) if v else None, "max": max(v) if v else None}
+        for role, v in by_role.items()
+    }
     res["world_rss_mb"] = max(wmem.rss.values(), default=None)
     s = parse_scenario(tomllib.loads(text))
     ref = run_batch([s], a.duration)[0].recorder.arrays()
@@ -136,17 +142,27 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(res, indent=2))
         return 1
     r = res["rss_mb"]
-    print(f"{a.n} agent processes ({a.leaders} leaders), {a.duration:g} s simulated at dt {a.dt:g}, "
-          f"sensing {'unlimited' if a.neighbours is None else f'about {a.neighbours} others'}:")
-    print(f"  first tick {res['first_tick_s']:.1f} s after Popen of swarm up (world startup_s {res['startup_s']:.1f} s)")
-    print(f"  {res['ticks']} ticks at {res['ticks_per_second']:.1f} ticks/s; converged {res['converged']} "
-          f"(worst relative radial error {res['worst_relative_error']:.4f}, {res['without_leader']} without a leader)")
-    print(f"  RSS while ticking, MB: followers mean {r['follower']['mean']:.1f} max {r['follower']['max']:.1f} "
-          f"(n={r['follower']['n']}); leaders mean {r['leader']['mean']:.1f} max {r['leader']['max']:.1f} "
-          f"(n={r['leader']['n']}); world {res['world_rss_mb']:.1f}")
+    print(
+        f"{a.n} agent processes ({a.leaders} leaders), {a.duration:g} s simulated at dt {a.dt:g}, "
+        f"sensing {'unlimited' if a.neighbours is None else f'about {a.neighbours} others'}:"
+    )
+    print(
+        f"  first tick {res['first_tick_s']:.1f} s after Popen of swarm up (world startup_s {res['startup_s']:.1f} s)"
+    )
+    print(
+        f"  {res['ticks']} ticks at {res['ticks_per_second']:.1f} ticks/s; converged {res['converged']} "
+        f"(worst relative radial error {res['worst_relative_error']:.4f}, {res['without_leader']} without a leader)"
+    )
+    print(
+        f"  RSS while ticking, MB: followers mean {r['follower']['mean']:.1f} max {r['follower']['max']:.1f} "
+        f"(n={r['follower']['n']}); leaders mean {r['leader']['mean']:.1f} max {r['leader']['max']:.1f} "
+        f"(n={r['leader']['n']}); world {res['world_rss_mb']:.1f}"
+    )
     print(f"  trajectory vs the batch engine: largest difference {res['max_diff_to_batch_m']:.3g} m")
-    print(f"  swarm up exit code {res['exit_code']}; processes of its run left afterwards: {len(res['left_after_exit'])} "
-          f"(of {res['processes_seen']} seen)")
+    print(
+        f"  swarm up exit code {res['exit_code']}; processes of its run left afterwards: {len(res['left_after_exit'])} "
+        f"(of {res['processes_seen']} seen)"
+    )
     return 0
 
 

@@ -28,8 +28,10 @@ import psutil
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from swarm.contracts import wire  # noqa: E402
-from swarm.contracts import credentials  # noqa: E402
+from swarm.contracts import (
+    credentials,  # noqa: E402
+    wire,  # noqa: E402
+)
 from swarm.contracts.transport import open_client  # noqa: E402
 from swarm.runtime.procs import Group, wait_until  # noqa: E402
 
@@ -48,12 +50,29 @@ def main() -> int:
     out = work / "run"
     # case2, with room for the agents this benchmark adds (the hub's rules name each of them)
     scenario = work / "case2-add.toml"
-    scenario.write_text((ROOT / "scenarios" / "case2.toml").read_text().replace(
-        "[run]\n", f"[run]\nmax_added_agents = {a.add}\n", 1))
+    scenario.write_text(
+        (ROOT / "scenarios" / "case2.toml").read_text().replace("[run]\n", f"[run]\nmax_added_agents = {a.add}\n", 1)
+    )
     group = Group(session=True)
-    up = group.start([sys.executable, "-m", "swarm", "up", str(scenario), "--out", str(out),
-                      "--clock", "realtime", "--duration", "3000", "--no-plots"],
-                     env=env, stdout=open(work / "up.log", "wb"), stderr=open(work / "up.err", "wb"))
+    up = group.start(
+        [
+            sys.executable,
+            "-m",
+            "swarm",
+            "up",
+            str(scenario),
+            "--out",
+            str(out),
+            "--clock",
+            "realtime",
+            "--duration",
+            "3000",
+            "--no-plots",
+        ],
+        env=env,
+        stdout=open(work / "up.log", "wb"),
+        stderr=open(work / "up.err", "wb"),
+    )
     try:
         endpoint = run = None
 
@@ -92,8 +111,10 @@ def main() -> int:
         m0, t0 = rss_mb(pid), info()["time"]
         time.sleep(a.run_for)
         m1, t1 = rss_mb(pid), info()["time"]
-        print(f"world RSS {m0:.1f} MB at t = {t0:.1f} s, {m1:.1f} MB at t = {t1:.1f} s: "
-              f"{(m1 - m0) * 1024 / max(t1 - t0, 1e-9):.1f} KB per simulated s")
+        print(
+            f"world RSS {m0:.1f} MB at t = {t0:.1f} s, {m1:.1f} MB at t = {t1:.1f} s: "
+            f"{(m1 - m0) * 1024 / max(t1 - t0, 1e-9):.1f} KB per simulated s"
+        )
         spec = {"role": "follower", "x": 50.0, "y": 50.0, "heading": 0.0, "speed": 10.0}
         host = socket.gethostname()
         ok = 0
@@ -111,10 +132,12 @@ def main() -> int:
         m2, t2 = rss_mb(pid), info()["time"]
         time.sleep(a.run_for)
         m3, t3 = rss_mb(pid), info()["time"]
-        print(f"added {ok}/{a.add} agents: world RSS {m1:.1f} -> {m2:.1f} MB "
-              f"({(m2 - m1) * 1024 / max(ok, 1):.1f} KB per added agent); "
-              f"{m3:.1f} MB at t = {t3:.1f} s ({(m3 - m2) * 1024 / max(t3 - t2, 1e-9):.1f} KB per simulated s "
-              f"with {ok + 6} agents recorded)")
+        print(
+            f"added {ok}/{a.add} agents: world RSS {m1:.1f} -> {m2:.1f} MB "
+            f"({(m2 - m1) * 1024 / max(ok, 1):.1f} KB per added agent); "
+            f"{m3:.1f} MB at t = {t3:.1f} s ({(m3 - m2) * 1024 / max(t3 - t2, 1e-9):.1f} KB per simulated s "
+            f"with {ok + 6} agents recorded)"
+        )
         rec = out / "recording.mcap"
         print(f"recording.mcap: {rec.stat().st_size / 2**20:.1f} MB on disk")
         ses.close()

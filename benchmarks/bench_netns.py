@@ -39,8 +39,9 @@ REPO = BENCH.parent
 sys.path[:0] = [str(REPO), str(BENCH), str(REPO / "tests")]
 
 from bench_runtime import Tracked, log, scenario_toml, wait_quiet  # noqa: E402
-from swarm.runtime.procs import wait_until  # noqa: E402
 from test_multihost import Lan, LanError, why_no_lan  # noqa: E402
+
+from swarm.runtime.procs import wait_until  # noqa: E402
 
 PY = sys.executable
 VARIANTS = ("up", "veth-tls", "veth-tcp", "local-hosts")
@@ -69,13 +70,18 @@ def run_up(scen: Path, work: Path, tag: str, timeout: float) -> dict:
     tr = Tracked()
     try:
         t0 = time.monotonic()
-        p = tr.spawn(swarm("up", scen, "--out", out, "--no-plots", "--clock", "lockstep"), work / f"up-{tag}.log",
-                     env_for(rt))
+        p = tr.spawn(
+            swarm("up", scen, "--out", out, "--no-plots", "--clock", "lockstep"), work / f"up-{tag}.log", env_for(rt)
+        )
         if not wait_until(lambda: p.poll() is not None, timeout, 0.1) or p.returncode != 0:
             raise RuntimeError(f"swarm up exited {p.poll()}; see {work / f'up-{tag}.log'}")
         s = summary_of(out)
-        return {"ticks_per_second": s["ticks_per_second"], "ticks": s["ticks"], "wall_s": time.monotonic() - t0,
-                "ticking_s": s["wall_time"]}
+        return {
+            "ticks_per_second": s["ticks_per_second"],
+            "ticks": s["ticks"],
+            "wall_s": time.monotonic() - t0,
+            "ticking_s": s["wall_time"],
+        }
     finally:
         tr.stop()
         shutil.rmtree(rt, ignore_errors=True)
@@ -95,8 +101,16 @@ def run_hosts(scen: Path, n: int, work: Path, tag: str, timeout: float, lan: Lan
     try:
         t0 = time.monotonic()
         listen = f"{proto}/{lan.address['w']}:7447" if lan is not None else f"unixsock-stream/{dirs['w']}/w.sock"
-        world = tr.spawn(where("w", swarm("world", scen, "--listen", listen, "--run", run, "--clock", "lockstep",
-                                          "--out", out, "--no-plots")), work / f"world-{tag}.log", env_for(dirs["w"]))
+        world = tr.spawn(
+            where(
+                "w",
+                swarm(
+                    "world", scen, "--listen", listen, "--run", run, "--clock", "lockstep", "--out", out, "--no-plots"
+                ),
+            ),
+            work / f"world-{tag}.log",
+            env_for(dirs["w"]),
+        )
         cred = Path(dirs["w"]) / f"{run}.cred"
         if not wait_until(lambda: cred.exists() or world.poll() is not None, 30, 0.05) or world.poll() is not None:
             raise RuntimeError(f"the world did not start; see {work / f'world-{tag}.log'}")
@@ -104,8 +118,11 @@ def run_hosts(scen: Path, n: int, work: Path, tag: str, timeout: float, lan: Lan
         for h, ids in halves(n).items():
             if lan is not None:
                 f = work / f"host-{h}-{tag}.cred"
-                p = tr.spawn(swarm("credentials", "--host", h, "--agents", ids, "--run", run, "-o", f, "--force"),
-                             work / f"credentials-{tag}.log", env_for(dirs["w"]))
+                p = tr.spawn(
+                    swarm("credentials", "--host", h, "--agents", ids, "--run", run, "-o", f, "--force"),
+                    work / f"credentials-{tag}.log",
+                    env_for(dirs["w"]),
+                )
                 if p.wait(30) != 0:
                     raise RuntimeError(f"swarm credentials failed; see {work / f'credentials-{tag}.log'}")
                 args = swarm("host", "--credentials", f, "--logs", work / f"logs-{h}-{tag}")
@@ -121,9 +138,13 @@ def run_hosts(scen: Path, n: int, work: Path, tag: str, timeout: float, lan: Lan
         if any(codes):
             raise RuntimeError(f"run {tag}: exit codes world {codes[0]}, hosts {codes[1:]}; logs in {work}")
         s = summary_of(out)
-        return {"ticks_per_second": s["ticks_per_second"], "ticks": s["ticks"], "wall_s": time.monotonic() - t0,
-                "ticking_s": s["wall_time"],
-                "missed": sum(a["missed_ticks"] for a in s["agents"].values())}
+        return {
+            "ticks_per_second": s["ticks_per_second"],
+            "ticks": s["ticks"],
+            "wall_s": time.monotonic() - t0,
+            "ticking_s": s["wall_time"],
+            "missed": sum(a["missed_ticks"] for a in s["agents"].values()),
+        }
     finally:
         tr.stop()
         for d in dirs.values():
@@ -133,17 +154,20 @@ def run_hosts(scen: Path, n: int, work: Path, tag: str, timeout: float, lan: Lan
 def report(results: dict, n: int) -> str:
     ref = results.get("up")
     ref_best = max((r["ticks_per_second"] for r in ref), default=None) if ref else None
-    lines = [f"lockstep ticks/s, {n} agents, best of {max(len(v) for v in results.values())} "
-             f"(the other runs in brackets)",
-             f"{'variant':<12} {'ticks/s':>8} {'vs up':>6}  {'runs':<24} {'wall s (ticking)':<18}"]
+    lines = [
+        f"lockstep ticks/s, {n} agents, best of {max(len(v) for v in results.values())} (the other runs in brackets)",
+        f"{'variant':<12} {'ticks/s':>8} {'vs up':>6}  {'runs':<24} {'wall s (ticking)':<18}",
+    ]
     for variant, runs in results.items():
         if not runs:
             continue
         best = max(runs, key=lambda r: r["ticks_per_second"])
         ratio = f"{best['ticks_per_second'] / ref_best:.2f}" if ref_best else "-"
         others = ", ".join(f"{r['ticks_per_second']:.0f}" for r in runs if r is not best)
-        lines.append(f"{variant:<12} {best['ticks_per_second']:8.0f} {ratio:>6}  [{others}]".ljust(54)
-                     + f"{best['wall_s']:.1f} ({best['ticking_s']:.1f})")
+        lines.append(
+            f"{variant:<12} {best['ticks_per_second']:8.0f} {ratio:>6}  [{others}]".ljust(54)
+            + f"{best['wall_s']:.1f} ({best['ticking_s']:.1f})"
+        )
     return "\n".join(lines)
 
 

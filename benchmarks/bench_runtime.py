@@ -51,8 +51,8 @@ import sys
 import tempfile
 import time
 from collections import Counter, defaultdict
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import psutil
 
@@ -151,12 +151,14 @@ class Tracked:
 
 def all_exited(procs: list[subprocess.Popen], tick=None) -> Callable[[], bool]:
     """A condition for wait_until: every process exited; until then `tick()` runs at each look."""
+
     def cond() -> bool:
         if all(p.poll() is not None for p in procs):
             return True
         if tick is not None:
             tick()
         return False
+
     return cond
 
 
@@ -191,6 +193,7 @@ class MemSampler:
         def s(d):
             v = list(d.values())
             return {"n": len(v), "mean_mb": statistics.fmean(v), "max_mb": max(v)} if v else None
+
         return {"rss": s(self.rss), "uss": s(self.uss)}
 
 
@@ -230,8 +233,13 @@ class CpuMeter:
             if k in v0:
                 cpu[k[0]] += v - v0[k]
         ours = sum(cpu.values())
-        return {"window_s": dt, "cpu_s": dict(cpu), "machine_busy_cores": (b1 - b0) / dt,
-                "ours_cores": ours / dt, "others_cores": max(0.0, (b1 - b0) - ours) / dt}
+        return {
+            "window_s": dt,
+            "cpu_s": dict(cpu),
+            "machine_busy_cores": (b1 - b0) / dt,
+            "ours_cores": ours / dt,
+            "others_cores": max(0.0, (b1 - b0) - ours) / dt,
+        }
 
 
 def cpu_so_far(procs: list[psutil.Process]) -> list[float]:
@@ -303,14 +311,43 @@ def run_baseline(n: int, ticks: int, warmup: int, work: Path, env: dict, tag: st
     cpu = CpuMeter()
     load = os.getloadavg()[0]
     try:
-        hub = tr.spawn([PY, str(BENCH / "bare_hub.py"), "--listen", endpoint, "--run", run, "--n", str(n),
-                        "--ticks", str(ticks), "--warmup", str(warmup), "--result", str(result),
-                        "--join-timeout", "90", "--linger", "2", "--ready", str(ready), *creds],
-                       d / "hub.log", env)
+        hub = tr.spawn(
+            [
+                PY,
+                str(BENCH / "bare_hub.py"),
+                "--listen",
+                endpoint,
+                "--run",
+                run,
+                "--n",
+                str(n),
+                "--ticks",
+                str(ticks),
+                "--warmup",
+                str(warmup),
+                "--result",
+                str(result),
+                "--join-timeout",
+                "90",
+                "--linger",
+                "2",
+                "--ready",
+                str(ready),
+                *creds,
+            ],
+            d / "hub.log",
+            env,
+        )
         handler = ["--handler", env.get("BENCH_CLIENT_HANDLER", "direct")]
-        clients = [tr.spawn([PY, str(BENCH / "bare_client.py"), str(i), endpoint, run, "--timeout", "240", *creds,
-                             *handler],
-                            d / f"client-{i}.log", env, own_group=False) for i in range(n)]
+        clients = [
+            tr.spawn(
+                [PY, str(BENCH / "bare_client.py"), str(i), endpoint, run, "--timeout", "240", *creds, *handler],
+                d / f"client-{i}.log",
+                env,
+                own_group=False,
+            )
+            for i in range(n)
+        ]
         cps = [tr.seen[c.pid] for c in clients if c.pid in tr.seen]
         state = {"uss": False}
         hub_p = tr.seen.get(hub.pid)
@@ -362,8 +399,8 @@ def sensing_range(n: int, neighbours: int | None, ticks: int = 1500) -> float | 
         return _RANGES[(n, neighbours, ticks)]
     import tomllib
 
-    from swarm.offline.batch import run_batch
     from swarm.contracts.scenario import parse_scenario
+    from swarm.offline.batch import run_batch
 
     r = 2 * RING_M * math.sin(math.pi * ((neighbours + 1) // 2 + 0.5) / n)  # that many at the start
     for _ in range(8):
@@ -377,9 +414,16 @@ def sensing_range(n: int, neighbours: int | None, ticks: int = 1500) -> float | 
     return r
 
 
-def scenario_toml(n: int, neighbours: int | None = None, leaders: int | None = None,
-                  selection: str = "nearest", dt: float = DT, duration: float = 60.0,
-                  sense_range: float | None = None, ticks: int = 1500) -> str:
+def scenario_toml(
+    n: int,
+    neighbours: int | None = None,
+    leaders: int | None = None,
+    selection: str = "nearest",
+    dt: float = DT,
+    duration: float = 60.0,
+    sense_range: float | None = None,
+    ticks: int = 1500,
+) -> str:
     """n agents on a 30 m ring around the target: 1-2 leaders (or `leaders`, evenly
     spaced), the rest followers with `selection`; with `neighbours`, a sensing range under
     which each senses about that many others over the first `ticks` ticks (or `sense_range`)."""
@@ -387,28 +431,62 @@ def scenario_toml(n: int, neighbours: int | None = None, leaders: int | None = N
     sr = sense_range if sense_range is not None else sensing_range(n, neighbours, ticks)
     n_leaders = leaders or (1 if n < 4 else 2)
     leader_slots = {round(k * n / n_leaders): k % 2 for k in range(n_leaders)}
-    lines = [f'name = "bench-{n}"',
-             f'description = "benchmarks/bench_runtime.py: {n} agents on a ring, {n_leaders} leader(s)"',
-             "", "[run]", f"dt = {dt}", f"duration = {duration}", 'clock = "lockstep"', "seed = 1",
-             "", "[target]", "x = 0.0", "y = 0.0",
-             "", "[gains]", "c1 = 1.0", "c2 = 0.5",
-             "", "[sensing]", f'selection = "{selection}"'] + ([f"range = {sr:.4f}"] if sr else []) + [""]
+    lines = (
+        [
+            f'name = "bench-{n}"',
+            f'description = "benchmarks/bench_runtime.py: {n} agents on a ring, {n_leaders} leader(s)"',
+            "",
+            "[run]",
+            f"dt = {dt}",
+            f"duration = {duration}",
+            'clock = "lockstep"',
+            "seed = 1",
+            "",
+            "[target]",
+            "x = 0.0",
+            "y = 0.0",
+            "",
+            "[gains]",
+            "c1 = 1.0",
+            "c2 = 0.5",
+            "",
+            "[sensing]",
+            f'selection = "{selection}"',
+        ]
+        + ([f"range = {sr:.4f}"] if sr else [])
+        + [""]
+    )
     f = 0
     for k in range(n):
         ang = 2 * math.pi * k / n
         x, y = RING_M * math.cos(ang), RING_M * math.sin(ang)
-        heading = math.atan2(math.sin(ang + math.pi / 2 + rng.uniform(-0.5, 0.5)),
-                             math.cos(ang + math.pi / 2 + rng.uniform(-0.5, 0.5)))
+        heading = math.atan2(
+            math.sin(ang + math.pi / 2 + rng.uniform(-0.5, 0.5)), math.cos(ang + math.pi / 2 + rng.uniform(-0.5, 0.5))
+        )
         lines += ["[[agents]]", f"id = {k + 1}"]
         if k in leader_slots:
             v, r = LEADERS[leader_slots[k]]
-            lines += ['role = "leader"', f"x = {x:.4f}", f"y = {y:.4f}", f"heading = {heading:.4f}",
-                      f"speed = {v}", f"orbit_radius = {r}", 'direction = "ccw"', ""]
+            lines += [
+                'role = "leader"',
+                f"x = {x:.4f}",
+                f"y = {y:.4f}",
+                f"heading = {heading:.4f}",
+                f"speed = {v}",
+                f"orbit_radius = {r}",
+                'direction = "ccw"',
+                "",
+            ]
         else:
             v = FOLLOWER_SPEEDS[f % len(FOLLOWER_SPEEDS)]
             f += 1
-            lines += ['role = "follower"', f"x = {x:.4f}", f"y = {y:.4f}", f"heading = {heading:.4f}",
-                      f"speed = {v}", ""]
+            lines += [
+                'role = "follower"',
+                f"x = {x:.4f}",
+                f"y = {y:.4f}",
+                f"heading = {heading:.4f}",
+                f"speed = {v}",
+                "",
+            ]
     return "\n".join(lines)
 
 
@@ -446,8 +524,9 @@ def mean_sensed(x, y, alive, sr: float | None) -> float:
     return total / count if count else float("nan")
 
 
-def run_swarm(n: int, ticks: int, work: Path, env: dict, tag: str, profile: float = 0.0,
-              neighbours: int | None = None) -> dict:
+def run_swarm(
+    n: int, ticks: int, work: Path, env: dict, tag: str, profile: float = 0.0, neighbours: int | None = None
+) -> dict:
     """One `swarm up`; profile > 0: attach py-spy for that many seconds once ticking."""
     d = work / f"up-{tag}"
     d.mkdir()
@@ -462,8 +541,11 @@ def run_swarm(n: int, ticks: int, work: Path, env: dict, tag: str, profile: floa
     state: dict = {"started": None, "uss": False, "agents": [], "world": None, "last_discover": 0.0}
     try:
         t_popen = time.time()
-        up = tr.spawn([PY, "-m", "swarm", "up", str(toml), "--out", str(out), "--duration", f"{ticks * DT:.6f}",
-                       "--no-plots"], d / "up.log", env)
+        up = tr.spawn(
+            [PY, "-m", "swarm", "up", str(toml), "--out", str(out), "--duration", f"{ticks * DT:.6f}", "--no-plots"],
+            d / "up.log",
+            env,
+        )
 
         def discover():
             kids = tr.discover(up)
@@ -480,8 +562,9 @@ def run_swarm(n: int, ticks: int, work: Path, env: dict, tag: str, profile: floa
                 if world_started(out):
                     state["started"] = now
                     discover()  # every agent has joined: all are there now
-                    state["startup_cpu"] = startup_cpu(state["agents"], {"world": state["world"],
-                                                                          "launcher": tr.seen.get(up.pid)})
+                    state["startup_cpu"] = startup_cpu(
+                        state["agents"], {"world": state["world"], "launcher": tr.seen.get(up.pid)}
+                    )
                 return
             mem.sample_rss(state["agents"])
             world = [state["world"]] if state["world"] is not None else []
@@ -498,8 +581,9 @@ def run_swarm(n: int, ticks: int, work: Path, env: dict, tag: str, profile: floa
                     state["t_threads0"] = now
             if profile > 0 and "targets" in state and not spies and now - state["t_threads0"] >= 2.0:
                 dt = now - state["t_threads0"]
-                state["thread_cores"] = {name: thread_cores(state["threads0"][name], thread_cpu(pr), dt)
-                                         for name, pr in state["targets"]}
+                state["thread_cores"] = {
+                    name: thread_cores(state["threads0"][name], thread_cpu(pr), dt) for name, pr in state["targets"]
+                }
                 start_spies()
 
         def profile_targets() -> list[tuple[str, psutil.Process]]:
@@ -511,9 +595,12 @@ def run_swarm(n: int, ticks: int, work: Path, env: dict, tag: str, profile: floa
                     pass
             leader_ids = {1, n // 2 + 1}
             followers = sorted(i for i in by_id if i not in leader_ids)
-            t = [("world", state["world"]), ("launcher", tr.seen.get(up.pid)),
-                 ("follower agent", by_id.get(followers[len(followers) // 2]) if followers else None),
-                 ("leader agent", by_id.get(1))]
+            t = [
+                ("world", state["world"]),
+                ("launcher", tr.seen.get(up.pid)),
+                ("follower agent", by_id.get(followers[len(followers) // 2]) if followers else None),
+                ("leader agent", by_id.get(1)),
+            ]
             return [(name, pr) for name, pr in t if pr is not None]
 
         def start_spies():
@@ -527,9 +614,27 @@ def run_swarm(n: int, ticks: int, work: Path, env: dict, tag: str, profile: floa
                 # --idle: every sample of every Python thread; which ones wait is decided from the
                 # innermost Python frame (see summarize_pyspy), since py-spy's own idle detection
                 # counts threads parked in SimpleQueue.get or zenoh's channels as busy.
-                p = tr.spawn([pyspy, "record", "-p", str(pr.pid), "-d", f"{profile:g}", "-r", "100", "-f", "raw",
-                              "--nolineno", "--threads", "--idle", "-o", str(raw)],
-                             d / f"pyspy-{name.replace(' ', '-')}.log", env)
+                p = tr.spawn(
+                    [
+                        pyspy,
+                        "record",
+                        "-p",
+                        str(pr.pid),
+                        "-d",
+                        f"{profile:g}",
+                        "-r",
+                        "100",
+                        "-f",
+                        "raw",
+                        "--nolineno",
+                        "--threads",
+                        "--idle",
+                        "-o",
+                        str(raw),
+                    ],
+                    d / f"pyspy-{name.replace(' ', '-')}.log",
+                    env,
+                )
                 spies.append((name, pr.pid, p, raw))
 
         finished = wait_until(all_exited([up], sample), 120 + ticks / 20, 0.25)
@@ -538,9 +643,15 @@ def run_swarm(n: int, ticks: int, work: Path, env: dict, tag: str, profile: floa
         wait_until(all_exited([s[2] for s in spies if s[2] is not None]), profile + 15, 0.25)
     finally:
         tr.stop()
-    res: dict = {"n": n, "ticks_requested": ticks, "load1": load, "ok": False,
-                 "memory_agents": mem.stats(), "memory_world": wmem.stats(),
-                 "cpu": cpu.result(drop_last=True)}  # the last sample may hold the world's final writing
+    res: dict = {
+        "n": n,
+        "ticks_requested": ticks,
+        "load1": load,
+        "ok": False,
+        "memory_agents": mem.stats(),
+        "memory_world": wmem.stats(),
+        "cpu": cpu.result(drop_last=True),
+    }  # the last sample may hold the world's final writing
     try:
         summary = json.loads((out / "summary.json").read_text())
     except (OSError, ValueError) as e:
@@ -550,8 +661,10 @@ def run_swarm(n: int, ticks: int, work: Path, env: dict, tag: str, profile: floa
     agents = summary.get("agents", {})
     res.update(
         ok=bool(summary.get("completed")) and summary.get("ticks_per_second") is not None,
-        completed=summary.get("completed"), ticks=summary.get("ticks"),
-        ticks_per_second=summary.get("ticks_per_second"), wall_time=summary.get("wall_time"),
+        completed=summary.get("completed"),
+        ticks=summary.get("ticks"),
+        ticks_per_second=summary.get("ticks_per_second"),
+        wall_time=summary.get("wall_time"),
         startup_s=start.get("startup_s") if start else None,
         first_tick_s=(start["wall_time"] - t_popen) if start else None,
         missed_ticks=sum(int(a.get("missed_ticks", 0)) for a in agents.values()),
@@ -607,8 +720,7 @@ def summarize_pyspy(raw: Path, seconds: float, rate: int = 100, top: int = 10) -
         text = raw.read_text()
     except OSError:
         return {"error": f"no py-spy output {raw}"}
-    threads: dict[str, dict] = defaultdict(lambda: {"samples": 0, "busy": 0, "self": Counter(),
-                                                    "incl": Counter()})
+    threads: dict[str, dict] = defaultdict(lambda: {"samples": 0, "busy": 0, "self": Counter(), "incl": Counter()})
     for line in text.splitlines():
         stack, _, count = line.rpartition(" ")
         if not stack or not count.isdigit():
@@ -632,10 +744,14 @@ def summarize_pyspy(raw: Path, seconds: float, rate: int = 100, top: int = 10) -
         n, b = t["samples"], t["busy"]
         if b == 0:
             continue
-        out[th] = {"busy_share": b / n, "samples": n, "busy_samples": b,
-                   "self": [(f, c / b) for f, c in t["self"].most_common(top)],
-                   # frames on (nearly) every busy stack are the entry points: leave them out
-                   "inclusive": [(f, c / b) for f, c in t["incl"].most_common() if c < 0.98 * b][:top]}
+        out[th] = {
+            "busy_share": b / n,
+            "samples": n,
+            "busy_samples": b,
+            "self": [(f, c / b) for f, c in t["self"].most_common(top)],
+            # frames on (nearly) every busy stack are the entry points: leave them out
+            "inclusive": [(f, c / b) for f, c in t["incl"].most_common() if c < 0.98 * b][:top],
+        }
     return out
 
 
@@ -663,72 +779,112 @@ def head(lines: list[str], columns: str, width: int) -> None:
 
 def report(results: dict) -> str:
     lines = []
-    lines.append(f"machine: {results['env']['cpus']} CPUs, python {results['env']['python']}, "
-                 f"zenoh {results['env']['zenoh']}; mode {'quick' if results['quick'] else 'full'}, "
-                 f"repeat {results['repeat']} (best run shown)")
+    lines.append(
+        f"machine: {results['env']['cpus']} CPUs, python {results['env']['python']}, "
+        f"zenoh {results['env']['zenoh']}; mode {'quick' if results['quick'] else 'full'}, "
+        f"repeat {results['repeat']} (best run shown)"
+    )
     lines.append("")
     nb = results.get("neighbours")
-    lines.append("sensing: " + (f"a range under which each agent senses about {nb} others at the start"
-                                if nb else "unlimited (every agent senses every other)")
-                 + "; 'sensed' = others each agent sensed per tick, mean over the run")
-    head(lines, f"{'N':>3} | {'sensed':>6} | {'baseline ticks/s':>16} | {'swarm ticks/s':>13} | {'ratio':>5} | "
-                f"target (>= {TARGET_RATIO}x) met? | all runs: baseline / swarm (ticks/s@cores busy elsewhere)", 118)
+    lines.append(
+        "sensing: "
+        + (
+            f"a range under which each agent senses about {nb} others at the start"
+            if nb
+            else "unlimited (every agent senses every other)"
+        )
+        + "; 'sensed' = others each agent sensed per tick, mean over the run"
+    )
+    head(
+        lines,
+        f"{'N':>3} | {'sensed':>6} | {'baseline ticks/s':>16} | {'swarm ticks/s':>13} | {'ratio':>5} | "
+        f"target (>= {TARGET_RATIO}x) met? | all runs: baseline / swarm (ticks/s@cores busy elsewhere)",
+        118,
+    )
     for n, r, b, s in by_size(results):
         ratio = (s["ticks_per_second"] / b["ticks_per_second"]) if (b and s) else None
         r["ratio"] = ratio
         met = None if ratio is None else ratio >= TARGET_RATIO
+
         def one(x):
             return f"{fmt(x.get('ticks_per_second'))}@{fmt((x.get('cpu') or {}).get('others_cores'), '.1f')}"
+
         runs = ", ".join(map(one, r["baseline"])) + " / " + ", ".join(map(one, r["swarm"]))
-        lines.append(f"{n:>3} | {fmt(s and s.get('contacts'), '.1f'):>6} | "
-                     f"{fmt(b and b['ticks_per_second']):>16} | {fmt(s and s['ticks_per_second']):>13} | "
-                     f"{fmt(ratio, '.2f'):>5} | {('yes' if met else 'NO') if met is not None else '-':>24} | {runs}")
+        lines.append(
+            f"{n:>3} | {fmt(s and s.get('contacts'), '.1f'):>6} | "
+            f"{fmt(b and b['ticks_per_second']):>16} | {fmt(s and s['ticks_per_second']):>13} | "
+            f"{fmt(ratio, '.2f'):>5} | {('yes' if met else 'NO') if met is not None else '-':>24} | {runs}"
+        )
     lines.append("")
     if any(r.get("swarm_open") for r in results["by_n"].values()):
-        lines.append("cost of the hub's checks (authentication, access rules, size filters): lockstep ticks/s "
-                     "with them / with an open hub, best runs (target: at most 10% slower)")
+        lines.append(
+            "cost of the hub's checks (authentication, access rules, size filters): lockstep ticks/s "
+            "with them / with an open hub, best runs (target: at most 10% slower)"
+        )
         for n, r in results["by_n"].items():
             s, o = best(r["swarm"]), best(r.get("swarm_open", []))
             ratio = (s["ticks_per_second"] / o["ticks_per_second"]) if (s and o) else None
             r["access_ratio"] = ratio
-            runs = (", ".join(fmt(x.get("ticks_per_second")) for x in r["swarm"]) + " / "
-                    + ", ".join(fmt(x.get("ticks_per_second")) for x in r.get("swarm_open", [])))
-            lines.append(f"{n:>5} agents, swarm up: {fmt(s and s['ticks_per_second'])} / "
-                         f"{fmt(o and o['ticks_per_second'])} ticks/s = {fmt(ratio, '.3f')} (all runs: {runs})")
+            runs = (
+                ", ".join(fmt(x.get("ticks_per_second")) for x in r["swarm"])
+                + " / "
+                + ", ".join(fmt(x.get("ticks_per_second")) for x in r.get("swarm_open", []))
+            )
+            lines.append(
+                f"{n:>5} agents, swarm up: {fmt(s and s['ticks_per_second'])} / "
+                f"{fmt(o and o['ticks_per_second'])} ticks/s = {fmt(ratio, '.3f')} (all runs: {runs})"
+            )
             b, ba = best(r["baseline"]), best(r.get("baseline_auth", []))
             bratio = (ba["ticks_per_second"] / b["ticks_per_second"]) if (b and ba) else None
             r["access_ratio_bare"] = bratio
-            runs = (", ".join(fmt(x.get("ticks_per_second")) for x in r.get("baseline_auth", [])) + " / "
-                    + ", ".join(fmt(x.get("ticks_per_second")) for x in r["baseline"]))
-            lines.append(f"{n:>5} agents, bare:     {fmt(ba and ba['ticks_per_second'])} / "
-                         f"{fmt(b and b['ticks_per_second'])} ticks/s = {fmt(bratio, '.3f')} (all runs: {runs})")
+            runs = (
+                ", ".join(fmt(x.get("ticks_per_second")) for x in r.get("baseline_auth", []))
+                + " / "
+                + ", ".join(fmt(x.get("ticks_per_second")) for x in r["baseline"])
+            )
+            lines.append(
+                f"{n:>5} agents, bare:     {fmt(ba and ba['ticks_per_second'])} / "
+                f"{fmt(b and b['ticks_per_second'])} ticks/s = {fmt(bratio, '.3f')} (all runs: {runs})"
+            )
         lines.append("")
     big = str(max(results["sizes"]))
     sw = [x for x in results["by_n"][big]["swarm"] if x.get("first_tick_s") is not None]
     if sw:
         ft = min(x["first_tick_s"] for x in sw)
         su = min(x["startup_s"] for x in sw)
-        lines.append(f"first tick, {big} agents: {ft:.2f} s from Popen of `swarm up` (world startup_s {su:.2f} s; "
-                     f"runs: {', '.join(format(x['first_tick_s'], '.2f') for x in sw)}) vs target "
-                     f"{TARGET_FIRST_TICK_S:.0f} s: {'met' if ft <= TARGET_FIRST_TICK_S else 'NOT met'}")
+        lines.append(
+            f"first tick, {big} agents: {ft:.2f} s from Popen of `swarm up` (world startup_s {su:.2f} s; "
+            f"runs: {', '.join(format(x['first_tick_s'], '.2f') for x in sw)}) vs target "
+            f"{TARGET_FIRST_TICK_S:.0f} s: {'met' if ft <= TARGET_FIRST_TICK_S else 'NOT met'}"
+        )
         sc = [x["startup_cpu"] for x in sw if x.get("startup_cpu")]
         bb = [x["startup_cpu"] for x in results["by_n"][big]["baseline"] if x.get("startup_cpu")]
         if sc:
             c = sc[-1]
-            lines.append(f"  CPU used until the first tick: {fmt(c['agents_mean_s'], '.2f')} s per agent process "
-                         f"({fmt(c['agents_sum_s'], '.1f')} s for {c['agents_n']}), world {fmt(c.get('world_s'), '.2f')} s, "
-                         f"launcher {fmt(c.get('launcher_s'), '.2f')} s, on {results['env']['cpus']} cores")
+            lines.append(
+                f"  CPU used until the first tick: {fmt(c['agents_mean_s'], '.2f')} s per agent process "
+                f"({fmt(c['agents_sum_s'], '.1f')} s for {c['agents_n']}), world {fmt(c.get('world_s'), '.2f')} s, "
+                f"launcher {fmt(c.get('launcher_s'), '.2f')} s, on {results['env']['cpus']} cores"
+            )
         if bb:
             c, b0 = bb[-1], results["by_n"][big]["baseline"][-1]
-            lines.append(f"  bare baseline: all {big} clients joined {fmt(b0.get('join_s'), '.2f')} s after the hub "
-                         f"opened; {fmt(c['agents_mean_s'], '.2f')} s CPU per client process until then")
+            lines.append(
+                f"  bare baseline: all {big} clients joined {fmt(b0.get('join_s'), '.2f')} s after the hub "
+                f"opened; {fmt(c['agents_mean_s'], '.2f')} s CPU per client process until then"
+            )
     else:
         lines.append(f"first tick, {big} agents: no successful run")
     lines.append("")
-    lines.append(f"memory per agent process (target {TARGET_AGENT_MB:.0f} MB); RSS = peak of ~1 s samples while "
-                 "ticking, USS = one sample while ticking")
-    head(lines, f"{'N':>3} | {'agents':>6} | {'RSS mean':>8} | {'RSS max':>7} | {'USS mean':>8} | {'USS max':>7} | "
-                f"{'met (RSS max / USS max)':>24} | bare client RSS mean / USS mean | world RSS / USS", 130)
+    lines.append(
+        f"memory per agent process (target {TARGET_AGENT_MB:.0f} MB); RSS = peak of ~1 s samples while "
+        "ticking, USS = one sample while ticking"
+    )
+    head(
+        lines,
+        f"{'N':>3} | {'agents':>6} | {'RSS mean':>8} | {'RSS max':>7} | {'USS mean':>8} | {'USS max':>7} | "
+        f"{'met (RSS max / USS max)':>24} | bare client RSS mean / USS mean | world RSS / USS",
+        130,
+    )
     for n, r, _, _ in by_size(results):
         s = next((x for x in r["swarm"] if (x.get("memory_agents") or {}).get("rss")), None)
         b = next((x for x in r["baseline"] if (x.get("memory") or {}).get("rss")), None)
@@ -737,19 +893,32 @@ def report(results: dict) -> str:
             continue
         ma, mw = s["memory_agents"], s["memory_world"]
         rss, uss = ma["rss"], ma["uss"] or {}
-        met = (f"{'yes' if rss['max_mb'] <= TARGET_AGENT_MB else 'NO'} / "
-               f"{('yes' if uss['max_mb'] <= TARGET_AGENT_MB else 'NO') if uss else '-'}")
-        bare = (f"{b['memory']['rss']['mean_mb']:.1f} / {fmt((b['memory']['uss'] or {}).get('mean_mb'), '.1f')}"
-                if b else "-")
-        world = (f"{fmt((mw['rss'] or {}).get('max_mb'), '.1f')} / {fmt((mw['uss'] or {}).get('max_mb'), '.1f')}")
-        lines.append(f"{n:>3} | {rss['n']:>6} | {rss['mean_mb']:8.1f} | {rss['max_mb']:7.1f} | "
-                     f"{fmt(uss.get('mean_mb'), '8.1f'):>8} | {fmt(uss.get('max_mb'), '7.1f'):>7} | {met:>24} | "
-                     f"{bare:>31} | {world}")
+        met = (
+            f"{'yes' if rss['max_mb'] <= TARGET_AGENT_MB else 'NO'} / "
+            f"{('yes' if uss['max_mb'] <= TARGET_AGENT_MB else 'NO') if uss else '-'}"
+        )
+        bare = (
+            f"{b['memory']['rss']['mean_mb']:.1f} / {fmt((b['memory']['uss'] or {}).get('mean_mb'), '.1f')}"
+            if b
+            else "-"
+        )
+        world = f"{fmt((mw['rss'] or {}).get('max_mb'), '.1f')} / {fmt((mw['uss'] or {}).get('max_mb'), '.1f')}"
+        lines.append(
+            f"{n:>3} | {rss['n']:>6} | {rss['mean_mb']:8.1f} | {rss['max_mb']:7.1f} | "
+            f"{fmt(uss.get('mean_mb'), '8.1f'):>8} | {fmt(uss.get('max_mb'), '7.1f'):>7} | {met:>24} | "
+            f"{bare:>31} | {world}"
+        )
     lines.append("")
-    lines.append("CPU while ticking (psutil cpu_times of each process; ms of CPU per tick = cores used / ticks per s; "
-                 "machine = all cores busy, others = processes not started here)")
-    head(lines, f"{'N':>3} | {'bare: hub':>9} {'clients':>8} {'machine':>8} {'others':>7} | "
-                f"{'swarm: world':>12} {'agents':>7} {'launcher':>8} {'machine':>8} {'others':>7}", 100)
+    lines.append(
+        "CPU while ticking (psutil cpu_times of each process; ms of CPU per tick = cores used / ticks per s; "
+        "machine = all cores busy, others = processes not started here)"
+    )
+    head(
+        lines,
+        f"{'N':>3} | {'bare: hub':>9} {'clients':>8} {'machine':>8} {'others':>7} | "
+        f"{'swarm: world':>12} {'agents':>7} {'launcher':>8} {'machine':>8} {'others':>7}",
+        100,
+    )
     for n, r, b, s in by_size(results):
 
         def per_tick(run, group):
@@ -762,24 +931,34 @@ def report(results: dict) -> str:
             c = run and run.get("cpu")
             return c[key] if c else None
 
-        lines.append(f"{n:>3} | {fmt(per_tick(b, 'hub'), '.3f'):>9} {fmt(per_tick(b, 'clients'), '.3f'):>8} "
-                     f"{fmt(cores(b, 'machine_busy_cores'), '.2f'):>8} {fmt(cores(b, 'others_cores'), '.2f'):>7} | "
-                     f"{fmt(per_tick(s, 'world'), '.3f'):>12} {fmt(per_tick(s, 'agents'), '.3f'):>7} "
-                     f"{fmt(per_tick(s, 'launcher'), '.3f'):>8} {fmt(cores(s, 'machine_busy_cores'), '.2f'):>8} "
-                     f"{fmt(cores(s, 'others_cores'), '.2f'):>7}")
-    lines.append("    (ms of CPU per tick; machine/others in cores out of "
-                 f"{results['env']['cpus']}; bare windows are approximate to ~0.25 s)")
+        lines.append(
+            f"{n:>3} | {fmt(per_tick(b, 'hub'), '.3f'):>9} {fmt(per_tick(b, 'clients'), '.3f'):>8} "
+            f"{fmt(cores(b, 'machine_busy_cores'), '.2f'):>8} {fmt(cores(b, 'others_cores'), '.2f'):>7} | "
+            f"{fmt(per_tick(s, 'world'), '.3f'):>12} {fmt(per_tick(s, 'agents'), '.3f'):>7} "
+            f"{fmt(per_tick(s, 'launcher'), '.3f'):>8} {fmt(cores(s, 'machine_busy_cores'), '.2f'):>8} "
+            f"{fmt(cores(s, 'others_cores'), '.2f'):>7}"
+        )
+    lines.append(
+        "    (ms of CPU per tick; machine/others in cores out of "
+        f"{results['env']['cpus']}; bare windows are approximate to ~0.25 s)"
+    )
     prof = results.get("profile")
     if prof:
         lines.append("")
-        lines.append(f"where time goes, {prof['n']} agents (separate run at {fmt(prof.get('ticks_per_second'))} ticks/s "
-                     "with py-spy attached)")
-        lines.append("  CPU by thread over 2 s of ticking (cores; \"python main\" = the main thread, \"python\" = "
-                     "zenoh callback threads, the rest are zenoh's Rust threads):")
+        lines.append(
+            f"where time goes, {prof['n']} agents (separate run at {fmt(prof.get('ticks_per_second'))} ticks/s "
+            "with py-spy attached)"
+        )
+        lines.append(
+            '  CPU by thread over 2 s of ticking (cores; "python main" = the main thread, "python" = '
+            "zenoh callback threads, the rest are zenoh's Rust threads):"
+        )
         for proc, kinds in (prof.get("thread_cores") or {}).items():
             lines.append(f"    {proc:<15} " + ", ".join(f"{k} {v:.3f}" for k, v in kinds.items() if v >= 0.0005))
-        lines.append(f"  py-spy, {prof['seconds']:g} s at 100 Hz: busy = share of a thread's samples not waiting; "
-                     "functions as shares of the busy samples")
+        lines.append(
+            f"  py-spy, {prof['seconds']:g} s at 100 Hz: busy = share of a thread's samples not waiting; "
+            "functions as shares of the busy samples"
+        )
         for proc, threads in (prof.get("profile") or {}).items():
             if "error" in threads:
                 lines.append(f"    {proc}: {threads['error']}")
@@ -796,24 +975,43 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="fewer ticks (about a quarter)")
     ap.add_argument("--sizes", default="6,20,50", help="agent counts, comma-separated (default 6,20,50)")
     ap.add_argument("--repeat", type=int, default=None, help="runs of each pair (default 2, quick 1)")
-    ap.add_argument("--swarm-seconds", type=float, default=None,
-                    help="aim for this many s of ticking per swarm run (default 4, quick 1.5)")
-    ap.add_argument("--quiet-wait", type=float, default=None,
-                    help="before each run wait up to this many s for the machine to be quiet "
-                         "(< 0.5 busy cores; default 20, quick 3)")
+    ap.add_argument(
+        "--swarm-seconds",
+        type=float,
+        default=None,
+        help="aim for this many s of ticking per swarm run (default 4, quick 1.5)",
+    )
+    ap.add_argument(
+        "--quiet-wait",
+        type=float,
+        default=None,
+        help="before each run wait up to this many s for the machine to be quiet "
+        "(< 0.5 busy cores; default 20, quick 3)",
+    )
     ap.add_argument("--profile", action="store_true", help="also profile a 20-agent run with py-spy")
     ap.add_argument("--profile-n", type=int, default=20, help="agents in the --profile run (default 20)")
-    ap.add_argument("--neighbours", type=int, default=None,
-                    help="give the scenario a sensing range under which each agent senses about this many "
-                         "others at the start (default: unlimited sensing); the table shows how many it sensed")
-    ap.add_argument("--floor-handler", choices=("direct", "callback"), default="direct",
-                    help="how the bare clients answer: in their zenoh callback (direct, the default: what "
-                         "agents do) or from the main thread after a queue (callback: what agents did before)")
+    ap.add_argument(
+        "--neighbours",
+        type=int,
+        default=None,
+        help="give the scenario a sensing range under which each agent senses about this many "
+        "others at the start (default: unlimited sensing); the table shows how many it sensed",
+    )
+    ap.add_argument(
+        "--floor-handler",
+        choices=("direct", "callback"),
+        default="direct",
+        help="how the bare clients answer: in their zenoh callback (direct, the default: what "
+        "agents do) or from the main thread after a queue (callback: what agents did before)",
+    )
     ap.add_argument("--json", type=Path, help="write all results to this JSON file")
     ap.add_argument("--keep", action="store_true", help="keep the work directory (logs, runs)")
-    ap.add_argument("--access-cost", action="store_true",
-                    help="also run swarm up with an open hub (SWARM_OPEN_HUB=1: no authentication, no access "
-                         "rules, no size filters) after each swarm run, and report the cost of the hub's checks")
+    ap.add_argument(
+        "--access-cost",
+        action="store_true",
+        help="also run swarm up with an open hub (SWARM_OPEN_HUB=1: no authentication, no access "
+        "rules, no size filters) after each swarm run, and report the cost of the hub's checks",
+    )
     a = ap.parse_args(argv)
     sizes = [int(x) for x in a.sizes.split(",") if x.strip()]
     repeat = a.repeat or (1 if a.quick else 2)
@@ -829,11 +1027,18 @@ def main(argv: list[str] | None = None) -> int:
     work = Path(tempfile.mkdtemp(prefix="swarm-bench-"))
     env = {**os.environ, "SWARM_RUNTIME_DIR": rt, "PYTHONUNBUFFERED": "1", "BENCH_CLIENT_HANDLER": a.floor_handler}
     results: dict = {
-        "quick": a.quick, "repeat": repeat, "sizes": sizes, "swarm_seconds": secs, "neighbours": a.neighbours,
+        "quick": a.quick,
+        "repeat": repeat,
+        "sizes": sizes,
+        "swarm_seconds": secs,
+        "neighbours": a.neighbours,
         "floor_handler": a.floor_handler,
-        "env": {"cpus": os.cpu_count(), "python": platform.python_version(),
-                "zenoh": getattr(zenoh, "__version__", None) or _dist_version("eclipse-zenoh"),
-                "platform": platform.platform()},
+        "env": {
+            "cpus": os.cpu_count(),
+            "python": platform.python_version(),
+            "zenoh": getattr(zenoh, "__version__", None) or _dist_version("eclipse-zenoh"),
+            "platform": platform.platform(),
+        },
         "targets": {"ratio": TARGET_RATIO, "first_tick_s": TARGET_FIRST_TICK_S, "agent_mb": TARGET_AGENT_MB},
         "by_n": {},
     }
@@ -848,8 +1053,10 @@ def main(argv: list[str] | None = None) -> int:
                 b = run_baseline(n, ticks, warmup, work, env, f"{n}-{k}")
                 b["quiet"] = q
                 r["baseline"].append(b)
-                log(f"  -> {fmt(b.get('ticks_per_second'))} ticks/s (others busy before: "
-                    f"{fmt(q.get('busy_cores'), '.2f')} cores) {b.get('error', '')}")
+                log(
+                    f"  -> {fmt(b.get('ticks_per_second'))} ticks/s (others busy before: "
+                    f"{fmt(q.get('busy_cores'), '.2f')} cores) {b.get('error', '')}"
+                )
                 tps = b.get("ticks_per_second") or {6: 3500, 20: 990, 50: 350}.get(n, 20000 / n)
                 sticks = int(min(40000, max(300, 0.8 * tps * secs)))
                 log(f"[N={n} run {k + 1}/{repeat}] swarm up: {sticks} ticks")
@@ -857,8 +1064,10 @@ def main(argv: list[str] | None = None) -> int:
                 s = run_swarm(n, sticks, work, env, f"{n}-{k}", neighbours=a.neighbours)
                 s["quiet"] = q
                 r["swarm"].append(s)
-                log(f"  -> {fmt(s.get('ticks_per_second'))} ticks/s, first tick {fmt(s.get('first_tick_s'), '.2f')} s"
-                    f" (others busy before: {fmt(q.get('busy_cores'), '.2f')} cores) {s.get('error', '')}")
+                log(
+                    f"  -> {fmt(s.get('ticks_per_second'))} ticks/s, first tick {fmt(s.get('first_tick_s'), '.2f')} s"
+                    f" (others busy before: {fmt(q.get('busy_cores'), '.2f')} cores) {s.get('error', '')}"
+                )
                 if a.access_cost:
                     log(f"[N={n} run {k + 1}/{repeat}] bare baseline with the hub's checks")
                     q = quiet()
@@ -868,8 +1077,9 @@ def main(argv: list[str] | None = None) -> int:
                     log(f"  -> {fmt(ba.get('ticks_per_second'))} ticks/s {ba.get('error', '')}")
                     log(f"[N={n} run {k + 1}/{repeat}] swarm up, open hub: {sticks} ticks")
                     q = quiet()
-                    o = run_swarm(n, sticks, work, {**env, "SWARM_OPEN_HUB": "1"}, f"{n}-{k}-open",
-                                  neighbours=a.neighbours)
+                    o = run_swarm(
+                        n, sticks, work, {**env, "SWARM_OPEN_HUB": "1"}, f"{n}-{k}-open", neighbours=a.neighbours
+                    )
                     o["quiet"] = q
                     r.setdefault("swarm_open", []).append(o)
                     log(f"  -> {fmt(o.get('ticks_per_second'))} ticks/s {o.get('error', '')}")
@@ -882,9 +1092,14 @@ def main(argv: list[str] | None = None) -> int:
             log(f"[profile] swarm up, {n} agents, {sticks} ticks, py-spy for {seconds:g} s")
             quiet()
             p = run_swarm(n, sticks, work, env, f"profile-{n}", profile=seconds, neighbours=a.neighbours)
-            results["profile"] = {"n": n, "seconds": seconds, "ticks_per_second": p.get("ticks_per_second"),
-                                  "thread_cores": p.get("thread_cores"), "profile": p.get("profile"),
-                                  "error": p.get("error")}
+            results["profile"] = {
+                "n": n,
+                "seconds": seconds,
+                "ticks_per_second": p.get("ticks_per_second"),
+                "thread_cores": p.get("thread_cores"),
+                "profile": p.get("profile"),
+                "error": p.get("error"),
+            }
     finally:
         if a.keep:
             log(f"kept {work}")

@@ -69,16 +69,23 @@ def rss_at(samples: list[tuple[float, int]], t: float) -> int:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--minutes", type=float, default=9.0, help="wall minutes of the run (default 9)")
-    ap.add_argument("--cycles-per-minute", type=float, default=5.0,
-                    help="kill/spawn cycles per wall minute (0: none, the control run; default 5)")
+    ap.add_argument(
+        "--cycles-per-minute",
+        type=float,
+        default=5.0,
+        help="kill/spawn cycles per wall minute (0: none, the control run; default 5)",
+    )
     ap.add_argument("--out", type=Path, default=None, help="the run's output directory (default: a new temp dir)")
     ap.add_argument("--scenario", type=Path, default=ROOT / "scenarios" / "case2.toml")
     ap.add_argument("--time-scale", type=float, default=2.0, help="simulated s per wall s (default 2)")
     ap.add_argument("--agents", default="2,3,4,5", help="ids to kill, in turn (default the followers of case 2)")
     ap.add_argument("--sample", type=float, default=3.0, help="wall s between RSS samples (default 3)")
-    ap.add_argument("--warmup", type=float, default=5.0,
-                    help="wall minutes before the drift is measured (default 5; half the run if that leaves "
-                         "less than a minute)")
+    ap.add_argument(
+        "--warmup",
+        type=float,
+        default=5.0,
+        help="wall minutes before the drift is measured (default 5; half the run if that leaves less than a minute)",
+    )
     a = ap.parse_args()
     # Stopped early (Ctrl-C, or SIGTERM: a background job of a shell ignores SIGINT), the run is
     # still stopped the way `swarm up` wants (SIGINT: results written) and its group ended.
@@ -92,22 +99,45 @@ def main() -> int:
     work = Path(tempfile.mkdtemp(prefix="swsoak-"))
     out = a.out or (work / "run")
     # the CLI and the run's processes import this checkout's swarm, world and agents (as this script does)
-    env = {**os.environ, "SWARM_RUNTIME_DIR": str(work / "rt"),
-           "PYTHONPATH": os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])}
+    env = {
+        **os.environ,
+        "SWARM_RUNTIME_DIR": str(work / "rt"),
+        "PYTHONPATH": os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]),
+    }
     victims = [int(x) for x in a.agents.split(",") if x.strip()]
     warm = (a.warmup if a.minutes >= a.warmup + 1.0 else a.minutes / 2) * 60.0
 
     group = Group(session=True)
     up_log = work / "up.log"
     with open(up_log, "wb") as log:
-        up = group.start([sys.executable, "-m", "swarm", "up", str(a.scenario), "--out", str(out), "--force",
-                          "--clock", "realtime", "--time-scale", str(a.time_scale), "--duration", str(duration),
-                          "--no-plots"],
-                         env=env, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT)
+        up = group.start(
+            [
+                sys.executable,
+                "-m",
+                "swarm",
+                "up",
+                str(a.scenario),
+                "--out",
+                str(out),
+                "--force",
+                "--clock",
+                "realtime",
+                "--time-scale",
+                str(a.time_scale),
+                "--duration",
+                str(duration),
+                "--no-plots",
+            ],
+            env=env,
+            stdin=subprocess.DEVNULL,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+        )
     samples: list[tuple[float, int]] = []
     cycles = failed = 0
     stop = threading.Event()
     try:
+
         def banner():
             for line in up_log.read_text(errors="replace").splitlines():
                 if line.startswith("run ") and "endpoint" in line:
@@ -127,6 +157,7 @@ def main() -> int:
             return 1
         ses = open_client(endpoint, timeout_ms=5000, creds=credentials.read(cred_file))
         try:
+
             def info():
                 for r in ses.get(wire.world_info_key(run), timeout=2.0):
                     if r.ok:
@@ -142,8 +173,11 @@ def main() -> int:
         pid = first["pid"]
         t0 = time.monotonic()
         end = t0 + a.minutes * 60.0
-        print(f"run {run}: world pid {pid}, {duration:g} simulated s at x{a.time_scale:g}, "
-              f"{ticks + 1} rows expected; output {out}", flush=True)
+        print(
+            f"run {run}: world pid {pid}, {duration:g} simulated s at x{a.time_scale:g}, "
+            f"{ticks + 1} rows expected; output {out}",
+            flush=True,
+        )
 
         def sampler():  # while the run ticks (not while it writes its results at the end)
             while not stop.is_set() and time.monotonic() < end - 1.0:
@@ -157,11 +191,20 @@ def main() -> int:
         th.start()
 
         def cli(*args) -> bool:
-            p = subprocess.run([sys.executable, "-m", "swarm", *args], env=env, stdin=subprocess.DEVNULL,
-                               capture_output=True, text=True, timeout=60, check=False)
+            p = subprocess.run(
+                [sys.executable, "-m", "swarm", *args],
+                env=env,
+                stdin=subprocess.DEVNULL,
+                capture_output=True,
+                text=True,
+                timeout=60,
+                check=False,
+            )
             if p.returncode != 0:
-                print(f"  swarm {' '.join(args)}: exit {p.returncode}: {(p.stderr or p.stdout).strip()[-300:]}",
-                      flush=True)
+                print(
+                    f"  swarm {' '.join(args)}: exit {p.returncode}: {(p.stderr or p.stdout).strip()[-300:]}",
+                    flush=True,
+                )
             return p.returncode == 0
 
         period = 60.0 / a.cycles_per_minute if a.cycles_per_minute > 0 else None
@@ -183,8 +226,10 @@ def main() -> int:
                     next_at = time.monotonic() + period
             if now - last_print >= 60.0 and samples:
                 last_print = now
-                print(f"  {(now - t0) / 60:5.1f} min: {cycles} cycles, world RSS {samples[-1][1] / 1024:.1f} MB",
-                      flush=True)
+                print(
+                    f"  {(now - t0) / 60:5.1f} min: {cycles} cycles, world RSS {samples[-1][1] / 1024:.1f} MB",
+                    flush=True,
+                )
             time.sleep(0.1)
         up_code = up.wait()
         stop.set()
@@ -220,18 +265,41 @@ def main() -> int:
     print(f"swarm up exit {up_code}; completed {summary.get('completed')}")
     print(f"cycles done: {cycles} (failed {failed}); drops {drops}, rejoins {rejoins} in summary.json")
     print(f"rows expected/recorded: {ticks + 1}/{rows} (time gaps {gaps})")
-    print(f"world RSS: {samples[0][1] / 1024:.1f} MB at start, {r_warm / 1024:.1f} MB at {warm / 60:g} min, "
-          f"{r_end / 1024:.1f} MB at end ({samples[-1][0] / 60:.1f} min)" if samples else "world RSS: no sample")
-    print(f"drift after {warm / 60:g} min: {drift:+.2f}%; slope after {warm / 60:g} min: "
-          + (f"{slope:+.1f} KB/min" if slope is not None else "n/a")
-          + (f", after 1 min: {slope_all:+.1f} KB/min" if slope_all is not None else "")
-          + (f" (~{per_cycle:+.1f} KB per cycle if it all came from the cycles)" if per_cycle is not None else ""))
+    print(
+        f"world RSS: {samples[0][1] / 1024:.1f} MB at start, {r_warm / 1024:.1f} MB at {warm / 60:g} min, "
+        f"{r_end / 1024:.1f} MB at end ({samples[-1][0] / 60:.1f} min)"
+        if samples
+        else "world RSS: no sample"
+    )
+    print(
+        f"drift after {warm / 60:g} min: {drift:+.2f}%; slope after {warm / 60:g} min: "
+        + (f"{slope:+.1f} KB/min" if slope is not None else "n/a")
+        + (f", after 1 min: {slope_all:+.1f} KB/min" if slope_all is not None else "")
+        + (f" (~{per_cycle:+.1f} KB per cycle if it all came from the cycles)" if per_cycle is not None else "")
+    )
     try:
-        (out / "soak.json").write_text(json.dumps({
-            "minutes": a.minutes, "cycles_per_minute": a.cycles_per_minute, "time_scale": a.time_scale,
-            "scenario": str(a.scenario), "cycles": cycles, "failed_cycles": failed, "rows_expected": ticks + 1,
-            "rows": rows, "gaps": gaps, "rss_warm_kb": r_warm, "rss_end_kb": r_end, "drift_pct": drift,
-            "slope_kb_per_min": slope, "samples": samples}, indent=1) + "\n")
+        (out / "soak.json").write_text(
+            json.dumps(
+                {
+                    "minutes": a.minutes,
+                    "cycles_per_minute": a.cycles_per_minute,
+                    "time_scale": a.time_scale,
+                    "scenario": str(a.scenario),
+                    "cycles": cycles,
+                    "failed_cycles": failed,
+                    "rows_expected": ticks + 1,
+                    "rows": rows,
+                    "gaps": gaps,
+                    "rss_warm_kb": r_warm,
+                    "rss_end_kb": r_end,
+                    "drift_pct": drift,
+                    "slope_kb_per_min": slope,
+                    "samples": samples,
+                },
+                indent=1,
+            )
+            + "\n"
+        )
     except OSError:
         pass
     ok = rows == ticks + 1 and gaps == 0 and up_code == 0

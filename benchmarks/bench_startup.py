@@ -27,8 +27,20 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 # s after the start; "run+S": S s after it printed its first line (`run R on ...`, just before
 # the world's own start-up: credentials, recording, zenoh.open); "ready+S": after it listens
-POINTS = ["0", "0.3", "0.6", "run", "run+0.01", "run+0.02", "run+0.03", "run+0.05", "run+0.1",
-          "ready", "ready+0.02", "ready+0.1"]
+POINTS = [
+    "0",
+    "0.3",
+    "0.6",
+    "run",
+    "run+0.01",
+    "run+0.02",
+    "run+0.03",
+    "run+0.05",
+    "run+0.1",
+    "ready",
+    "ready+0.02",
+    "ready+0.1",
+]
 
 
 def one_try(point: str, deadline: float) -> tuple[bool, list[str], int | None]:
@@ -39,8 +51,9 @@ def one_try(point: str, deadline: float) -> tuple[bool, list[str], int | None]:
     cmd = [sys.executable, "-m", "swarm", "world", str(REPO / "scenarios" / "case2.toml"), "--run", "bench"]
     # stdin as a user's `swarm world` has it (this process's): with /dev/null instead, the
     # hang after "listening" did not show in 8 tries before the fix, against 4 in 12 with it
-    p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                         env=env, start_new_session=True, cwd=REPO)
+    p = subprocess.Popen(
+        cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, start_new_session=True, cwd=REPO
+    )
     try:
         mark = {"run": b"run bench on", "ready": b"listening on"}.get(point.partition("+")[0])
         if mark is not None:
@@ -76,8 +89,9 @@ def main() -> None:
     ap.add_argument("--points", default=",".join(POINTS), help="S, run+S or ready+S (see POINTS)")
     ap.add_argument("--load", type=int, default=0, help="busy-loop processes running meanwhile")
     a = ap.parse_args()
-    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"], stdin=subprocess.DEVNULL)
-            for _ in range(a.load)]
+    hogs = [
+        subprocess.Popen([sys.executable, "-c", "while True: pass"], stdin=subprocess.DEVNULL) for _ in range(a.load)
+    ]
     try:
         run(a)
     finally:
@@ -98,17 +112,22 @@ def run(a) -> None:
             r[1] += hung
             r[2] += bool(left)
             for name in left:
-                ext = name[name.index("."):] if "." in name else name
+                ext = name[name.index(".") :] if "." in name else name
                 left_names[ext] = left_names.get(ext, 0) + 1
-            print(f"  SIGTERM at {pt:>9}: {'HUNG' if hung else f'exit {code}'}"
-                  f"{'; left ' + ', '.join(left) if left else ''}", flush=True)
+            print(
+                f"  SIGTERM at {pt:>9}: {'HUNG' if hung else f'exit {code}'}"
+                f"{'; left ' + ', '.join(left) if left else ''}",
+                flush=True,
+            )
     tries = sum(r[0] for r in rows.values())
     print(f"\n{'point':>9} {'tries':>6} {'hung':>5} {'files left':>11}")
     for pt, (n, hung, left) in rows.items():
         print(f"{pt:>9} {n:>6} {hung:>5} {left:>11}")
-    print(f"all ({a.load} CPU hogs meanwhile): {tries} tries, {sum(r[1] for r in rows.values())} hung "
-          f"(no exit within {a.deadline:g} s), {sum(r[2] for r in rows.values())} left files behind "
-          f"({', '.join(f'{k} x{v}' for k, v in sorted(left_names.items())) or 'none'})")
+    print(
+        f"all ({a.load} CPU hogs meanwhile): {tries} tries, {sum(r[1] for r in rows.values())} hung "
+        f"(no exit within {a.deadline:g} s), {sum(r[2] for r in rows.values())} left files behind "
+        f"({', '.join(f'{k} x{v}' for k, v in sorted(left_names.items())) or 'none'})"
+    )
 
 
 if __name__ == "__main__":

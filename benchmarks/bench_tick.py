@@ -48,9 +48,20 @@ def measure(n: int, neighbours: int | None, ticks: int) -> dict:
         eng.mark_frames()
         sensed, bearing, rng = c.sensing()
         active = c.active_ids()
-        frames = wire.encode_sense_rows(c.tick, c.time, [c.index[a] for a in active], c.ids, c.heading,
-                                        c.target[0] - c.x, c.target[1] - c.y, c.is_leader, sensed, bearing,
-                                        rng, c.hops)
+        frames = wire.encode_sense_rows(
+            c.tick,
+            c.time,
+            [c.index[a] for a in active],
+            c.ids,
+            c.heading,
+            c.target[0] - c.x,
+            c.target[1] - c.y,
+            c.is_leader,
+            sensed,
+            bearing,
+            rng,
+            c.hops,
+        )
         t1 = time.perf_counter()
         cmds = []
         for aid, buf in zip(active, frames):
@@ -67,8 +78,12 @@ def measure(n: int, neighbours: int | None, ticks: int) -> dict:
         if k >= 50:  # after a warm-up
             world_s += (t1 - t0) + (t3 - t2)
             agents_s += t2 - t1
-    return {"n": n, "contacts": contacts / ticks / n, "world_ms": 1e3 * world_s / ticks,
-            "agent_us": 1e6 * agents_s / ticks / n}
+    return {
+        "n": n,
+        "contacts": contacts / ticks / n,
+        "world_ms": 1e3 * world_s / ticks,
+        "agent_us": 1e6 * agents_s / ticks / n,
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -82,8 +97,10 @@ def main(argv: list[str] | None = None) -> int:
     for n in (int(x) for x in a.sizes.split(",")):
         for nb in (None, a.neighbours):
             r = measure(n, nb, a.ticks)
-            print(f"{n:>4} | {'unlimited' if nb is None else f'~{nb} others':>9} | {r['contacts']:8.1f} | "
-                  f"{r['world_ms']:13.3f} | {r['agent_us']:17.1f}")
+            print(
+                f"{n:>4} | {'unlimited' if nb is None else f'~{nb} others':>9} | {r['contacts']:8.1f} | "
+                f"{r['world_ms']:13.3f} | {r['agent_us']:17.1f}"
+            )
     return 0
 
 

@@ -41,15 +41,21 @@ summary = results.summary
 print("converged:", summary.converged, " switches:", summary.switches, " sim time:", summary.sim_time, "s")
 for aid, a in summary.agents.items():
     error = "-" if a.relative_error is None else f"{100 * a.relative_error:.3f} %"
-    print(f"  agent {aid} {a.role:<8} out-neighbour {a.out_neighbour}  radius {a.final_radius:7.2f} m "
-          f"(expected {a.expected_radius:.2f})  error {error}")
+    print(
+        f"  agent {aid} {a.role:<8} out-neighbour {a.out_neighbour}  radius {a.final_radius:7.2f} m "
+        f"(expected {a.expected_radius:.2f})  error {error}"
+    )
 
 # %% Our own figure from the arrays: (T, N) arrays by column, or one agent's by id.
 tx, ty = results.target
 fig, (paths, dist) = plt.subplots(1, 2, figsize=(12, 5), layout="constrained")
 for aid, track in results.agents.items():
-    line, = paths.plot(track.x, track.y, lw=2.0 if track.role == "leader" else 1.0,
-                       label=f"{'L' if track.role == 'leader' else ''}{aid}")
+    (line,) = paths.plot(
+        track.x,
+        track.y,
+        lw=2.0 if track.role == "leader" else 1.0,
+        label=f"{'L' if track.role == 'leader' else ''}{aid}",
+    )
     paths.plot(track.x[0], track.y[0], "o", color=line.get_color())
     dist.plot(track.t, np.hypot(track.x - tx, track.y - ty), color=line.get_color(), label=line.get_label())
     expected = summary.agents[aid].expected_radius

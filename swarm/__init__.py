@@ -10,8 +10,20 @@ errors are swarm/contracts/errors.py's. Every name is imported on first use (mod
 __version__ = "0.1.0"  # the one place the version is written (pyproject.toml reads it)
 
 _EXPORTS = {
-    "api.runs": ("Builder", "OutDirError", "Record", "Recovery", "Results", "RunReadError", "Scenario", "ScenarioError",
-            "Summary", "AgentTrack", "open_run", "simulate"),
+    "api.runs": (
+        "Builder",
+        "OutDirError",
+        "Record",
+        "Recovery",
+        "Results",
+        "RunReadError",
+        "Scenario",
+        "ScenarioError",
+        "Summary",
+        "AgentTrack",
+        "open_run",
+        "simulate",
+    ),
     "api.launch": ("Launch", "UpOutcome", "launch"),
     "api.scenario": ("from_dict", "load", "to_toml"),
     "api.live": ("Live", "LiveState", "connect", "runs"),

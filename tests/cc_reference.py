@@ -22,14 +22,14 @@ from swarm.contracts.orbits import TAU, wrap
 #: i.e. the planned turn rates stay below 10x the orbit's own turn rate v / R.
 DEFAULT_MIN_RADIUS_FRACTION = 0.1
 
-_D_EPS = 1e-12          # alpha == beta (D ~ 0): no CC path through the Lemma 1 hyperbola
-_ON_ORBIT_TOL = 1e-9    # plan_cc: "already on the orbit" tolerance (relative radius / rad)
-_ANGLE_SNAP = 1e-10     # an arc angle within this of 2 pi is a rounding of 0 (rad) ...
-_LENGTH_SNAP = 1e-10    # ... if the arc length dropped is below this times the scene size
-_MIN_GAP = 1e-6         # |r_A + r_B| below this times max(|r_A|, |r_B|, |a|, R): near-coincident
-_TANGENCY_TOL = 1e-9    # relative residual of |o_A - o_B| = |r_A + r_B| accepted
+_D_EPS = 1e-12  # alpha == beta (D ~ 0): no CC path through the Lemma 1 hyperbola
+_ON_ORBIT_TOL = 1e-9  # plan_cc: "already on the orbit" tolerance (relative radius / rad)
+_ANGLE_SNAP = 1e-10  # an arc angle within this of 2 pi is a rounding of 0 (rad) ...
+_LENGTH_SNAP = 1e-10  # ... if the arc length dropped is below this times the scene size
+_MIN_GAP = 1e-6  # |r_A + r_B| below this times max(|r_A|, |r_B|, |a|, R): near-coincident
+_TANGENCY_TOL = 1e-9  # relative residual of |o_A - o_B| = |r_A + r_B| accepted
 _BOUNDARY_NUDGE = 1e-9  # radii placed exactly on r_min are pushed out by this fraction
-_N_STARTS = 4           # plan_cc refines around this many of the best coarse entry angles
+_N_STARTS = 4  # plan_cc refines around this many of the best coarse entry angles
 
 
 def _min_radius(v: float, radius: float, max_turn_rate: float | None) -> float:
@@ -100,14 +100,16 @@ def _best_cc(px, py, alpha, radius, s, r_min, r_cap, phis, mags, n_best=1, n_rin
         dx, dy = oax - obx, oay - oby
         ssum = ra + rb
         dist = np.hypot(dx, dy)
-        scale = np.maximum.reduce([np.abs(ra), np.abs(rb), np.sqrt(2.0 * half_a2) + 0.0 * ra,
-                                   np.full_like(ra, radius)])
+        scale = np.maximum.reduce([np.abs(ra), np.abs(rb), np.sqrt(2.0 * half_a2) + 0.0 * ra, np.full_like(ra, radius)])
         ok = (
             (d > _D_EPS)
-            & np.isfinite(ra) & np.isfinite(rb)
+            & np.isfinite(ra)
+            & np.isfinite(rb)
             & (np.abs(den) > 1e-300)
-            & (np.abs(ra) >= r_min) & (np.abs(rb) >= r_min)
-            & (np.abs(ra) <= r_cap) & (np.abs(rb) <= r_cap)
+            & (np.abs(ra) >= r_min)
+            & (np.abs(rb) >= r_min)
+            & (np.abs(ra) <= r_cap)
+            & (np.abs(rb) <= r_cap)
             & (np.abs(ssum) > _MIN_GAP * scale)
             & (np.abs(dist - np.abs(ssum)) <= _TANGENCY_TOL * scale)
         )
@@ -130,12 +132,10 @@ def _best_cc(px, py, alpha, radius, s, r_min, r_cap, phis, mags, n_best=1, n_rin
     if n_best > 1 and n_ring >= 3:
         ring = per_phi[:n_ring]
         eligible[:n_ring] &= (ring <= np.roll(ring, 1)) & (ring <= np.roll(ring, -1))
-    order = [i for i in np.argsort(np.where(eligible, per_phi, np.inf), kind="stable")[:n_best]
-             if eligible[i]]
+    order = [i for i in np.argsort(np.where(eligible, per_phi, np.inf), kind="stable")[:n_best] if eligible[i]]
     if not order:
         return None
-    return [(float(per_phi[i]), float(ra[i, k[i]]), float(rb[i, k[i]]), float(phis[i, 0]))
-            for i in order]
+    return [(float(per_phi[i]), float(ra[i, k[i]]), float(rb[i, k[i]]), float(phis[i, 0])) for i in order]
 
 
 def _single_arc_phi(px, py, alpha, radius, s):
@@ -160,12 +160,22 @@ def _orbit_path(x, y, v, radius, s) -> CCPath:
     """Zero-length path for a leader already on the orbit (both arcs are the orbit)."""
     theta = math.atan2(y, x)
     entry = (radius * math.cos(theta), radius * math.sin(theta), wrap(theta + s * 0.5 * math.pi))
-    return CCPath(r_a=-s * radius, r_b=s * radius, u1=s * v / radius, u2=s * v / radius,
-                  t1=0.0, t2=0.0, entry=entry, length=0.0)
+    return CCPath(
+        r_a=-s * radius, r_b=s * radius, u1=s * v / radius, u2=s * v / radius, t1=0.0, t2=0.0, entry=entry, length=0.0
+    )
 
 
-def plan_cc(x: float, y: float, heading: float, v: float, radius: float, direction: int,
-            max_turn_rate: float | None = None, *, n_entry: int = 72) -> CCPath:
+def plan_cc(
+    x: float,
+    y: float,
+    heading: float,
+    v: float,
+    radius: float,
+    direction: int,
+    max_turn_rate: float | None = None,
+    *,
+    n_entry: int = 72,
+) -> CCPath:
     """Shortest circle-circle path (over a candidate grid) from a pose onto the orbit.
 
     x, y: leader position relative to the target (m); heading (rad); v: speed (m/s) > 0;
@@ -191,8 +201,10 @@ def plan_cc(x: float, y: float, heading: float, v: float, radius: float, directi
 
     r = math.hypot(x, y)
     theta = math.atan2(y, x)
-    if (abs(r - radius) < _ON_ORBIT_TOL * max(1.0, radius)
-            and abs(wrap(heading - theta - s * 0.5 * math.pi)) < _ON_ORBIT_TOL):
+    if (
+        abs(r - radius) < _ON_ORBIT_TOL * max(1.0, radius)
+        and abs(wrap(heading - theta - s * 0.5 * math.pi)) < _ON_ORBIT_TOL
+    ):
         return _orbit_path(x, y, v, radius, s)
 
     alpha = wrap(heading)
@@ -208,8 +220,7 @@ def plan_cc(x: float, y: float, heading: float, v: float, radius: float, directi
     for _ in range(4):  # widen until something is feasible
         phis = np.concatenate([np.arange(n_phi) * (TAU / n_phi), extra])
         mags = r_min * np.geomspace(1.0, max(2.0, top * big / r_min), n_mag)
-        coarse = _best_cc(x, y, alpha, radius, s, r_min, r_cap, phis, mags,
-                          n_best=_N_STARTS, n_ring=n_phi)
+        coarse = _best_cc(x, y, alpha, radius, s, r_min, r_cap, phis, mags, n_best=_N_STARTS, n_ring=n_phi)
         if coarse is not None:
             break
         n_phi, n_mag, top = 4 * n_phi, 2 * n_mag, 10.0 * top
@@ -249,5 +260,4 @@ def plan_cc(x: float, y: float, heading: float, v: float, radius: float, directi
     d2 = 0.0 if _snap(d2, rb, scene) else d2
     t1, t2 = abs(ra) * d1 / v, abs(rb) * d2 / v
     entry = (radius * math.cos(phi), radius * math.sin(phi), wrap(beta))
-    return CCPath(r_a=ra, r_b=rb, u1=-v / ra, u2=v / rb, t1=t1, t2=t2, entry=entry,
-                  length=abs(ra) * d1 + abs(rb) * d2)
+    return CCPath(r_a=ra, r_b=rb, u1=-v / ra, u2=v / rb, t1=t1, t2=t2, entry=entry, length=abs(ra) * d1 + abs(rb) * d2)

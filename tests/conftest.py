@@ -27,8 +27,7 @@ BASE = {
     "gains": {"c1": 0.5, "c2": 0.25},
     "sensing": {"selection": "fixed"},
     "agents": [
-        {"id": 1, "role": "leader", "x": 2.0, "y": 0.0, "heading": math.pi / 2, "speed": 1.0,
-         "orbit_radius": 2.0},
+        {"id": 1, "role": "leader", "x": 2.0, "y": 0.0, "heading": math.pi / 2, "speed": 1.0, "orbit_radius": 2.0},
         {"id": 2, "role": "follower", "x": 0.0, "y": -3.0, "heading": 0.0, "speed": 1.5, "follow": 1},
         {"id": 3, "role": "follower", "x": -3.0, "y": 1.0, "heading": 1.0, "speed": 0.6, "follow": 2},
     ],

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 
 class FakePublisher:
-    def __init__(self, session: "FakeSession", key: str):
+    def __init__(self, session: FakeSession, key: str):
         self.session, self.key = session, key
 
     def put(self, payload: bytes) -> None:
@@ -59,7 +59,7 @@ class _Declared:
 
 
 class _Liveliness:
-    def __init__(self, session: "FakeSession"):
+    def __init__(self, session: FakeSession):
         self.session = session
 
     def declare_token(self, key: str):

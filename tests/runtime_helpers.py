@@ -29,10 +29,10 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import psutil
@@ -105,15 +105,17 @@ class Tracked:
     def check_running(self, what: str) -> None:
         """Fail, with its output, if it has exited (a `check` while waiting for `what`)."""
         if self.poll() is not None:
-            raise AssertionError(f"{self.name} (pid {self.pid}) exited ({self.poll()}) while waiting for {what}:\n"
-                                 f"{self.text()[-3000:]}")
+            raise AssertionError(
+                f"{self.name} (pid {self.pid}) exited ({self.poll()}) while waiting for {what}:\n{self.text()[-3000:]}"
+            )
 
     def wait(self, timeout: float) -> int:
         try:
             return self.popen.wait(timeout)
         except subprocess.TimeoutExpired:
-            raise AssertionError(f"{self.name} (pid {self.pid}) still running after {timeout} s; "
-                                 f"its output:\n{self.text()[-3000:]}") from None
+            raise AssertionError(
+                f"{self.name} (pid {self.pid}) still running after {timeout} s; its output:\n{self.text()[-3000:]}"
+            ) from None
 
 
 @dataclass
@@ -146,8 +148,14 @@ class ProcessTracker:
         log = self.log_dir / f"{name}.out"
         group = Group(session=True)
         with open(log, "ab") as f:
-            p = group.start(args, stdin=subprocess.DEVNULL, stdout=f, stderr=subprocess.STDOUT,
-                            env=self.env if env is None else env, cwd=cwd or self.cwd)
+            p = group.start(
+                args,
+                stdin=subprocess.DEVNULL,
+                stdout=f,
+                stderr=subprocess.STDOUT,
+                env=self.env if env is None else env,
+                cwd=cwd or self.cwd,
+            )
         t = Tracked(name, group, log, time.time())
         with self._lock:
             self.roots.append(t)
@@ -178,8 +186,7 @@ class ProcessTracker:
                     if old is None or abs(old.create_time - seen.create_time) < 0.01:
                         # (re)record: a child seen between fork and exec still shows its
                         # parent's command line, so refresh it while the process lives.
-                        self.seen[k.pid] = seen if old is None else Seen(k.pid, old.create_time,
-                                                                         seen.cmdline, old.root)
+                        self.seen[k.pid] = seen if old is None else Seen(k.pid, old.create_time, seen.cmdline, old.root)
 
     def _watch(self) -> None:
         while not self._stop.wait(self.POLL_S):
@@ -203,10 +210,12 @@ class ProcessTracker:
 
     def wait_agent_pids(self, root: Tracked, n: int, timeout: float = 10.0) -> dict[int, int]:
         """{agent id: pid} once `n` agent processes run under `root`."""
+
         def found():
             self.poll_once()
             pids = self.agent_pids(root)
             return pids if len(pids) >= n else None
+
         return wait_for(found, timeout, f"{n} agent processes under {root.name}")
 
     def world_pid(self, root: Tracked) -> int | None:
@@ -300,7 +309,7 @@ class Runtime:
         finally:
             shutil.rmtree(self.dir, ignore_errors=True)
 
-    def __enter__(self) -> "Runtime":
+    def __enter__(self) -> Runtime:
         return self
 
     def __exit__(self, exc_type, *_) -> None:
@@ -324,14 +333,15 @@ def run_credentials(endpoint: str, run: str, runtime_dir: str | Path | None = No
         return None
 
 
-def open_hub(rt: "Runtime") -> None:
+def open_hub(rt: Runtime) -> None:
     """Processes this runtime starts from now on open their hub to anyone (SWARM_OPEN_HUB):
     for tests of what garbage from a stranger does behind the hub's checks."""
     rt.env["SWARM_OPEN_HUB"] = "1"
 
 
-def open_session(endpoint: str, timeout: float = 15.0, check: Callable[[], None] | None = None,
-                 creds=None, user: str = "operator"):
+def open_session(
+    endpoint: str, timeout: float = 15.0, check: Callable[[], None] | None = None, creds=None, user: str = "operator"
+):
     """A zenoh client session of this test process on `endpoint` (as `user` with `creds`;
     without, a stranger, which only an open hub lets in), retried until it listens.
     `check()` runs before each try (to fail early, e.g. when the process to listen exited)."""
@@ -363,8 +373,14 @@ class Observer:
     info query, through swarm/live/client.py. Events of the run are read from summary.json once it
     has ended; while it goes, the world's counters (joins, drops, alive, tick) tell."""
 
-    def __init__(self, endpoint: str, run: str, timeout: float = 30.0, check: Callable[[], None] | None = None,
-                 runtime_dir: str | None = None):
+    def __init__(
+        self,
+        endpoint: str,
+        run: str,
+        timeout: float = 30.0,
+        check: Callable[[], None] | None = None,
+        runtime_dir: str | None = None,
+    ):
         from swarm.live.client import LiveRun, NoRun, RunRef
 
         def attempt():
@@ -389,26 +405,38 @@ class Observer:
         except self._no_run:
             return None
 
-    def wait(self, cond: Callable[[dict], object], timeout: float, what: str,
-             check: Callable[[], None] | None = None, interval: float = 0.05) -> dict:
+    def wait(
+        self,
+        cond: Callable[[dict], object],
+        timeout: float,
+        what: str,
+        check: Callable[[], None] | None = None,
+        interval: float = 0.05,
+    ) -> dict:
         """The world's info once `cond(info)` holds; `check()` runs before each query."""
+
         def ready():
             if check is not None:
                 check()
             info = self.info()
             return info if info is not None and cond(info) else None
+
         return wait_for(ready, timeout, what, interval)
 
     def close(self) -> None:
         self.live.__exit__(None, None, None)
 
 
-def observe_world(tracker: ProcessTracker, world: Tracked, endpoint: str, run: str,
-                  timeout: float = 30.0) -> Observer:
+def observe_world(tracker: ProcessTracker, world: Tracked, endpoint: str, run: str, timeout: float = 30.0) -> Observer:
     """An observer of a world started by hand, once it listens (failing if the world exits
     first); the tracker closes it."""
-    obs = Observer(endpoint, run, timeout, check=lambda: world.check_running("it to listen"),
-                   runtime_dir=tracker.env.get("SWARM_RUNTIME_DIR"))
+    obs = Observer(
+        endpoint,
+        run,
+        timeout,
+        check=lambda: world.check_running("it to listen"),
+        runtime_dir=tracker.env.get("SWARM_RUNTIME_DIR"),
+    )
     tracker.closing.append(obs.close)
     return obs
 
@@ -443,15 +471,22 @@ class UpRun:
     def running(self, what: str = "the run") -> None:
         """Fail (with the launcher's and the world's output) when the launcher has exited."""
         if self.launcher.poll() is not None:
-            raise AssertionError(f"launcher exited ({self.launcher.poll()}) while waiting for {what}:\n"
-                                 f"{self.launcher.text()[-3000:]}\n{self.world_text()[-3000:]}")
+            raise AssertionError(
+                f"launcher exited ({self.launcher.poll()}) while waiting for {what}:\n"
+                f"{self.launcher.text()[-3000:]}\n{self.world_text()[-3000:]}"
+            )
 
     def observe(self, timeout: float = 60.0) -> Observer:
         """The observer of this run (opened once the world listens; the tracker closes it)."""
         if self.observer is None:
             run, endpoint = self.banner()
-            self.observer = Observer(endpoint, run, timeout, check=lambda: self.running("the world to listen"),
-                                     runtime_dir=self.tracker.env.get("SWARM_RUNTIME_DIR"))
+            self.observer = Observer(
+                endpoint,
+                run,
+                timeout,
+                check=lambda: self.running("the world to listen"),
+                runtime_dir=self.tracker.env.get("SWARM_RUNTIME_DIR"),
+            )
             self.tracker.closing.append(self.observer.close)
         return self.observer
 
@@ -488,8 +523,9 @@ def start_up(tracker: ProcessTracker, scenario: Path | str, out: Path, *extra, n
     return UpRun(tracker.spawn(args, name), Path(out), tracker)
 
 
-def start_ticking(tracker: ProcessTracker, out: Path, duration: float,
-                  scenario: Path | str = SCENARIOS / "case2.toml") -> tuple[UpRun, dict[int, int], dict]:
+def start_ticking(
+    tracker: ProcessTracker, out: Path, duration: float, scenario: Path | str = SCENARIOS / "case2.toml"
+) -> tuple[UpRun, dict[int, int], dict]:
     """A lockstep `swarm up` of `scenario` for `duration` s, once every agent process is known
     and the world ticks: (the run, agent pids by id, the world's info at that moment)."""
     up = start_up(tracker, scenario, out, "--duration", str(duration), "--clock", "lockstep")
@@ -499,18 +535,38 @@ def start_ticking(tracker: ProcessTracker, out: Path, duration: float,
     return up, pids, info
 
 
-def ring_scenario(path: Path, n: int, leaders: int = 2, clock: str = "realtime", dt: float = 0.05,
-                  duration: float = 600.0) -> Path:
+def ring_scenario(
+    path: Path, n: int, leaders: int = 2, clock: str = "realtime", dt: float = 0.05, duration: float = 600.0
+) -> Path:
     """Write a scenario of `n` agents on a spiral round the target (the first `leaders` of them
     leaders) to `path`: for runs larger than the shipped scenarios."""
     import math
 
-    lines = [f'name = "ring{n}"', "[run]", f"dt = {dt}", f"duration = {duration}", f'clock = "{clock}"', "seed = 1",
-             "[target]", "x = 0.0", "y = 0.0", "[gains]", "c1 = 1.0", "c2 = 0.5"]
+    lines = [
+        f'name = "ring{n}"',
+        "[run]",
+        f"dt = {dt}",
+        f"duration = {duration}",
+        f'clock = "{clock}"',
+        "seed = 1",
+        "[target]",
+        "x = 0.0",
+        "y = 0.0",
+        "[gains]",
+        "c1 = 1.0",
+        "c2 = 0.5",
+    ]
     for i in range(1, n + 1):
         a, r, v = 2 * math.pi * i / n, 30.0 + 2 * i, 20.0 + (i % 7) * 3
-        lines += ["[[agents]]", f"id = {i}", f'role = "{"leader" if i <= leaders else "follower"}"',
-                  f"x = {r * math.cos(a):.3f}", f"y = {r * math.sin(a):.3f}", f"speed = {v}", f"heading = {a + 1.57:.3f}"]
+        lines += [
+            "[[agents]]",
+            f"id = {i}",
+            f'role = "{"leader" if i <= leaders else "follower"}"',
+            f"x = {r * math.cos(a):.3f}",
+            f"y = {r * math.sin(a):.3f}",
+            f"speed = {v}",
+            f"heading = {a + 1.57:.3f}",
+        ]
         if i <= leaders:
             lines += [f"orbit_radius = {v}", 'direction = "ccw"']
     path.write_text("\n".join(lines) + "\n")
@@ -561,7 +617,7 @@ def first_ticks(traj: dict[str, np.ndarray], summary: dict, ticks: int) -> tuple
     """A whole run cut to its first `ticks` ticks: the rows 0..ticks of every per-tick array,
     and the events of those ticks (a run is the same whatever its duration, up to its end)."""
     rows = len(traj["t"])
-    cut = {k: v[:ticks + 1] if v.ndim and v.shape[0] == rows else v for k, v in traj.items()}
+    cut = {k: v[: ticks + 1] if v.ndim and v.shape[0] == rows else v for k, v in traj.items()}
     return cut, {**summary, "events": [e for e in summary["events"] if e.get("tick", 0) <= ticks]}
 
 
@@ -630,6 +686,7 @@ def live_swarm(base: Path, scenario: Path | str, n: int, *up_args, timeout: floa
         up = start_up(rt.tracker, scenario, base / "run", "--clock", "realtime", *up_args)
         state["up"] = up
         try:
+
             def ready():
                 if up.launcher.poll() is not None:
                     raise AssertionError(f"swarm up exited {up.launcher.poll()}:\n{up.launcher.text()[-3000:]}")

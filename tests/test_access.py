@@ -18,8 +18,8 @@ import time
 
 import psutil
 import pytest
-
 from runtime_helpers import SCENARIOS, Runtime, UpRun, open_session, run_credentials, swarm_cmd, wait_for
+
 from swarm.contracts import credentials, wire
 from swarm.contracts.identities import SUPERVISOR, agent_user
 from swarm.contracts.transport import open_client, query_statuses
@@ -40,10 +40,14 @@ def run(tmp_path_factory):
         # pass through (so that only the run's own modes keep another user out)
         os.chmod(rt.dir, 0o711)
         rt.env["SWARM_RUNTIME_DIR"] = os.path.join(rt.dir, "rt")
-        args = swarm_cmd("up", SCENARIOS / "case2.toml", "--out", d / "run", "--no-plots", "--clock", "realtime",
-                         "--duration", "600")
-        up = UpRun(rt.tracker.spawn(["/bin/sh", "-c", 'umask 000; exec "$@"', "sh", *map(str, args)], "up"),
-                   d / "run", rt.tracker)
+        args = swarm_cmd(
+            "up", SCENARIOS / "case2.toml", "--out", d / "run", "--no-plots", "--clock", "realtime", "--duration", "600"
+        )
+        up = UpRun(
+            rt.tracker.spawn(["/bin/sh", "-c", 'umask 000; exec "$@"', "sh", *map(str, args)], "up"),
+            d / "run",
+            rt.tracker,
+        )
         run_id, endpoint = up.banner()
         up.wait_started(60)
         pids = rt.tracker.wait_agent_pids(up.launcher, 6)
@@ -51,8 +55,16 @@ def run(tmp_path_factory):
         operator = open_session(endpoint, creds=creds)
         insider = open_session(endpoint, creds=creds, user=agent_user(INSIDER))
         try:
-            yield {"up": up, "rt": rt, "run": run_id, "endpoint": endpoint, "pids": pids, "creds": creds,
-                   "operator": operator, "insider": insider}
+            yield {
+                "up": up,
+                "rt": rt,
+                "run": run_id,
+                "endpoint": endpoint,
+                "pids": pids,
+                "creds": creds,
+                "operator": operator,
+                "insider": insider,
+            }
         finally:
             insider.close()
             operator.close()
@@ -72,8 +84,7 @@ def ticks_on(r, seconds: float = 0.5) -> None:
 
 
 def all_alive(r) -> bool:
-    return all(psutil.pid_exists(p) and psutil.Process(p).status() != psutil.STATUS_ZOMBIE
-               for p in r["pids"].values())
+    return all(psutil.pid_exists(p) and psutil.Process(p).status() != psutil.STATUS_ZOMBIE for p in r["pids"].values())
 
 
 # -- strangers ---------------------------------------------------------------------------------
@@ -105,10 +116,17 @@ def test_runtime_dir_and_files_are_private_under_umask_000(run):
 @pytest.mark.skipif(os.getuid() != 0 or not os.path.exists("/usr/bin/python3"), reason="needs root and a system python")
 def test_another_local_user_reaches_nothing(run):
     """Another user of the machine (it once paused a run through a world-writable socket)."""
-    r = subprocess.run(["/usr/bin/python3", "-c", PROBE, run["rt"].env["SWARM_RUNTIME_DIR"], run["run"]], user=NOBODY,
-                       capture_output=True, text=True, timeout=30)
+    r = subprocess.run(
+        ["/usr/bin/python3", "-c", PROBE, run["rt"].env["SWARM_RUNTIME_DIR"], run["run"]],
+        user=NOBODY,
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout) == {"list": "PermissionError", "read": "PermissionError", "connect": "PermissionError"}
+
+
 def test_no_credentials_refused_at_connect(run):
     with pytest.raises(Exception):
         open_client(run["endpoint"], timeout_ms=REFUSE_MS).close()
@@ -151,8 +169,7 @@ def test_insider_cannot_steer_another_agent(run):
     (Ticks already reached: on an open hub the world would count each as rogue.)"""
     before = info(run)
     for k in range(200):
-        cmd = wire.Command(agent=1, tick=max(before["tick"] - k, 0), u=-1.0, out=None, phase="orbit", hops=0,
-                           key=12345)
+        cmd = wire.Command(agent=1, tick=max(before["tick"] - k, 0), u=-1.0, out=None, phase="orbit", hops=0, key=12345)
         run["insider"].put(wire.agent_key(run["run"], 1, "cmd"), wire.encode_cmd(cmd))
         time.sleep(0.002)
     time.sleep(0.5)
@@ -163,8 +180,9 @@ def test_insider_cannot_steer_another_agent(run):
 
 def test_insider_cannot_pause_or_resume(run):
     for cmd in ("pause", "resume"):
-        replies = list(run["insider"].get(wire.world_admin_key(run["run"]), payload=wire.encode_admin(cmd, by="evil"),
-                                          timeout=1.0))
+        replies = list(
+            run["insider"].get(wire.world_admin_key(run["run"]), payload=wire.encode_admin(cmd, by="evil"), timeout=1.0)
+        )
         assert [r for r in replies if r.ok is not None] == []
     assert info(run)["paused"] is False
     ticks_on(run)
@@ -193,8 +211,10 @@ def test_insider_cannot_answer_for_another_agent(run):
     operator hears agent 1 itself only."""
     q = run["insider"].declare_queryable(
         wire.agent_key(run["run"], 1, "status"),
-        lambda query: query.reply(wire.agent_key(run["run"], 1, "status"),
-                                  wire.encode_status({"id": 1, "pid": 4242, "host": "evil"})))
+        lambda query: query.reply(
+            wire.agent_key(run["run"], 1, "status"), wire.encode_status({"id": 1, "pid": 4242, "host": "evil"})
+        ),
+    )
     try:
         time.sleep(0.3)
         replies = [r for r in run["operator"].get(wire.agent_key(run["run"], 1, "status"), timeout=1.0) if r.ok]
@@ -209,15 +229,20 @@ def test_insider_cannot_answer_join_claims(run):
     """A rogue join reply (it once made an agent import a module of the rogue's choosing)."""
     q = run["insider"].declare_queryable(
         wire.agent_key(run["run"], "*", "join"),
-        lambda query: query.reply(str(query.key_expr), wire.encode_join_reply(False, error="evil")))
+        lambda query: query.reply(str(query.key_expr), wire.encode_join_reply(False, error="evil")),
+    )
     try:
         time.sleep(0.3)
         # what an agent 2 claiming its id would hear (the world refuses: 2 is live)
         a2 = open_client(run["endpoint"], timeout_ms=5000, creds=run["creds"], user=agent_user(2))
         try:
-            replies = [wire.decode_join_reply(r.ok.payload.to_bytes())
-                       for r in a2.get(wire.agent_key(run["run"], 2, "join"),
-                                       payload=wire.encode_join_request(2, 1, "h"), timeout=2.0) if r.ok]
+            replies = [
+                wire.decode_join_reply(r.ok.payload.to_bytes())
+                for r in a2.get(
+                    wire.agent_key(run["run"], 2, "join"), payload=wire.encode_join_request(2, 1, "h"), timeout=2.0
+                )
+                if r.ok
+            ]
         finally:
             a2.close()
         assert len(replies) == 1 and "already live" in replies[0]["error"], replies
@@ -226,13 +251,20 @@ def test_insider_cannot_answer_join_claims(run):
 
 
 def test_insider_cannot_claim_another_id(run):
-    replies = list(run["insider"].get(wire.agent_key(run["run"], 3, "join"),
-                                      payload=wire.encode_join_request(3, 1, "evil"), timeout=1.0))
+    replies = list(
+        run["insider"].get(
+            wire.agent_key(run["run"], 3, "join"), payload=wire.encode_join_request(3, 1, "evil"), timeout=1.0
+        )
+    )
     assert [r for r in replies if r.ok is not None] == []
     # and not on its own key either, for another id: the world refuses
-    replies = [wire.decode_join_reply(r.ok.payload.to_bytes())
-               for r in run["insider"].get(wire.agent_key(run["run"], INSIDER, "join"),
-                                           payload=wire.encode_join_request(3, 1, "evil"), timeout=2.0) if r.ok]
+    replies = [
+        wire.decode_join_reply(r.ok.payload.to_bytes())
+        for r in run["insider"].get(
+            wire.agent_key(run["run"], INSIDER, "join"), payload=wire.encode_join_request(3, 1, "evil"), timeout=2.0
+        )
+        if r.ok
+    ]
     assert len(replies) == 1 and not replies[0]["ok"] and "another agent's join key" in replies[0]["error"]
     assert info(run)["agents"]["3"]["pid"] == run["pids"][3]
 
@@ -271,9 +303,13 @@ def test_oversized_payload_on_own_command_key_is_dropped_by_the_hub(run):
 # -- the operator can -----------------------------------------------------------------------------
 def test_operator_can_pause_and_resume(run):
     for cmd, paused in (("pause", True), ("resume", False)):
-        replies = [wire.decode_admin_reply(r.ok.payload.to_bytes())
-                   for r in run["operator"].get(wire.world_admin_key(run["run"]),
-                                                payload=wire.encode_admin(cmd, by="test"), timeout=2.0) if r.ok]
+        replies = [
+            wire.decode_admin_reply(r.ok.payload.to_bytes())
+            for r in run["operator"].get(
+                wire.world_admin_key(run["run"]), payload=wire.encode_admin(cmd, by="test"), timeout=2.0
+            )
+            if r.ok
+        ]
         assert replies and replies[0]["ok"] and replies[0]["paused"] is paused
     ticks_on(run)
 
@@ -281,9 +317,10 @@ def test_operator_can_pause_and_resume(run):
 def test_operator_cannot_forge_commands_or_notices(run):
     """The operator acts on the run through the world (admin) and the agents (ctl) only."""
     before = info(run)
-    run["operator"].put(wire.agent_key(run["run"], 1, "cmd"),
-                        wire.encode_cmd(wire.Command(agent=1, tick=before["tick"] + 1, u=1.0, out=None, phase="orbit",
-                                                     hops=0, key=1)))
+    run["operator"].put(
+        wire.agent_key(run["run"], 1, "cmd"),
+        wire.encode_cmd(wire.Command(agent=1, tick=before["tick"] + 1, u=1.0, out=None, phase="orbit", hops=0, key=1)),
+    )
     run["operator"].put(wire.world_control_key(run["run"]), wire.encode_end(1))
     time.sleep(1.0)
     assert info(run)["agents"]["1"]["rogue_commands"] == 0
@@ -296,13 +333,19 @@ def test_operator_cannot_write_the_record(run):
     on world/admin, never routed to world/supervise, and the run's secret does not give
     the supervisor's password: no report reaches the world, every agent stays in."""
     r = run["run"]
-    for payload in (wire.encode_agent_exit(5, run["pids"][5], 1, True, "forged", []),
-                    wire.encode_admin("fault_done", index=0)):
-        admin = [wire.decode_admin_reply(x.ok.payload.to_bytes())
-                 for x in run["operator"].get(wire.world_admin_key(r), payload=payload, timeout=2.0) if x.ok]
+    for payload in (
+        wire.encode_agent_exit(5, run["pids"][5], 1, True, "forged", []),
+        wire.encode_admin("fault_done", index=0),
+    ):
+        admin = [
+            wire.decode_admin_reply(x.ok.payload.to_bytes())
+            for x in run["operator"].get(wire.world_admin_key(r), payload=payload, timeout=2.0)
+            if x.ok
+        ]
         assert admin and not admin[0]["ok"] and "unknown cmd" in admin[0]["error"], admin
-        assert not [x for x in run["operator"].get(wire.world_supervise_key(r), payload=payload, timeout=2.0)
-                    if x.ok], "the hub let the operator's query reach the supervise key"
+        assert not [
+            x for x in run["operator"].get(wire.world_supervise_key(r), payload=payload, timeout=2.0) if x.ok
+        ], "the hub let the operator's query reach the supervise key"
     with pytest.raises(Exception):
         open_client(run["endpoint"], timeout_ms=REFUSE_MS, creds=run["creds"], user=SUPERVISOR).close()
     after = info(run)

@@ -16,8 +16,8 @@ import pytest
 
 import swarm
 from swarm.contracts.scenario import ScenarioError, load_scenario, parse_scenario
-from swarm.runtime.procs import wait_until
 from swarm.offline.sim import run_sim
+from swarm.runtime.procs import wait_until
 
 REPO = Path(__file__).resolve().parent.parent
 SCENARIOS = REPO / "scenarios"
@@ -40,6 +40,7 @@ def untimed(summary: dict) -> dict:
 
 
 # -- scenarios -------------------------------------------------------------------------------
+
 
 def test_load_and_from_dict_give_the_scenario_the_files_give(base, write_toml):
     assert swarm.load(SCENARIOS / "case2.toml") == load_scenario(SCENARIOS / "case2.toml")
@@ -97,6 +98,7 @@ def test_to_toml_quotes_keys_toml_cannot_leave_bare(base):
 
 
 # -- simulate and open_run ------------------------------------------------------------------
+
 
 def test_simulate_equals_run_sim(base):
     s = parse_scenario(base)
@@ -166,11 +168,13 @@ def test_up_refuses_before_starting_anything(base, tmp_path):
 
 def test_importing_the_contracts_stays_cheap():
     """An agent process imports swarm.contracts.*: the API must not add anything to that."""
-    code = ("import sys, swarm.contracts.wire, swarm\n"
-            "heavy = [m for m in ('numpy', 'zenoh', 'matplotlib', 'pydantic', 'swarm.api.runs', 'world', 'agents') "
-            "if m in sys.modules]\n"
-            "assert not heavy, heavy\n"
-            "assert 'simulate' in dir(swarm) and 'swarm.api.runs' not in sys.modules\n")
+    code = (
+        "import sys, swarm.contracts.wire, swarm\n"
+        "heavy = [m for m in ('numpy', 'zenoh', 'matplotlib', 'pydantic', 'swarm.api.runs', 'world', 'agents') "
+        "if m in sys.modules]\n"
+        "assert not heavy, heavy\n"
+        "assert 'simulate' in dir(swarm) and 'swarm.api.runs' not in sys.modules\n"
+    )
     subprocess.run([sys.executable, "-c", code], check=True, cwd=REPO)
     assert swarm.simulate is sys.modules["swarm.api.runs"].simulate  # loaded on first use
     with pytest.raises(AttributeError, match="no attribute 'nope'"):
@@ -178,6 +182,7 @@ def test_importing_the_contracts_stays_cheap():
 
 
 # -- the slow tier: figures, the example, the distributed runtime ---------------------------
+
 
 def is_png(path: Path) -> bool:
     return path.is_file() and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -196,8 +201,13 @@ def test_results_plot_draws_the_run_figures(base, tmp_path):
 @pytest.mark.slow
 def test_the_example_notebook_runs(tmp_path):
     figure = tmp_path / "figs" / "case2.png"
-    p = subprocess.run([sys.executable, str(REPO / "examples" / "case2_notebook.py"), str(figure)],
-                       capture_output=True, text=True, timeout=240, cwd=tmp_path)
+    p = subprocess.run(
+        [sys.executable, str(REPO / "examples" / "case2_notebook.py"), str(figure)],
+        capture_output=True,
+        text=True,
+        timeout=240,
+        cwd=tmp_path,
+    )
     assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-3000:]
     assert is_png(figure) and "converged: True" in p.stdout
 
@@ -275,8 +285,9 @@ def test_up_in_lockstep_equals_simulate_and_leaves_nothing(private_runtime, tmp_
     got, want = run.results(), swarm.simulate(scenario, duration=duration)
     same_arrays(got.arrays, want.arrays, TICK_KEYS[:-1], atol=1e-9)
     assert got.summary.converged == want.summary.converged and got.summary.ticks == want.summary.ticks == 2000
-    switches = [sorted((e.tick, e.agent, e["from"] or 0, e.to or 0) for e in r.summary.events_of("switch"))
-                for r in (got, want)]  # within a tick, the order the agents' commands came in
+    switches = [
+        sorted((e.tick, e.agent, e["from"] or 0, e.to or 0) for e in r.summary.events_of("switch")) for r in (got, want)
+    ]  # within a tick, the order the agents' commands came in
     assert switches[0] == switches[1] and switches[0]
 
 

@@ -12,10 +12,10 @@ import threading
 
 import psutil
 import pytest
+from test_api import SCENARIOS, TICK_KEYS, Descendants, private_runtime, same_arrays  # noqa: F401 (a fixture)
 
 import swarm
 from swarm.runtime.procs import wait_until
-from test_api import SCENARIOS, TICK_KEYS, Descendants, private_runtime, same_arrays  # noqa: F401 (a fixture)
 
 
 def children() -> list[int]:
@@ -61,8 +61,10 @@ def test_open_run_says_what_it_recovered(base, tmp_path):
     (out / "summary.json").unlink()
     rec = swarm.open_run(out).recovered
     assert (rec.ticks, rec.sim_time, rec.finished) == (20, 1.0, True)
-    assert rec.line() == (f"recovered 21 ticks (t = 0 to 1.00 s) from the recording (finished) into {out}: "
-                          "trajectory.npz, summary.json (complete: false)")
+    assert rec.line() == (
+        f"recovered 21 ticks (t = 0 to 1.00 s) from the recording (finished) into {out}: "
+        "trajectory.npz, summary.json (complete: false)"
+    )
     assert swarm.open_run(out).recovered is None  # rebuilt once
     paths = swarm.open_run(out).write_csv()
     assert [p.name for p in paths] == ["agent-1.csv", "agent-2.csv", "agent-3.csv"]
@@ -74,8 +76,15 @@ def test_launch_in_lockstep_equals_simulate_and_leaves_nothing(private_runtime, 
     scenario, duration = SCENARIOS / "case2.toml", 5.0
     seen, lines, started = Descendants(os.getpid()), [], []
     figures = []
-    o = swarm.launch(scenario, out=tmp_path / "up", clock="lockstep", duration=duration, say=lines.append,
-                     progress=figures.append, on_start=lambda run: started.append((run.run_id, run.endpoint)))
+    o = swarm.launch(
+        scenario,
+        out=tmp_path / "up",
+        clock="lockstep",
+        duration=duration,
+        say=lines.append,
+        progress=figures.append,
+        on_start=lambda run: started.append((run.run_id, run.endpoint)),
+    )
     assert o.exit_code == 0 and o.words is None and not o.failed, (o, lines)
     assert started == [(o.run_id, started[0][1])] and o.run_id.startswith("case2-") and o.out == tmp_path / "up"
     assert o.exits == [] and o.recovered is None and o.stop_signal is None, lines
@@ -123,8 +132,12 @@ def test_launch_off_the_main_thread_leaves_the_signal_handlers_alone(private_run
     handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     handle, outcome = [], []
     seen = Descendants(os.getpid())
-    worker = threading.Thread(target=lambda: outcome.append(swarm.launch(
-        long_run(), out=tmp_path / "up", clock="lockstep", on_start=handle.append)), daemon=True)
+    worker = threading.Thread(
+        target=lambda: outcome.append(
+            swarm.launch(long_run(), out=tmp_path / "up", clock="lockstep", on_start=handle.append)
+        ),
+        daemon=True,
+    )
     worker.start()
     assert wait_until(lambda: handle, 30, 0.05)
     assert wait_until(lambda: (tmp_path / "up" / "recording.mcap").exists() and len(seen.seen) >= 7, 120, 0.1)

@@ -13,10 +13,10 @@ import subprocess
 import sys
 
 import pytest
+from runtime_helpers import SCENARIOS, live_swarm, short_runtime_dir, swarm_cmd
 from typer.testing import CliRunner
 
 import swarm
-from runtime_helpers import SCENARIOS, live_swarm, short_runtime_dir, swarm_cmd
 from swarm.cli.errors import exit_code
 
 
@@ -32,8 +32,17 @@ def test_error_classes_and_their_exit_codes():
     from swarm.live.client import NoRun
 
     assert NoRun is swarm.NoRunError  # what swarm/live/client.py raises is the API's class
-    codes = {swarm.NoRunError: 1, swarm.LiveError: 1, swarm.UsageError: 2, swarm.UpError: 1, ScenarioError: 2,
-             OutDirError: 2, RunReadError: 1, PlotError: 1, RecordingError: 74}
+    codes = {
+        swarm.NoRunError: 1,
+        swarm.LiveError: 1,
+        swarm.UsageError: 2,
+        swarm.UpError: 1,
+        ScenarioError: 2,
+        OutDirError: 2,
+        RunReadError: 1,
+        PlotError: 1,
+        RecordingError: 74,
+    }
     assert {cls: exit_code(cls("x")) for cls in codes} == codes
     assert exit_code(ValueError("x")) is None and exit_code(KeyError(3)) is None  # bugs keep their traceback
 
@@ -102,17 +111,32 @@ def test_connect_without_a_run_raises_one_line(empty_runtime, monkeypatch):
 
 def test_a_live_command_process_imports_only_its_group(empty_runtime):
     """`swarm pause` as a process: no scenario model, no numpy, none of the other command groups."""
-    code = ("import sys; sys.argv = ['swarm', 'pause']\nfrom swarm.cli.main import main\ntry:\n    main()\n"
-            "except SystemExit as e:\n    code = e.code\n"
-            "print(sorted(m for m in sys.modules if m.startswith(('swarm.', 'numpy', 'world')) or m == 'numpy'),"
-            " code)")
-    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=30,
-                       env={**os.environ, "SWARM_RUNTIME_DIR": empty_runtime})
+    code = (
+        "import sys; sys.argv = ['swarm', 'pause']\nfrom swarm.cli.main import main\ntry:\n    main()\n"
+        "except SystemExit as e:\n    code = e.code\n"
+        "print(sorted(m for m in sys.modules if m.startswith(('swarm.', 'numpy', 'world')) or m == 'numpy'),"
+        " code)"
+    )
+    p = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=30,
+        env={**os.environ, "SWARM_RUNTIME_DIR": empty_runtime},
+    )
     assert "no swarm is running" in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
     mods, rc = p.stdout.rsplit(" ", 1)
     assert rc.strip() == "1"
-    for heavy in ("numpy", "swarm.contracts.scenario", "swarm.cli.up", "swarm.cli.run", "swarm.cli.study",
-                  "swarm.cli.offline", "swarm.api.runs", "swarm.world.recording"):
+    for heavy in (
+        "numpy",
+        "swarm.contracts.scenario",
+        "swarm.cli.up",
+        "swarm.cli.run",
+        "swarm.cli.study",
+        "swarm.cli.offline",
+        "swarm.api.runs",
+        "swarm.world.recording",
+    ):
         assert f"'{heavy}'" not in mods, (heavy, mods)
 
 
@@ -173,9 +197,11 @@ def test_connect_pauses_resumes_and_refuses_what_it_cannot_do(live):
 @pytest.mark.slow
 def test_commands_exit_with_the_api_errors_codes(live):
     """The same refusals through the commands, as processes: one line, the class's exit code."""
-    for args, code, what in ((["kill", "99"], 1, "agent 99 is not in run"),
-                             (["spawn", "--id", "3", "--x", "1"], 2, "only apply to a new id"),
-                             (["kill", "3", "--signal", "HUP"], 2, "use one of KILL")):
+    for args, code, what in (
+        (["kill", "99"], 1, "agent 99 is not in run"),
+        (["spawn", "--id", "3", "--x", "1"], 2, "only apply to a new id"),
+        (["kill", "3", "--signal", "HUP"], 2, "use one of KILL"),
+    ):
         p = subprocess.run(swarm_cmd(*args), capture_output=True, text=True, timeout=30, stdin=subprocess.DEVNULL)
         assert p.returncode == code and what in p.stderr, (args, p.returncode, p.stderr)
         assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr, p.stderr

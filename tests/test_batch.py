@@ -16,10 +16,10 @@ import pytest
 from typer.testing import CliRunner
 
 from swarm.agents.batch_maths import wrap as batch_wrap
-from swarm.offline.batch import BatchRefused, refusal, run_batch
 from swarm.cli.main import app
 from swarm.contracts.orbits import wrap
 from swarm.contracts.scenario import load_scenario, parse_scenario
+from swarm.offline.batch import BatchRefused, refusal, run_batch
 from swarm.offline.sim import run_sim
 from swarm.study.swarms import SwarmSetting, random_swarm
 
@@ -55,6 +55,7 @@ def assert_same_run(ref, got, *, full: bool = True) -> None:
 
 # -- whole runs --------------------------------------------------------------------------------
 
+
 @pytest.mark.slow  # 30,000 ticks each way
 def test_case1_whole_run_equals_swarm_sim():
     s = load_scenario(SCENARIOS / "case1.toml")
@@ -80,12 +81,15 @@ def test_random_30_agent_swarm_whole_run_equals_swarm_sim():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name, make", [
-    ("range 40 m", lambda: random_swarm(SwarmSetting(range=40.0, duration=150.0), 7)),
-    ("range 60 m, fov 180 deg", lambda: random_swarm(SwarmSetting(range=60.0, fov=math.pi, duration=150.0), 8)),
-    ("case2-range", lambda: load_scenario(SCENARIOS / "case2-range.toml")),
-    ("case2-fov", lambda: load_scenario(SCENARIOS / "case2-fov.toml")),
-])
+@pytest.mark.parametrize(
+    "name, make",
+    [
+        ("range 40 m", lambda: random_swarm(SwarmSetting(range=40.0, duration=150.0), 7)),
+        ("range 60 m, fov 180 deg", lambda: random_swarm(SwarmSetting(range=60.0, fov=math.pi, duration=150.0), 8)),
+        ("case2-range", lambda: load_scenario(SCENARIOS / "case2-range.toml")),
+        ("case2-fov", lambda: load_scenario(SCENARIOS / "case2-fov.toml")),
+    ],
+)
 def test_limited_sensing_whole_run_equals_swarm_sim(name, make):
     """Holds, coasts, shadows and searches (the followers' slow path, one by one) beside
     keeps over arrays: the same bits, the same events, the same loss figures."""
@@ -93,27 +97,36 @@ def test_limited_sensing_whole_run_equals_swarm_sim(name, make):
     ref, (got,) = run_sim(s), run_batch([s])
     assert_same_run(ref, got)
     a, b = ref.summary()["agents"], got.summary()["agents"]
-    assert {k: (v.get("losses"), v.get("loss_switches_max")) for k, v in a.items()} == \
-        {k: (v.get("losses"), v.get("loss_switches_max")) for k, v in b.items()}
+    assert {k: (v.get("losses"), v.get("loss_switches_max")) for k, v in a.items()} == {
+        k: (v.get("losses"), v.get("loss_switches_max")) for k, v in b.items()
+    }
     assert sum(v.get("losses", 0) for v in a.values()) > 0  # the rule's other states were exercised
 
 
 # -- every rule, briefly -----------------------------------------------------------------------
 
+
 def _with(s, **sensing):
     return s.model_copy(update={"sensing": s.sensing.model_copy(update=sensing)})
 
 
-@pytest.mark.parametrize("name, make", [
-    ("nearest, range, hysteresis", lambda: _with(random_swarm(SwarmSetting(
-        n=10, selection="nearest", range=70.0, duration=15.0), 2), hysteresis=0.2)),
-    ("rooted", lambda: random_swarm(SwarmSetting(n=10, selection="rooted", duration=15.0), 3)),
-    ("rooted, range", lambda: random_swarm(SwarmSetting(n=10, selection="rooted", range=60.0, duration=15.0), 3)),
-    ("sticky, fov", lambda: random_swarm(SwarmSetting(n=10, range=80.0, fov=3.0, duration=15.0), 1)),
-    ("rooted, hysteresis 0.2 (rooted.toml)", lambda: load_scenario(SCENARIOS / "rooted.toml")),
-    ("fixed (case2-fixed)", lambda: load_scenario(SCENARIOS / "case2-fixed.toml")),
-    ("turn-rate limits (turtlebot)", lambda: load_scenario(SCENARIOS / "turtlebot.toml")),
-])
+@pytest.mark.parametrize(
+    "name, make",
+    [
+        (
+            "nearest, range, hysteresis",
+            lambda: _with(
+                random_swarm(SwarmSetting(n=10, selection="nearest", range=70.0, duration=15.0), 2), hysteresis=0.2
+            ),
+        ),
+        ("rooted", lambda: random_swarm(SwarmSetting(n=10, selection="rooted", duration=15.0), 3)),
+        ("rooted, range", lambda: random_swarm(SwarmSetting(n=10, selection="rooted", range=60.0, duration=15.0), 3)),
+        ("sticky, fov", lambda: random_swarm(SwarmSetting(n=10, range=80.0, fov=3.0, duration=15.0), 1)),
+        ("rooted, hysteresis 0.2 (rooted.toml)", lambda: load_scenario(SCENARIOS / "rooted.toml")),
+        ("fixed (case2-fixed)", lambda: load_scenario(SCENARIOS / "case2-fixed.toml")),
+        ("turn-rate limits (turtlebot)", lambda: load_scenario(SCENARIOS / "turtlebot.toml")),
+    ],
+)
 @pytest.mark.slow  # a whole run in-process
 def test_every_rule_equals_swarm_sim(name, make):
     s = make()
@@ -162,12 +175,18 @@ def test_many_seeds_in_one_batch_equal_each_seed_alone():
 
 def test_exact_wrap_matches_the_scalar_one():
     rng = np.random.default_rng(5)
-    a = np.concatenate([rng.uniform(-8, 8, 2000), rng.uniform(-100, 100, 200),
-                        [math.pi, -math.pi, 2 * math.pi, -2 * math.pi, 3 * math.pi, 0.0, -0.0]])
+    a = np.concatenate(
+        [
+            rng.uniform(-8, 8, 2000),
+            rng.uniform(-100, 100, 200),
+            [math.pi, -math.pi, 2 * math.pi, -2 * math.pi, 3 * math.pi, 0.0, -0.0],
+        ]
+    )
     assert batch_wrap(a).tolist() == [wrap(v) for v in a.tolist()]
 
 
 # -- refusals ------------------------------------------------------------------------------------
+
 
 def test_faults_and_own_laws_are_refused_with_the_reason(base, monkeypatch):
     faults = load_scenario(SCENARIOS / "faults.toml")
@@ -184,13 +203,17 @@ def test_faults_and_own_laws_are_refused_with_the_reason(base, monkeypatch):
 
 def test_members_of_one_batch_must_share_dt_ticks_agents_and_rule():
     a = random_swarm(SwarmSetting(n=6, duration=5.0), 0)
-    for b in (random_swarm(SwarmSetting(n=7, duration=5.0), 0), random_swarm(SwarmSetting(n=6, duration=6.0), 0),
-              random_swarm(SwarmSetting(n=6, duration=5.0, selection="nearest"), 0)):
+    for b in (
+        random_swarm(SwarmSetting(n=7, duration=5.0), 0),
+        random_swarm(SwarmSetting(n=6, duration=6.0), 0),
+        random_swarm(SwarmSetting(n=6, duration=5.0, selection="nearest"), 0),
+    ):
         with pytest.raises(ValueError, match="one batch needs"):
             run_batch([a, b])
 
 
 # -- the commands --------------------------------------------------------------------------------
+
 
 def invoke(*args):
     return CliRunner().invoke(app, [str(a) for a in args])
@@ -223,8 +246,21 @@ def test_sim_batch_refuses_a_scenario_with_faults(tmp_path):
 
 @pytest.mark.slow  # a whole run in-process
 def test_study_batch_rows_equal_per_agent_rows(tmp_path):
-    args = ("study", "swarms", "--seeds", "3", "--n", "6", "--range", "inf,50", "--duration", "10", "-j", "1",
-            "--no-plot")
+    args = (
+        "study",
+        "swarms",
+        "--seeds",
+        "3",
+        "--n",
+        "6",
+        "--range",
+        "inf,50",
+        "--duration",
+        "10",
+        "-j",
+        "1",
+        "--no-plot",
+    )
     assert invoke(*args, "--out", tmp_path / "p", "--per-agent").exit_code == 0
     res = invoke(*args, "--out", tmp_path / "b")
     assert res.exit_code == 0, res.output

@@ -13,8 +13,7 @@ from swarm.cli.main import app
 from swarm.contracts.scenario import load_scenario
 
 SCENARIOS = sorted((Path(__file__).resolve().parent.parent / "scenarios").glob("*.toml"))
-KEYS = {"ids", "role", "speed", "orbit_radius", "target", "dt", "t", "x", "y", "heading", "u",
-        "out", "alive", "missed"}
+KEYS = {"ids", "role", "speed", "orbit_radius", "target", "dt", "t", "x", "y", "heading", "u", "out", "alive", "missed"}
 COMMANDS = ["check", "schema", "sim", "plot", "export"]
 
 
@@ -161,6 +160,7 @@ def test_plot_on_missing_dir(tmp_path):
 
 # -- a follower law name that does not resolve --------------------------------------------
 
+
 @pytest.fixture
 def bad_law_file(base, write_toml):
     base["gains"]["law"] = "no_such_law"
@@ -181,6 +181,7 @@ def test_check_with_unknown_law_exits_2_naming_the_field(bad_law_file):
 
 
 # -- scenario values that cannot run: `swarm check` exits 2 with one line naming file and field --
+
 
 def _check_fails(path, *fragments):
     res = invoke("check", path)
@@ -221,7 +222,8 @@ def test_check_rejects_deep_nesting_in_one_line(tmp_path):
     path = tmp_path / "deep.toml"
     path.write_text("a = " + "[" * 100_000 + "]" * 100_000)
     assert _check_fails(path, "nested too deeply") == [
-        f"{path}: nested too deeply (arrays or tables inside one another)"]
+        f"{path}: nested too deeply (arrays or tables inside one another)"
+    ]
 
 
 def test_check_rejects_a_binary_file(tmp_path):
@@ -247,10 +249,13 @@ def test_progress_line_sums_up_a_large_swarm():
     big = {"errors": {i: (None if i % 4 == 0 else i / 1000) for i in range(1, 201)}, "dropped": [201, 202]}
     line = progress_errors(big)
     # settled: within the 2% band (errors 0.1% .. 2.0%: agents 1..20 less the 5 without a leader)
-    assert line == ("200 live: 15 settled, 135 not (worst 199:20% 198:20% 197:20%), 50 without a leader; "
-                    "dropped 201, 202"), line
+    assert line == (
+        "200 live: 15 settled, 135 not (worst 199:20% 198:20% 197:20%), 50 without a leader; dropped 201, 202"
+    ), line
     many_dropped = progress_errors({**big, "dropped": list(range(201, 231))})
     assert many_dropped.endswith("; 30 dropped") and len(many_dropped) < 110, many_dropped
-    assert progress_errors({"errors": {i: None for i in range(20)}, "dropped": []}) == \
-        "20 live: 0 settled, 20 without a leader"
+    assert (
+        progress_errors({"errors": {i: None for i in range(20)}, "dropped": []})
+        == "20 live: 0 settled, 20 without a leader"
+    )
     assert progress_errors({"errors": {i: 0.001 for i in range(30)}, "dropped": []}) == "30 live: 30 settled"

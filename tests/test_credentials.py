@@ -10,7 +10,8 @@ import stat
 
 import pytest
 
-from swarm.contracts import access, credentials as C
+from swarm.contracts import access
+from swarm.contracts import credentials as C
 from swarm.contracts.laws import LawError, check_trusted, trusted_laws
 
 NOBODY = 65534
@@ -87,23 +88,32 @@ def test_credentials_readable_by_others_or_foreign_are_refused(rtdir):
             C.read(path)
 
 
-@pytest.mark.parametrize("text,message", [
-    ("not json", "not a credentials file"),
-    ("[]", "no \"v\": 1"),
-    ('{"v": 1, "endpoint": "e", "secret": "00"}', "run: expected a non-empty string"),
-    ('{"v": 1, "run": "a b", "endpoint": "e", "secret": "' + "0" * 64 + '"}', "run:"),
-    ('{"v": 1, "run": "r", "endpoint": "e", "secret": "zz"}', "secret: expected at least 32 hex digits"),
-    ('{"v": 1, "run": "r", "endpoint": "e"}', "neither a secret nor a user and password"),
-    ('{"v": 1, "run": "r", "endpoint": "e", "user": "agent-1", "password": "p", "pid": -1}', "pid:"),
-    ('{"v": 1, "run": "r", "endpoint": "e", "user": "agent-1", "password": "p", "open_hub": 1}', "open_hub:"),
-    ('{"v": 1, "run": "r", "endpoint": "e", "user": "host", "password": "p", "host": "a/b", "agents": {"1": "p"}}',
-     "host: host name"),
-    ('{"v": 1, "run": "r", "endpoint": "e", "user": "host", "password": "p", "host": "a", "agents": {"01": "p"}}',
-     "agents: expected"),
-    ('{"v": 1, "run": "r", "endpoint": "e", "user": "host", "password": "p", "host": "a", "agents": []}',
-     "agents: expected"),
-    ('{"v": 1, "run": "r", "endpoint": "e", "user": "host", "password": "p", "host": "a"}', "both host and agents"),
-])
+@pytest.mark.parametrize(
+    "text,message",
+    [
+        ("not json", "not a credentials file"),
+        ("[]", 'no "v": 1'),
+        ('{"v": 1, "endpoint": "e", "secret": "00"}', "run: expected a non-empty string"),
+        ('{"v": 1, "run": "a b", "endpoint": "e", "secret": "' + "0" * 64 + '"}', "run:"),
+        ('{"v": 1, "run": "r", "endpoint": "e", "secret": "zz"}', "secret: expected at least 32 hex digits"),
+        ('{"v": 1, "run": "r", "endpoint": "e"}', "neither a secret nor a user and password"),
+        ('{"v": 1, "run": "r", "endpoint": "e", "user": "agent-1", "password": "p", "pid": -1}', "pid:"),
+        ('{"v": 1, "run": "r", "endpoint": "e", "user": "agent-1", "password": "p", "open_hub": 1}', "open_hub:"),
+        (
+            '{"v": 1, "run": "r", "endpoint": "e", "user": "host", "password": "p", "host": "a/b", "agents": {"1": "p"}}',
+            "host: host name",
+        ),
+        (
+            '{"v": 1, "run": "r", "endpoint": "e", "user": "host", "password": "p", "host": "a", "agents": {"01": "p"}}',
+            "agents: expected",
+        ),
+        (
+            '{"v": 1, "run": "r", "endpoint": "e", "user": "host", "password": "p", "host": "a", "agents": []}',
+            "agents: expected",
+        ),
+        ('{"v": 1, "run": "r", "endpoint": "e", "user": "host", "password": "p", "host": "a"}', "both host and agents"),
+    ],
+)
 def test_malformed_credentials_name_the_file_and_field(tmp_path, text, message):
     path = tmp_path / "bad.cred"
     C.write_private(path, text.encode())
@@ -150,8 +160,9 @@ def test_an_agent_hosts_file_holds_the_host_and_its_agents_only(rtdir):
         own.export_host("a", [])
 
 
-@pytest.mark.parametrize("text,ids", [("3", (3,)), ("3,4,5", (3, 4, 5)), ("3-5", (3, 4, 5)),
-                                      ("1-3, 7,2", (1, 2, 3, 7))])
+@pytest.mark.parametrize(
+    "text,ids", [("3", (3,)), ("3,4,5", (3, 4, 5)), ("3-5", (3, 4, 5)), ("1-3, 7,2", (1, 2, 3, 7))]
+)
 def test_agent_ids_as_written_on_the_command_line(text, ids):
     assert C.parse_ids(text) == ids
 
@@ -259,8 +270,11 @@ def test_an_agent_the_hub_does_not_know_is_refused_before_connecting():
     c = C.new_credentials("r1", "e", ids=(1, 2, 3), added_ids=(4, 15))
     for aid in (1, 3, 4, 15):
         c.check_agent(aid)
-    with pytest.raises(C.CredentialsError, match=r"agent 99 is not in scenario of run r1 \(ids: 1, 2, 3; "
-                                                 r"agents added at run time take ids 4..15\)"):
+    with pytest.raises(
+        C.CredentialsError,
+        match=r"agent 99 is not in scenario of run r1 \(ids: 1, 2, 3; "
+        r"agents added at run time take ids 4..15\)",
+    ):
         c.check_agent(99)
     assert C.parse(json.dumps(c.to_json())).added_ids == (4, 15)
 
@@ -274,8 +288,10 @@ def _cli(*args):
 
 
 def test_swarm_credentials_exports_one_identity_or_says_why_not(rtdir, tmp_path, monkeypatch):
-    C.write(C.new_credentials("r1", "unixsock-stream/x.sock", pid=os.getpid(), ids=(1, 2), added_ids=(3, 10)),
-            C.run_file("r1"))
+    C.write(
+        C.new_credentials("r1", "unixsock-stream/x.sock", pid=os.getpid(), ids=(1, 2), added_ids=(3, 10)),
+        C.run_file("r1"),
+    )
     out = tmp_path / "a2.cred"
     res = _cli("credentials", "--agent", "2")
     assert res.exit_code == 2 and "from this machine only: give --endpoint" in res.output
@@ -285,22 +301,25 @@ def test_swarm_credentials_exports_one_identity_or_says_why_not(rtdir, tmp_path,
     assert (doc["user"], doc["endpoint"], "secret" in doc) == ("agent-2", "tcp/10.0.0.5:7447", False)
     assert stat.S_IMODE(out.stat().st_mode) == 0o600
     assert _cli("credentials", "--agent", "2", "--endpoint", "tcp/h:1", "-o", out).exit_code == 2  # exists
-    for args, what in [((), "give one of --agent ID, --operator or --host NAME --agents IDS"),
-                       (("--agent", "1", "--operator"), "give one of"),
-                       (("--host", "a", "--agent", "1"), "give one of"),
-                       (("--host", "a"), "--host NAME goes with --agents IDS"),
-                       (("--agents", "1-2", "--operator"), "--host NAME goes with --agents IDS"),
-                       (("--host", "a", "--agents", "1-99", "--endpoint", "tcp/h:1"), "agent 11 is not in scenario"),
-                       (("--host", "a b", "--agents", "1", "--endpoint", "tcp/h:1"), "host name"),
-                       (("--host", "a", "--agents", "x", "--endpoint", "tcp/h:1"), "agent ids"),
-                       (("--host", "a", "--agents", "1-2"), "from this machine only: give --endpoint"),
-                       (("--agent", "99", "--endpoint", "tcp/h:1"), "agent 99 is not in scenario of run r1"),
-                       (("--operator", "--run", "a/b"), "run id"),
-                       (("--operator", "--run", "r9"), "no credentials for run r9")]:
+    for args, what in [
+        ((), "give one of --agent ID, --operator or --host NAME --agents IDS"),
+        (("--agent", "1", "--operator"), "give one of"),
+        (("--host", "a", "--agent", "1"), "give one of"),
+        (("--host", "a"), "--host NAME goes with --agents IDS"),
+        (("--agents", "1-2", "--operator"), "--host NAME goes with --agents IDS"),
+        (("--host", "a", "--agents", "1-99", "--endpoint", "tcp/h:1"), "agent 11 is not in scenario"),
+        (("--host", "a b", "--agents", "1", "--endpoint", "tcp/h:1"), "host name"),
+        (("--host", "a", "--agents", "x", "--endpoint", "tcp/h:1"), "agent ids"),
+        (("--host", "a", "--agents", "1-2"), "from this machine only: give --endpoint"),
+        (("--agent", "99", "--endpoint", "tcp/h:1"), "agent 99 is not in scenario of run r1"),
+        (("--operator", "--run", "a/b"), "run id"),
+        (("--operator", "--run", "r9"), "no credentials for run r9"),
+    ]:
         res = _cli("credentials", *args)
         assert res.exit_code == 2 and what in res.output and "Traceback" not in res.output, (args, res.output)
-    res = _cli("credentials", "--host", "a", "--agents", "1-2,4", "--endpoint", "tls/10.0.0.5:7447",
-               "-o", tmp_path / "a.cred")
+    res = _cli(
+        "credentials", "--host", "a", "--agents", "1-2,4", "--endpoint", "tls/10.0.0.5:7447", "-o", tmp_path / "a.cred"
+    )
     assert res.exit_code == 0, res.output
     assert "host a with agents 1, 2, 4 of run r1" in res.output and "swarm host --credentials a.cred" in res.output
     doc = json.loads((tmp_path / "a.cred").read_text())
@@ -320,8 +339,14 @@ def test_a_world_that_comes_back_keeps_its_runs_secret(rtdir, monkeypatch):
     from swarm.world.hub_auth import run_auth
 
     monkeypatch.delenv("SWARM_OPEN_HUB", raising=False)
-    s = parse_scenario({"gains": {"c1": 1.0, "c2": 0.5}, "agents": [
-        {"id": 1, "role": "leader", "x": 1.0, "y": 0.0, "heading": 0.0, "speed": 1.0, "orbit_radius": 1.0}]})
+    s = parse_scenario(
+        {
+            "gains": {"c1": 1.0, "c2": 0.5},
+            "agents": [
+                {"id": 1, "role": "leader", "x": 1.0, "y": 0.0, "heading": 0.0, "speed": 1.0, "orbit_radius": 1.0}
+            ],
+        }
+    )
     dead = C.new_credentials("r1", "unixsock-stream/x", pid=2**22 + 12345)
     C.write(dead, C.run_file("r1"))
     auth = run_auth("r1", "unixsock-stream/x", s)

@@ -30,6 +30,7 @@ def law_module(monkeypatch):
 
 # -- laws --------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("g_i, g_j, lam", [(0.0, 0.5, 1.0), (0.3, -2.0, 2.5), (-1.0, 1.2, -0.4)])
 def test_bearing_law_formula(g_i, g_j, lam):
     c1, c2 = 0.7, 0.3
@@ -70,12 +71,15 @@ def test_make_follower_law_binds_gains():
     assert isinstance(u(0.1, 0.9, 1.4), float)
 
 
-@pytest.mark.parametrize("name, fragments", [
-    ("bogus", ["unknown follower law 'bogus'", "bearing", "module:function"]),
-    ("no_such_module_xyz:law", ["cannot import module 'no_such_module_xyz'"]),
-    ("helpers_law:missing", ["module 'helpers_law' has no function 'missing'"]),
-    ("helpers_law:NOT_A_FUNCTION", ["has no function 'NOT_A_FUNCTION'"]),
-])
+@pytest.mark.parametrize(
+    "name, fragments",
+    [
+        ("bogus", ["unknown follower law 'bogus'", "bearing", "module:function"]),
+        ("no_such_module_xyz:law", ["cannot import module 'no_such_module_xyz'"]),
+        ("helpers_law:missing", ["module 'helpers_law' has no function 'missing'"]),
+        ("helpers_law:NOT_A_FUNCTION", ["has no function 'NOT_A_FUNCTION'"]),
+    ],
+)
 def test_unknown_law_raises_law_error(law_module, name, fragments):
     with pytest.raises(LawError) as exc:
         resolve_law(name)
@@ -91,6 +95,7 @@ def test_non_finite_gains_rejected(c1, c2):
 
 
 # -- AgentBrain, follower side ------------------------------------------------------------
+
 
 def _brain(base, **agent_changes):
     for k, v in agent_changes.items():
@@ -155,6 +160,7 @@ def test_leader_frame_without_target_is_an_error(base):
 
 # -- custom law through the engine ---------------------------------------------------------
 
+
 def test_custom_law_is_used_by_run_sim(base, law_module):
     base["gains"]["law"] = "helpers_law:constant_law"
     s = parse_scenario(base)
@@ -185,18 +191,28 @@ OMEGA = V_J / R_J  # 0.5 rad/s
 def _pair(ratio, start, direction="ccw", dt=0.02, duration=150 / OMEGA):
     sign = 1 if direction == "ccw" else -1
     fx, fy, fh = start
-    return parse_scenario({
-        "run": {"dt": dt, "duration": duration},
-        "gains": {"c1": OMEGA, "c2": OMEGA / 2},
-        "sensing": {"selection": "fixed"},
-        "agents": [
-            # leader already on its orbit, tangent heading
-            {"id": 1, "role": "leader", "x": R_J, "y": 0.0, "heading": sign * math.pi / 2,
-             "speed": V_J, "orbit_radius": R_J, "direction": direction},
-            {"id": 2, "role": "follower", "x": fx, "y": fy, "heading": fh,
-             "speed": ratio * V_J, "follow": 1},
-        ],
-    }, "pair")
+    return parse_scenario(
+        {
+            "run": {"dt": dt, "duration": duration},
+            "gains": {"c1": OMEGA, "c2": OMEGA / 2},
+            "sensing": {"selection": "fixed"},
+            "agents": [
+                # leader already on its orbit, tangent heading
+                {
+                    "id": 1,
+                    "role": "leader",
+                    "x": R_J,
+                    "y": 0.0,
+                    "heading": sign * math.pi / 2,
+                    "speed": V_J,
+                    "orbit_radius": R_J,
+                    "direction": direction,
+                },
+                {"id": 2, "role": "follower", "x": fx, "y": fy, "heading": fh, "speed": ratio * V_J, "follow": 1},
+            ],
+        },
+        "pair",
+    )
 
 
 def _final_radius_and_rate(result, col, window):

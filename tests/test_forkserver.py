@@ -19,15 +19,19 @@ import time
 
 import psutil
 import pytest
-
 from runtime_helpers import SCENARIOS, events_of, start_up
+
 from swarm.runtime.forks import Forked
 from swarm.runtime.procs import agent_id_of, command_words
 
 
 def _server():
-    return subprocess.Popen([sys.executable, "-m", "swarm.agents.forkserver"], stdin=subprocess.PIPE,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    return subprocess.Popen(
+        [sys.executable, "-m", "swarm.agents.forkserver"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
 
 
 def test_a_bad_request_is_an_error_reply_and_the_end_of_stdin_ends_the_server():

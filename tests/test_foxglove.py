@@ -63,8 +63,10 @@ def test_recording_lists_the_topics(tmp_path):
 def test_port_in_use_is_one_line():
     held, port = busy_port()
     try:
-        for cmd in (["up", str(CASE2), "--foxglove", "--foxglove-port", str(port)],
-                    ["world", str(CASE2), "--out", "/nonexistent/never", "--foxglove", "--foxglove-port", str(port)]):
+        for cmd in (
+            ["up", str(CASE2), "--foxglove", "--foxglove-port", str(port)],
+            ["world", str(CASE2), "--out", "/nonexistent/never", "--foxglove", "--foxglove-port", str(port)],
+        ):
             res = CliRunner().invoke(app, cmd)
             assert res.exit_code == 2, res.output
             lines = res.output.strip().splitlines()
@@ -89,17 +91,20 @@ def test_world_bind_failure_is_one_line(tmp_path):
         w.close()
 
 
-@pytest.mark.parametrize("argv, expected", [
-    (["up", "s.toml", "--foxglove"], ["up", "s.toml", "--foxglove"]),
-    (["up", "s.toml", "--foxglove", "9000"], ["up", "s.toml", "--foxglove", "--foxglove-port", "9000"]),
-    (["world", "--foxglove=9001", "s.toml"], ["world", "--foxglove", "--foxglove-port", "9001", "s.toml"]),
-    (["watch", "--foxglove", "--run", "r"], ["watch", "--foxglove", "--run", "r"]),
-    (["watch", "--foxglove", "--foxglove-port", "9"], ["watch", "--foxglove", "--foxglove-port", "9"]),
-    (["watch", "--foxglove=x"], ["watch", "--foxglove=x"]),  # typer says what is wrong
-    (["up", "s.toml", "--", "--foxglove", "9"], ["up", "s.toml", "--", "--foxglove", "9"]),
-    (["sim", "s.toml", "--foxglove", "9"], ["sim", "s.toml", "--foxglove", "9"]),  # not a live-view command
-    ([], []),
-])
+@pytest.mark.parametrize(
+    "argv, expected",
+    [
+        (["up", "s.toml", "--foxglove"], ["up", "s.toml", "--foxglove"]),
+        (["up", "s.toml", "--foxglove", "9000"], ["up", "s.toml", "--foxglove", "--foxglove-port", "9000"]),
+        (["world", "--foxglove=9001", "s.toml"], ["world", "--foxglove", "--foxglove-port", "9001", "s.toml"]),
+        (["watch", "--foxglove", "--run", "r"], ["watch", "--foxglove", "--run", "r"]),
+        (["watch", "--foxglove", "--foxglove-port", "9"], ["watch", "--foxglove", "--foxglove-port", "9"]),
+        (["watch", "--foxglove=x"], ["watch", "--foxglove=x"]),  # typer says what is wrong
+        (["up", "s.toml", "--", "--foxglove", "9"], ["up", "s.toml", "--", "--foxglove", "9"]),
+        (["sim", "s.toml", "--foxglove", "9"], ["sim", "s.toml", "--foxglove", "9"]),  # not a live-view command
+        ([], []),
+    ],
+)
 def test_foxglove_takes_an_optional_port(argv, expected):
     assert foxglove_argv(["swarm", *argv]) == ["swarm", *expected]
 
@@ -114,13 +119,15 @@ def test_the_world_stops_before_listening_when_the_port_is_in_use(tmp_path, monk
     held, port = busy_port()
     listen = f"unixsock-stream/{tmp_path / 'w.sock'}"
     try:
-        code = run_world(WorldConfig(load_scenario(CASE2), "fg-busy", listen, tmp_path / "out",
-                                     foxglove=("127.0.0.1", port)))
+        code = run_world(
+            WorldConfig(load_scenario(CASE2), "fg-busy", listen, tmp_path / "out", foxglove=("127.0.0.1", port))
+        )
     finally:
         held.close()
     err = capsys.readouterr().err.strip().splitlines()
-    assert code == 2 and err == [f"swarm world: --foxglove: cannot serve on 127.0.0.1:{port}: "
-                                 "Address already in use"], err
+    assert code == 2 and err == [
+        f"swarm world: --foxglove: cannot serve on 127.0.0.1:{port}: Address already in use"
+    ], err
     assert not (tmp_path / "w.sock").exists() and not (tmp_path / "out" / "recording.mcap").exists()
 
 
@@ -135,9 +142,13 @@ class WsClient:
     def __init__(self, port: int, subprotocols=SUBPROTOCOLS, timeout: float = 10.0):
         self.sock = socket.create_connection(("127.0.0.1", port), timeout=timeout)
         key = base64.b64encode(os.urandom(16)).decode()
-        self.sock.sendall((f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
-                           f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
-                           f"Sec-WebSocket-Protocol: {', '.join(subprotocols)}\r\n\r\n").encode())
+        self.sock.sendall(
+            (
+                f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
+                f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
+                f"Sec-WebSocket-Protocol: {', '.join(subprotocols)}\r\n\r\n"
+            ).encode()
+        )
         head = b""
         while b"\r\n\r\n" not in head:
             chunk = self.sock.recv(4096)
@@ -147,8 +158,9 @@ class WsClient:
         head, self.buf = head.split(b"\r\n\r\n", 1)
         text = head.decode("latin-1")
         assert text.startswith("HTTP/1.1 101"), text
-        picked = [ln.split(":", 1)[1].strip() for ln in text.split("\r\n")
-                  if ln.lower().startswith("sec-websocket-protocol:")]
+        picked = [
+            ln.split(":", 1)[1].strip() for ln in text.split("\r\n") if ln.lower().startswith("sec-websocket-protocol:")
+        ]
         assert picked and picked[0] in subprotocols, text
         self.subprotocol = picked[0]
 
@@ -164,9 +176,13 @@ class WsClient:
     def _send(self, opcode: int, payload: bytes) -> None:
         mask = os.urandom(4)
         n = len(payload)
-        head = bytes([0x80 | opcode]) + (bytes([0x80 | n]) if n < 126 else
-                                         bytes([0x80 | 126]) + struct.pack(">H", n) if n < 65536 else
-                                         bytes([0x80 | 127]) + struct.pack(">Q", n))
+        head = bytes([0x80 | opcode]) + (
+            bytes([0x80 | n])
+            if n < 126
+            else bytes([0x80 | 126]) + struct.pack(">H", n)
+            if n < 65536
+            else bytes([0x80 | 127]) + struct.pack(">Q", n)
+        )
         self.sock.sendall(head + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload)))
 
     def send_json(self, msg: dict) -> None:
@@ -215,8 +231,18 @@ def test_up_serves_the_run_live(rt, tmp_path):
     from runtime_helpers import start_up
 
     port = free_port()
-    up = start_up(rt.tracker, CASE2, tmp_path / "run", "--clock", "realtime", "--duration", "60",
-                  "--foxglove", "--foxglove-port", port)
+    up = start_up(
+        rt.tracker,
+        CASE2,
+        tmp_path / "run",
+        "--clock",
+        "realtime",
+        "--duration",
+        "60",
+        "--foxglove",
+        "--foxglove-port",
+        port,
+    )
     try:
         ws = connect(port, 60, lambda: up.running("the live view"))
     except BaseException:
@@ -233,8 +259,9 @@ def test_up_serves_the_run_live(rt, tmp_path):
         assert channels["/swarm/agents"]["encoding"] == "json"
         assert channels["/swarm/scene"]["schemaName"] == "foxglove.SceneUpdate"
         subs = {1: "/swarm/agents", 2: "/swarm/scene"}
-        ws.send_json({"op": "subscribe", "subscriptions": [{"id": k, "channelId": channels[t]["id"]}
-                                                           for k, t in subs.items()]})
+        ws.send_json(
+            {"op": "subscribe", "subscriptions": [{"id": k, "channelId": channels[t]["id"]} for k, t in subs.items()]}
+        )
         ids = {a.id for a in load_scenario(CASE2).agents}
         seen: set[int] = set()
         got_scene = False
@@ -311,8 +338,9 @@ def test_watch_serves_a_live_run(rt, tmp_path):
         assert refused.wait(30) == 2
     finally:
         held.close()
-    assert refused.text().strip().splitlines() == [f"--foxglove: cannot serve on 127.0.0.1:{busy}: "
-                                                   "Address already in use"], refused.text()
+    assert refused.text().strip().splitlines() == [
+        f"--foxglove: cannot serve on 127.0.0.1:{busy}: Address already in use"
+    ], refused.text()
     port, other = free_port(), free_port()
     watcher = rt.tracker.spawn(swarm_cmd("watch", "--foxglove", port), "watch")
     stays = rt.tracker.spawn(swarm_cmd("watch", f"--foxglove={other}"), "watch-to-the-end")
@@ -321,13 +349,19 @@ def test_watch_serves_a_live_run(rt, tmp_path):
         channels = advertised(ws)
         assert set(channels) == set(LIVE_TOPICS), channels
         assert {t: c["encoding"] for t, c in channels.items()} == {
-            "/swarm/scene": "protobuf", "/swarm/trails": "protobuf", "/swarm/agents": "json",
-            "/swarm/events": "json", "/swarm/run": "json"}
-        assert channels["/swarm/scene"]["schemaName"] == channels["/swarm/trails"]["schemaName"] == \
-            "foxglove.SceneUpdate"
+            "/swarm/scene": "protobuf",
+            "/swarm/trails": "protobuf",
+            "/swarm/agents": "json",
+            "/swarm/events": "json",
+            "/swarm/run": "json",
+        }
+        assert (
+            channels["/swarm/scene"]["schemaName"] == channels["/swarm/trails"]["schemaName"] == "foxglove.SceneUpdate"
+        )
         subs = {1: "/swarm/agents", 2: "/swarm/scene", 3: "/swarm/events"}
-        ws.send_json({"op": "subscribe", "subscriptions": [{"id": k, "channelId": channels[t]["id"]}
-                                                           for k, t in subs.items()]})
+        ws.send_json(
+            {"op": "subscribe", "subscriptions": [{"id": k, "channelId": channels[t]["id"]} for k, t in subs.items()]}
+        )
         ids = {a.id for a in load_scenario(CASE2).agents}
         seen: set[int] = set()
         got_scene = False
@@ -337,8 +371,11 @@ def test_watch_serves_a_live_run(rt, tmp_path):
             assert time.monotonic() < end, f"poses seen of {sorted(seen)} only; scene: {got_scene}"
             topic, doc = next(stream)
             if topic == "/swarm/agents":
-                seen |= {r["id"] for r in doc["agents"] if r["alive"] and isinstance(r["x"], float)
-                         and isinstance(r["radial_error"], float)}
+                seen |= {
+                    r["id"]
+                    for r in doc["agents"]
+                    if r["alive"] and isinstance(r["x"], float) and isinstance(r["radial_error"], float)
+                }
             got_scene = got_scene or (topic == "/swarm/scene" and len(doc) > 0)
         victim = 3
         kill = rt.tracker.spawn(swarm_cmd("kill", victim), "kill")
@@ -363,6 +400,7 @@ def test_watch_serves_a_live_run(rt, tmp_path):
     assert stays.wait(30) == 0, stays.text()  # the other watcher saw the run end
     lines = stays.text().strip().splitlines()
     assert lines[0].startswith(f"run {up.banner()[0]}: live view: ws://127.0.0.1:{other}"), lines
-    assert len(lines) == 2 and re.fullmatch(rf"run {up.banner()[0]} ended at tick \d+; the live view is closed",
-                                            lines[1]), lines
+    assert len(lines) == 2 and re.fullmatch(
+        rf"run {up.banner()[0]} ended at tick \d+; the live view is closed", lines[1]
+    ), lines
     rt.tracker.assert_none_left(timeout=10)

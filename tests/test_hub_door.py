@@ -16,8 +16,8 @@ import threading
 from contextlib import contextmanager
 
 import pytest
-
 from runtime_helpers import REPO, SCENARIOS, live_swarm, swarm_cmd
+
 from swarm.contracts import credentials
 from swarm.contracts.errors import NoRunError
 from swarm.live.client import open_run_session
@@ -77,8 +77,9 @@ def idle_crowd(port: int, n: int):
 def test_idle_connections_do_not_lock_the_run_out(tmp_path_factory):
     port = free_port()
     base = tmp_path_factory.mktemp("door")
-    with live_swarm(base, SCENARIOS / "case2.toml", 6, "--duration", "600",
-                    "--listen", f"tcp/127.0.0.1:{port}", timeout=60) as state:
+    with live_swarm(
+        base, SCENARIOS / "case2.toml", 6, "--duration", "600", "--listen", f"tcp/127.0.0.1:{port}", timeout=60
+    ) as state:
         env = {**os.environ, "SWARM_RUNTIME_DIR": str(state["runtime"])}
         for k in ("SWARM_RUN", "SWARM_CONNECT", "SWARM_CREDENTIALS"):
             env.pop(k, None)
@@ -86,12 +87,19 @@ def test_idle_connections_do_not_lock_the_run_out(tmp_path_factory):
         with idle_crowd(port, 200):
             # through the run's local door, and through the network port the strangers crowd
             for extra in ((), ("--connect", ep)):
-                res = subprocess.run(swarm_cmd("agents", "--run", state["run"], *extra), env=env, cwd=REPO,
-                                     capture_output=True, text=True, timeout=60)
+                res = subprocess.run(
+                    swarm_cmd("agents", "--run", state["run"], *extra),
+                    env=env,
+                    cwd=REPO,
+                    capture_output=True,
+                    text=True,
+                    timeout=60,
+                )
                 assert res.returncode == 0, f"swarm agents {' '.join(extra)} exited {res.returncode}: {res.stderr}"
                 assert state["run"] in res.stdout
-                assert all(re.search(rf"^\s*{i}\s+(leader|follower)\s+\d+", res.stdout, re.M)
-                           for i in range(1, 7)), res.stdout
+                assert all(re.search(rf"^\s*{i}\s+(leader|follower)\s+\d+", res.stdout, re.M) for i in range(1, 7)), (
+                    res.stdout
+                )
 
 
 def _creds_file(tmp_path, endpoint: str):

@@ -109,8 +109,11 @@ def test_speed_preserved_by_chord():
 def test_wrap_values():
     a = np.array([0.0, math.pi, 3 * math.pi / 2, -3 * math.pi / 2, 7.0, -7.0, 100.0])
     w = wrap(a)
-    assert np.allclose(w, [0.0, math.pi, -math.pi / 2, math.pi / 2, 7.0 - 2 * math.pi,
-                           2 * math.pi - 7.0, 100.0 - 32 * math.pi], atol=1e-12)
+    assert np.allclose(
+        w,
+        [0.0, math.pi, -math.pi / 2, math.pi / 2, 7.0 - 2 * math.pi, 2 * math.pi - 7.0, 100.0 - 32 * math.pi],
+        atol=1e-12,
+    )
     assert np.all(np.abs(np.sin(w) - np.sin(a)) < 1e-12)
 
 
@@ -146,10 +149,19 @@ def test_step_one_gives_nan_where_step_does():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         for g in (3.0, -math.pi, math.nan):
-            for u, dt in [(1e308, 1.0), (-1e308, 2.0), (1.7e308, 1.0), (math.inf, 0.01), (math.nan, 0.01),
-                          (1e300, 1e8), (1e308, 0.01)]:
-                arr = [float(v[0]) for v in step(np.array([1.0]), np.array([2.0]), np.array([g]), np.array([5.0]),
-                                                 np.array([u]), dt)]
+            for u, dt in [
+                (1e308, 1.0),
+                (-1e308, 2.0),
+                (1.7e308, 1.0),
+                (math.inf, 0.01),
+                (math.nan, 0.01),
+                (1e300, 1e8),
+                (1e308, 0.01),
+            ]:
+                arr = [
+                    float(v[0])
+                    for v in step(np.array([1.0]), np.array([2.0]), np.array([g]), np.array([5.0]), np.array([u]), dt)
+                ]
                 assert same(arr, step_one(1.0, 2.0, g, 5.0, u, dt)), (g, u, dt)
 
 

@@ -13,20 +13,20 @@ from types import MappingProxyType
 
 import numpy as np
 import pytest
+from test_follower import law_module  # noqa: F401  (fixture: tests/helpers_law.py importable)
 from typer.testing import CliRunner
 
 from swarm.agents.brain import AgentBrain
 from swarm.agents.laws import bearing, bearing_law, loiter, search
 from swarm.agents.leader import on_orbit_command
-from swarm.offline.batch import refusal
 from swarm.cli.main import app
 from swarm.contracts.brain_config import BrainConf
 from swarm.contracts.laws import ENV_LAW_PATH, law_dirs, with_law_path
 from swarm.contracts.observation import Observation, Search
 from swarm.contracts.scenario import ScenarioError, load_scenario, parse_scenario
+from swarm.offline.batch import refusal
 from swarm.offline.sim import run_sim
 from swarm.world.sensing import Contact, SensorFrame
-from test_follower import law_module  # noqa: F401  (fixture: tests/helpers_law.py importable)
 
 
 def _brain(base, aid, law):
@@ -36,6 +36,7 @@ def _brain(base, aid, law):
 
 
 # -- what a law is given --------------------------------------------------------------------------
+
 
 def test_a_follower_law_gets_one_observation(base, law_module):
     base["agents"][1]["max_turn_rate"] = 2.0
@@ -84,11 +85,15 @@ def test_the_built_in_follower_law_on_an_observation_is_the_formula(base):
     assert bearing(lost) == loiter(lost) == -s.gains.c2  # no search circle: loiter
     circle = Search(-10.0, 0.0, 4.0, 1)  # home 10 m behind it (heading 0.2)
     searching = lost._replace(search=circle)
-    assert bearing(searching) == search(searching) == on_orbit_command(10.0, 0.0, 0.2, searching.speed, 4.0, 1,
-                                                                       searching.max_turn_rate)
+    assert (
+        bearing(searching)
+        == search(searching)
+        == on_orbit_command(10.0, 0.0, 0.2, searching.speed, 4.0, 1, searching.max_turn_rate)
+    )
 
 
 # -- through the engine ---------------------------------------------------------------------------
+
 
 def test_a_custom_leader_law_is_used_by_run_sim(base, law_module):
     base["law"] = {"leader": "helpers_law:orbit_rate_leader", "params": {"rate": 0.3}}
@@ -110,20 +115,33 @@ def test_a_custom_follower_law_is_used_by_run_sim(base, law_module):
 
 # -- checked at load ------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("change, fragments", [
-    ({"law": {"follower": "helpers_law:constant_law"}},
-     ["law.follower", "does not take one argument (obs", "goes in [gains] law"]),
-    ({"law": {"leader": "helpers_law:two_arg_law"}}, ["law.leader", "leader law", "does not take one argument"]),
-    ({"law": {"leader": "helpers_law:missing"}}, ["law.leader", "has no function 'missing'"]),
-    ({"law": {"leader": "nope"}}, ["law.leader", "unknown leader law 'nope'", "['cc']"]),
-    ({"law": {"follower": "no_such_module_xyz:f"}}, ["law.follower", "cannot import module 'no_such_module_xyz'"]),
-    ({"gains": {"c1": 1.0, "c2": 0.5, "law": "helpers_law:orbit_rate_leader"}},
-     ["gains.law", "does not take (g_i, g_j, lambda_ij, c1, c2)", "goes in [law] follower"]),
-    ({"gains": {"c1": 1.0, "c2": 0.5, "law": "helpers_law:constant_law"},
-      "law": {"follower": "helpers_law:stateful_follower"}}, ["law.follower", "named twice", "keep one"]),
-    ({"law": {"params": {"k": "x"}}}, ["law.params.k"]),
-    ({"law": {"colour": "red"}}, ["law.colour", "unknown key"]),
-])
+
+@pytest.mark.parametrize(
+    "change, fragments",
+    [
+        (
+            {"law": {"follower": "helpers_law:constant_law"}},
+            ["law.follower", "does not take one argument (obs", "goes in [gains] law"],
+        ),
+        ({"law": {"leader": "helpers_law:two_arg_law"}}, ["law.leader", "leader law", "does not take one argument"]),
+        ({"law": {"leader": "helpers_law:missing"}}, ["law.leader", "has no function 'missing'"]),
+        ({"law": {"leader": "nope"}}, ["law.leader", "unknown leader law 'nope'", "['cc']"]),
+        ({"law": {"follower": "no_such_module_xyz:f"}}, ["law.follower", "cannot import module 'no_such_module_xyz'"]),
+        (
+            {"gains": {"c1": 1.0, "c2": 0.5, "law": "helpers_law:orbit_rate_leader"}},
+            ["gains.law", "does not take (g_i, g_j, lambda_ij, c1, c2)", "goes in [law] follower"],
+        ),
+        (
+            {
+                "gains": {"c1": 1.0, "c2": 0.5, "law": "helpers_law:constant_law"},
+                "law": {"follower": "helpers_law:stateful_follower"},
+            },
+            ["law.follower", "named twice", "keep one"],
+        ),
+        ({"law": {"params": {"k": "x"}}}, ["law.params.k"]),
+        ({"law": {"colour": "red"}}, ["law.colour", "unknown key"]),
+    ],
+)
 def test_a_bad_law_names_the_file_and_the_field(base, write_toml, law_module, change, fragments):
     base.update(change)
     path = write_toml(base)
@@ -142,6 +160,7 @@ def test_law_names_are_what_swarm_up_trusts(base, law_module):
 
 
 # -- the scenario's directory is on the import path -----------------------------------------------
+
 
 def _law_next_to_scenario(tmp_path, write_toml, base, source: str, where: str):
     mod = f"dirlaw_{uuid.uuid4().hex[:8]}"
@@ -191,6 +210,7 @@ def test_law_path_for_agent_processes(monkeypatch, tmp_path):
 
 # -- the join reply, trust, the batch engine ------------------------------------------------------
 
+
 def test_the_join_reply_carries_the_laws(base, law_module):
     base["law"] = {"leader": "helpers_law:orbit_rate_leader", "params": {"rate": 0.25}}
     s = parse_scenario(base)
@@ -201,17 +221,22 @@ def test_the_join_reply_carries_the_laws(base, law_module):
     d = json.loads(json.dumps(BrainConf.from_scenario(s, 2).to_json()))
     del d["law"]  # a world that sends none: the built-in laws
     assert BrainConf.from_json(d).law_names() == ["bearing"]
-    for bad, field in (({"leader": 3}, "law.leader"), ({"params": {"k": float("nan")}}, "law.params.k"),
-                       ({"params": {"k": True}}, "law.params.k"), ([], "law:")):
+    for bad, field in (
+        ({"leader": 3}, "law.leader"),
+        ({"params": {"k": float("nan")}}, "law.params.k"),
+        ({"params": {"k": True}}, "law.params.k"),
+        ([], "law:"),
+    ):
         with pytest.raises(ValueError, match=field.replace(".", r"\.")):
             BrainConf.from_json({**d, "law": bad})
 
 
 def test_an_untrusted_leader_law_is_refused_without_importing_it(tmp_path, monkeypatch):
-    from swarm.agents.joining import EXIT_REFUSED, AgentExit
-    from swarm.agents.node import AgentNode
     from fakes import FakeSession
     from test_shells import RUN, claim, open_world
+
+    from swarm.agents.joining import EXIT_REFUSED, AgentExit
+    from swarm.agents.node import AgentNode
 
     (tmp_path / "evil_leader.py").write_text("def law(obs):\n    return 0.0\n")
     monkeypatch.syspath_prepend(str(tmp_path))

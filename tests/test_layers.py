@@ -78,8 +78,11 @@ def imports_of(path: Path, here: str | None = None) -> list[tuple[int, str, bool
                 else:
                     module = child.module or ""
                 found.append((child.lineno, module, in_function))
-                found.extend((child.lineno, f"{module}.{a.name}", in_function) for a in child.names
-                             if f"{module}.{a.name}" in MODULES)
+                found.extend(
+                    (child.lineno, f"{module}.{a.name}", in_function)
+                    for a in child.names
+                    if f"{module}.{a.name}" in MODULES
+                )
             visit(child, inner)
 
     visit(ast.parse(path.read_text(), str(path)), False)
@@ -96,17 +99,23 @@ MODULES = {module_of_file(p) for p in project_files()}
 @pytest.mark.parametrize("path", project_files(), ids=lambda p: str(p.relative_to(ROOT)))
 def test_imports_follow_the_layers(path):
     here = package_of(module_of_file(path))
-    bad = [f"{path.relative_to(ROOT)}:{line} ({here}) imports {mod} ({package_of(mod)})"
-           for line, mod, _ in imports_of(path)
-           if package_of(mod) is not None and package_of(mod) not in MAY_IMPORT[here]]
+    bad = [
+        f"{path.relative_to(ROOT)}:{line} ({here}) imports {mod} ({package_of(mod)})"
+        for line, mod, _ in imports_of(path)
+        if package_of(mod) is not None and package_of(mod) not in MAY_IMPORT[here]
+    ]
     assert not bad, "\n".join(bad)
 
 
 def test_no_project_module_imports_the_folders_by_their_folder_names():
     """`agents` and `world` are folders of the repository, installed as swarm.agents and
     swarm.world: importing them by the folder name works only from the repository's root."""
-    bad = [f"{p.relative_to(ROOT)}:{line} imports {mod}" for p in project_files() + sorted(
-        (ROOT / "tests").glob("*.py")) for line, mod, _ in imports_of_any(p) if mod.split(".")[0] in ("agents", "world")]
+    bad = [
+        f"{p.relative_to(ROOT)}:{line} imports {mod}"
+        for p in project_files() + sorted((ROOT / "tests").glob("*.py"))
+        for line, mod, _ in imports_of_any(p)
+        if mod.split(".")[0] in ("agents", "world")
+    ]
     assert not bad, "\n".join(bad)
 
 

@@ -10,10 +10,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import cc_reference
 import numpy as np
 import pytest
 
-import cc_reference
 from swarm.agents.cc_plan import (
     CCPath,
     cc_coefficients,
@@ -27,13 +27,15 @@ from swarm.world.kinematics import step
 ROOT = Path(__file__).resolve().parents[1]
 
 # Sample sizes: the fast tier checks a sample, the long tier the whole of it.
-SAMPLE = pytest.mark.parametrize("n", [pytest.param(50, id="sample"),
-                                       pytest.param(None, id="all", marks=pytest.mark.slow)])
+SAMPLE = pytest.mark.parametrize(
+    "n", [pytest.param(50, id="sample"), pytest.param(None, id="all", marks=pytest.mark.slow)]
+)
 
 
 def arc_step(x, y, g, v, u, t):
     """One exact arc of the world's integrator, as Python floats."""
     return tuple(float(a) for a in step(x, y, g, v, u, t))
+
 
 HALF_PI = 0.5 * math.pi
 
@@ -204,8 +206,9 @@ def test_plan_cc_near_orbit_poses(n):
         direction = int(rng.choice([1, -1]))
         dist = radius * (1 + rng.choice([1, -1]) * 10 ** rng.uniform(-8, -2))
         theta = rng.uniform(-math.pi, math.pi)
-        heading = (theta + direction * HALF_PI + rng.choice([0.0, math.pi])
-                   + rng.choice([1, -1]) * 10 ** rng.uniform(-12, -1))
+        heading = (
+            theta + direction * HALF_PI + rng.choice([0.0, math.pi]) + rng.choice([1, -1]) * 10 ** rng.uniform(-12, -1)
+        )
         max_rate = [None, v / radius, v / (radius * rng.uniform(0.05, 1.0))][i % 3]
         x, y = dist * math.cos(theta), dist * math.sin(theta)
         path = plan_cc(x, y, heading, v, radius, direction, max_rate)
@@ -255,18 +258,29 @@ def _port_cases(n, seed):
             dist = radius * float(rng.uniform(0.0, 5.0))
             heading = float(rng.uniform(-3 * math.pi, 3 * math.pi))
         max_rate = [None, v / radius, v / (radius * float(rng.uniform(0.05, 1.0)))][i % 3]
-        cases.append((dist * math.cos(theta), dist * math.sin(theta), heading, v, radius, direction,
-                      max_rate))
+        cases.append((dist * math.cos(theta), dist * math.sin(theta), heading, v, radius, direction, max_rate))
     return cases
 
 
 def _path_close(p: CCPath, q: CCPath, rel: float) -> bool:
     def close(a, b):
         return abs(a - b) <= rel * max(abs(a), abs(b)) + 1e-300
-    return (all(close(a, b) for a, b in [(p.t1, q.t1), (p.t2, q.t2), (p.r_a, q.r_a), (p.r_b, q.r_b),
-                                         (p.length, q.length), (p.entry[0], q.entry[0]),
-                                         (p.entry[1], q.entry[1])])
-            and abs(wrap(p.entry[2] - q.entry[2])) <= rel * math.pi)
+
+    return (
+        all(
+            close(a, b)
+            for a, b in [
+                (p.t1, q.t1),
+                (p.t2, q.t2),
+                (p.r_a, q.r_a),
+                (p.r_b, q.r_b),
+                (p.length, q.length),
+                (p.entry[0], q.entry[0]),
+                (p.entry[1], q.entry[1]),
+            ]
+        )
+        and abs(wrap(p.entry[2] - q.entry[2])) <= rel * math.pi
+    )
 
 
 @SAMPLE
@@ -292,8 +306,10 @@ def test_plan_cc_port_matches_numpy_reference(n):
         else:  # a different boundary candidate: still a valid, equally short path
             assert _path_close(got, want, 1e-6), c
             _check_path(got, *c)
-    print(f"plan_cc port vs numpy reference: {len(cases)} paths, {identical} identical, "
-          f"{within} more within 1e-9, {len(cases) - identical - within} beyond (lengths within 1e-9)")
+    print(
+        f"plan_cc port vs numpy reference: {len(cases)} paths, {identical} identical, "
+        f"{within} more within 1e-9, {len(cases) - identical - within} beyond (lengths within 1e-9)"
+    )
     assert identical + within >= 0.9 * len(cases)
 
 
@@ -309,16 +325,24 @@ print(sum(cc_reference.plan_cc(*c) != plan_cc(*c) for c in cases))
 """
 
 
-@pytest.mark.skipif(platform.machine().lower() not in ("x86_64", "amd64"),
-                    reason="checked where numpy's non-AVX-512 float64 kernels are libm's")
+@pytest.mark.skipif(
+    platform.machine().lower() not in ("x86_64", "amd64"),
+    reason="checked where numpy's non-AVX-512 float64 kernels are libm's",
+)
 @pytest.mark.slow  # a Python process of its own
 def test_plan_cc_port_bit_exact_without_avx512_numpy():
     """Same algorithm, same float operations: with numpy's AVX-512 kernels disabled the port
     and the numpy reference give identical paths, to the last bit."""
     cases = _port_cases(120, 99)
     env = dict(os.environ, NPY_DISABLE_CPU_FEATURES=_NO_AVX512, PYTHONWARNINGS="ignore")
-    p = subprocess.run([sys.executable, "-c", _BIT_EXACT, json.dumps(cases)], capture_output=True,
-                       text=True, timeout=120, cwd=ROOT, env=env)
+    p = subprocess.run(
+        [sys.executable, "-c", _BIT_EXACT, json.dumps(cases)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=ROOT,
+        env=env,
+    )
     assert p.returncode == 0, p.stderr[-2000:]
     assert p.stdout.split()[-1] == "0"
 
@@ -327,8 +351,7 @@ def test_plan_cc_port_bit_exact_without_avx512_numpy():
 def test_importing_the_leader_does_not_load_numpy():
     """Leader processes stay as light as followers: swarm.agents.leader is numpy-free."""
     code = "import sys, swarm.agents.leader; sys.exit('numpy' in sys.modules)"
-    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
-                       cwd=ROOT)
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT)
     assert p.returncode == 0, p.stderr[-2000:] or "swarm.agents.leader imported numpy"
 
 

@@ -29,18 +29,29 @@ import time
 
 import psutil
 import pytest
+from runtime_helpers import SCENARIOS, live_swarm, reaped, ring_scenario, run_credentials, swarm_cmd, wait_for
 from typer.testing import CliRunner
 
-from runtime_helpers import SCENARIOS, live_swarm, reaped, ring_scenario, run_credentials, swarm_cmd, wait_for
-from swarm.runtime.procs import wait_until
-from swarm.live import watch as W
 from swarm.cli.main import app
+from swarm.live import watch as W
 from swarm.live.data import graph_of, merge_agents
 from swarm.live.views import graph_dot
+from swarm.runtime.procs import wait_until
 
-LIVE_COMMANDS = [["runs"], ["runs", "--json"], ["agents"], ["agents", "--json"], ["graph", "--json"],
-                 ["graph", "--dot"], ["graph", "--watch"], ["kill", "3"], ["spawn", "--id", "3"],
-                 ["pause"], ["resume"], ["watch"]]
+LIVE_COMMANDS = [
+    ["runs"],
+    ["runs", "--json"],
+    ["agents"],
+    ["agents", "--json"],
+    ["graph", "--json"],
+    ["graph", "--dot"],
+    ["graph", "--watch"],
+    ["kill", "3"],
+    ["spawn", "--id", "3"],
+    ["pause"],
+    ["resume"],
+    ["watch"],
+]
 
 
 def invoke(*args):
@@ -48,9 +59,11 @@ def invoke(*args):
 
 
 # --- a strict little DOT parser (enough for what `swarm graph --dot` may print) ----------------------
-DOT_TOKEN = re.compile(r'\s*(?:(->|[{}\[\]=;,])'                       # punctuation
-                       r'|("(?:\\.|[^"\\])*")'                        # quoted string
-                       r'|([A-Za-z_][A-Za-z0-9_]*|-?(?:\.\d+|\d+(?:\.\d*)?)))')  # name or numeral
+DOT_TOKEN = re.compile(
+    r"\s*(?:(->|[{}\[\]=;,])"  # punctuation
+    r'|("(?:\\.|[^"\\])*")'  # quoted string
+    r"|([A-Za-z_][A-Za-z0-9_]*|-?(?:\.\d+|\d+(?:\.\d*)?)))"
+)  # name or numeral
 
 
 def parse_dot(text: str) -> dict:
@@ -60,7 +73,7 @@ def parse_dot(text: str) -> dict:
     text = text.strip()
     while pos < len(text):
         m = DOT_TOKEN.match(text, pos)
-        assert m and m.end() > pos, f"DOT: cannot read {text[pos:pos + 30]!r}"
+        assert m and m.end() > pos, f"DOT: cannot read {text[pos : pos + 30]!r}"
         toks.append(m.group(1) or m.group(2) or m.group(3))
         pos = m.end()
         while pos < len(text) and text[pos].isspace():
@@ -141,8 +154,9 @@ def _adjacent(a, b):
     return max(abs(a[0] - b[0]), abs(a[1] - b[1])) == 1
 
 
-@pytest.mark.parametrize("c0,r0,c1,r1", [(0, 0, 7, 3), (5, 5, 0, 0), (2, 8, 2, 1), (0, 0, 9, 0), (3, 3, 3, 3),
-                                         (0, 9, 4, -2)])
+@pytest.mark.parametrize(
+    "c0,r0,c1,r1", [(0, 0, 7, 3), (5, 5, 0, 0), (2, 8, 2, 1), (0, 0, 9, 0), (3, 3, 3, 3), (0, 9, 4, -2)]
+)
 def test_line_cells_bresenham(c0, r0, c1, r1):
     cells = W.line_cells(c0, r0, c1, r1)
     assert cells[0] == (c0, r0) and cells[-1] == (c1, r1)
@@ -220,10 +234,12 @@ def test_canvas_layers():
 
 
 def test_draw_scene_picture():
-    bodies = [W.Body(1, "leader", 28.0, 0.0, math.pi / 2, orbit_radius=28.0),
-              W.Body(2, "follower", -35.0, 0.0, -math.pi / 2, out=1, expected_radius=35.0),
-              W.Body(3, "follower", 0.0, -60.0, 0.0, alive=False),
-              W.Body(4, "follower", 0.0, 50.0, math.pi, out=9, rooted=False)]
+    bodies = [
+        W.Body(1, "leader", 28.0, 0.0, math.pi / 2, orbit_radius=28.0),
+        W.Body(2, "follower", -35.0, 0.0, -math.pi / 2, out=1, expected_radius=35.0),
+        W.Body(3, "follower", 0.0, -60.0, 0.0, alive=False),
+        W.Body(4, "follower", 0.0, 50.0, math.pi, out=9, rooted=False),
+    ]
     canvas = W.draw_scene((0.0, 0.0), bodies, 100, 40)
     lines = canvas.lines()
     text = "\n".join(lines)
@@ -233,7 +249,7 @@ def test_draw_scene_picture():
     for b, glyph in [(bodies[0], "↑"), (bodies[1], "↓"), (bodies[2], W.DEAD_GLYPH), (bodies[3], "←")]:
         c, r = view.cell(b.x, b.y)
         assert lines[r][c] == glyph, (b.id, lines[r])
-        assert str(b.id) in lines[r][max(c - 2, 0):c + 3], (b.id, lines[r])
+        assert str(b.id) in lines[r][max(c - 2, 0) : c + 3], (b.id, lines[r])
         assert canvas.styles[r][c] == W.STYLES[b.kind]
     assert [b.kind for b in bodies] == ["leader", "follower", "dead", "unrooted"]
     # the edge 2 -> 1 runs along the row of the target, ending in an arrowhead next to 1
@@ -241,8 +257,9 @@ def test_draw_scene_picture():
     c2, _ = view.cell(-35.0, 0.0)
     row = lines[r1]
     assert row[c1 - 1] == "→"
-    assert row[c2 + 3:c1 - 1].replace(W.TARGET_GLYPH, "").replace(" ", "") == W.EDGE_GLYPH * len(
-        row[c2 + 3:c1 - 1].replace(W.TARGET_GLYPH, "").replace(" ", ""))
+    assert row[c2 + 3 : c1 - 1].replace(W.TARGET_GLYPH, "").replace(" ", "") == W.EDGE_GLYPH * len(
+        row[c2 + 3 : c1 - 1].replace(W.TARGET_GLYPH, "").replace(" ", "")
+    )
     assert row.count(W.EDGE_GLYPH) >= (c1 - c2) - 6
     # orbits of 28 m and 35 m are drawn, and nothing for the edge to a missing agent 9
     assert text.count(W.ORBIT_GLYPH) > 50
@@ -256,24 +273,56 @@ def test_draw_scene_picture():
 # --- swarm/live/data.py, swarm/live/views.py: pure parts -----------------------------------------
 def _fake_info():
     def agent(i, role, alive, out, pid):
-        return {"id": i, "role": role, "state": "active" if alive else "gone", "alive": alive, "pid": pid,
-                "host": "h", "x": float(i), "y": 0.0, "heading": 0.0, "speed": 1.0, "u": 0.1, "out": out,
-                "root": None, "hops": None, "distance": 1.0, "expected_radius": None, "radial_error": None,
-                "relative_error": None, "orbit_radius": 5.0 if role == "leader" else None,
-                "last_command_age": 0.01, "missed": 0, "commands": 10, "joins": 1, "drops": 0, "garbage": 0}
+        return {
+            "id": i,
+            "role": role,
+            "state": "active" if alive else "gone",
+            "alive": alive,
+            "pid": pid,
+            "host": "h",
+            "x": float(i),
+            "y": 0.0,
+            "heading": 0.0,
+            "speed": 1.0,
+            "u": 0.1,
+            "out": out,
+            "root": None,
+            "hops": None,
+            "distance": 1.0,
+            "expected_radius": None,
+            "radial_error": None,
+            "relative_error": None,
+            "orbit_radius": 5.0 if role == "leader" else None,
+            "last_command_age": 0.01,
+            "missed": 0,
+            "commands": 10,
+            "joins": 1,
+            "drops": 0,
+            "garbage": 0,
+        }
 
-    return {"run": "r", "tick": 7, "time": 0.07, "agents": {
-        "1": agent(1, "leader", True, None, 11), "2": agent(2, "follower", True, 1, 12),
-        "3": agent(3, "follower", False, None, 13), "4": agent(4, "follower", True, 5, 14),
-        "5": agent(5, "follower", True, 4, 15), "10": agent(10, "follower", True, 2, 20)},
-        "sensing": [[2, 1], [4, 5]]}
+    return {
+        "run": "r",
+        "tick": 7,
+        "time": 0.07,
+        "agents": {
+            "1": agent(1, "leader", True, None, 11),
+            "2": agent(2, "follower", True, 1, 12),
+            "3": agent(3, "follower", False, None, 13),
+            "4": agent(4, "follower", True, 5, 14),
+            "5": agent(5, "follower", True, 4, 15),
+            "10": agent(10, "follower", True, 2, 20),
+        },
+        "sensing": [[2, 1], [4, 5]],
+    }
 
 
 def test_merge_and_graph_offline():
     info = _fake_info()
-    statuses = {2: {"id": 2, "pid": 99, "host": "h2", "out": 10, "hops": 3, "phase": "track", "fallback": True,
-                    "pinned": 1},
-                3: {"id": 3, "pid": 13, "host": "h", "out": 1, "hops": 1, "phase": "track"}}
+    statuses = {
+        2: {"id": 2, "pid": 99, "host": "h2", "out": 10, "hops": 3, "phase": "track", "fallback": True, "pinned": 1},
+        3: {"id": 3, "pid": 13, "host": "h", "out": 1, "hops": 1, "phase": "track"},
+    }
     rows = merge_agents(info, statuses)
     assert [r["id"] for r in rows] == [1, 2, 3, 4, 5, 10]
     r2, r3 = rows[1], rows[2]
@@ -284,8 +333,14 @@ def test_merge_and_graph_offline():
     assert g["cycles"] == [[2, 10], [4, 5]]
     assert g["unrooted"] == [2, 4, 5, 10] and g["dead"] == [3] and g["leaders"] == [1]
     assert g["sensing"] == [[2, 1], [4, 5]]
-    assert {a["id"]: a["source"] for a in g["agents"]} == {1: "world", 2: "agent", 3: "world", 4: "world",
-                                                           5: "world", 10: "world"}
+    assert {a["id"]: a["source"] for a in g["agents"]} == {
+        1: "world",
+        2: "agent",
+        3: "world",
+        4: "world",
+        5: "world",
+        10: "world",
+    }
     d = parse_dot(graph_dot(g))
     assert set(d["nodes"]) == {"1", "2", "3", "4", "5", "10"}
     assert d["nodes"]["3"]["style"] == "dashed" and "grey" in d["nodes"]["3"]["color"]
@@ -322,8 +377,20 @@ def test_runs_and_agents(live):
     docs = _json("runs", "--json")
     assert [d["run"] for d in docs] == [live["run"]]
     d = docs[0]
-    assert set(d) == {"run", "endpoint", "scenario", "clock", "paused", "tick", "ticks", "time", "agents_live",
-                      "agents_total", "host", "pid"}
+    assert set(d) == {
+        "run",
+        "endpoint",
+        "scenario",
+        "clock",
+        "paused",
+        "tick",
+        "ticks",
+        "time",
+        "agents_live",
+        "agents_total",
+        "host",
+        "pid",
+    }
     assert (d["scenario"], d["clock"], d["paused"], d["ticks"]) == ("case2", "realtime", False, 60000)
     res = invoke("runs")
     assert res.exit_code == 0 and live["run"] in res.stdout and "6/6" in res.stdout
@@ -414,8 +481,10 @@ def test_pause_and_resume(live):
         took_resume = time.perf_counter() - t0
     assert res2.exit_code == 0 and "resumed at tick" in res2.stdout, res2.output
     # The world's reply ends the command (it used to wait out the query's 1 s timeout: 1.3-2.2 s).
-    print(f"\n[timing] swarm pause {took_pause:.3f} s, swarm resume {took_resume:.3f} s (in-process, "
-          "attaching included; target < 0.3 s)")
+    print(
+        f"\n[timing] swarm pause {took_pause:.3f} s, swarm resume {took_resume:.3f} s (in-process, "
+        "attaching included; target < 0.3 s)"
+    )
     with LiveRun(RunRef(live["run"], live["endpoint"], run_credentials(live["endpoint"], live["run"]))) as lv:
         t0 = lv.info()["tick"]
         wait_for(lambda: lv.info()["tick"] > t0 + 5, 3, "ticks after resume")
@@ -455,8 +524,11 @@ def test_kill_and_spawn(live):
     assert parse_dot(invoke("graph", "--dot").stdout)["nodes"]["3"]["style"] == "dashed"
 
     # a dead agent cannot be killed again; unknown ids and bad signals are clear errors
-    for args, code, what in [(["kill", "3"], 1, "not live"), (["kill", "99"], 1, "not in run"),
-                             (["kill", "2", "--signal", "HUP"], 2, "--signal")]:
+    for args, code, what in [
+        (["kill", "3"], 1, "not live"),
+        (["kill", "99"], 1, "not in run"),
+        (["kill", "2", "--signal", "HUP"], 2, "--signal"),
+    ]:
         r = invoke(*args)
         assert r.exit_code == code and what in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.output
 
@@ -482,6 +554,7 @@ def test_kill_and_spawn(live):
     # new ids come from the range the hub's rules were made for (case2: 7..30)
     r = invoke("spawn", "--id", "42", "--x", "1", "--y", "1", "--heading", "0", "--speed", "5")
     assert r.exit_code == 2 and "take ids 7..30" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.output
+
     # the respawned 3 chooses at runtime (a fresh brain: the nearest agent with a path, now)
     def chosen():
         g = _json("graph", "--json")
@@ -491,8 +564,12 @@ def test_kill_and_spawn(live):
     assert g["nodes"] == [1, 2, 3, 4, 5, 6] and 3 not in g["unrooted"] and g["cycles"] == []
 
     # graph --watch saw 3 go and come back, then stops on SIGINT (Ctrl-C) with exit 0
-    wait_for(lambda: any(d["dead"] == [3] for d in watched()) and watched()[-1]["dead"] == [], 5,
-             "graph --watch to print the graph without and with agent 3", 0.05)
+    wait_for(
+        lambda: any(d["dead"] == [3] for d in watched()) and watched()[-1]["dead"] == [],
+        5,
+        "graph --watch to print the graph without and with agent 3",
+        0.05,
+    )
     docs = watched()
     gone = next(d for d in docs if d["dead"] == [3])
     assert all(3 not in e for e in gone["edges"]) and 3 not in gone["nodes"]
@@ -559,8 +636,8 @@ def test_up_hint_adds_run_when_another_run_is_up(monkeypatch):
     from types import SimpleNamespace
 
     import swarm.contracts.credentials as creds
-    from swarm.contracts.scenario import load_scenario
     from swarm.cli.up import attach_hints
+    from swarm.contracts.scenario import load_scenario
 
     s = load_scenario(SCENARIOS / "case2.toml")
     monkeypatch.setattr(creds, "local_runs", lambda: [SimpleNamespace(run="other-1a2b3c")])
@@ -570,8 +647,10 @@ def test_up_hint_adds_run_when_another_run_is_up(monkeypatch):
     assert add.startswith("add an agent by hand: swarm spawn --id N --run case2-abc") and "7..30" in add, add
     assert "swarm credentials --agent N --run case2-abc" in remote and "--connect tcp/127.0.0.1:7447" in remote
     monkeypatch.setattr(creds, "local_runs", lambda: [SimpleNamespace(run="case2-abc")])  # only itself
-    assert [ln.split(":")[0] for ln in attach_hints("case2-abc", "unixsock-stream//tmp/x.sock", s)] == \
-        ["watch it from another terminal", "add an agent by hand"]
+    assert [ln.split(":")[0] for ln in attach_hints("case2-abc", "unixsock-stream//tmp/x.sock", s)] == [
+        "watch it from another terminal",
+        "add an agent by hand",
+    ]
     assert "--run" not in "".join(attach_hints("case2-abc", "unixsock-stream//tmp/x.sock", s))
 
 
@@ -590,11 +669,33 @@ def test_environment_picks_one_of_two_runs(live, tmp_path, capsys):
     scen = ring_scenario(tmp_path / "two.toml", 2, leaders=1)
     # agent 1 started before its world: it waits for it to listen (up to 10 s) and joins
     agents = [tr.spawn(swarm_cmd("agent", "--id", 1, "--connect", endpoint, "--run", two), "agent-two-1")]
-    world = tr.spawn(swarm_cmd("world", scen, "--listen", endpoint, "--run", two, "--out", tmp_path / "out",
-                               "--clock", "realtime", "--duration", "600", "--no-plots"), "world-two")
-    wait_for(lambda: world.check_running("it to listen") or
-             any(d["run"] == two for d in json.loads(invoke("runs", "--json").stdout or "[]")),
-             30, "the second run's world to answer", interval=0.1)
+    world = tr.spawn(
+        swarm_cmd(
+            "world",
+            scen,
+            "--listen",
+            endpoint,
+            "--run",
+            two,
+            "--out",
+            tmp_path / "out",
+            "--clock",
+            "realtime",
+            "--duration",
+            "600",
+            "--no-plots",
+        ),
+        "world-two",
+    )
+    wait_for(
+        lambda: (
+            world.check_running("it to listen")
+            or any(d["run"] == two for d in json.loads(invoke("runs", "--json").stdout or "[]"))
+        ),
+        30,
+        "the second run's world to answer",
+        interval=0.1,
+    )
     agents.append(tr.spawn(swarm_cmd("agent", "--id", 2, "--connect", endpoint, "--run", two), "agent-two-2"))
     try:
         res = invoke("agents", "--json")  # two runs, no flag: which one?
@@ -603,8 +704,9 @@ def test_environment_picks_one_of_two_runs(live, tmp_path, capsys):
         assert _run_ids(env(SWARM_RUN=two)) == {two}
         assert _run_ids(env(SWARM_RUN=live["run"])) == {live["run"]}
         assert _run_ids(env(SWARM_CONNECT=endpoint)) == {two}
-        assert _run_ids(CliRunner().invoke(app, ["agents", "--json", "--run", live["run"]],
-                                           env={"SWARM_RUN": two})) == {live["run"]}  # the flag wins
+        assert _run_ids(
+            CliRunner().invoke(app, ["agents", "--json", "--run", live["run"]], env={"SWARM_RUN": two})
+        ) == {live["run"]}  # the flag wins
         doc = json.loads(env(SWARM_RUN=two).stdout)
         assert [a["id"] for a in doc["agents"]] == [1, 2]
         res = CliRunner().invoke(app, ["pause"], env={"SWARM_RUN": two})
@@ -615,8 +717,7 @@ def test_environment_picks_one_of_two_runs(live, tmp_path, capsys):
         for cmd in ("runs", "agents", "graph", "watch", "kill", "spawn", "pause", "resume"):
             text = invoke(cmd, "--help").stdout
             assert "SWARM_RUN" in text and "SWARM_CONNECT" in text, cmd
-        watcher = tr.spawn(swarm_cmd("graph", "--watch", "--json"), "graph-watch-two",
-                           env={**tr.env, "SWARM_RUN": two})
+        watcher = tr.spawn(swarm_cmd("graph", "--watch", "--json"), "graph-watch-two", env={**tr.env, "SWARM_RUN": two})
         wait_for(lambda: '"run": "' + two + '"' in watcher.text(), 15, "graph --watch of the second run")
         wait_for(lambda: json.loads(env(SWARM_RUN=two).stdout)["time"] > 0.5, 20, "the second run to tick")
     finally:
@@ -628,8 +729,10 @@ def test_environment_picks_one_of_two_runs(live, tmp_path, capsys):
     # patience for a loaded one (ENDED_SILENT_S)
     assert watcher.wait(5) == 0, watcher.text()[-2000:]
     with capsys.disabled():
-        print(f"\n[timing] SIGINT to the world: it exited after {t_world:.2f} s, graph --watch by "
-              f"{time.monotonic() - t_int:.2f} s")
+        print(
+            f"\n[timing] SIGINT to the world: it exited after {t_world:.2f} s, graph --watch by "
+            f"{time.monotonic() - t_int:.2f} s"
+        )
     assert f"the world of run {two} ended" in watcher.text()
     for a in agents:
         assert a.wait(10) in (0, 4), a.text()[-2000:]
@@ -652,10 +755,24 @@ def test_agent_before_its_world(live, tmp_path):
     zenoh source path; a SIGTERM while it connects: one line, exit 143, no traceback. (One
     whose world comes meanwhile joins: test_environment_picks_one_of_two_runs.)"""
     tr = live["tracker"]
-    early = tr.spawn(swarm_cmd("agent", "--id", 1, "--connect", f"unixsock-stream/{live['runtime']}/later.sock",
-                               "--run", "later-run", "--world-wait", "2"), "agent-early")
-    refused = tr.spawn(swarm_cmd("agent", "--id", 1, "--connect", "tcp/127.0.0.1:9", "--run", "later-run",
-                                 "--world-wait", "2"), "agent-refused")
+    early = tr.spawn(
+        swarm_cmd(
+            "agent",
+            "--id",
+            1,
+            "--connect",
+            f"unixsock-stream/{live['runtime']}/later.sock",
+            "--run",
+            "later-run",
+            "--world-wait",
+            "2",
+        ),
+        "agent-early",
+    )
+    refused = tr.spawn(
+        swarm_cmd("agent", "--id", 1, "--connect", "tcp/127.0.0.1:9", "--run", "later-run", "--world-wait", "2"),
+        "agent-refused",
+    )
     t0 = time.monotonic()
     assert early.wait(30) == 6, early.text()
     print(f"\n[timing] an agent with no world to join exited 6 after {time.monotonic() - t0:.1f} s")
@@ -672,8 +789,9 @@ def test_agent_before_its_world(live, tmp_path):
     lsn.settimeout(20)
     port = lsn.getsockname()[1]
     creds = os.path.join(live["runtime"], f"{live['run']}.cred")
-    hang = tr.spawn(swarm_cmd("agent", "--id", 1, "--connect", f"tcp/127.0.0.1:{port}", "--credentials", creds),
-                    "agent-hang")
+    hang = tr.spawn(
+        swarm_cmd("agent", "--id", 1, "--connect", f"tcp/127.0.0.1:{port}", "--credentials", creds), "agent-hang"
+    )
     try:
         conns = [lsn.accept()[0] for _ in range(2)]  # its probe of the endpoint, then zenoh's connection
         time.sleep(0.3)
@@ -705,8 +823,9 @@ def test_watch_renders_in_a_terminal(live):
     # `setsid -c`: a session of its own with the pty as controlling terminal, so Ctrl-C typed
     # on the terminal is a SIGINT to it (as in a real terminal); without setsid: signal it.
     args = ([setsid, "-c"] if setsid else []) + swarm_cmd("watch", "--rate", "8")
-    p = subprocess.Popen(args, stdin=slave, stdout=slave, stderr=slave, env=env, close_fds=True,
-                         start_new_session=setsid is None)
+    p = subprocess.Popen(
+        args, stdin=slave, stdout=slave, stderr=slave, env=env, close_fds=True, start_new_session=setsid is None
+    )
     os.close(slave)
     live["extra_pids"].append((p.pid, psutil.Process(p.pid).create_time()))
     buf = b""
@@ -730,10 +849,13 @@ def test_watch_renders_in_a_terminal(live):
                 return
 
     try:
+
         def enough(text):
-            return (live["run"] in text and all(re.search(rf"^.*\b{i}\s+(leader|follower)\s+yes", text, re.M)
-                                                for i in range(1, 7))
-                    and text.count(f"run {live['run']}") >= 2)  # at least one refresh after the first frame
+            return (
+                live["run"] in text
+                and all(re.search(rf"^.*\b{i}\s+(leader|follower)\s+yes", text, re.M) for i in range(1, 7))
+                and text.count(f"run {live['run']}") >= 2
+            )  # at least one refresh after the first frame
 
         read_for(15, enough)
         text = _strip_ansi(buf.decode(errors="replace"))
@@ -801,11 +923,29 @@ def test_a_world_that_stops_answering_is_not_an_ended_one(live, tmp_path):
     tr = live["tracker"]
     run, endpoint = "silent", f"unixsock-stream/{live['runtime']}/silent.sock"
     scen = ring_scenario(tmp_path / "silent.toml", 2, leaders=1)
-    world = tr.spawn(swarm_cmd("world", scen, "--listen", endpoint, "--run", run, "--out", tmp_path / "out",
-                               "--duration", "600", "--no-plots"), "world-silent")
+    world = tr.spawn(
+        swarm_cmd(
+            "world",
+            scen,
+            "--listen",
+            endpoint,
+            "--run",
+            run,
+            "--out",
+            tmp_path / "out",
+            "--duration",
+            "600",
+            "--no-plots",
+        ),
+        "world-silent",
+    )
     env = {**tr.env, "SWARM_RUN": run}
-    wait_for(lambda: world.check_running("it to listen") or
-             invoke("runs", "--json", "--run", run).exit_code == 0, 30, "the world to answer", interval=0.1)
+    wait_for(
+        lambda: world.check_running("it to listen") or invoke("runs", "--json", "--run", run).exit_code == 0,
+        30,
+        "the world to answer",
+        interval=0.1,
+    )
     gw = tr.spawn(swarm_cmd("graph", "--watch", "--json"), "graph-watch-silent", env=env)
     wt = tr.spawn(swarm_cmd("watch", "--rate", "4"), "watch-silent", env=env)
     wait_for(lambda: gw.text().startswith("{") and f"run {run}" in wt.text(), 20, "the watchers to show the run")
@@ -854,12 +994,16 @@ def test_no_swarm_as_processes(tmp_path):
     os.makedirs(empty, exist_ok=True)
     env = dict(os.environ, SWARM_RUNTIME_DIR=empty)
     try:
-        for args, what in [(["agents"], "no swarm is running"), (["watch"], "no swarm is running"),
-                           (["graph", "--connect", "tcp/127.0.0.1:9"], "tcp/127.0.0.1:9"),
-                           (["kill", "1", "--connect", f"unixsock-stream/{empty}/none.sock"], "none.sock"),
-                           (["pause", "--run", "nope"], "run 'nope' not found")]:
-            p = subprocess.run(swarm_cmd(*args), env=env, capture_output=True, text=True, timeout=60,
-                               stdin=subprocess.DEVNULL)
+        for args, what in [
+            (["agents"], "no swarm is running"),
+            (["watch"], "no swarm is running"),
+            (["graph", "--connect", "tcp/127.0.0.1:9"], "tcp/127.0.0.1:9"),
+            (["kill", "1", "--connect", f"unixsock-stream/{empty}/none.sock"], "none.sock"),
+            (["pause", "--run", "nope"], "run 'nope' not found"),
+        ]:
+            p = subprocess.run(
+                swarm_cmd(*args), env=env, capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL
+            )
             assert p.returncode == 1, (args, p.stdout, p.stderr)
             assert len(p.stderr.strip().splitlines()) == 1 and what in p.stderr, (args, p.stderr)
             assert "Traceback" not in p.stderr

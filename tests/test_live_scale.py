@@ -19,9 +19,9 @@ import time
 import numpy as np
 import psutil
 import pytest
+from runtime_helpers import live_swarm, reaped, ring_scenario, run_credentials, swarm_cmd, wait_for
 from typer.testing import CliRunner
 
-from runtime_helpers import live_swarm, reaped, ring_scenario, run_credentials, swarm_cmd, wait_for
 from swarm.cli.main import app
 
 N = 30
@@ -86,8 +86,10 @@ def test_live_commands_at_30_agents(many):
     assert len(old) == N
     assert [r["id"] for r in snap["agents"]] == list(range(1, N + 1))
     assert all(r["answered"] and r["alive"] for r in snap["agents"]), "an agent's status was cut off"
-    print(f"\n[timing] {N} agents: status query waiting for its timeout {old_med:.3f} s; "
-          f"snapshot (info + statuses, ending when all answered) median {new_med:.3f} s, max {new_max:.3f} s")
+    print(
+        f"\n[timing] {N} agents: status query waiting for its timeout {old_med:.3f} s; "
+        f"snapshot (info + statuses, ending when all answered) median {new_med:.3f} s, max {new_max:.3f} s"
+    )
     assert new_max < 0.9, f"a snapshot took {new_max:.3f} s: it waited for a timeout"
 
     figures = {}
@@ -95,18 +97,27 @@ def test_live_commands_at_30_agents(many):
         med, mx, res = timed(lambda: invoke(*args), repeat=3)
         assert res.exit_code == 0, res.output
         figures[" ".join(args)] = (med, mx)
-    print("[timing] in-process (CliRunner: attaching, queries, output; typer's own setup included): " +
-          ", ".join(f"{k} {m:.3f} s (max {x:.3f})" for k, (m, x) in figures.items()))
+    print(
+        "[timing] in-process (CliRunner: attaching, queries, output; typer's own setup included): "
+        + ", ".join(f"{k} {m:.3f} s (max {x:.3f})" for k, (m, x) in figures.items())
+    )
     assert figures["agents --json"][0] < 1.0 and figures["pause"][0] < 1.0, figures
     procs = {}
     for args in (["agents", "--json"], ["pause"], ["resume"]):
-        med, _, p = timed(lambda: subprocess.run(swarm_cmd(*args), capture_output=True, text=True, timeout=30,
-                                                 stdin=subprocess.DEVNULL), repeat=3)
+        med, _, p = timed(
+            lambda: subprocess.run(
+                swarm_cmd(*args), capture_output=True, text=True, timeout=30, stdin=subprocess.DEVNULL
+            ),
+            repeat=3,
+        )
         assert p.returncode == 0, p.stderr
         procs[" ".join(args)] = med
     imports, _, _ = timed(lambda: subprocess.run(swarm_cmd("--help"), capture_output=True, timeout=30), repeat=3)
-    print("[timing] as processes (python start and imports included): " +
-          ", ".join(f"swarm {k} {v:.3f} s" for k, v in procs.items()) + f"; `swarm --help` alone {imports:.3f} s")
+    print(
+        "[timing] as processes (python start and imports included): "
+        + ", ".join(f"swarm {k} {v:.3f} s" for k, v in procs.items())
+        + f"; `swarm --help` alone {imports:.3f} s"
+    )
 
 
 def _progress_lines(text: str) -> list[str]:
@@ -116,11 +127,17 @@ def _progress_lines(text: str) -> list[str]:
 @pytest.mark.slow
 def test_progress_line_at_30_agents_counts_spawned_and_killed(many):
     up, tr = many["up"], many["tracker"]
-    line = wait_for(lambda: [ln for ln in _progress_lines(up.launcher.text()) if f" {N} live: " in ln],
-                    10, "a progress line that sums up the swarm")[-1]
+    line = wait_for(
+        lambda: [ln for ln in _progress_lines(up.launcher.text()) if f" {N} live: " in ln],
+        10,
+        "a progress line that sums up the swarm",
+    )[-1]
     m = re.search(rf"ticks/s  ({N} live: .*)$", line)
-    assert m and re.fullmatch(rf"{N} live: \d+ settled(, \d+ not \(worst( \d+:[\d.]+%){{1,3}}\))?"
-                              r"(, \d+ without a leader)?", m[1]), line
+    assert m and re.fullmatch(
+        rf"{N} live: \d+ settled(, \d+ not \(worst( \d+:[\d.]+%){{1,3}}\))?"
+        r"(, \d+ without a leader)?",
+        m[1],
+    ), line
     assert len(m[1]) <= 80, m[1]
 
     # an agent added at run time counts once it is live
@@ -128,18 +145,28 @@ def test_progress_line_at_30_agents_counts_spawned_and_killed(many):
     assert sp.wait(30) == 0, sp.text()
     pid31 = int(re.search(r"pid (\d+)", sp.text())[1])
     many["extra_pids"].append((pid31, psutil.Process(pid31).create_time()))
-    wait_for(lambda: any(f" {N + 1} live: " in ln for ln in _progress_lines(up.launcher.text())), 10,
-             "the progress line to count the spawned agent")
+    wait_for(
+        lambda: any(f" {N + 1} live: " in ln for ln in _progress_lines(up.launcher.text())),
+        10,
+        "the progress line to count the spawned agent",
+    )
 
     # one of the launcher's own agents killed: reaped at once (no zombie), shown as dropped
     pid5 = {r["id"]: r for r in json.loads(invoke("agents", "--json").stdout)["agents"]}[5]["pid"]
     t0 = time.monotonic()
     res = invoke("kill", 5)
     assert res.exit_code == 0, res.output
-    wait_for(lambda: reaped(pid5), max(0.0, 1.0 - (time.monotonic() - t0)),
-             "the launcher to reap agent 5 (a zombie a second after swarm kill)", interval=0.02)
+    wait_for(
+        lambda: reaped(pid5),
+        max(0.0, 1.0 - (time.monotonic() - t0)),
+        "the launcher to reap agent 5 (a zombie a second after swarm kill)",
+        interval=0.02,
+    )
     print(f"\n[timing] agent 5 killed and reaped {time.monotonic() - t0:.3f} s after `swarm kill` started")
     assert invoke("kill", N + 1).exit_code == 0
-    wait_for(lambda: any(ln.endswith(f"; dropped 5, {N + 1}") for ln in _progress_lines(up.launcher.text())),
-             10, "the progress line to name both dropped agents")
+    wait_for(
+        lambda: any(ln.endswith(f"; dropped 5, {N + 1}") for ln in _progress_lines(up.launcher.text())),
+        10,
+        "the progress line to name both dropped agents",
+    )
     assert f"agent 5 (pid {pid5}) exited (killed by SIGKILL)" in up.launcher.text()

@@ -31,9 +31,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from runtime_helpers import SCENARIOS, events_of, load_trajectory, make_env, run_sim, short_runtime_dir, swarm_cmd, \
-    wait_for
+from runtime_helpers import (
+    SCENARIOS,
+    events_of,
+    load_trajectory,
+    make_env,
+    run_sim,
+    short_runtime_dir,
+    swarm_cmd,
+    wait_for,
+)
 
 pytestmark = pytest.mark.slow
 
@@ -65,7 +72,7 @@ class Lan:
         if r.returncode != 0:
             raise LanError(f"ip {' '.join(args)}: {r.stderr.strip() or f'exit code {r.returncode}'}")
 
-    def up(self) -> "Lan":
+    def up(self) -> Lan:
         try:
             for ns in self.ns.values():
                 self.made.append(ns)  # (a failed add may leave its name behind: deleted too)
@@ -74,8 +81,9 @@ class Lan:
             w = self.ns["w"]
             self._ip("-n", w, "link", "add", "br0", "type", "bridge")
             for h in self.hosts:
-                self._ip("link", "add", f"w{h}", "netns", w, "type", "veth", "peer", "name", "eth0",
-                         "netns", self.ns[h])
+                self._ip(
+                    "link", "add", f"w{h}", "netns", w, "type", "veth", "peer", "name", "eth0", "netns", self.ns[h]
+                )
                 self._ip("-n", w, "link", "set", f"w{h}", "master", "br0")
                 self._ip("-n", w, "link", "set", f"w{h}", "up")
                 self._ip("-n", self.ns[h], "addr", "add", f"{self.address[h]}/24", "dev", "eth0")
@@ -159,32 +167,53 @@ class Machines:
             shutil.rmtree(self.dirs[h], ignore_errors=True)
 
     def start_world(self, *extra):
-        args = swarm_cmd("world", SCENARIOS / "case2.toml", "--listen", self.endpoint, "--run", self.run,
-                         "--clock", "lockstep", "--out", self.out, "--no-plots", *extra)
+        args = swarm_cmd(
+            "world",
+            SCENARIOS / "case2.toml",
+            "--listen",
+            self.endpoint,
+            "--run",
+            self.run,
+            "--clock",
+            "lockstep",
+            "--out",
+            self.out,
+            "--no-plots",
+            *extra,
+        )
         self.world = self.rt.tracker.spawn(self.lan.cmd("w", args), "world", env=self.env["w"])
         cred = Path(self.dirs["w"]) / f"{self.run}.cred"
-        wait_for(lambda: self.world.check_running("its credentials") or cred.exists(), 30,
-                 "the world's credentials")
+        wait_for(lambda: self.world.check_running("its credentials") or cred.exists(), 30, "the world's credentials")
         return self.world
 
     def start_hosts(self):
         for h, ids in HOSTS.items():
             f = self.tmp / f"host-{h}.cred"
-            p = self.rt.tracker.spawn(swarm_cmd("credentials", "--host", h, "--agents", ",".join(map(str, ids)),
-                                                "--run", self.run, "-o", f), f"credentials-{h}", env=self.env["w"])
+            p = self.rt.tracker.spawn(
+                swarm_cmd("credentials", "--host", h, "--agents", ",".join(map(str, ids)), "--run", self.run, "-o", f),
+                f"credentials-{h}",
+                env=self.env["w"],
+            )
             assert p.wait(30) == 0, p.text()
             doc = json.loads(f.read_text())
             assert doc["user"] == "host" and "secret" not in doc and sorted(doc["agents"]) == sorted(map(str, ids))
             assert doc["endpoint"] == self.endpoint
             self.hosts[h] = self.rt.tracker.spawn(
                 self.lan.cmd(h, swarm_cmd("host", "--credentials", f, "--logs", self.tmp / f"logs-{h}")),
-                f"host-{h}", env=self.env[h])
+                f"host-{h}",
+                env=self.env[h],
+            )
         return self.hosts
 
     def agents_json(self) -> dict | None:
         """`swarm agents --json` on the world's machine (as its operator), or None."""
-        r = subprocess.run(self.lan.cmd("w", swarm_cmd("agents", "--json", "--run", self.run)), env=self.env["w"],
-                           capture_output=True, text=True, timeout=30)
+        r = subprocess.run(
+            self.lan.cmd("w", swarm_cmd("agents", "--json", "--run", self.run)),
+            env=self.env["w"],
+            capture_output=True,
+            text=True,
+            timeout=30,
+        )
         return json.loads(r.stdout) if r.returncode == 0 else None
 
     def agent_pids(self) -> dict[str, dict[int, int]]:
@@ -259,8 +288,11 @@ def test_a_kill_on_one_host_is_noticed_by_the_world(machines):
 
     doc = wait_for(dropped, 30, f"the world to drop agent {victim}")
     wait_for(lambda: (d := m.agents_json()) is not None and d["tick"] > doc["tick"], 30, "the world to tick on")
-    wait_for(lambda: f"agent {victim} (pid {pids['b'][victim]}) exited (killed by SIGKILL)" in m.hosts["b"].text(),
-             10, "host b to report the kill")
+    wait_for(
+        lambda: f"agent {victim} (pid {pids['b'][victim]}) exited (killed by SIGKILL)" in m.hosts["b"].text(),
+        10,
+        "host b to report the kill",
+    )
 
     os.kill(m.world.pid, signal.SIGINT)
     assert m.world.wait(60) == 130, m.why()
@@ -280,13 +312,19 @@ def test_a_host_stopped_and_a_world_killed(machines):
     m.start_world("--duration", "600")
     m.start_hosts()
     pids = m.agent_pids()
-    wait_for(lambda: (d := m.agents_json()) is not None and d["tick"] > 0 and all(a["alive"] for a in d["agents"]),
-             60, "every agent live")
+    wait_for(
+        lambda: (d := m.agents_json()) is not None and d["tick"] > 0 and all(a["alive"] for a in d["agents"]),
+        60,
+        "every agent live",
+    )
     os.kill(m.hosts["a"].pid, signal.SIGINT)  # Ctrl-C on host a
     assert m.hosts["a"].wait(15) == 130, m.why()
     assert all(not _runs(p) for p in pids["a"].values())
-    wait_for(lambda: (d := m.agents_json()) is not None
-             and [a["id"] for a in d["agents"] if a["alive"]] == list(HOSTS["b"]), 15, "the world to drop a's agents")
+    wait_for(
+        lambda: (d := m.agents_json()) is not None and [a["id"] for a in d["agents"] if a["alive"]] == list(HOSTS["b"]),
+        15,
+        "the world to drop a's agents",
+    )
     os.kill(m.world.pid, signal.SIGKILL)
     assert m.hosts["b"].wait(15) == 1, m.why()  # its agents saw the world gone: exit 4, at once
     text = m.hosts["b"].text()

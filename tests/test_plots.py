@@ -308,9 +308,9 @@ def test_control_range_clips_the_leaders_start_on_case2(tmp_path: Path) -> None:
     """Case 2's leaders start at their 10 rad/s limit; the followers turn at about 1 rad/s.
     The y-range comes from the followers and leaves the spike out, marked as clipped."""
     from swarm.contracts.scenario import load_scenario
+    from swarm.offline.sim import run_sim
     from swarm.plots.clipping import clip_text, control_range
     from swarm.plots.palette import agent_looks
-    from swarm.offline.sim import run_sim
     from swarm.world.recording import write_run
 
     scenario = load_scenario(Path(__file__).resolve().parent.parent / "scenarios" / "case2.toml")

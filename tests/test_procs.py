@@ -20,7 +20,7 @@ def pid_runs(pid: int) -> bool:
             stat = f.read()
     except FileNotFoundError:
         return False
-    return stat[stat.rindex(b")") + 2:].split()[0] != b"Z"
+    return stat[stat.rindex(b")") + 2 :].split()[0] != b"Z"
 
 
 def reaped(p: subprocess.Popen) -> bool:
@@ -160,8 +160,10 @@ def test_stop_groups_shares_one_grace_period(groups, tmp_path):
     run (one after another, the second would get it only once the first was killed). Each
     member ignores SIGTERM but, on it, writes how many of the three members still run."""
     pids, log = tmp_path / "pids", tmp_path / "log"
-    script = (f'trap \'n=0; for p in $(cat {pids}); do kill -0 $p 2>/dev/null && n=$((n+1)); done; '
-              f'echo $n >> {log}\' TERM; echo ready; while :; do sleep 0.05; done')
+    script = (
+        f"trap 'n=0; for p in $(cat {pids}); do kill -0 $p 2>/dev/null && n=$((n+1)); done; "
+        f"echo $n >> {log}' TERM; echo ready; while :; do sleep 0.05; done"
+    )
     gs = [groups() for _ in range(3)]
     ps = []
     for g in gs:

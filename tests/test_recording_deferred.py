@@ -16,8 +16,20 @@ class Calls:
         self.rows = 0
 
     def record(self, tick, time, x, y, heading, u, out, alive, missed=0):
-        self.calls.append(("record", tick, time, x.tolist(), y.tolist(), heading.tolist(), u.tolist(),
-                           out.tolist(), alive.tolist(), missed))
+        self.calls.append(
+            (
+                "record",
+                tick,
+                time,
+                x.tolist(),
+                y.tolist(),
+                heading.tolist(),
+                u.tolist(),
+                out.tolist(),
+                alive.tolist(),
+                missed,
+            )
+        )
         self.rows = tick + 1
 
     def event(self, ev):

@@ -156,15 +156,23 @@ def test_full_disk_is_one_line_and_leaves_no_half_file(tmp_path):
     file; no trajectory.npz or summary.json is left half written, and a run directory
     completed before is untouched."""
     done = tmp_path / "done"
-    assert CliRunner().invoke(app, ["sim", str(CASE2), "--out", str(done), "--no-plots", "--duration", "5"]
-                              ).exit_code == 0
+    assert (
+        CliRunner().invoke(app, ["sim", str(CASE2), "--out", str(done), "--no-plots", "--duration", "5"]).exit_code == 0
+    )
     before = {p.name: p.read_bytes() for p in done.iterdir()}
-    code = ("import resource, signal, sys; signal.signal(signal.SIGXFSZ, signal.SIG_IGN); "
-            "resource.setrlimit(resource.RLIMIT_FSIZE, (200_000, 200_000)); "
-            "from swarm.cli.main import main; sys.argv = ['swarm'] + sys.argv[1:]; main()")
+    code = (
+        "import resource, signal, sys; signal.signal(signal.SIGXFSZ, signal.SIG_IGN); "
+        "resource.setrlimit(resource.RLIMIT_FSIZE, (200_000, 200_000)); "
+        "from swarm.cli.main import main; sys.argv = ['swarm'] + sys.argv[1:]; main()"
+    )
     out = tmp_path / "full"
-    p = subprocess.run([sys.executable, "-c", code, "sim", str(CASE2), "--out", str(out), "--no-plots"],
-                       capture_output=True, text=True, timeout=120, cwd=ROOT)
+    p = subprocess.run(
+        [sys.executable, "-c", code, "sim", str(CASE2), "--out", str(out), "--no-plots"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=ROOT,
+    )
     assert p.returncode == EXIT_NO_SPACE, p.stderr[-2000:]
     lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and "cannot" in lines[0] and str(out) in lines[0], p.stderr
@@ -221,12 +229,15 @@ def test_full_disk_under_swarm_up(rt, tmp_path):
     exits 74; what was flushed before is in valid result files that say "complete": false."""
     from runtime_helpers import UpRun
 
-    code = ("import resource, signal, sys; signal.signal(signal.SIGXFSZ, signal.SIG_IGN); "
-            "resource.setrlimit(resource.RLIMIT_FSIZE, (300_000, 300_000)); "
-            "from swarm.cli.main import main; sys.argv = ['swarm'] + sys.argv[1:]; main()")
+    code = (
+        "import resource, signal, sys; signal.signal(signal.SIGXFSZ, signal.SIG_IGN); "
+        "resource.setrlimit(resource.RLIMIT_FSIZE, (300_000, 300_000)); "
+        "from swarm.cli.main import main; sys.argv = ['swarm'] + sys.argv[1:]; main()"
+    )
     out = tmp_path / "run"
-    p = rt.tracker.spawn([sys.executable, "-c", code, "up", str(CASE2), "--out", str(out), "--no-plots",
-                          "--clock", "lockstep"], "up")
+    p = rt.tracker.spawn(
+        [sys.executable, "-c", code, "up", str(CASE2), "--out", str(out), "--no-plots", "--clock", "lockstep"], "up"
+    )
     up = UpRun(p, out, rt.tracker)
     assert p.wait(180) == EXIT_NO_SPACE, p.text()[-3000:]
     rt.tracker.assert_none_left(timeout=10)

@@ -12,7 +12,6 @@ import stat
 from pathlib import Path
 
 import pytest
-
 from runtime_helpers import SCENARIOS, agent_info, make_env, start_up, swarm_cmd
 
 pytestmark = pytest.mark.slow
@@ -29,8 +28,17 @@ def test_agent_elsewhere_rejoins_over_tls_with_an_exported_identity(rt, tmp_path
     127.0.0.1, the one elsewhere the address its exported file names."""
     port = _free_port()
     listen, endpoint = f"tls/0.0.0.0:{port}", f"tls/127.0.0.1:{port}"
-    up = start_up(rt.tracker, SCENARIOS / "case2.toml", tmp_path / "run", "--clock", "realtime",
-                  "--duration", "600", "--listen", listen)
+    up = start_up(
+        rt.tracker,
+        SCENARIOS / "case2.toml",
+        tmp_path / "run",
+        "--clock",
+        "realtime",
+        "--duration",
+        "600",
+        "--listen",
+        listen,
+    )
     run_id, ep = up.banner()
     assert ep == listen
     up.wait_started(60)
@@ -38,8 +46,9 @@ def test_agent_elsewhere_rejoins_over_tls_with_an_exported_identity(rt, tmp_path
 
     # the operator exports agent 3's identity (and the run's CA) for the other machine
     cred = tmp_path / "agent-3.cred"
-    p = rt.tracker.spawn(swarm_cmd("credentials", "--agent", "3", "--run", run_id, "--endpoint", endpoint,
-                                   "-o", cred), "export")
+    p = rt.tracker.spawn(
+        swarm_cmd("credentials", "--agent", "3", "--run", run_id, "--endpoint", endpoint, "-o", cred), "export"
+    )
     assert p.wait(30) == 0, p.text()
     assert stat.S_IMODE(cred.stat().st_mode) == 0o600
     doc = json.loads(cred.read_text())
@@ -50,13 +59,19 @@ def test_agent_elsewhere_rejoins_over_tls_with_an_exported_identity(rt, tmp_path
     up.wait_info(lambda i: not agent_info(i, 3)["alive"], 10, "agent 3 to drop")
 
     elsewhere = make_env(str(tmp_path / "elsewhere"))  # nothing of the run's there
-    wrong = rt.tracker.spawn(swarm_cmd("agent", "--id", "4", "--connect", endpoint, "--credentials", cred),
-                             "agent-4-elsewhere", env=elsewhere)
+    wrong = rt.tracker.spawn(
+        swarm_cmd("agent", "--id", "4", "--connect", endpoint, "--credentials", cred),
+        "agent-4-elsewhere",
+        env=elsewhere,
+    )
     assert wrong.wait(30) == 3
     assert "are for 'agent-3' of run" in wrong.text() and "not 'agent-4'" in wrong.text()
 
-    agent = rt.tracker.spawn(swarm_cmd("agent", "--id", "3", "--connect", endpoint, "--credentials", cred),
-                             "agent-3-elsewhere", env=elsewhere)
+    agent = rt.tracker.spawn(
+        swarm_cmd("agent", "--id", "3", "--connect", endpoint, "--credentials", cred),
+        "agent-3-elsewhere",
+        env=elsewhere,
+    )
     info = up.wait_info(lambda i: agent_info(i, 3)["alive"], 30, "agent 3 to rejoin from elsewhere")
     assert agent_info(info, 3)["pid"] == agent.pid and agent_info(info, 3)["joins"] == 2
 

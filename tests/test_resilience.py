@@ -25,9 +25,6 @@ from pathlib import Path
 import numpy as np
 import psutil
 import pytest
-
-from runtime_helpers import (SCENARIOS, agent_info, check_time_column, events_of, open_hub, open_session,
-                             replay_events, run_sim, sim_results, start_up, swarm_cmd, wait_for)
 from malformed import (
     ADMIN_BAD,
     BAD_JSON,
@@ -45,6 +42,21 @@ from malformed import (
     _sense_bad,
     _truth_bad,
 )
+from runtime_helpers import (
+    SCENARIOS,
+    agent_info,
+    check_time_column,
+    events_of,
+    open_hub,
+    open_session,
+    replay_events,
+    run_sim,
+    sim_results,
+    start_up,
+    swarm_cmd,
+    wait_for,
+)
+
 from swarm.contracts import wire
 from swarm.contracts.graph import analyse
 
@@ -77,8 +89,7 @@ def _first_event(summ: dict, kind: str, agent: int, lo: int, hi: int) -> dict | 
 
 def _realtime_case2(rt, tmp_path):
     """case2 under `swarm up` (realtime, 600 s), once started: (run, run id, endpoint, agent pids)."""
-    up = start_up(rt.tracker, SCENARIOS / "case2.toml", tmp_path / "run", "--clock", "realtime",
-                  "--duration", "600")
+    up = start_up(rt.tracker, SCENARIOS / "case2.toml", tmp_path / "run", "--clock", "realtime", "--duration", "600")
     run_id, endpoint = up.banner()
     up.wait_started(60)
     agents = rt.tracker.wait_agent_pids(up.launcher, 6)
@@ -115,9 +126,11 @@ def test_faults_toml_through_up(rt, tmp_path, shipped_sim):
     assert [f["kind"] for f in faults] == kinds
     print(f"\n[faults.toml] swarm up lockstep: {wall:.1f} s wall; per fault:")
     for f in faults:
-        print(f"  {f['kind']:<9} agent {str(f.get('agent')):<4} tick {f['tick']:>5}: recovery_time "
-              f"{f['recovery_time']} s (window to {f['window_end_time']} s), worst relative error "
-              f"{f['worst_relative_error']:.3f}, commands missed {f['commands_missed']}, switches {f['switches']}")
+        print(
+            f"  {f['kind']:<9} agent {str(f.get('agent')):<4} tick {f['tick']:>5}: recovery_time "
+            f"{f['recovery_time']} s (window to {f['window_end_time']} s), worst relative error "
+            f"{f['worst_relative_error']:.3f}, commands missed {f['commands_missed']}, switches {f['switches']}"
+        )
     for i, f in enumerate(faults):
         assert f["index"] == i and f["tick"] == round(f["at"] / 0.01)
         ev = _fault_event(summ, i)
@@ -144,14 +157,14 @@ def test_faults_toml_through_up(rt, tmp_path, shipped_sim):
     np.testing.assert_array_equal(traj["alive"], rep_alive)
     np.testing.assert_array_equal(traj["out"], rep_out)
     col = {int(a): k for k, a in enumerate(traj["ids"])}
-    assert not traj["alive"][drop4["tick"]:rejoin4["tick"], col[4]].any()
+    assert not traj["alive"][drop4["tick"] : rejoin4["tick"], col[4]].any()
 
     # Network faults: the partition loses agent 1's frames for its 2 s (200 ticks), the
     # loss draws 30% of every frame and command.
     part = by_kind["partition"]
     n_part = round(part["duration"] / 0.01)
     assert part["commands_missed"] >= n_part, part
-    assert (traj["missed"][part["tick"]:part["tick"] + n_part] >= 1).all()
+    assert (traj["missed"][part["tick"] : part["tick"] + n_part] >= 1).all()
     assert by_kind["loss"]["commands_missed"] > 0, by_kind["loss"]
 
     # One engine: every fault kind means the same in `swarm sim`, so the runs are equal.
@@ -179,8 +192,9 @@ SOAK_SEED = 4  # both leaders are down at once between t = 75.79 s and 78.34 s w
 SOAK_DURATION = 250.0
 
 
-def soak_faults(seed: int, ids=CASE2_IDS, leaders=CASE2_LEADERS, pairs=10, lo=10.0, hi=100.0,
-                dt=0.01) -> list[tuple[int, int, int]]:
+def soak_faults(
+    seed: int, ids=CASE2_IDS, leaders=CASE2_LEADERS, pairs=10, lo=10.0, hi=100.0, dt=0.01
+) -> list[tuple[int, int, int]]:
     """(agent, kill tick, restart tick) x pairs: kills between lo and hi s, restart 1-4 s later,
     never two faults on one tick, never two kill/restart windows of one agent overlapping,
     at least one leader among the victims."""
@@ -210,8 +224,10 @@ def write_soak_scenario(path: Path, pairs, duration: float = SOAK_DURATION) -> P
     assert n == 1
     text = text.replace('name = "case2"', 'name = "soak"')
     for a, k, r in pairs:
-        text += (f'\n[[faults]]\nat = {k / 100:.2f}\nkind = "kill"\nagent = {a}\n'
-                 f'\n[[faults]]\nat = {r / 100:.2f}\nkind = "restart"\nagent = {a}\n')
+        text += (
+            f'\n[[faults]]\nat = {k / 100:.2f}\nkind = "kill"\nagent = {a}\n'
+            f'\n[[faults]]\nat = {r / 100:.2f}\nkind = "restart"\nagent = {a}\n'
+        )
     path.write_text(text)
     return path
 
@@ -227,9 +243,11 @@ def test_soak_kills_and_restarts(rt, tmp_path):
     t0 = time.monotonic()
     summ, traj = up.results(360)
     wall = time.monotonic() - t0
-    print(f"\n[soak] seed {SOAK_SEED}: 10 kill/restart pairs {pairs}\n[soak] swarm up: {wall:.1f} s wall "
-          f"for {SOAK_DURATION:g} s simulated ({summ['wall_time']:.1f} s ticking, world clock held "
-          f"for restarts meanwhile)")
+    print(
+        f"\n[soak] seed {SOAK_SEED}: 10 kill/restart pairs {pairs}\n[soak] swarm up: {wall:.1f} s wall "
+        f"for {SOAK_DURATION:g} s simulated ({summ['wall_time']:.1f} s ticking, world clock held "
+        f"for restarts meanwhile)"
+    )
     assert summ["completed"] is True and summ["ticks"] == ticks
     check_time_column(traj, ticks, 0.01)
     assert len(summ["faults"]) == 20
@@ -241,10 +259,13 @@ def test_soak_kills_and_restarts(rt, tmp_path):
         drop = _first_event(summ, "drop", a, k, r)
         rejoin = _first_event(summ, "rejoin", a, r, nxt)
         assert drop is not None, f"agent {a} killed at tick {k}: no drop before tick {r}: {events_of(summ, 'drop', a)}"
-        assert rejoin is not None, \
+        assert rejoin is not None, (
             f"agent {a} restarted at tick {r}: no rejoin before tick {nxt}: {events_of(summ, 'rejoin', a)}"
-        print(f"  agent {a}: kill tick {k} -> drop tick {drop['tick']}; restart tick {r} -> rejoin tick "
-              f"{rejoin['tick']} (pid {rejoin.get('pid')})")
+        )
+        print(
+            f"  agent {a}: kill tick {k} -> drop tick {drop['tick']}; restart tick {r} -> rejoin tick "
+            f"{rejoin['tick']} (pid {rejoin.get('pid')})"
+        )
     assert len(events_of(summ, "drop")) == 10 and len(events_of(summ, "rejoin")) == 10
     for aid in CASE2_IDS:
         n = sum(1 for a, _, _ in pairs if a == aid)
@@ -254,8 +275,10 @@ def test_soak_kills_and_restarts(rt, tmp_path):
     np.testing.assert_array_equal(traj["alive"], rep_alive)
 
     last = max(summ["faults"], key=lambda f: f["tick"])
-    print(f"[soak] last fault: {last['kind']} agent {last['agent']} at {last['at']} s, recovery_time "
-          f"{last['recovery_time']} s, worst relative error {last['worst_relative_error']:.3f}")
+    print(
+        f"[soak] last fault: {last['kind']} agent {last['agent']} at {last['at']} s, recovery_time "
+        f"{last['recovery_time']} s, worst relative error {last['worst_relative_error']:.3f}"
+    )
     assert last["recovery_time"] is not None, last
     assert summ["converged"] is True, {k: v["relative_error"] for k, v in summ["agents"].items()}
 
@@ -274,8 +297,9 @@ def test_nearest_selection_cycle_is_flagged_live(rt, tmp_path):
     calls = iter(range(10_000))
 
     def cycle_flagged():
-        p = rt.tracker.spawn(swarm_cmd("graph", "--json", "--connect", endpoint, "--run", run_id),
-                             f"graph-{next(calls)}")
+        p = rt.tracker.spawn(
+            swarm_cmd("graph", "--json", "--connect", endpoint, "--run", run_id), f"graph-{next(calls)}"
+        )
         rc = p.wait(30)
         assert up.launcher.poll() is None, up.launcher.text()[-2000:]
         if rc != 0:
@@ -286,8 +310,10 @@ def test_nearest_selection_cycle_is_flagged_live(rt, tmp_path):
 
     t0 = time.monotonic()
     g = wait_for(cycle_flagged, 45, "swarm graph --json to flag the cycle [2, 5]", interval=0.2)
-    print(f"\n[nearest] cycle {g['cycles']} flagged at tick {g['tick']} after {time.monotonic() - t0:.2f} s; "
-          f"unrooted {g['unrooted']}, edges {g['edges']}")
+    print(
+        f"\n[nearest] cycle {g['cycles']} flagged at tick {g['tick']} after {time.monotonic() - t0:.2f} s; "
+        f"unrooted {g['unrooted']}, edges {g['edges']}"
+    )
     assert g["roots"]["2"]["root"] is None and g["roots"]["5"]["root"] is None
     assert set(g["leaders"]) == {1} and set(g["nodes"]) == {1, 2, 3, 4, 5}
     assert [2, 5] in g["edges"] and [5, 2] in g["edges"]
@@ -300,16 +326,14 @@ def test_rooted_selection_keeps_every_follower_rooted(rt, tmp_path):
     """The first 100 s of rooted.toml through `swarm up`: every follower rooted, no cycle at
     any tick. (Convergence of the whole run: tests/test_rooted.py under `swarm sim`, which
     lockstep `swarm up` equals: test_runtime.py.)"""
-    up = start_up(rt.tracker, SCENARIOS / "rooted.toml", tmp_path / "run", "--clock", "lockstep",
-                  "--duration", "100")
+    up = start_up(rt.tracker, SCENARIOS / "rooted.toml", tmp_path / "run", "--clock", "lockstep", "--duration", "100")
     summ, traj = up.results(240)
     assert summ["completed"] is True and summ["ticks"] == 10000
     check_time_column(traj, 10000, 0.01)
     ids = [int(i) for i in traj["ids"]]
     leaders = {i for i, r in zip(ids, traj["role"]) if r == "leader"}
     final = analyse({i: (int(o) if o >= 0 else None) for i, o in zip(ids, traj["out"][-1])}, leaders)
-    print(f"\n[rooted] final graph {final['edges']}, roots "
-          f"{ {k: v['root'] for k, v in final['roots'].items()} }")
+    print(f"\n[rooted] final graph {final['edges']}, roots { {k: v['root'] for k, v in final['roots'].items()} }")
     assert final["cycles"] == [] and final["unrooted"] == [], final
     for aid, a in summ["agents"].items():
         assert a["root"] in leaders, (aid, a)
@@ -336,35 +360,59 @@ def garbage_plan(run: str, rng: random.Random) -> list[tuple[str, str, bytes]]:
     # are only invalid by their size (a pause, a KILL signal, an end notice).
     big = [("put", wire.agent_key(run, a, "cmd"), _oversized(rng)) for a in (1, 3, "abc")]
     big += [("put", wire.agent_key(run, a, "sense"), _oversized(rng)) for a in CASE2_IDS]
-    big += [("put", wire.agent_key(run, 2, "ctl"), _oversized(rng, b'{"v": 1, "kind": "signal", "signal": "KILL"}')),
-            ("put", wire.agent_key(run, 5, "ctl"), _oversized(rng)),
-            ("put", wire.world_control_key(run), _oversized(rng, b'{"v": 1, "kind": "end"}')),
-            ("put", wire.world_control_key(run), _oversized(rng)),
-            ("put", wire.events_key(run), _oversized(rng)),
-            ("put", wire.truth_key(run), _oversized(rng)),
-            ("get", wire.world_admin_key(run), _oversized(rng, b'{"v": 1, "cmd": "pause"}')),
-            ("get", wire.world_admin_key(run), _oversized(rng)),
-            ("get", wire.agent_key(run, 3, "join"), _oversized(rng)),
-            ("get", wire.world_info_key(run), _oversized(rng)),
-            ("get", wire.agent_key(run, 4, "status"), _oversized(rng))]
+    big += [
+        ("put", wire.agent_key(run, 2, "ctl"), _oversized(rng, b'{"v": 1, "kind": "signal", "signal": "KILL"}')),
+        ("put", wire.agent_key(run, 5, "ctl"), _oversized(rng)),
+        ("put", wire.world_control_key(run), _oversized(rng, b'{"v": 1, "kind": "end"}')),
+        ("put", wire.world_control_key(run), _oversized(rng)),
+        ("put", wire.events_key(run), _oversized(rng)),
+        ("put", wire.truth_key(run), _oversized(rng)),
+        ("get", wire.world_admin_key(run), _oversized(rng, b'{"v": 1, "cmd": "pause"}')),
+        ("get", wire.world_admin_key(run), _oversized(rng)),
+        ("get", wire.agent_key(run, 3, "join"), _oversized(rng)),
+        ("get", wire.world_info_key(run), _oversized(rng)),
+        ("get", wire.agent_key(run, 4, "status"), _oversized(rng)),
+    ]
     plan += big
     n_small = 10_000 - len(big)
-    counts = {"cmd": 3000, "sense": 2000, "ctl": 1000, "control": 700, "events": 400, "truth": 500,
-              "admin": 800, "join": 500, "info": 300, "status": 400, "token": 400}
+    counts = {
+        "cmd": 3000,
+        "sense": 2000,
+        "ctl": 1000,
+        "control": 700,
+        "events": 400,
+        "truth": 500,
+        "admin": 800,
+        "join": 500,
+        "info": 300,
+        "status": 400,
+        "token": 400,
+    }
     counts["cmd"] -= sum(counts.values()) - n_small  # the oversized ones are part of the 10,000
-    add(counts["cmd"], lambda: (lambda k: ("put", wire.agent_key(run, k, "cmd"), _cmd_bad(rng, k)))(
-        rng.choice(some)))
-    add(counts["sense"], lambda: (lambda k: ("put", wire.agent_key(run, k, "sense"), _sense_bad(rng, k)))(
-        rng.choice(CASE2_IDS * 4 + NON_IDS)))
-    add(counts["ctl"], lambda: ("put", wire.agent_key(run, rng.choice(CASE2_IDS * 3 + NON_IDS), "ctl"),
-                                rng.choice(CTL_BAD)))
+    add(counts["cmd"], lambda: (lambda k: ("put", wire.agent_key(run, k, "cmd"), _cmd_bad(rng, k)))(rng.choice(some)))
+    add(
+        counts["sense"],
+        lambda: (lambda k: ("put", wire.agent_key(run, k, "sense"), _sense_bad(rng, k)))(
+            rng.choice(CASE2_IDS * 4 + NON_IDS)
+        ),
+    )
+    add(
+        counts["ctl"],
+        lambda: ("put", wire.agent_key(run, rng.choice(CASE2_IDS * 3 + NON_IDS), "ctl"), rng.choice(CTL_BAD)),
+    )
     add(counts["control"], lambda: ("put", wire.world_control_key(run), rng.choice(CONTROL_BAD)))
     add(counts["events"], lambda: ("put", wire.events_key(run), rng.choice(EVENTS_BAD)))
     add(counts["truth"], lambda: ("put", wire.truth_key(run), _truth_bad(rng)))
     add(counts["admin"], lambda: ("get", wire.world_admin_key(run), rng.choice(ADMIN_BAD)))
     add(counts["join"], lambda: ("get", wire.agent_key(run, rng.choice(some), "join"), rng.choice(JOIN_BAD)))
-    add(counts["info"], lambda: ("get", wire.world_info_key(run) + rng.choice(
-        ["", "?sensing=maybe", "?x=1;y", "?;;;", "?sensing=0;sensing=1"]), rng.choice(BAD_JSON)))
+    add(
+        counts["info"],
+        lambda: (
+            "get",
+            wire.world_info_key(run) + rng.choice(["", "?sensing=maybe", "?x=1;y", "?;;;", "?sensing=0;sensing=1"]),
+            rng.choice(BAD_JSON),
+        ),
+    )
     add(counts["status"], lambda: ("get", wire.agent_key(run, rng.choice(some), "status"), rng.choice(BAD_JSON)))
     add(counts["token"], lambda: ("token", f"{P}/agent/{rng.choice([n for n in NON_IDS if n != '99'])}/alive", b""))
     rng.shuffle(plan)
@@ -417,10 +465,12 @@ def test_malformed_messages_on_every_key(rt, tmp_path):
     finally:
         ses.close()
     send_s = time.monotonic() - t0
-    print(f"\n[garbage] sent {sum(stats[k] for k in ('put', 'get', 'token'))} malformed messages "
-          f"({stats['put']} puts, {stats['get']} queries, {stats['token']} liveliness tokens, "
-          f"{stats['bytes'] / MIB:.1f} MiB) in {send_s:.1f} s; replies {stats['replies_ok']} ok, "
-          f"{stats['replies_err']} errors")
+    print(
+        f"\n[garbage] sent {sum(stats[k] for k in ('put', 'get', 'token'))} malformed messages "
+        f"({stats['put']} puts, {stats['get']} queries, {stats['token']} liveliness tokens, "
+        f"{stats['bytes'] / MIB:.1f} MiB) in {send_s:.1f} s; replies {stats['replies_ok']} ok, "
+        f"{stats['replies_err']} errors"
+    )
     assert stats["put"] + stats["get"] + stats["token"] == 10_000
 
     # Every process of the run is still alive (no agent restarted or added), the run still ticks.
@@ -441,9 +491,11 @@ def test_malformed_messages_on_every_key(rt, tmp_path):
     assert info2["garbage"] > 0
     assert set(st1) == set(st2) == set(CASE2_IDS), (sorted(st1), sorted(st2))
     garbage = {i: st2[i]["garbage"] for i in CASE2_IDS}
-    print(f"[garbage] world info: garbage {info2['garbage']}, ignored {info2['ignored']}; "
-          f"agents' own garbage counts {garbage}; world per-agent garbage "
-          f"{ {k: a['garbage'] for k, a in info2['agents'].items()} }")
+    print(
+        f"[garbage] world info: garbage {info2['garbage']}, ignored {info2['ignored']}; "
+        f"agents' own garbage counts {garbage}; world per-agent garbage "
+        f"{ {k: a['garbage'] for k, a in info2['agents'].items()} }"
+    )
     for i in CASE2_IDS:
         assert st2[i]["garbage"] > 0, (i, st2[i])
         assert st2[i]["last_tick"] > st1[i]["last_tick"], f"agent {i} stopped answering its frames"
@@ -454,8 +506,10 @@ def test_malformed_messages_on_every_key(rt, tmp_path):
     assert _stop(up) == 130, up.launcher.text()[-3000:]
     rt.tracker.assert_none_left(timeout=10)
     summ = up.summary()
-    print(f"[garbage] summary: garbage_messages {summ['garbage_messages']}, ignored_messages "
-          f"{summ['ignored_messages']}, per agent {({k: a['garbage'] for k, a in summ['agents'].items()})}")
+    print(
+        f"[garbage] summary: garbage_messages {summ['garbage_messages']}, ignored_messages "
+        f"{summ['ignored_messages']}, per agent { ({k: a['garbage'] for k, a in summ['agents'].items()}) }"
+    )
     assert summ["garbage_messages"] > 0
     assert summ["garbage_messages"] >= info2["garbage"]
     assert set(summ["agents"]) == {str(i) for i in CASE2_IDS}
@@ -463,8 +517,9 @@ def test_malformed_messages_on_every_key(rt, tmp_path):
         assert isinstance(a["garbage"], int) and a["garbage"] >= 0, (aid, a)
         assert a["alive"] and a["joins"] == 1 and a["drops"] == 0, (aid, a)
     # a flood of join claims is rate-limited (one `limit` event, counted): nothing else happened
-    assert {e["kind"] for e in summ["events"]} <= {"join", "start", "switch", "limit"}, \
-        sorted({e["kind"] for e in summ["events"]})
+    assert {e["kind"] for e in summ["events"]} <= {"join", "start", "switch", "limit"}, sorted(
+        {e["kind"] for e in summ["events"]}
+    )
     assert set(summ["over_limit"]) <= {"join_rate"}, summ["over_limit"]
     assert [e["limit"] for e in summ["events"] if e["kind"] == "limit"] == list(summ["over_limit"])
 
@@ -487,9 +542,15 @@ def test_rogue_commands_change_nothing(rt, tmp_path):
         sub = ses.declare_subscriber(wire.agent_key(run_id, 3, "sense"), on_sense)
         pub = ses.declare_publisher(wire.agent_key(run_id, 3, "cmd"), express=True)
         while up.launcher.poll() is None and time.monotonic() < t_end:
-            c = wire.Command(3, max(0, latest[0] - rng.randint(0, 2)), rng.uniform(-5.0, 5.0),
-                             rng.choice([None, 1, 2, 4, 5, 6]), rng.choice(wire.PHASES),
-                             rng.choice([None, 0, 1, 2, 7]), rng.getrandbits(64))
+            c = wire.Command(
+                3,
+                max(0, latest[0] - rng.randint(0, 2)),
+                rng.uniform(-5.0, 5.0),
+                rng.choice([None, 1, 2, 4, 5, 6]),
+                rng.choice(wire.PHASES),
+                rng.choice([None, 0, 1, 2, 7]),
+                rng.getrandbits(64),
+            )
             pub.put(wire.encode_cmd(c))
             sent += 1
         sub.undeclare()
@@ -499,9 +560,11 @@ def test_rogue_commands_change_nothing(rt, tmp_path):
     dx = np.max(np.abs(traj["x"] - sim["x"]))
     dy = np.max(np.abs(traj["y"] - sim["y"]))
     rogue = summ["agents"]["3"]["rogue_commands"]
-    print(f"\n[rogue] {sent} forged commands for agent 3 published; the world counted {rogue} rogue "
-          f"commands; max |dx| {dx:.3g} m, |dy| {dy:.3g} m against swarm sim; missed ticks "
-          f"{[a['missed_ticks'] for a in summ['agents'].values()]}")
+    print(
+        f"\n[rogue] {sent} forged commands for agent 3 published; the world counted {rogue} rogue "
+        f"commands; max |dx| {dx:.3g} m, |dy| {dy:.3g} m against swarm sim; missed ticks "
+        f"{[a['missed_ticks'] for a in summ['agents'].values()]}"
+    )
     assert summ["completed"] is True and summ["ticks"] == 1500
     assert traj["x"].shape == sim["x"].shape
     assert dx < 1e-9 and dy < 1e-9, f"the rogue changed the trajectory: {max(dx, dy)} m"
@@ -513,8 +576,9 @@ def test_rogue_commands_change_nothing(rt, tmp_path):
 
 
 # --- regression tests for runtime bugs these tests found -------------------------------------------
-@pytest.mark.parametrize("fault", [{"agent": [4], "kind": "kill"}, {"agent": "a/b", "kind": "restart"}],
-                         ids=["list-agent", "path-agent"])
+@pytest.mark.parametrize(
+    "fault", [{"agent": [4], "kind": "kill"}, {"agent": "a/b", "kind": "restart"}], ids=["list-agent", "path-agent"]
+)
 def test_launcher_survives_malformed_fault_notice(rt, tmp_path, fault):
     open_hub(rt)  # a stranger sends it: behind the hub's checks (tests/test_access.py tests those)
     up, run_id, endpoint, agents = _realtime_case2(rt, tmp_path)
@@ -522,8 +586,11 @@ def test_launcher_survives_malformed_fault_notice(rt, tmp_path, fault):
     try:
         ses.put(wire.world_control_key(run_id), _j({"v": 1, "kind": "fault", "index": "x", "fault": fault}))
         # The launcher reads its notices every 0.25 s and says when it drops one.
-        wait_for(lambda: "ignored a malformed fault notice" in up.launcher.text() or up.launcher.poll() is not None,
-                 10, "the launcher to read and drop the malformed notice")
+        wait_for(
+            lambda: "ignored a malformed fault notice" in up.launcher.text() or up.launcher.poll() is not None,
+            10,
+            "the launcher to read and drop the malformed notice",
+        )
     finally:
         ses.close()
     rc = up.launcher.poll()
@@ -544,8 +611,17 @@ def test_launcher_survives_truth_of_unknown_agent(rt, tmp_path):
     open_hub(rt)  # a stranger sends it: behind the hub's checks (tests/test_access.py tests those)
     up, run_id, endpoint, agents = _realtime_case2(rt, tmp_path)
     ids = np.array([1, 99])
-    buf = wire.encode_truth(5, 0.05, ids, np.array([28.0, 10.0]), np.zeros(2), np.zeros(2), np.zeros(2),
-                            np.array([-1, 1]), ["active", "active"])
+    buf = wire.encode_truth(
+        5,
+        0.05,
+        ids,
+        np.array([28.0, 10.0]),
+        np.zeros(2),
+        np.zeros(2),
+        np.zeros(2),
+        np.array([-1, 1]),
+        ["active", "active"],
+    )
     ses = open_session(endpoint)
     sent = 0
     try:
@@ -565,8 +641,9 @@ def test_launcher_survives_truth_of_unknown_agent(rt, tmp_path):
     else:
         up.launcher.wait(30)
     rt.tracker.assert_none_left(timeout=15)
-    assert alive, f"swarm up exited {up.launcher.poll()} after {sent} forged truth messages:\n" \
-                  f"{up.launcher.text()[-1500:]}"
+    assert alive, (
+        f"swarm up exited {up.launcher.poll()} after {sent} forged truth messages:\n{up.launcher.text()[-1500:]}"
+    )
 
 
 def test_garbage_on_sense_key_costs_no_frame(rt, tmp_path):

@@ -7,8 +7,8 @@ import pytest
 
 from swarm.agents.brain import AgentBrain
 from swarm.contracts.frames import Contact, SensorFrame
-from swarm.contracts.scenario import load_scenario
 from swarm.contracts.graph import analyse
+from swarm.contracts.scenario import load_scenario
 from swarm.offline.sim import run_sim
 
 ROOTED = Path(__file__).resolve().parent.parent / "scenarios" / "rooted.toml"

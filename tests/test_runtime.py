@@ -17,9 +17,20 @@ import time
 
 import numpy as np
 import pytest
+from runtime_helpers import (
+    SCENARIOS,
+    Runtime,
+    agent_cmd,
+    check_time_column,
+    events_of,
+    first_ticks,
+    observe_world,
+    replay_events,
+    run_sim,
+    sim_results,
+    start_up,
+)
 
-from runtime_helpers import (SCENARIOS, Runtime, agent_cmd, check_time_column, events_of, observe_world,
-                             first_ticks, replay_events, run_sim, sim_results, start_up)
 from swarm.contracts.scenario import load_scenario
 
 pytestmark = pytest.mark.slow
@@ -60,12 +71,21 @@ def lockstep_runs(tmp_path_factory, shipped_sim):
             rc = up.launcher.wait(240)
             wall = time.monotonic() - t0
             r.tracker.assert_none_left(timeout=10)
-            cache[name] = {"rc": rc, "run": up, "wall": wall, "sim": sim_traj, "sim_summary": sim_summary,
-                           "traj": up.trajectory(), "summary": up.summary(),
-                           "scenario": load_scenario(scen), "ticks": round((d or 0) / load_scenario(scen).run.dt)
-                           or load_scenario(scen).run.ticks}
-            print(f"\n[timing] swarm up {name}: {wall:.1f} s wall, "
-                  f"{cache[name]['summary']['ticks_per_second']:.0f} ticks/s")
+            cache[name] = {
+                "rc": rc,
+                "run": up,
+                "wall": wall,
+                "sim": sim_traj,
+                "sim_summary": sim_summary,
+                "traj": up.trajectory(),
+                "summary": up.summary(),
+                "scenario": load_scenario(scen),
+                "ticks": round((d or 0) / load_scenario(scen).run.dt) or load_scenario(scen).run.ticks,
+            }
+            print(
+                f"\n[timing] swarm up {name}: {wall:.1f} s wall, "
+                f"{cache[name]['summary']['ticks_per_second']:.0f} ticks/s"
+            )
         return cache[name]
 
     with r:
@@ -128,8 +148,9 @@ def test_lockstep_up_equals_sim_first_20_s(rt, tmp_path, name):
     assert sorted(switches(summ["events"])) == sorted(switches(sim_summ["events"]))
     # what the agents counted themselves (their status) is what the brains of swarm sim counted
     for aid, a in sim_summ["agents"].items():
-        assert {k: summ["agents"][aid].get(k) for k in ("losses", "loss_switches_max")} == \
-            {k: a.get(k) for k in ("losses", "loss_switches_max")}, aid
+        assert {k: summ["agents"][aid].get(k) for k in ("losses", "loss_switches_max")} == {
+            k: a.get(k) for k in ("losses", "loss_switches_max")
+        }, aid
 
 
 def test_case2_chooses_at_runtime_through_up(lockstep_runs):
@@ -139,8 +160,7 @@ def test_case2_chooses_at_runtime_through_up(lockstep_runs):
     assert res["scenario"].sensing.selection == "sticky"
     assert all(a.follow is None for a in res["scenario"].agents)
     summ = res["summary"]
-    assert {int(i): a["out_neighbour"] for i, a in summ["agents"].items()} == \
-        {1: None, 2: 4, 3: 1, 4: 1, 5: 1, 6: None}
+    assert {int(i): a["out_neighbour"] for i, a in summ["agents"].items()} == {1: None, 2: 4, 3: 1, 4: 1, 5: 1, 6: None}
     assert summ["switches"] == 1 and summ["agents"]["2"]["switches"] == 1
     (sw,) = [e for e in events_of(summ, "switch") if e["from"] is not None]
     assert (sw["tick"], sw["agent"], sw["from"], sw["to"]) == (1, 2, 1, 4)
@@ -157,8 +177,9 @@ def test_leader_loss_through_up_re_roots_on_the_other_tree(lockstep_runs):
     np.testing.assert_array_equal(up["alive"], sim["alive"])
     kill = 6000
     assert sorted(switches(summ["events"])) == sorted(switches(res["sim_summary"]["events"]))
-    at_kill = sorted((e["agent"], e["from"], e["to"], e["reason"]) for e in events_of(summ, "switch")
-                     if e["tick"] >= kill)
+    at_kill = sorted(
+        (e["agent"], e["from"], e["to"], e["reason"]) for e in events_of(summ, "switch") if e["tick"] >= kill
+    )
     assert at_kill == [(a, 1, 6, "out-neighbour left the world") for a in (3, 4, 5)]
     assert all(e["tick"] == kill for e in events_of(summ, "switch") if e["tick"] >= kill)
     assert summ["converged"] is True and summ["switches"] == 4
@@ -208,8 +229,7 @@ def _stop_up(rt: Runtime, out_dir, sig: int, expected: int) -> float:
     # test_world_honours_sigterm_while_publishing for why ~13 s stops happen now and then.
     rc = run.launcher.wait(30)
     stop_s = time.monotonic() - t0
-    assert rc == expected, f"swarm up exited {rc} on signal {sig}, expected {expected}:\n" \
-                           f"{run.launcher.text()[-2000:]}"
+    assert rc == expected, f"swarm up exited {rc} on signal {sig}, expected {expected}:\n{run.launcher.text()[-2000:]}"
     # Every process the launcher started is gone.
     rt.tracker.assert_none_left(timeout=5)
     assert len(desc) >= 3
@@ -225,8 +245,10 @@ def _stop_up(rt: Runtime, out_dir, sig: int, expected: int) -> float:
     # The world removed its socket.
     assert not [f for f in os.listdir(rt.dir) if f.endswith(".sock")], os.listdir(rt.dir)
     STOP_TIMES.append(stop_s)
-    print(f"\n[timing] signal {sig} -> launcher exit {stop_s:.3f} s "
-          f"(max so far {max(STOP_TIMES):.3f} s over {len(STOP_TIMES)})")
+    print(
+        f"\n[timing] signal {sig} -> launcher exit {stop_s:.3f} s "
+        f"(max so far {max(STOP_TIMES):.3f} s over {len(STOP_TIMES)})"
+    )
     return stop_s
 
 
@@ -268,9 +290,27 @@ main()
 
 def test_world_honours_sigterm_while_publishing(rt, tmp_path):
     endpoint = f"unixsock-stream/{rt.dir}/w.sock"
-    w = rt.tracker.spawn([sys.executable, "-c", SIGNAL_IN_TRUTH, "world", str(SCENARIOS / "turtlebot.toml"),
-                          "--listen", endpoint, "--run", "sig", "--out", str(tmp_path / "out"),
-                          "--duration", "20", "--no-plots", "--join-timeout", "60"], "world")
+    w = rt.tracker.spawn(
+        [
+            sys.executable,
+            "-c",
+            SIGNAL_IN_TRUTH,
+            "world",
+            str(SCENARIOS / "turtlebot.toml"),
+            "--listen",
+            endpoint,
+            "--run",
+            "sig",
+            "--out",
+            str(tmp_path / "out"),
+            "--duration",
+            "20",
+            "--no-plots",
+            "--join-timeout",
+            "60",
+        ],
+        "world",
+    )
     observe_world(rt.tracker, w, endpoint, "sig")  # until it listens
     agents = [rt.tracker.spawn(agent_cmd(i, endpoint, "sig"), f"agent-{i}") for i in (1, 2)]
     rc = w.wait(60)
@@ -280,9 +320,9 @@ def test_world_honours_sigterm_while_publishing(rt, tmp_path):
     if "[test] SIGTERM to myself at tick 0" not in w.text():
         pytest.fail(f"the signal was not sent as planned:\n{w.text()[-2000:]}")
     summ = json.loads((tmp_path / "out" / "summary.json").read_text())
-    assert rc == 143 and summ["stopped_by_signal"] == signal.SIGTERM, \
-        f"world exited {rc} after SIGTERM at tick 0 and ran {summ['ticks']} ticks " \
-        f"(completed={summ['completed']})"
+    assert rc == 143 and summ["stopped_by_signal"] == signal.SIGTERM, (
+        f"world exited {rc} after SIGTERM at tick 0 and ran {summ['ticks']} ticks (completed={summ['completed']})"
+    )
 
 
 # --- 7. two runs side by side -----------------------------------------------------------------------

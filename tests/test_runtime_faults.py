@@ -13,13 +13,25 @@ import time
 
 import numpy as np
 import pytest
+from runtime_helpers import (
+    SCENARIOS,
+    Runtime,
+    agent_cmd,
+    agent_info,
+    check_time_column,
+    events_of,
+    has_started,
+    observe_world,
+    replay_events,
+    run_sim,
+    start_ticking,
+    start_up,
+    swarm_cmd,
+)
 
-from runtime_helpers import (SCENARIOS, Runtime, agent_cmd, agent_info, check_time_column, events_of, has_started,
-                             observe_world, replay_events, run_sim, start_ticking, start_up, swarm_cmd)
 from swarm.runtime.procs import wait_until
 
 pytestmark = pytest.mark.slow
-
 
 
 # --- 3 + 4: SIGKILL a follower and a leader mid-run, restart the follower ----------------------------
@@ -36,8 +48,9 @@ def fault_run(tmp_path_factory):
     base = tmp_path_factory.mktemp("faults")
     with Runtime(base) as r:
         tr = r.tracker
-        up = start_up(tr, SCENARIOS / "case2-fixed.toml", base / "run", "--duration", FAULT_DURATION,
-                      "--clock", "lockstep")
+        up = start_up(
+            tr, SCENARIOS / "case2-fixed.toml", base / "run", "--duration", FAULT_DURATION, "--clock", "lockstep"
+        )
         run_id, endpoint = up.banner()
         up.wait_started(60)
         pids = tr.wait_agent_pids(up.launcher, 6)
@@ -60,8 +73,11 @@ def fault_run(tmp_path_factory):
         again = tr.spawn(agent_cmd(4, endpoint, run_id), "agent-4-again")
         res["again"] = again
         try:
-            up.wait_info(lambda i: agent_info(i, 4)["joins"] == 2 and agent_info(i, 4)["alive"], 60,
-                         "the restarted agent 4 to rejoin")
+            up.wait_info(
+                lambda i: agent_info(i, 4)["joins"] == 2 and agent_info(i, 4)["alive"],
+                60,
+                "the restarted agent 4 to rejoin",
+            )
         except AssertionError as e:
             raise AssertionError(f"{e}\nthe restarted agent 4 said:\n{again.text()}") from None
         res["restart_to_rejoin_s"] = time.monotonic() - t_again
@@ -94,14 +110,15 @@ def _check_followers_switch(res: dict, victim: int, expected_followers: set[int]
         sw = [e for e in events_of(summ, "switch", f) if e["tick"] >= k]
         assert sw, f"agent {f} never switched away from dropped agent {victim}"
         first = sw[0]
-        assert first["tick"] <= k + 1, \
+        assert first["tick"] <= k + 1, (
             f"agent {f} switched at tick {first['tick']}, more than one tick after drop tick {k}"
+        )
         assert first["from"] == victim and first["to"] is not None and first["to"] != victim, first
         # The recording shows the new neighbour from the switch until f's next switch.
         nxt = sw[1]["tick"] if len(sw) > 1 else len(traj["t"])
-        seg = traj["out"][first["tick"]:nxt, col[f]]
+        seg = traj["out"][first["tick"] : nxt, col[f]]
         assert (seg == first["to"]).all(), f"agent {f}: out column {np.unique(seg)} after its switch"
-        assert (traj["out"][k:first["tick"], col[f]] == victim).all()
+        assert (traj["out"][k : first["tick"], col[f]] == victim).all()
 
 
 @pytest.mark.parametrize("victim, followers", [(4, {5}), (1, {2, 3})], ids=["follower", "leader"])
@@ -163,13 +180,14 @@ def test_restarted_agent_rejoins_from_its_drop_pose(fault_run):
     assert traj["alive"][kr:, col].all(), "agent 4 is not alive from its rejoin to the end"
     # "leave": frozen while gone, and back in the world exactly where it dropped.
     for key in ("x", "y", "heading"):
-        a = traj[key][kd:kr + 1, col]
+        a = traj[key][kd : kr + 1, col]
         assert (a == a[0]).all(), f"agent 4's {key} changed while it was gone"
     pose_drop = [traj[k][kd, col] for k in ("x", "y", "heading")]
     pose_rejoin = [traj[k][kr, col] for k in ("x", "y", "heading")]
     assert pose_drop == pose_rejoin
-    assert traj["x"][kr + 2, col] != pose_rejoin[0] or traj["y"][kr + 2, col] != pose_rejoin[1], \
+    assert traj["x"][kr + 2, col] != pose_rejoin[0] or traj["y"][kr + 2, col] != pose_rejoin[1], (
         "agent 4 does not move after rejoining"
+    )
     # It is controlled again: commands after the rejoin, and its pinned follower 5 returns to it.
     assert summ["agents"]["4"]["pid"] == res["again"].pid
     back = [e for e in events_of(summ, "switch", 5) if e["tick"] >= kr and e["to"] == 4]
@@ -183,8 +201,21 @@ def _world_by_hand(rt, tmp_path, scenario: str, *extra):
     """A `swarm world` started here, once it listens: (process, endpoint, run id, observer)."""
     endpoint = f"unixsock-stream/{rt.dir}/w.sock"
     run_id = "byhand"
-    w = rt.tracker.spawn(swarm_cmd("world", SCENARIOS / scenario, "--listen", endpoint, "--run", run_id,
-                                   "--out", tmp_path / "world-out", "--no-plots", *extra), "world")
+    w = rt.tracker.spawn(
+        swarm_cmd(
+            "world",
+            SCENARIOS / scenario,
+            "--listen",
+            endpoint,
+            "--run",
+            run_id,
+            "--out",
+            tmp_path / "world-out",
+            "--no-plots",
+            *extra,
+        ),
+        "world",
+    )
     return w, endpoint, run_id, observe_world(rt.tracker, w, endpoint, run_id)
 
 
@@ -226,11 +257,14 @@ def test_duplicate_and_unknown_ids_are_refused(rt, tmp_path):
 
 # --- 8. the world vanishes ------------------------------------------------------------------------------
 def test_agents_exit_when_the_world_vanishes(rt, tmp_path):
-    w, ep, run_id, world = _world_by_hand(rt, tmp_path, "turtlebot.toml", "--duration", "4000",
-                                          "--join-timeout", "120")
+    w, ep, run_id, world = _world_by_hand(rt, tmp_path, "turtlebot.toml", "--duration", "4000", "--join-timeout", "120")
     agents = {i: rt.tracker.spawn(agent_cmd(i, ep, run_id), f"agent-{i}") for i in (1, 2)}
-    world.wait(lambda i: has_started(i) and i["tick"] > 0, 60, "the run to start and tick",
-               check=lambda: w.check_running("the run to start"))
+    world.wait(
+        lambda i: has_started(i) and i["tick"] > 0,
+        60,
+        "the run to start and tick",
+        check=lambda: w.check_running("the run to start"),
+    )
     world.close()
     t0 = time.monotonic()
     w.group.signal(signal.SIGKILL)
@@ -243,8 +277,10 @@ def test_agents_exit_when_the_world_vanishes(rt, tmp_path):
         return len(exits) == len(agents)
 
     wait_until(all_exited, 10, interval=0.005)
-    print("\n[timing] world SIGKILL -> agents exit: " + ", ".join(f"{i}: {1000 * s:.0f} ms"
-                                                                    for i, s in sorted(exits.items())))
+    print(
+        "\n[timing] world SIGKILL -> agents exit: "
+        + ", ".join(f"{i}: {1000 * s:.0f} ms" for i, s in sorted(exits.items()))
+    )
     assert w.wait(5) == -signal.SIGKILL
     for i, a in agents.items():
         assert i in exits, f"agent {i} still running 10 s after the world died"
@@ -292,8 +328,7 @@ def test_frozen_agent_is_dropped(rt, tmp_path):
     drops = events_of(summ, "drop")
     assert drops and drops[0]["agent"] == 3, drops
     latency = drops[0]["wall_time"] - t_stop
-    print(f"\n[timing] SIGSTOP agent 3 -> drop event {latency:.3f} s (seen live after "
-          f"{t_seen - t_stop:.3f} s)")
+    print(f"\n[timing] SIGSTOP agent 3 -> drop event {latency:.3f} s (seen live after {t_seen - t_stop:.3f} s)")
     assert latency > 0 and summ["reproducible"] is False, summ.get("not_reproducible")
     # Nobody else was dropped while the world waited for the frozen one.
     assert {e["agent"] for e in drops} == {3}, drops
@@ -304,9 +339,12 @@ def test_frozen_agent_is_dropped(rt, tmp_path):
     assert traj["alive"][:k, col].all()
     # After SIGCONT the process may come back briefly (its link reconnects and its token
     # reappears: a rejoin and another drop), but it must not outlive the run.
-    after = [(e["kind"], e["tick"]) for e in summ["events"] if e["agent"] == 3 and e["tick"] >= k
-             and e["kind"] != "switch"]
-    print(f"[info] agent 3 after SIGCONT: events {after}, log: {up.out.joinpath('logs', 'agent-3.log').read_text().strip()!r}")
+    after = [
+        (e["kind"], e["tick"]) for e in summ["events"] if e["agent"] == 3 and e["tick"] >= k and e["kind"] != "switch"
+    ]
+    print(
+        f"[info] agent 3 after SIGCONT: events {after}, log: {up.out.joinpath('logs', 'agent-3.log').read_text().strip()!r}"
+    )
     rep_out, rep_alive = replay_events(summ["events"], traj["ids"], summ["ticks"] + 1)
     np.testing.assert_array_equal(traj["alive"], rep_alive)
     np.testing.assert_array_equal(traj["out"], rep_out)

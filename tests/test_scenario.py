@@ -83,8 +83,11 @@ BAD = [
     ("follow-missing-agent", _set("agents.1.follow", 99), ["agents[1].follow", "99"]),
     ("follow-self", _set("agents.1.follow", 2), ["agents[1].follow", "itself"]),
     ("follow-on-leader", _set("agents.0.follow", 2), ["agents[0].follow"]),
-    ("follower-only-cycle", _all(_set("agents.1.follow", 3), _set("agents.2.follow", 2)),
-     ["agents", "cycle", "2 -> 3 -> 2"]),
+    (
+        "follower-only-cycle",
+        _all(_set("agents.1.follow", 3), _set("agents.2.follow", 2)),
+        ["agents", "cycle", "2 -> 3 -> 2"],
+    ),
     ("fixed-without-follow", _set("agents.2.follow", _DELETE), ["agents[2].follow", "fixed"]),
     # v / max_turn_rate = 1.0 / 0.25 = 4 m > R = 2 m
     ("unreachable-orbit", _set("agents.0.max_turn_rate", 0.25), ["agents[0].orbit_radius", "not reachable"]),
@@ -94,26 +97,43 @@ BAD = [
     ("nan-duration", _set("run.duration", math.nan), ["run.duration", "finite"]),
     ("inf-dt", _set("run.dt", math.inf), ["run.dt", "finite"]),
     ("nan-dt", _set("run.dt", math.nan), ["run.dt", "finite"]),
-    ("huge-duration", _set("run.duration", 1e300),
-     ["run.duration", "2e+301 steps", "2e8 agent-ticks", "shorter run.duration or a larger run.dt"]),
-    ("steps-overflow", _all(_set("run.duration", 1e300), _set("run.dt", 1e-300)),
-     ["run.duration", "inf steps", "larger run.dt"]),
-    ("duration-under-half-a-step", _set("run.duration", 0.02),
-     ["run.duration", "shorter than one step (dt = 0.05 s)"]),
+    (
+        "huge-duration",
+        _set("run.duration", 1e300),
+        ["run.duration", "2e+301 steps", "2e8 agent-ticks", "shorter run.duration or a larger run.dt"],
+    ),
+    (
+        "steps-overflow",
+        _all(_set("run.duration", 1e300), _set("run.dt", 1e-300)),
+        ["run.duration", "inf steps", "larger run.dt"],
+    ),
+    ("duration-under-half-a-step", _set("run.duration", 0.02), ["run.duration", "shorter than one step (dt = 0.05 s)"]),
     # 1e8 ticks x (3 + 12) agents
-    ("recording-too-large", _all(_set("run.dt", 0.001), _set("run.duration", 1e5)),
-     ["run.duration", "100000000 ticks x 15 agents", "1.5e+09 agent-ticks", "2e8", "larger run.dt"]),
-    ("added-agents-over-wire", _set("run.max_added_agents", 9998),
-     ["run.max_added_agents", "10001 agents", "wire carries (10000)", "9997 or fewer"]),
+    (
+        "recording-too-large",
+        _all(_set("run.dt", 0.001), _set("run.duration", 1e5)),
+        ["run.duration", "100000000 ticks x 15 agents", "1.5e+09 agent-ticks", "2e8", "larger run.dt"],
+    ),
+    (
+        "added-agents-over-wire",
+        _set("run.max_added_agents", 9998),
+        ["run.max_added_agents", "10001 agents", "wire carries (10000)", "9997 or fewer"],
+    ),
     ("added-agents-above-limit", _set("run.max_added_agents", 10**6), ["run.max_added_agents", "10000"]),
     ("negative-added-agents", _set("run.max_added_agents", -1), ["run.max_added_agents"]),
-    ("added-ids-past-wire", lambda d: (d["run"].update(max_added_agents=12), d["agents"][2].update(id=2**31 - 5)),
-     ["agents[2].id", "2147483644..2147483655", "2147483647", "run.max_added_agents = 4 or fewer"]),
+    (
+        "added-ids-past-wire",
+        lambda d: (d["run"].update(max_added_agents=12), d["agents"][2].update(id=2**31 - 5)),
+        ["agents[2].id", "2147483644..2147483655", "2147483647", "run.max_added_agents = 4 or fewer"],
+    ),
     ("negative-id", _set("agents.2.id", -3), ["agents[2].id", "greater than or equal to 0"]),
     ("huge-id", _set("agents.2.id", 10**400), ["agents[2].id", "2147483647"]),
     ("huge-follow", _set("agents.2.follow", 10**400), ["agents[2].follow", "2147483647"]),
-    ("huge-fault-agent", _set("faults", [{"at": 1.0, "kind": "kill", "agent": 10**400}]),
-     ["faults[0].agent", "2147483647"]),
+    (
+        "huge-fault-agent",
+        _set("faults", [{"at": 1.0, "kind": "kill", "agent": 10**400}]),
+        ["faults[0].agent", "2147483647"],
+    ),
     ("negative-seed", _set("run.seed", -1), ["run.seed", "greater than or equal to 0"]),
     ("huge-seed", _set("run.seed", 10**400), ["run.seed", "less than or equal to"]),
     ("relative-law-module", _set("gains.law", ".nowhere:law"), ["gains.law", "cannot import"]),
@@ -207,6 +227,7 @@ def test_parse_scenario_names_source(base):
 
 # -- valid input ----------------------------------------------------------------------
 
+
 def test_base_loads_with_defaults(base, write_toml):
     s = load_scenario(write_toml(base))
     assert isinstance(s, Scenario)
@@ -259,8 +280,10 @@ def test_shipped_scenarios_load(path):
 
 @pytest.mark.parametrize(
     "where, value",
-    [pytest.param(("agents", 1, "speed"), "1.5", id="string-speed"),
-     pytest.param(("agents", 1, "x"), True, id="bool-x")],
+    [
+        pytest.param(("agents", 1, "speed"), "1.5", id="string-speed"),
+        pytest.param(("agents", 1, "x"), True, id="bool-x"),
+    ],
 )
 def test_wrong_toml_type_is_rejected_not_coerced(base, write_toml, where, value):
     base[where[0]][where[1]][where[2]] = value
@@ -276,6 +299,7 @@ def test_toml_writer_round_trips(base, write_toml):
 
 
 # -- added agents, and what the wire and the recording can hold -------------------------
+
 
 def test_added_agents_default_to_four_per_scenario_agent(base):
     s = parse_scenario(base)
@@ -305,8 +329,10 @@ def test_added_ids_up_to_the_largest_wire_id(base):
 
 
 def _leaders(n: int) -> list[dict]:
-    return [{"id": i, "role": "leader", "x": float(i), "y": 0.0, "heading": 0.0, "speed": 1.0,
-             "orbit_radius": 2.0} for i in range(n)]
+    return [
+        {"id": i, "role": "leader", "x": float(i), "y": 0.0, "heading": 0.0, "speed": 1.0, "orbit_radius": 2.0}
+        for i in range(n)
+    ]
 
 
 def test_more_agents_than_the_wire_carries(base):
@@ -352,17 +378,22 @@ def test_inf_duration_in_toml_is_rejected(base, write_toml):
 
 def test_schema_describes_max_added_agents():
     prop = Scenario.model_json_schema()["$defs"]["RunSpec"]["properties"]["max_added_agents"]
-    assert prop["description"] == ("agents that may be added while the run goes (swarm spawn of a new id); "
-                                   "default 4 x the scenario's agents")
+    assert prop["description"] == (
+        "agents that may be added while the run goes (swarm spawn of a new id); default 4 x the scenario's agents"
+    )
 
 
 # -- files that are not scenarios: always a ScenarioError naming the file --------------
 
-@pytest.mark.parametrize("text", [
-    pytest.param("a = " + "[" * 100_000 + "]" * 100_000, id="deep-arrays"),
-    pytest.param("a = " + "{b = " * 5_000 + "1" + "}" * 5_000, id="deep-inline-tables"),
-    pytest.param("gains = " + "[" * 600 + "]" * 600, id="deep-in-a-field"),
-])
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        pytest.param("a = " + "[" * 100_000 + "]" * 100_000, id="deep-arrays"),
+        pytest.param("a = " + "{b = " * 5_000 + "1" + "}" * 5_000, id="deep-inline-tables"),
+        pytest.param("gains = " + "[" * 600 + "]" * 600, id="deep-in-a-field"),
+    ],
+)
 def test_nested_too_deeply(tmp_path, text):
     path = tmp_path / "deep.toml"
     path.write_text(text)
@@ -371,14 +402,20 @@ def test_nested_too_deeply(tmp_path, text):
     assert str(exc.value) == f"{path}: nested too deeply (arrays or tables inside one another)"
 
 
-@pytest.mark.parametrize("raw, fragment", [
-    pytest.param(bytes(range(256)) * 4, "not UTF-8 text", id="binary"),
-    pytest.param(b'name = "\xff\xfe"\n', "not UTF-8 text (byte 8", id="latin-1"),
-    pytest.param(b"\x00\x00\x00", "TOML syntax error", id="nul-bytes"),
-    pytest.param(b"", "gains: Field required", id="empty"),
-    pytest.param(b"[run]\nseed = " + b"9" * 5000 + b"\n", "cannot parse: Exceeds the limit (4300 digits)",
-                 id="5000-digit-integer"),
-])
+@pytest.mark.parametrize(
+    "raw, fragment",
+    [
+        pytest.param(bytes(range(256)) * 4, "not UTF-8 text", id="binary"),
+        pytest.param(b'name = "\xff\xfe"\n', "not UTF-8 text (byte 8", id="latin-1"),
+        pytest.param(b"\x00\x00\x00", "TOML syntax error", id="nul-bytes"),
+        pytest.param(b"", "gains: Field required", id="empty"),
+        pytest.param(
+            b"[run]\nseed = " + b"9" * 5000 + b"\n",
+            "cannot parse: Exceeds the limit (4300 digits)",
+            id="5000-digit-integer",
+        ),
+    ],
+)
 def test_not_a_scenario_file(tmp_path, raw, fragment):
     path = tmp_path / "odd.toml"
     path.write_bytes(raw)

@@ -16,9 +16,9 @@ import pytest
 from swarm.agents.coast import Tracker
 from swarm.agents.search import SearchMemory, drift, radius
 from swarm.agents.selection import LOSS_CHANGES
-from swarm.offline.batch import run_batch
 from swarm.contracts.frames import Contact
 from swarm.contracts.scenario import load_scenario
+from swarm.offline.batch import run_batch
 from swarm.study.swarms import SwarmSetting, random_swarm
 from swarm.world.kinematics import step_one
 from swarm.world.metrics import switch_ticks
@@ -50,8 +50,8 @@ def test_dead_reckoning_carries_a_point_within_a_fraction_of_a_metre():
 def test_the_spiral_breathes_out_and_back_in_ever_wider():
     rho0, pitch, v = 30.0, 30.0, 20.0
     rate = pitch * v / math.pi
-    leg1 = ((4 * rho0) ** 2 - rho0 ** 2) / rate
-    leg2 = ((8 * rho0) ** 2 - rho0 ** 2) / rate
+    leg1 = ((4 * rho0) ** 2 - rho0**2) / rate
+    leg2 = ((8 * rho0) ** 2 - rho0**2) / rate
     assert radius(rho0, pitch, 0.0, v, 0.0) == rho0
     assert radius(rho0, pitch, 0.0, v, leg1) == pytest.approx(4 * rho0)
     assert radius(rho0, pitch, 0.0, v, 2 * leg1) == pytest.approx(rho0)
@@ -81,9 +81,15 @@ def _orbit_contacts(follower_poses, t0, r=30.0, w=1.0):
     for k, (x, y, g) in enumerate(follower_poses):
         th = w * (t0 + k * DT)
         ax, ay = r * math.cos(th), r * math.sin(th)
-        out.append(Contact(1, math.atan2(ay - y, ax - x), math.atan2(math.sin(th + math.pi / 2),
-                                                                      math.cos(th + math.pi / 2)),
-                           math.hypot(ax - x, ay - y), 0))
+        out.append(
+            Contact(
+                1,
+                math.atan2(ay - y, ax - x),
+                math.atan2(math.sin(th + math.pi / 2), math.cos(th + math.pi / 2)),
+                math.hypot(ax - x, ay - y),
+                0,
+            )
+        )
     return out
 
 
@@ -100,8 +106,13 @@ def test_a_coasting_prediction_follows_an_orbiting_agent_out_of_sight():
             assert seen[k].range < tr.edge_range
             break
         coasted += 1
-        assert math.hypot(p.range * math.cos(p.bearing) - seen[k].range * math.cos(seen[k].bearing),
-                          p.range * math.sin(p.bearing) - seen[k].range * math.sin(seen[k].bearing)) < 1.0
+        assert (
+            math.hypot(
+                p.range * math.cos(p.bearing) - seen[k].range * math.cos(seen[k].bearing),
+                p.range * math.sin(p.bearing) - seen[k].range * math.sin(seen[k].bearing),
+            )
+            < 1.0
+        )
         assert abs(math.remainder(p.heading - seen[k].heading, 2 * math.pi)) < 1e-6
     assert coasted >= 10
 

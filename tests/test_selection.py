@@ -112,6 +112,7 @@ def test_frame_of_leader_not_at_origin():
 
 # -- selection --------------------------------------------------------------------------
 
+
 def C(i, r):
     return Contact(i, 0.1 * i, 0.0, r)
 

@@ -6,8 +6,8 @@ network, no processes: the middle tier between the pure tests and the multi-proc
 from __future__ import annotations
 
 import zenoh
-
 from fakes import FakeQuery, FakeSession
+
 from swarm.contracts import wire
 from swarm.contracts.scenario import parse_scenario
 from swarm.world.engine import Engine
@@ -98,8 +98,9 @@ def test_world_latches_owned_commands_and_counts_the_rest():
     assert pending == {1} and world.core.u[1] == 0.3 and world.engine.out[1] == 1
     (switch,) = [e for e in world.engine.events if e["kind"] == "switch"]
     assert (switch["agent"], switch["from"], switch["to"], switch["reason"]) == (2, None, 1, "out-neighbour chosen")
-    world._on_cmd(wire.agent_key(RUN, 1, "cmd"), wire.encode_cmd(wire.Command(1, 0, 0.1, None, "orbit", 0, key1)),
-                  pending)
+    world._on_cmd(
+        wire.agent_key(RUN, 1, "cmd"), wire.encode_cmd(wire.Command(1, 0, 0.1, None, "orbit", 0, key1)), pending
+    )
     assert pending == set()
     world.record_and_step()
     assert world.core.tick == 1 and world.engine.rec.rows == 1
@@ -159,7 +160,9 @@ NEW = {"role": "follower", "x": 1.0, "y": 1.0, "heading": 0.0, "speed": 1.0}
 
 
 def add(world, aid: int, spec: dict | None = None) -> dict:
-    q = FakeQuery(wire.encode_join_request(aid, 100 + aid, "host", spec or NEW), key_expr=wire.agent_key(RUN, aid, "join"))
+    q = FakeQuery(
+        wire.encode_join_request(aid, 100 + aid, "host", spec or NEW), key_expr=wire.agent_key(RUN, aid, "join")
+    )
     world._on_join(q)
     return wire.decode_join_reply(q.replies[0][1])
 
@@ -246,8 +249,9 @@ def test_a_rogues_flood_on_an_agents_key_costs_that_agent_nothing():
     join(world, 1)
     k2 = join(world, 2)
     for _ in range(4 * PER_KEY_MAX):
-        world.enqueue(("cmd", wire.agent_key(RUN, 2, "cmd"),
-                       wire.encode_cmd_fields(2, 0, 5.0, None, "track", None, k2 ^ 1)))
+        world.enqueue(
+            ("cmd", wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd_fields(2, 0, 5.0, None, "track", None, k2 ^ 1))
+        )
     world.enqueue(("cmd", wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd_fields(2, 0, 0.1, None, "track", None, k2)))
     assert world.inbox.qsize() == 1
     pending = {2}
@@ -295,7 +299,8 @@ def test_a_law_from_the_join_reply_is_not_imported_unless_trusted(tmp_path, monk
 
     marker = tmp_path / "imported"
     (tmp_path / "evil_law.py").write_text(
-        f"open({str(marker)!r}, 'w').write('x')\n\ndef law(gi, gj, lam, c1, c2):\n    return 0.0\n")
+        f"open({str(marker)!r}, 'w').write('x')\n\ndef law(gi, gj, lam, c1, c2):\n    return 0.0\n"
+    )
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.delenv("SWARM_TRUSTED_LAWS", raising=False)
     world, _ = open_world()

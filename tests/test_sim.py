@@ -18,11 +18,11 @@ from swarm.world.metrics import agent_metrics, angular_rate, converged, settling
 from swarm.world.recording import write_run
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
-KEYS = {"ids", "role", "speed", "orbit_radius", "target", "dt", "t", "x", "y", "heading", "u",
-        "out", "alive", "missed"}
+KEYS = {"ids", "role", "speed", "orbit_radius", "target", "dt", "t", "x", "y", "heading", "u", "out", "alive", "missed"}
 
 
 # -- engine ---------------------------------------------------------------------------------
+
 
 def test_run_sim_is_deterministic():
     s = load_scenario(SCENARIOS / "case2.toml")
@@ -124,6 +124,7 @@ def test_write_run(tmp_path, base):
 
 # -- world core ---------------------------------------------------------------------------
 
+
 def test_world_sanitises_commands(base):
     base["agents"][1]["max_turn_rate"] = 0.5
     w = WorldCore(parse_scenario(base))
@@ -170,6 +171,7 @@ def test_world_not_joined(base):
 
 
 # -- metrics --------------------------------------------------------------------------------
+
 
 def test_root_of():
     leaders = {1, 6}
@@ -225,11 +227,18 @@ def test_agent_metrics_and_converged():
     radii = np.array([2.0, 4.0, 1.01, 3.0, 3.0])
     x = np.cos(0.5 * t)[:, None] * radii
     y = np.sin(0.5 * t)[:, None] * radii
-    m = agent_metrics(ids=ids, roles=np.array(["leader"] + ["follower"] * 4),
-                      speeds=np.array([1.0, 2.0, 0.5, 1.0, 1.0]),
-                      orbit_radius=np.array([2.0] + [math.nan] * 4), t=t, x=x, y=y,
-                      alive=np.ones((101, 5), dtype=bool), out_final=np.array([-1, 1, 2, 5, 4]),
-                      target=(0.0, 0.0))
+    m = agent_metrics(
+        ids=ids,
+        roles=np.array(["leader"] + ["follower"] * 4),
+        speeds=np.array([1.0, 2.0, 0.5, 1.0, 1.0]),
+        orbit_radius=np.array([2.0] + [math.nan] * 4),
+        t=t,
+        x=x,
+        y=y,
+        alive=np.ones((101, 5), dtype=bool),
+        out_final=np.array([-1, 1, 2, 5, 4]),
+        target=(0.0, 0.0),
+    )
     assert m["1"]["expected_radius"] == 2.0 and m["1"]["radial_error"] == pytest.approx(0.0, abs=1e-12)
     assert m["2"]["expected_radius"] == 4.0 and m["2"]["root"] == 1 and m["2"]["hops"] == 1
     assert m["3"]["expected_radius"] == 1.0 and m["3"]["hops"] == 2
@@ -250,10 +259,18 @@ def test_dead_agents_have_no_root():
     t = np.linspace(0.0, 1.0, 11)
     alive = np.ones((11, 2), dtype=bool)
     alive[-1, 0] = False  # the leader dropped
-    m = agent_metrics(ids=np.array([1, 2]), roles=np.array(["leader", "follower"]),
-                      speeds=np.array([1.0, 1.0]), orbit_radius=np.array([1.0, math.nan]), t=t,
-                      x=np.ones((11, 2)), y=np.zeros((11, 2)), alive=alive,
-                      out_final=np.array([-1, 1]), target=(0.0, 0.0))
+    m = agent_metrics(
+        ids=np.array([1, 2]),
+        roles=np.array(["leader", "follower"]),
+        speeds=np.array([1.0, 1.0]),
+        orbit_radius=np.array([1.0, math.nan]),
+        t=t,
+        x=np.ones((11, 2)),
+        y=np.zeros((11, 2)),
+        alive=alive,
+        out_final=np.array([-1, 1]),
+        target=(0.0, 0.0),
+    )
     assert m["1"]["alive"] is False and m["1"]["root"] is None
     assert m["2"]["root"] is None and m["2"]["out_neighbour"] == 1
     assert not converged(m)

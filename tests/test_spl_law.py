@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from swarm.agents.spl_circle import spl_circle
-from swarm.offline.batch import refusal
 from swarm.contracts.frames import Contact
 from swarm.contracts.observation import Observation
 from swarm.contracts.scenario import load_scenario
+from swarm.offline.batch import refusal
 from swarm.offline.sim import run_sim
 
 SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "spl-splay.toml"
@@ -27,8 +27,26 @@ def _obs(k: int, angles, headings, direction=1, params=PARAMS) -> Observation:
     """Agent k's observation of N agents at `angles` about the target (origin), `headings`."""
     x, y = R * math.cos(angles[k]), R * math.sin(angles[k])
     contacts = tuple(Contact(j, 0.0, headings[j], 1.0) for j in range(len(angles)) if j != k)
-    return Observation(k, "leader", 0, 0.0, 0.05, V, headings[k], None, contacts, None, (-x, -y), R, direction,
-                       1.0, 0.5, params, {}, 0.0)
+    return Observation(
+        k,
+        "leader",
+        0,
+        0.0,
+        0.05,
+        V,
+        headings[k],
+        None,
+        contacts,
+        None,
+        (-x, -y),
+        R,
+        direction,
+        1.0,
+        0.5,
+        params,
+        {},
+        0.0,
+    )
 
 
 @pytest.mark.parametrize("direction", [1, -1], ids=["ccw", "cw"])
@@ -70,8 +88,10 @@ def test_swarm_sim_reaches_the_documented_equilibrium():
     k0 = int(np.searchsorted(t, t[-1] - 10 / (V / R)))  # the last 10 / omega0 s
     theta = np.unwrap(np.arctan2(y[k0:], x[k0:]), axis=0)
     rate = (theta[-1] - theta[0]) / (t[-1] - t[k0])
-    print(f"\n[spl] radius error {np.max(np.abs(r - R)):.2e} m, spacing error "
-          f"{np.max(np.abs(gaps - 2 * math.pi / N)):.2e} rad, rate error {np.max(np.abs(rate - V / R)):.2e} rad/s")
+    print(
+        f"\n[spl] radius error {np.max(np.abs(r - R)):.2e} m, spacing error "
+        f"{np.max(np.abs(gaps - 2 * math.pi / N)):.2e} rad, rate error {np.max(np.abs(rate - V / R)):.2e} rad/s"
+    )
     assert np.max(np.abs(r - R)) < 1e-3 * R  # on the circle of radius R = v / |omega0|
     assert np.max(np.abs(gaps - 2 * math.pi / N)) < 1e-3  # the splay state: 2 pi / N apart
     assert np.max(np.abs(rate - V / R)) < 1e-3  # counter-clockwise at omega0

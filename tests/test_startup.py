@@ -21,10 +21,9 @@ from pathlib import Path
 
 import psutil
 import pytest
+from runtime_helpers import SCENARIOS, Runtime, agent_cmd, live_swarm, short_runtime_dir, swarm_cmd, wait_for
 from typer.testing import CliRunner
 
-from runtime_helpers import (SCENARIOS, Runtime, agent_cmd, live_swarm, short_runtime_dir, swarm_cmd,
-                             wait_for)
 from swarm.contracts.runtime_sweep import sweep_stale
 from swarm.contracts.startup import ENV_READY_FD, READY, Announcer, ReadyWait
 from swarm.contracts.stop_signals import StopSignals
@@ -99,8 +98,14 @@ def test_sweep_removes_only_files_whose_owner_is_gone(tmp_path):
     finally:
         os.close(fd)
     assert removed == {"dead.cred", "dead.sock", "dead.sock.lock", "dead.tls", "orphan.sock.lock"}
-    assert sorted(p.name for p in d.iterdir()) == ["held.sock", "held.sock.lock", "live.cred", "live.sock",
-                                                    "live.sock.lock", "other.txt"]
+    assert sorted(p.name for p in d.iterdir()) == [
+        "held.sock",
+        "held.sock.lock",
+        "live.cred",
+        "live.sock",
+        "live.sock.lock",
+        "other.txt",
+    ]
 
 
 # --- a world process stopped while it starts ---------------------------------------------------------
@@ -110,9 +115,16 @@ def world_process(rt_dir: str, run: str = "st", *extra):
     Killed (its own group) if a test leaves it running."""
     r, w = os.pipe()
     env = {**os.environ, "SWARM_RUNTIME_DIR": rt_dir, ENV_READY_FD: str(w)}
-    p = subprocess.Popen(swarm_cmd("world", SCENARIOS / "case2.toml", "--run", run, *extra), env=env,
-                         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                         pass_fds=(w,), start_new_session=True, cwd=REPO)
+    p = subprocess.Popen(
+        swarm_cmd("world", SCENARIOS / "case2.toml", "--run", run, *extra),
+        env=env,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        pass_fds=(w,),
+        start_new_session=True,
+        cwd=REPO,
+    )
     os.close(w)
     wait = ReadyWait(r)
     try:
@@ -190,8 +202,14 @@ def test_agent_stopped_in_its_first_second_exits():
             assert wait.wait(60)
             endpoint = f"unixsock-stream/{rt}/ag.sock"
             for delay in (0.0, 0.15, 0.3, 0.6, 1.0):
-                a = subprocess.Popen(agent_cmd(1, endpoint, "ag"), env=env, stdin=subprocess.DEVNULL,
-                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+                a = subprocess.Popen(
+                    agent_cmd(1, endpoint, "ag"),
+                    env=env,
+                    stdin=subprocess.DEVNULL,
+                    stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL,
+                    start_new_session=True,
+                )
                 try:
                     time.sleep(delay)
                     a.send_signal(signal.SIGTERM)
@@ -227,10 +245,26 @@ def test_up_waits_for_a_slow_world(tmp_path):
     site.mkdir()
     (site / "sitecustomize.py").write_text(SLOW_WORLD)
     with Runtime(tmp_path) as rt:
-        env = {**rt.env, "SLOW_WORLD_S": "20", "PYTHONPATH": os.pathsep.join(
-            [str(site), rt.env.get("PYTHONPATH", "")]).rstrip(os.pathsep)}
-        up = rt.tracker.spawn(swarm_cmd("up", SCENARIOS / "case2.toml", "--out", tmp_path / "run", "--no-plots",
-                                        "--duration", "1", "--clock", "lockstep"), "up", env=env)
+        env = {
+            **rt.env,
+            "SLOW_WORLD_S": "20",
+            "PYTHONPATH": os.pathsep.join([str(site), rt.env.get("PYTHONPATH", "")]).rstrip(os.pathsep),
+        }
+        up = rt.tracker.spawn(
+            swarm_cmd(
+                "up",
+                SCENARIOS / "case2.toml",
+                "--out",
+                tmp_path / "run",
+                "--no-plots",
+                "--duration",
+                "1",
+                "--clock",
+                "lockstep",
+            ),
+            "up",
+            env=env,
+        )
         code = up.wait(240)
         assert code == 0, up.text()[-3000:]
         assert "cannot reach" not in up.text() and (tmp_path / "run" / "summary.json").exists()
@@ -242,8 +276,12 @@ def test_spawned_agent_logs_in_the_runs_logs(tmp_path):
     refused at once, in one line, nothing started."""
     with live_swarm(tmp_path, SCENARIOS / "case2.toml", 6, "--duration", "600") as state:
         up, tr = state["up"], state["tracker"]
-        sp = tr.spawn(swarm_cmd("spawn", "--id", "7", "--x", "10", "--y", "-5", "--heading", "0", "--speed", "20",
-                                "--follow", "1"), "spawn-7")
+        sp = tr.spawn(
+            swarm_cmd(
+                "spawn", "--id", "7", "--x", "10", "--y", "-5", "--heading", "0", "--speed", "20", "--follow", "1"
+            ),
+            "spawn-7",
+        )
         assert sp.wait(60) == 0, sp.text()
         m = re.search(r"agent 7 is live: pid (\d+) \(log (.+)\)", sp.text())
         assert m, sp.text()

@@ -148,9 +148,15 @@ def test_feasible_follows_the_fewest_hops_advertised():
 def test_nobody_to_steer_by_searches_then_the_brain_tracks():
     from swarm.contracts.scenario import parse_scenario
 
-    sc = parse_scenario({"gains": {"c1": 1.0, "c2": 0.5}, "agents": [
-        {"id": 1, "role": "leader", "x": 0, "y": 0, "heading": 0, "speed": 1, "orbit_radius": 1},
-        {"id": 2, "role": "follower", "x": 5, "y": 0, "heading": 0, "speed": 1}]})
+    sc = parse_scenario(
+        {
+            "gains": {"c1": 1.0, "c2": 0.5},
+            "agents": [
+                {"id": 1, "role": "leader", "x": 0, "y": 0, "heading": 0, "speed": 1, "orbit_radius": 1},
+                {"id": 2, "role": "follower", "x": 5, "y": 0, "heading": 0, "speed": 1},
+            ],
+        }
+    )
     assert sc.sensing.selection == "sticky"  # the default
     b = AgentBrain(sc.agent(2), sc.gains, sc.sensing, 0.01, 2)
     d = b.decide(SensorFrame(0, 0.0, 2, 0.0, (C(3, 1.0, -1),), None))  # 3: a higher id, no path
@@ -164,8 +170,18 @@ def test_nobody_to_steer_by_searches_then_the_brain_tracks():
 # -- properties on abstract swarms ---------------------------------------------------------
 
 
-def _abstract_run(seed: int, n: int, leaders: int, ticks: int, p_sense: float, p_drop: float,
-                  hold: int = HOLD_TICKS, coast: int = 0, reach: float = math.inf, selectors: dict | None = None):
+def _abstract_run(
+    seed: int,
+    n: int,
+    leaders: int,
+    ticks: int,
+    p_sense: float,
+    p_drop: float,
+    hold: int = HOLD_TICKS,
+    coast: int = 0,
+    reach: float = math.inf,
+    selectors: dict | None = None,
+):
     """n Sticky selectors (ids 0..n-1, the first `leaders` are leaders) on random sensing
     graphs that change every tick, with agents dropping out and coming back; hop counts
     relayed with one tick of delay, as the world does. With coast > 0 an out-neighbour out
@@ -204,8 +220,9 @@ def _abstract_run(seed: int, n: int, leaders: int, ticks: int, p_sense: float, p
         for i in range(leaders, n):
             if not alive[i]:
                 continue
-            contacts = tuple(Contact(int(j), 0.0, 0.0, float(dist[i, j]), int(hops[j]))
-                             for j in np.flatnonzero(sensed[i]))
+            contacts = tuple(
+                Contact(int(j), 0.0, 0.0, float(dist[i, j]), int(hops[j])) for j in np.flatnonzero(sensed[i])
+            )
             for c in contacts:
                 seen_hops[(i, c.id)] = c.hops
 
@@ -222,9 +239,16 @@ def _abstract_run(seed: int, n: int, leaders: int, ticks: int, p_sense: float, p
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 14), leaders=st.integers(1, 3),
-       p_sense=st.floats(0.1, 1.0), p_drop=st.sampled_from([0.0, 0.01, 0.05]),
-       hold=st.integers(0, 6), coast=st.integers(0, 6), reach=st.sampled_from([math.inf, 60.0, 100.0]))
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(2, 14),
+    leaders=st.integers(1, 3),
+    p_sense=st.floats(0.1, 1.0),
+    p_drop=st.sampled_from([0.0, 0.01, 0.05]),
+    hold=st.integers(0, 6),
+    coast=st.integers(0, 6),
+    reach=st.sampled_from([math.inf, 60.0, 100.0]),
+)
 def test_no_follower_only_cycle_is_ever_formed(seed, n, leaders, p_sense, p_drop, hold, coast, reach):
     """Every out edge counts: committed, held, coasted, provisional and shadow edges."""
     leaders = min(leaders, n - 1)
@@ -234,9 +258,15 @@ def test_no_follower_only_cycle_is_ever_formed(seed, n, leaders, p_sense, p_drop
 
 
 @settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 14), leaders=st.integers(1, 3),
-       p_sense=st.floats(0.1, 1.0), p_drop=st.sampled_from([0.0, 0.01, 0.05]),
-       hold=st.integers(0, 6), coast=st.integers(0, 6))
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(2, 14),
+    leaders=st.integers(1, 3),
+    p_sense=st.floats(0.1, 1.0),
+    p_drop=st.sampled_from([0.0, 0.01, 0.05]),
+    hold=st.integers(0, 6),
+    coast=st.integers(0, 6),
+)
 def test_each_loss_costs_at_most_loss_changes(seed, n, leaders, p_sense, p_drop, hold, coast):
     """Counted from the outside: from the tick a committed follower loses its out-neighbour
     (its loss count goes up) to the tick it advertises a path again, its out changes at
@@ -275,7 +305,7 @@ def test_without_losses_the_graph_stops_changing(seed, n, leaders):
     leaders = min(leaders, n - 1)
     history = [out for _, out, _ in _abstract_run(seed, n, leaders, 4 * n + 10, 1.0, 0.0)]
     settled = history[2 * n + 1]
-    assert all(out == settled for out in history[2 * n + 1:])
+    assert all(out == settled for out in history[2 * n + 1 :])
     assert analyse(settled, set(range(leaders)))["unrooted"] == []
     for i in range(leaders, n):
         changes = sum(1 for a, b in zip(history, history[1:]) if a[i] != b[i])

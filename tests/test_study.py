@@ -16,8 +16,8 @@ from typer.testing import CliRunner
 
 from swarm.cli.main import app
 from swarm.runtime.procs import Group, wait_until
-from swarm.study.swarms import SwarmSetting, cut_off_at_start, random_swarm, summarise_swarms
 from swarm.study.gains import GainJob, run_gain
+from swarm.study.swarms import SwarmSetting, cut_off_at_start, random_swarm, summarise_swarms
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -33,8 +33,22 @@ def rows(path: Path) -> list[dict]:
 
 @pytest.mark.slow  # a whole run in-process
 def test_swarms_study_compares_rules_on_the_same_swarms(tmp_path):
-    res = invoke("study", "swarms", "--seeds", "2", "--n", "6", "--selection", "sticky,nearest",
-                 "--duration", "20", "-j", "1", "--out", tmp_path / "s")
+    res = invoke(
+        "study",
+        "swarms",
+        "--seeds",
+        "2",
+        "--n",
+        "6",
+        "--selection",
+        "sticky,nearest",
+        "--duration",
+        "20",
+        "-j",
+        "1",
+        "--out",
+        tmp_path / "s",
+    )
     assert res.exit_code == 0, res.output
     runs = rows(tmp_path / "s" / "runs.csv")
     assert len(runs) == 4
@@ -52,8 +66,9 @@ def test_on_a_known_swarm_sticky_settles_where_rooted_chatters_and_nearest_cycle
     from swarm.study.swarms import run_swarm
 
     base = dict(n=10, leaders=2, duration=120.0)
-    sticky, rooted, nearest = (run_swarm((SwarmSetting(selection=r, **base), 0))
-                               for r in ("sticky", "rooted", "nearest"))
+    sticky, rooted, nearest = (
+        run_swarm((SwarmSetting(selection=r, **base), 0)) for r in ("sticky", "rooted", "nearest")
+    )
     assert sticky["converged"] and sticky["unrooted"] == 0 and sticky["switches_max"] <= 2
     assert rooted["switches"] > 10 * max(1, sticky["switches"]) and not rooted["converged"]
     assert nearest["unrooted"] > 0 and not nearest["converged"]
@@ -63,10 +78,25 @@ def test_every_run_counts_and_cut_off_swarms_are_also_shown_apart():
     far = SwarmSetting(n=6, leaders=1, range=1.0)  # nobody senses anybody
     assert cut_off_at_start(random_swarm(far, 0))
     assert not cut_off_at_start(random_swarm(SwarmSetting(n=6, leaders=1), 0))
-    fake = [{**SwarmSetting().__dict__, "seed": k, "converged": k != 1, "cut_off": k > 0, "settling_time": 10.0,
-             "switches": 0, "switches_max": 0, "switch_counts": "0;1", "unrooted": 0, "searching_s": float(k),
-             "searching_max_s": 2.0 * k, "losses": k, "loss_switches_max": k, "wall_s": 0.1}
-            for k in range(3)]
+    fake = [
+        {
+            **SwarmSetting().__dict__,
+            "seed": k,
+            "converged": k != 1,
+            "cut_off": k > 0,
+            "settling_time": 10.0,
+            "switches": 0,
+            "switches_max": 0,
+            "switch_counts": "0;1",
+            "unrooted": 0,
+            "searching_s": float(k),
+            "searching_max_s": 2.0 * k,
+            "losses": k,
+            "loss_switches_max": k,
+            "wall_s": 0.1,
+        }
+        for k in range(3)
+    ]
     (line,) = summarise_swarms(fake)
     assert (line["runs"], line["cut_off"], line["cut_off_converged"], line["converged"]) == (3, 2, 1, 2)
     assert line["converged_fraction"] == 2 / 3  # over every run, cut off or not
@@ -93,29 +123,50 @@ def test_gain_map_batches_give_the_per_agent_rows():
     chunks = gain_chunks(jobs, workers=1)
     assert [len(c) for c in chunks] == [2, 2, 2, 2]  # four chunks per worker
     batched = [row for c in chunks for row in run_gain_chunk(c)]
-    nan_free = [{k: "nan" if isinstance(v, float) and math.isnan(v) else v for k, v in r.items()}
-                for r in batched + [run_gain(j) for j in jobs]]
-    assert nan_free[:len(jobs)] == nan_free[len(jobs):]
+    nan_free = [
+        {k: "nan" if isinstance(v, float) and math.isnan(v) else v for k, v in r.items()}
+        for r in batched + [run_gain(j) for j in jobs]
+    ]
+    assert nan_free[: len(jobs)] == nan_free[len(jobs) :]
     assert any(r["settling_time"] == "nan" for r in nan_free) and any(r["settling_time"] != "nan" for r in nan_free)
 
 
 @pytest.mark.slow  # a whole run in-process
 def test_gains_study_table_and_plot(tmp_path):
-    res = invoke("study", "gains", "--c1", "1", "--c2", "0.5,3", "--ratios", "2", "--starts", "1",
-                 "--duration", "150", "-j", "1", "--out", tmp_path / "g")
+    res = invoke(
+        "study",
+        "gains",
+        "--c1",
+        "1",
+        "--c2",
+        "0.5,3",
+        "--ratios",
+        "2",
+        "--starts",
+        "1",
+        "--duration",
+        "150",
+        "-j",
+        "1",
+        "--out",
+        tmp_path / "g",
+    )
     assert res.exit_code == 0, res.output
     summary = {(float(r["c2"])): r["worst_settling_s"] for r in rows(tmp_path / "g" / "summary.csv")}
     assert math.isfinite(float(summary[0.5])) and math.isnan(float(summary[3.0]))
     assert (tmp_path / "g" / "gains.png").stat().st_size > 1000
 
 
-@pytest.mark.parametrize("args, message", [
-    (["swarms", "--selection", "random"], "--selection: 'random'"),
-    (["swarms", "--speeds", "40,15"], "--speeds"),
-    (["swarms", "--range", "far"], "--range: 'far' is not a number"),
-    (["swarms", "--n", "3", "--leaders", "3"], "--leaders"),
-    (["gains", "--c2", "0,1"], "--c2: '0' must be a positive"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["swarms", "--selection", "random"], "--selection: 'random'"),
+        (["swarms", "--speeds", "40,15"], "--speeds"),
+        (["swarms", "--range", "far"], "--range: 'far' is not a number"),
+        (["swarms", "--n", "3", "--leaders", "3"], "--leaders"),
+        (["gains", "--c2", "0,1"], "--c2: '0' must be a positive"),
+    ],
+)
 def test_bad_options_name_the_option(tmp_path, args, message):
     res = invoke("study", *args, "--out", tmp_path / "x")
     assert res.exit_code == 2
@@ -128,9 +179,30 @@ def test_bad_options_name_the_option(tmp_path, args, message):
 def test_ctrl_c_keeps_finished_rows_and_leaves_no_worker(tmp_path, engine):
     out = tmp_path / "s"
     group = Group(session=True)
-    proc = group.start([sys.executable, "-m", "swarm", "study", "swarms", "--seeds", "60", "--n", "6",
-                        "--duration", "60", "-j", "2", "--out", str(out), engine],
-                       cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    proc = group.start(
+        [
+            sys.executable,
+            "-m",
+            "swarm",
+            "study",
+            "swarms",
+            "--seeds",
+            "60",
+            "--n",
+            "6",
+            "--duration",
+            "60",
+            "-j",
+            "2",
+            "--out",
+            str(out),
+            engine,
+        ],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     try:
         csv_path = out / "runs.csv"
 

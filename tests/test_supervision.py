@@ -14,20 +14,33 @@ import time
 
 import pytest
 import zenoh
-
 from fakes import FakeQuery, FakeSession
+from test_shells import RUN, join, open_world
+
 from swarm.contracts import wire
 from swarm.contracts.lifeline import endpoint_refuses, exit_status
 from swarm.runtime.supervision import agent_exit, cause_of, is_crash, tail
-from test_shells import RUN, join, open_world
 
 # -- classifying an exit ----------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("code, crash", [
-    (1, True), (3, True), (2, True), (-signal.SIGSEGV, True), (-signal.SIGABRT, True),
-    (0, False), (4, False), (5, False), (-signal.SIGKILL, False), (-signal.SIGTERM, False),
-    (128 + signal.SIGTERM, False), (128 + signal.SIGINT, False)])
+@pytest.mark.parametrize(
+    "code, crash",
+    [
+        (1, True),
+        (3, True),
+        (2, True),
+        (-signal.SIGSEGV, True),
+        (-signal.SIGABRT, True),
+        (0, False),
+        (4, False),
+        (5, False),
+        (-signal.SIGKILL, False),
+        (-signal.SIGTERM, False),
+        (128 + signal.SIGTERM, False),
+        (128 + signal.SIGINT, False),
+    ],
+)
 def test_which_exits_are_crashes(code, crash):
     assert is_crash(code) is crash
 
@@ -39,8 +52,10 @@ def test_exit_status_in_words():
 
 def test_report_takes_the_traceback_last_line_as_cause(tmp_path):
     log = tmp_path / "agent-2.log"
-    log.write_text("[agent 2] tick 1: out-neighbour 1 -> 3\nTraceback (most recent call last):\n"
-                   '  File "law.py", line 3, in law\nRuntimeError: the law gave up\n\n')
+    log.write_text(
+        "[agent 2] tick 1: out-neighbour 1 -> 3\nTraceback (most recent call last):\n"
+        '  File "law.py", line 3, in law\nRuntimeError: the law gave up\n\n'
+    )
     r = agent_exit(2, 123, 1, log, before_start=False)
     assert (r.crash, r.cause, r.log[-1]) == (True, "RuntimeError: the law gave up", "RuntimeError: the law gave up")
     assert r.line() == "agent 2 (pid 123) crashed (exit code 1): RuntimeError: the law gave up"
@@ -51,8 +66,10 @@ def test_report_takes_the_traceback_last_line_as_cause(tmp_path):
 
 
 def test_zenoh_source_locations_are_cut_from_the_cause():
-    line = ("swarm world: cannot listen on tcp/127.0.0.1:99999: invalid port value at "
-            "/root/.cargo/git/checkouts/zenoh/io/zenoh-link-commons/src/lib.rs:62.")
+    line = (
+        "swarm world: cannot listen on tcp/127.0.0.1:99999: invalid port value at "
+        "/root/.cargo/git/checkouts/zenoh/io/zenoh-link-commons/src/lib.rs:62."
+    )
     assert cause_of([line], 2) == "swarm world: cannot listen on tcp/127.0.0.1:99999: invalid port value"
 
 
@@ -66,8 +83,15 @@ def test_agent_exit_round_trip_and_limits():
     assert len(req["cause"]) == wire.EXIT_LINE_CHARS and req["log"][-1] == "line 49"
     assert len(req["log"]) == wire.EXIT_LOG_LINES
     good = {"cmd": "agent_exit", "id": 2, "pid": 1, "code": 1, "crash": True, "cause": "c", "log": []}
-    for bad in ({"crash": 1}, {"code": 999}, {"log": "x"}, {"log": [1]}, {"log": ["x" * 501]}, {"id": -1},
-                {"cause": None}):
+    for bad in (
+        {"crash": 1},
+        {"code": 999},
+        {"log": "x"},
+        {"log": [1]},
+        {"log": ["x" * 501]},
+        {"id": -1},
+        {"cause": None},
+    ):
         with pytest.raises(wire.WireError):
             wire.decode_admin(wire.encode_json({**good, **bad}))
     del good["pid"]
@@ -90,8 +114,9 @@ def test_world_records_crash_and_exit_events():
     join(world, 1)
     join(world, 2)
     _leave(world, 2)
-    rep = _admin(world, wire.encode_agent_exit(2, 102, 1, True, "RuntimeError: boom",
-                                               ["Traceback", "RuntimeError: boom"]))
+    rep = _admin(
+        world, wire.encode_agent_exit(2, 102, 1, True, "RuntimeError: boom", ["Traceback", "RuntimeError: boom"])
+    )
     assert rep["ok"]
     _admin(world, wire.encode_agent_exit(1, 101, -9, False, "", []))  # before its token went: kept
     assert [e["kind"] for e in world.engine.events if e["kind"] in ("crash", "exit")] == ["crash"]
@@ -158,16 +183,21 @@ def test_non_finite_law_output_is_counted_and_held(tmp_path, monkeypatch):
         "import math\ncalls = []\n"
         "def law(g_i, g_j, lam, c1, c2):\n"
         "    calls.append(1)\n"
-        "    return math.nan if len(calls) % 2 == 0 else 0.25\n")
+        "    return math.nan if len(calls) % 2 == 0 else 0.25\n"
+    )
     monkeypatch.syspath_prepend(str(tmp_path))
+    from test_shells import SCENARIO
+
     from swarm.agents.brain import AgentBrain
     from swarm.contracts.brain_config import BrainConf
     from swarm.contracts.scenario import parse_scenario
     from swarm.world.engine import Engine
-    from test_shells import SCENARIO
 
-    sc = {**SCENARIO, "gains": {"c1": 1.0, "c2": 0.5, "law": "nanlaw_mod:law"},
-          "agents": [SCENARIO["agents"][0], {**SCENARIO["agents"][1], "max_turn_rate": 0.1}]}
+    sc = {
+        **SCENARIO,
+        "gains": {"c1": 1.0, "c2": 0.5, "law": "nanlaw_mod:law"},
+        "agents": [SCENARIO["agents"][0], {**SCENARIO["agents"][1], "max_turn_rate": 0.1}],
+    }
     s = parse_scenario(sc)
     c = BrainConf.from_scenario(s, 2)
     brain = AgentBrain(c.agent, c.gains, c.sensing, c.dt, c.n_agents)
@@ -178,8 +208,9 @@ def test_non_finite_law_output_is_counted_and_held(tmp_path, monkeypatch):
 
 
 def test_agent_status_carries_the_non_finite_count():
-    from swarm.agents.node import AgentNode
     from test_shells import claim
+
+    from swarm.agents.node import AgentNode
 
     world, _ = open_world()
     ses = FakeSession()

@@ -18,10 +18,17 @@ import socket
 import time
 
 import pytest
-
 from conftest import to_toml
-from runtime_helpers import (SCENARIOS, agent_cmd, events_of, has_started, observe_world, start_ticking, start_up,
-                             swarm_cmd)
+from runtime_helpers import (
+    SCENARIOS,
+    agent_cmd,
+    events_of,
+    has_started,
+    observe_world,
+    start_ticking,
+    start_up,
+    swarm_cmd,
+)
 
 pytestmark = pytest.mark.slow
 
@@ -138,14 +145,34 @@ def test_world_stopped_for_5_s_the_run_goes_on(rt, tmp_path):
 
 def test_agent_gives_up_on_a_silent_world_after_its_grace(rt, tmp_path):
     endpoint, run_id = f"unixsock-stream/{rt.dir}/w.sock", "grace"
-    w = rt.tracker.spawn(swarm_cmd("world", SCENARIOS / "turtlebot.toml", "--listen", endpoint, "--run", run_id,
-                                   "--out", tmp_path / "out", "--no-plots", "--duration", "4000",
-                                   "--join-timeout", "120"), "world")
+    w = rt.tracker.spawn(
+        swarm_cmd(
+            "world",
+            SCENARIOS / "turtlebot.toml",
+            "--listen",
+            endpoint,
+            "--run",
+            run_id,
+            "--out",
+            tmp_path / "out",
+            "--no-plots",
+            "--duration",
+            "4000",
+            "--join-timeout",
+            "120",
+        ),
+        "world",
+    )
     world = observe_world(rt.tracker, w, endpoint, run_id)
-    agents = {i: rt.tracker.spawn(agent_cmd(i, endpoint, run_id) + ["--world-grace", "2"], f"agent-{i}")
-              for i in (1, 2)}
-    world.wait(lambda i: has_started(i) and i["tick"] > 0, 60, "the run to start and tick",
-               check=lambda: w.check_running("the run to start"))
+    agents = {
+        i: rt.tracker.spawn(agent_cmd(i, endpoint, run_id) + ["--world-grace", "2"], f"agent-{i}") for i in (1, 2)
+    }
+    world.wait(
+        lambda i: has_started(i) and i["tick"] > 0,
+        60,
+        "the run to start and tick",
+        check=lambda: w.check_running("the run to start"),
+    )
     world.close()
     t0 = time.monotonic()
     os.kill(w.pid, signal.SIGSTOP)

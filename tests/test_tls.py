@@ -38,15 +38,33 @@ def _config(settings: dict):
 
 
 def open_router(listen: str, extra: dict):
-    return zenoh.open(_config({
-        "mode": "router", "listen/endpoints": [listen], "scouting/multicast/enabled": False,
-        "scouting/delay": 0, "transport/shared_memory/enabled": False, **extra}))
+    return zenoh.open(
+        _config(
+            {
+                "mode": "router",
+                "listen/endpoints": [listen],
+                "scouting/multicast/enabled": False,
+                "scouting/delay": 0,
+                "transport/shared_memory/enabled": False,
+                **extra,
+            }
+        )
+    )
 
 
 def open_client(connect: str, extra: dict, timeout_ms: int = OPEN_MS):
-    return zenoh.open(_config({
-        "mode": "client", "connect/endpoints": [connect], "connect/timeout_ms": timeout_ms,
-        "scouting/multicast/enabled": False, "transport/shared_memory/enabled": False, **extra}))
+    return zenoh.open(
+        _config(
+            {
+                "mode": "client",
+                "connect/endpoints": [connect],
+                "connect/timeout_ms": timeout_ms,
+                "scouting/multicast/enabled": False,
+                "transport/shared_memory/enabled": False,
+                **extra,
+            }
+        )
+    )
 
 
 def assert_refused(connect: str, extra: dict):
@@ -58,8 +76,10 @@ def assert_refused(connect: str, extra: dict):
 @pytest.fixture(scope="module")
 def certs(tmp_path_factory):
     d = tmp_path_factory.mktemp("tls")
-    return (tls.generate_run_certificates(d / "run", RUN, ["127.0.0.1"]),
-            tls.generate_run_certificates(d / "other", "other-run", ["127.0.0.1"]))
+    return (
+        tls.generate_run_certificates(d / "run", RUN, ["127.0.0.1"]),
+        tls.generate_run_certificates(d / "other", "other-run", ["127.0.0.1"]),
+    )
 
 
 @pytest.fixture(scope="module")
@@ -118,7 +138,8 @@ def test_the_hub_certificate_names_every_host_and_is_signed_by_the_run_ca(tmp_pa
     cert.verify_directly_issued_by(ca)
     san = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
     assert set(san.get_values_for_type(x509.IPAddress)) == {
-        ipaddress.ip_address(a) for a in ("192.168.1.20", "fd00::2", "127.0.0.1")}
+        ipaddress.ip_address(a) for a in ("192.168.1.20", "fd00::2", "127.0.0.1")
+    }
     assert set(san.get_values_for_type(x509.DNSName)) == {"hub.lan", "localhost"}
     days = (cert.not_valid_after_utc - cert.not_valid_before_utc).days
     assert 29 <= days <= 31
@@ -196,8 +217,13 @@ def test_username_and_password_over_tls(certs, tmp_path):
     users = tmp_path / "users.txt"
     users.write_text("agent:s3cret\nworld:other\n")
     ep = f"tls/127.0.0.1:{free_port()}"
-    h = open_router(ep, {**tls.hub_tls_settings(files), "transport/auth/usrpwd": {
-        "user": "hub", "password": "hubpw", "dictionary_file": str(users)}})
+    h = open_router(
+        ep,
+        {
+            **tls.hub_tls_settings(files),
+            "transport/auth/usrpwd": {"user": "hub", "password": "hubpw", "dictionary_file": str(users)},
+        },
+    )
     try:
         ca = tls.client_tls_settings(files.ca)
         c = open_client(ep, {**ca, "transport/auth/usrpwd": {"user": "agent", "password": "s3cret"}})

@@ -38,8 +38,9 @@ def _get(q: queue.Queue, timeout: float = 3.0):
 def test_a_command_put_by_the_client_reaches_the_hub(sessions):
     hub, client = sessions
     got: queue.Queue = queue.Queue()
-    sub = hub.declare_subscriber(wire.agent_key(RUN, "*", "cmd"), lambda s: got.put((str(s.key_expr),
-                                                                                     s.payload.to_bytes())))
+    sub = hub.declare_subscriber(
+        wire.agent_key(RUN, "*", "cmd"), lambda s: got.put((str(s.key_expr), s.payload.to_bytes()))
+    )
     try:
         cmd = wire.Command(4, 17, -0.25, 2, "track", 3, 77)
 
@@ -64,9 +65,11 @@ def test_liveliness_token_appears_and_goes(sessions):
     seen: queue.Queue = queue.Queue()
     import zenoh
 
-    sub = hub.liveliness().declare_subscriber(wire.agent_key(RUN, "*", "alive"),
-                                              lambda s: seen.put((wire.agent_of_key(str(s.key_expr)), s.kind)),
-                                              history=True)
+    sub = hub.liveliness().declare_subscriber(
+        wire.agent_key(RUN, "*", "alive"),
+        lambda s: seen.put((wire.agent_of_key(str(s.key_expr)), s.kind)),
+        history=True,
+    )
     try:
         token = client.liveliness().declare_token(wire.agent_key(RUN, 5, "alive"))
         assert _get(seen) == (5, zenoh.SampleKind.PUT)
@@ -79,11 +82,15 @@ def test_liveliness_token_appears_and_goes(sessions):
 def test_status_query_returns_each_agents_own_status(sessions):
     hub, client = sessions
     st = {"id": 3, "role": "follower", "out": 1, "hops": 1, "rooted": True}
-    qa = client.declare_queryable(wire.agent_key(RUN, 3, "status"),
-                                  lambda q: q.reply(wire.agent_key(RUN, 3, "status"), wire.encode_status(st)))
-    liar = client.declare_queryable(wire.agent_key(RUN, 8, "status"),  # answers for another id: skipped
-                                    lambda q: q.reply(wire.agent_key(RUN, 8, "status"), wire.encode_status(st)))
+    qa = client.declare_queryable(
+        wire.agent_key(RUN, 3, "status"), lambda q: q.reply(wire.agent_key(RUN, 3, "status"), wire.encode_status(st))
+    )
+    liar = client.declare_queryable(
+        wire.agent_key(RUN, 8, "status"),  # answers for another id: skipped
+        lambda q: q.reply(wire.agent_key(RUN, 8, "status"), wire.encode_status(st)),
+    )
     try:
+
         def answered():
             got = query_statuses(hub, RUN, timeout=1.0)
             return got if 3 in got else None

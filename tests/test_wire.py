@@ -7,7 +7,6 @@ from __future__ import annotations
 import random
 
 import pytest
-
 from malformed import (
     ADMIN_BAD,
     BAD_JSON,
@@ -22,6 +21,7 @@ from malformed import (
     _sense_bad,
     _truth_bad,
 )
+
 from swarm.contracts import wire
 from swarm.contracts.frames import Contact, SensorFrame
 
@@ -84,8 +84,7 @@ def test_frames_built_pair_by_pair_are_the_matrix_frames(sense_range, fov):
         rows = [k for k in range(n) if present[k]]
         target = (float(rng.uniform(-5, 5)), float(rng.uniform(-5, 5)))
         s, bearing, rngm = sensing_matrix(x, y, g, present, sense_range, fov)
-        want = wire.encode_sense_rows(4, 0.04, rows, ids, g, target[0] - x, target[1] - y, lead, s, bearing,
-                                      rngm, hops)
+        want = wire.encode_sense_rows(4, 0.04, rows, ids, g, target[0] - x, target[1] - y, lead, s, bearing, rngm, hops)
         got = encode_frames_pairwise(4, 0.04, rows, ids, x, y, g, present, lead, target, sense_range, fov, hops)
         assert got == want, seed
 
@@ -143,11 +142,18 @@ DECODERS = {
     "status": (wire.decode_status, BAD_JSON),
     "info": (wire.decode_info, BAD_JSON),
     "admin reply": (wire.decode_admin_reply, BAD_JSON),
-    "join reply": (wire.decode_join_reply, BAD_JSON + [_j({"v": 1, "ok": True}), _j({"v": 1, "ok": True, "key": -1,
-                                                                                      "brain": {}}),
-                                                       _j({"v": 1, "ok": True, "key": 2**64, "brain": {}}),
-                                                       _j({"v": 1, "ok": True, "key": 5, "brain": "x"}),
-                                                       _j({"v": 1, "ok": False}), _j({"v": 1, "ok": "yes"})]),
+    "join reply": (
+        wire.decode_join_reply,
+        BAD_JSON
+        + [
+            _j({"v": 1, "ok": True}),
+            _j({"v": 1, "ok": True, "key": -1, "brain": {}}),
+            _j({"v": 1, "ok": True, "key": 2**64, "brain": {}}),
+            _j({"v": 1, "ok": True, "key": 5, "brain": "x"}),
+            _j({"v": 1, "ok": False}),
+            _j({"v": 1, "ok": "yes"}),
+        ],
+    ),
 }
 
 
@@ -179,9 +185,11 @@ def test_every_malformed_payload_is_a_wire_error(kind):
 @pytest.mark.parametrize("kind", ["cmd", "sense", "truth"])
 def test_broken_binary_messages_are_wire_errors(kind):
     rng = random.Random(kind)
-    make = {"cmd": lambda: _cmd_bad(rng, rng.choice(CASE2_IDS)),
-            "sense": lambda: _sense_bad(rng, rng.choice(CASE2_IDS)),
-            "truth": lambda: _truth_bad(rng)}[kind]
+    make = {
+        "cmd": lambda: _cmd_bad(rng, rng.choice(CASE2_IDS)),
+        "sense": lambda: _sense_bad(rng, rng.choice(CASE2_IDS)),
+        "truth": lambda: _truth_bad(rng),
+    }[kind]
     decode = {"cmd": wire.decode_cmd, "sense": wire.decode_sense, "truth": wire.decode_truth}[kind]
     errors = other = 0
     for _ in range(2000):

@@ -31,8 +31,12 @@ def _open(settings: dict):
     import zenoh
 
     cfg = zenoh.Config()
-    for k, v in {"scouting/multicast/enabled": False, "transport/shared_memory/enabled": False,
-                 "scouting/delay": 0, **settings}.items():
+    for k, v in {
+        "scouting/multicast/enabled": False,
+        "transport/shared_memory/enabled": False,
+        "scouting/delay": 0,
+        **settings,
+    }.items():
         cfg.insert_json5(k, json.dumps(v))
     return zenoh.open(cfg)
 
@@ -54,28 +58,60 @@ def layout(tmp_path):
     (tmp_path / "a.users").write_text("agent-1:a1\n")
     acl = access.access_control(RUN, [1, 2])
     acl["subjects"].append({"id": "host-a", "usernames": ["host-a"]})
-    acl["policies"].append({"rules": [r["id"] for r in access.agent_rules(RUN, 1)] + ["egress"],
-                            "subjects": ["host-a"]})
+    acl["policies"].append(
+        {"rules": [r["id"] for r in access.agent_rules(RUN, 1)] + ["egress"], "subjects": ["host-a"]}
+    )
     sessions = []
     try:
-        hub = _open({"mode": "router", "listen/endpoints": [hub_ep], "access_control": acl,
-                     "transport/auth/usrpwd": {"user": "world", "password": "w",
-                                               "dictionary_file": str(tmp_path / "hub.users")}})
+        hub = _open(
+            {
+                "mode": "router",
+                "listen/endpoints": [hub_ep],
+                "access_control": acl,
+                "transport/auth/usrpwd": {
+                    "user": "world",
+                    "password": "w",
+                    "dictionary_file": str(tmp_path / "hub.users"),
+                },
+            }
+        )
         sessions.append(hub)
         acl_a = access.access_control(RUN, [1])
-        acl_a["rules"].append({"id": "upstream", "permission": "allow", "flows": ["ingress", "egress"],
-                               "messages": access.ALL_MESSAGES, "key_exprs": [f"swarm/{RUN}/**"]})
+        acl_a["rules"].append(
+            {
+                "id": "upstream",
+                "permission": "allow",
+                "flows": ["ingress", "egress"],
+                "messages": access.ALL_MESSAGES,
+                "key_exprs": [f"swarm/{RUN}/**"],
+            }
+        )
         acl_a["subjects"].append({"id": "hub", "zids": [str(hub.info.zid())]})
         acl_a["policies"].append({"rules": ["upstream"], "subjects": ["hub"]})
-        host = _open({"mode": "router", "listen/endpoints": [a_ep], "connect/endpoints": [hub_ep],
-                      "access_control": acl_a,
-                      "transport/auth/usrpwd": {"user": "host-a", "password": "ha",
-                                                "dictionary_file": str(tmp_path / "a.users")}})
+        host = _open(
+            {
+                "mode": "router",
+                "listen/endpoints": [a_ep],
+                "connect/endpoints": [hub_ep],
+                "access_control": acl_a,
+                "transport/auth/usrpwd": {
+                    "user": "host-a",
+                    "password": "ha",
+                    "dictionary_file": str(tmp_path / "a.users"),
+                },
+            }
+        )
         sessions.append(host)
 
         def client(user, password, timeout_ms=3000):
-            s = _open({"mode": "client", "connect/endpoints": [a_ep], "connect/timeout_ms": timeout_ms,
-                       "transport/auth/usrpwd": {"user": user, "password": password}})
+            s = _open(
+                {
+                    "mode": "client",
+                    "connect/endpoints": [a_ep],
+                    "connect/timeout_ms": timeout_ms,
+                    "transport/auth/usrpwd": {"user": user, "password": password},
+                }
+            )
             sessions.append(s)
             return s
 
@@ -128,8 +164,18 @@ def swarm_layout(tmp_path, monkeypatch):
             users = tmp_path / f"{name}.users"
             C.write_private(users, access.host_dictionary(hc.identity(C.agent_user(a)) for a in ids).encode())
             ep = f"unixsock-stream/{tmp_path}/{name}.sock"
-            sessions.append(zenoh.open(T.host_router_config(ep, hub_ep, RUN, hc.identity(C.HOST), users,
-                                                            access.host_router_access(RUN, ids, str(hub.info.zid())))))
+            sessions.append(
+                zenoh.open(
+                    T.host_router_config(
+                        ep,
+                        hub_ep,
+                        RUN,
+                        hc.identity(C.HOST),
+                        users,
+                        access.host_router_access(RUN, ids, str(hub.info.zid())),
+                    )
+                )
+            )
             users.unlink()
             hosts[name] = (ep, hc)
 

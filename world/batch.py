@@ -45,7 +45,7 @@ def sensing_matrices(x, y, heading, sense_range, fov, fov_on):
 class BatchFrames:
     """This tick's frames of every member (the protocol agents/batch.py reads)."""
 
-    def __init__(self, w: "BatchWorld"):
+    def __init__(self, w: BatchWorld):
         self.w = w
         self.heading = w.heading
         self.hops = w.hops.copy()  # what this tick's frames advertise
@@ -70,8 +70,10 @@ class BatchFrames:
             return ()
         x, y, ids, heading, hops = w.x[b], w.y[b], w.ids[b], self.heading[b], self.hops[b]
         bearing = np.arctan2(y[j] - y[i], x[j] - x[i])
-        return tuple(Contact(int(ids[a]), float(bb), float(heading[a]), float(rng_row[a]), int(hops[a]))
-                     for a, bb in zip(j.tolist(), bearing.tolist()))
+        return tuple(
+            Contact(int(ids[a]), float(bb), float(heading[a]), float(rng_row[a]), int(hops[a]))
+            for a, bb in zip(j.tolist(), bearing.tolist())
+        )
 
     def sensed_pairs(self, j: np.ndarray, b=slice(None)) -> np.ndarray:
         """(B, N): agent i senses agent j[b, i] (False where j < 0); with `b`, the

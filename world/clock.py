@@ -40,8 +40,11 @@ class Clock:
         """Answer the pause queries that came during a tick, now that it is done, with the
         clock's state now (a resume in the same tick: paused false), and finish them."""
         for q in self.pause_waiters:
-            answer(q, wire.world_admin_key(self.cfg.run),
-                   wire.encode_admin_reply(True, paused=self.paused, tick=self.core.tick))
+            answer(
+                q,
+                wire.world_admin_key(self.cfg.run),
+                wire.encode_admin_reply(True, paused=self.paused, tick=self.core.tick),
+            )
         self.pause_waiters.clear()
 
     def wait_for_agents(self) -> None:
@@ -54,12 +57,17 @@ class Clock:
                 return
             now = time.monotonic()
             if t_end is not None and now > t_end:
-                raise TimeoutError(f"agents {', '.join(map(str, missing))} did not join within "
-                                   f"{self.cfg.join_timeout} s")
+                raise TimeoutError(
+                    f"agents {', '.join(map(str, missing))} did not join within {self.cfg.join_timeout} s"
+                )
             if self.cfg.progress and now - last_note > 5.0:
                 last_note = now
-                print(f"[world] waiting for agents {', '.join(map(str, missing))}: "
-                      f"swarm agent --id N --connect {self.cfg.listen}", file=sys.stderr, flush=True)
+                print(
+                    f"[world] waiting for agents {', '.join(map(str, missing))}: "
+                    f"swarm agent --id N --connect {self.cfg.listen}",
+                    file=sys.stderr,
+                    flush=True,
+                )
             self.drain(None, 0.1)
 
     def _wait(self, cond, timeout: float) -> bool:
@@ -92,9 +100,12 @@ class Clock:
         late = {aid: n for aid, n in self.late.items() if n}
         if late:
             n = sum(late.values())
-            reasons.insert(0, f"{n} command{'s' if n > 1 else ''} missed the lockstep deadline (agent"
-                              f"{'s' if len(late) > 1 else ''} {', '.join(map(str, sorted(late)))}): "
-                              "the last command was held instead")
+            reasons.insert(
+                0,
+                f"{n} command{'s' if n > 1 else ''} missed the lockstep deadline (agent"
+                f"{'s' if len(late) > 1 else ''} {', '.join(map(str, sorted(late)))}): "
+                "the last command was held instead",
+            )
         if len(self.book) > len(self.cfg.scenario.ids):
             reasons.append(f"{len(self.book) - len(self.cfg.scenario.ids)} agents added at run time")
         return {"reproducible": not reasons, "not_reproducible": reasons}
@@ -146,8 +157,12 @@ class Clock:
         if self.deserted_since is None:
             self.deserted_since = now
             if self.cfg.progress:
-                print(f"[world] no agent left at tick {self.core.tick}; ending the run unless one joins within "
-                      f"{DESERTED_GRACE:g} s", file=sys.stderr, flush=True)
+                print(
+                    f"[world] no agent left at tick {self.core.tick}; ending the run unless one joins within "
+                    f"{DESERTED_GRACE:g} s",
+                    file=sys.stderr,
+                    flush=True,
+                )
         return now - self.deserted_since > DESERTED_GRACE
 
     def lockstep_tick(self) -> None:
@@ -216,16 +231,21 @@ class Clock:
         last_note = time.monotonic()
         t0_ticks = time.monotonic()
         self.wait_for_agents()
-        self.event("start", None, f"all {len(self.book)} agents joined; clock {self.cfg.clock}",
-                   startup_s=time.monotonic() - self.t_start)
+        self.event(
+            "start",
+            None,
+            f"all {len(self.book)} agents joined; clock {self.cfg.clock}",
+            startup_s=time.monotonic() - self.t_start,
+        )
         self.started = True
         t_next = time.monotonic() + period
         t0_ticks = time.monotonic()
         self.trimmer = Trimmer()  # freed native memory back to the system (world/memory.py)
         while self.core.tick < self.ticks:
             if self.deserted():
-                self.event("deserted", None, f"no agent process for {DESERTED_GRACE:g} s of wall time; "
-                                             "the run ends here")
+                self.event(
+                    "deserted", None, f"no agent process for {DESERTED_GRACE:g} s of wall time; the run ends here"
+                )
                 self.wall_ticks = time.monotonic() - t0_ticks
                 return EXIT_DESERTED
             if self.cfg.clock == "lockstep" and self.deserted_since is not None:
@@ -260,7 +280,10 @@ class Clock:
             if self.cfg.progress and now - last_note > 2.0:
                 last_note = now
                 rate = self.core.tick / max(now - t0_ticks, 1e-9)
-                print(f"[world] tick {self.core.tick}/{self.ticks} t={self.core.time:.2f}s {rate:.0f} ticks/s",
-                      file=sys.stderr, flush=True)
+                print(
+                    f"[world] tick {self.core.tick}/{self.ticks} t={self.core.time:.2f}s {rate:.0f} ticks/s",
+                    file=sys.stderr,
+                    flush=True,
+                )
         self.wall_ticks = time.monotonic() - t0_ticks
         return 0

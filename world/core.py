@@ -69,9 +69,22 @@ class WorldCore:
         wanted = self.active_ids() if only is None else only
         receivers = [self.index[i] for i in wanted]
         sens = self.scenario.sensing
-        return build_frames(self.tick, self.time, self.ids, self.x, self.y, self.heading,
-                            self.present_mask(), receivers, self.is_leader, self.target,
-                            sens.range, sens.fov, self.hops, self.sensing())
+        return build_frames(
+            self.tick,
+            self.time,
+            self.ids,
+            self.x,
+            self.y,
+            self.heading,
+            self.present_mask(),
+            receivers,
+            self.is_leader,
+            self.target,
+            sens.range,
+            sens.fov,
+            self.hops,
+            self.sensing(),
+        )
 
     def sensing(self):
         """(S, bearing, range) matrices of the current tick: S[i, j] when i senses j.

@@ -19,8 +19,8 @@ restart or a thaw brings it back (a restart with a fresh brain, a thaw with the 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -35,9 +35,16 @@ LATCHED, LOST, REFUSED = "latched", "lost", "refused"
 
 
 class Engine:
-    def __init__(self, scenario: Scenario, ticks: int, *, joined: bool = True,
-                 wall_clock: Callable[[], float] | None = None,
-                 on_event: Callable[[dict], None] | None = None, recording: Path | None = None):
+    def __init__(
+        self,
+        scenario: Scenario,
+        ticks: int,
+        *,
+        joined: bool = True,
+        wall_clock: Callable[[], float] | None = None,
+        on_event: Callable[[dict], None] | None = None,
+        recording: Path | None = None,
+    ):
         """ticks: steps to record; joined: agents start in the world (sim) or join later
         (the world process); wall_clock: stamps events with `wall_time`; on_event: told of
         every event as it happens (the world publishes and prints them); recording: the
@@ -154,8 +161,9 @@ class Engine:
         new = -1 if out is None else out
         if new != self.out[k] and not self.core.is_leader[k]:
             old = None if self.out[k] < 0 else int(self.out[k])
-            self.event("switch", agent, self.core.switch_reason(agent, old, out, self.hops_sent),
-                       **{"from": old, "to": out})
+            self.event(
+                "switch", agent, self.core.switch_reason(agent, old, out, self.hops_sent), **{"from": old, "to": out}
+            )
         self.out[k] = new
         return LATCHED
 
@@ -180,8 +188,7 @@ class Engine:
         """Record the final state (no command: u is NaN), once."""
         c = self.core
         if c.tick <= self.ticks and self.rec.rows <= c.tick:
-            self.rec.record(c.tick, c.time, c.x, c.y, c.heading, np.full(len(c.ids), np.nan),
-                            self.out, c.alive_mask())
+            self.rec.record(c.tick, c.time, c.x, c.y, c.heading, np.full(len(c.ids), np.nan), self.out, c.alive_mask())
 
     def result(self, extra: dict, agent_extra: dict | None = None) -> RunResult:
         return RunResult(self.core.scenario, self.rec, self.events, extra, agent_extra or {})

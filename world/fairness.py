@@ -70,8 +70,14 @@ class Fairness:
                 b.flooded += n
             if key not in fair.noted:
                 fair.noted.add(key)
-                self.event("limit", aid, f"more than {PER_KEY_MAX} messages waiting on {key} (or {INBOX_MAX} in "
-                                         "all): its messages dropped, no one else's", limit="inbox", key=key)
+                self.event(
+                    "limit",
+                    aid,
+                    f"more than {PER_KEY_MAX} messages waiting on {key} (or {INBOX_MAX} in "
+                    "all): its messages dropped, no one else's",
+                    limit="inbox",
+                    key=key,
+                )
 
     @property
     def fair(self) -> _Fair:
@@ -128,8 +134,12 @@ class Fairness:
         if b is None or b.key is None or cmd.key == b.key:
             return False
         k = core.index.get(aid)
-        if (cmd.out is not None and (cmd.out == aid or cmd.out not in core.index)) or k is None \
-                or core.state[k] != ACTIVE or cmd.tick > core.tick:
+        if (
+            (cmd.out is not None and (cmd.out == aid or cmd.out not in core.index))
+            or k is None
+            or core.state[k] != ACTIVE
+            or cmd.tick > core.tick
+        ):
             return False  # garbage or ignored, as the main thread says (world/inbox.py, _on_cmd)
         with self.fair.lock:
             self.fair.rogue[aid] = self.fair.rogue.get(aid, 0) + 1

@@ -30,7 +30,9 @@ class FaultPlan:
         self.dt = dt
         self.faults = list(faults)
         self.tick_of = [int(round(f.at / dt)) for f in self.faults]
-        self.end_of = [t + (int(round(f.duration / dt)) if f.duration else 0) for t, f in zip(self.tick_of, self.faults)]
+        self.end_of = [
+            t + (int(round(f.duration / dt)) if f.duration else 0) for t, f in zip(self.tick_of, self.faults)
+        ]
         self.seed = seed
         self.history: dict[int, deque] = {}  # agent -> recent frames (delay)
         self.lost_sense = 0
@@ -65,8 +67,10 @@ class FaultPlan:
     def sense(self, frame: SensorFrame) -> SensorFrame | None:
         """The frame as the agent receives it at this tick, or None when it is lost."""
         tick, agent = frame.tick, frame.agent
-        hist = self.history.setdefault(agent, deque(maxlen=1 + max(
-            (int(round(f.delay / self.dt)) for f in self.faults if f.kind == "delay"), default=0)))
+        hist = self.history.setdefault(
+            agent,
+            deque(maxlen=1 + max((int(round(f.delay / self.dt)) for f in self.faults if f.kind == "delay"), default=0)),
+        )
         hist.append(frame)
         for f in self._active(tick, agent, "delay"):
             lag = int(round(f.delay / self.dt))
@@ -80,9 +84,11 @@ class FaultPlan:
             e = self._rng(tick, agent, _NOISE).normal(0.0, f.std, size=2 * n + 1)
             frame = frame._replace(
                 heading=frame.heading + float(e[0]),
-                contacts=tuple(c._replace(bearing=c.bearing + float(e[1 + 2 * j]),
-                                          heading=c.heading + float(e[2 + 2 * j]))
-                               for j, c in enumerate(frame.contacts)))
+                contacts=tuple(
+                    c._replace(bearing=c.bearing + float(e[1 + 2 * j]), heading=c.heading + float(e[2 + 2 * j]))
+                    for j, c in enumerate(frame.contacts)
+                ),
+            )
         return frame
 
     def command_lost(self, tick: int, agent: int) -> bool:
@@ -95,11 +101,11 @@ class FaultPlan:
 
     def active_at(self, tick: int) -> bool:
         """Some network fault is in force at this tick."""
-        return any(t0 <= tick < t1 for t0, t1, f in zip(self.tick_of, self.end_of, self.faults)
-                   if f.kind not in PROCESS_FAULTS)
+        return any(
+            t0 <= tick < t1 for t0, t1, f in zip(self.tick_of, self.end_of, self.faults) if f.kind not in PROCESS_FAULTS
+        )
 
 
 def fault_event(index: int, f: FaultSpec) -> dict:
     """The `fault` event of the summary for fault `index`."""
     return {"index": index, **{k: v for k, v in f.model_dump().items() if v is not None}}
-

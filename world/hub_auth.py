@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import os
 import shutil
-from dataclasses import replace
 import sys
+from dataclasses import replace
 
 from swarm.contracts import credentials
 from swarm.contracts.identities import ENV_SUPERVISOR, CredentialsError
@@ -41,17 +41,26 @@ def run_auth(run: str, listen: str, scenario: Scenario) -> HubAuth | None:
     open_hub = open_hub_requested()
     added = scenario.added_id_range
     # local processes dial the endpoint as written in the file (a wildcard as 127.0.0.1)
-    creds = credentials.new_credentials(run, dial_endpoint(listen), pid=os.getpid(), tls_ca=ca,
-                                        hub_is_open=open_hub, ids=tuple(scenario.ids),
-                                        added_ids=(added.start, added.stop - 1))
+    creds = credentials.new_credentials(
+        run,
+        dial_endpoint(listen),
+        pid=os.getpid(),
+        tls_ca=ca,
+        hub_is_open=open_hub,
+        ids=tuple(scenario.ids),
+        added_ids=(added.start, added.stop - 1),
+    )
     if old is not None and old.secret is not None:
         # The file of a world of this run that died (killed: it had no time to remove it):
         # its secret is kept, so that agents waiting for the world (--wait-world) get back in.
         creds = replace(creds, secret=old.secret)
     credentials.write(creds, path)
     if open_hub:
-        print("swarm world: SWARM_OPEN_HUB is set: anyone who reaches the endpoint can act on this run",
-              file=sys.stderr, flush=True)
+        print(
+            "swarm world: SWARM_OPEN_HUB is set: anyone who reaches the endpoint can act on this run",
+            file=sys.stderr,
+            flush=True,
+        )
         return None
     # The launcher's own password (swarm/contracts/access.py, `supervisor`): taken out of the
     # environment at once; a world started by hand has no supervisor.

@@ -148,8 +148,14 @@ class Inbox(Fairness, Reports):
                 return
             b.claim_until = 0.0  # the key stays: a thawed process rejoins with the claim it had
             b.last_cmd_tick = self.core.tick - 1
-            self.engine.join(aid, f"liveliness token appeared (pid {b.pid} on {b.host})", b.joins > 0,
-                             quiet=self._churn_quiet(aid), pid=b.pid, host=b.host)
+            self.engine.join(
+                aid,
+                f"liveliness token appeared (pid {b.pid} on {b.host})",
+                b.joins > 0,
+                quiet=self._churn_quiet(aid),
+                pid=b.pid,
+                host=b.host,
+            )
             b.joins += 1
             self.unscripted(aid, "joined")
         elif self.core.state[k] == ACTIVE and time.monotonic() - self.stall_seen < REJOIN_WAIT:
@@ -164,8 +170,12 @@ class Inbox(Fairness, Reports):
         LINK_GRACE s to come back (a link lease run out under load; an agent host's link)
         before the agent is dropped; the launcher's exit report of its process drops it at
         once (`_on_agent_exit`). The clock waits for it meanwhile."""
-        return (self.cfg.clock == "lockstep" and self.started and aid != self.carrying
-                and aid not in (self.exit_reports or {}))  # its exit was reported first: no link to wait for
+        return (
+            self.cfg.clock == "lockstep"
+            and self.started
+            and aid != self.carrying
+            and aid not in (self.exit_reports or {})
+        )  # its exit was reported first: no link to wait for
 
     def _churn_quiet(self, aid: int) -> bool:
         """One more join, rejoin or drop of `aid`: True when it is past CHURN_EVENTS (counted,
@@ -175,8 +185,13 @@ class Inbox(Fairness, Reports):
         if b.churn <= CHURN_EVENTS:
             return False
         if b.churn == CHURN_EVENTS + 1:
-            self.event("limit", aid, f"more than {CHURN_EVENTS} joins and drops: later ones are counted "
-                                     "(churn_events_unwritten), not written", limit="churn")
+            self.event(
+                "limit",
+                aid,
+                f"more than {CHURN_EVENTS} joins and drops: later ones are counted "
+                "(churn_events_unwritten), not written",
+                limit="churn",
+            )
         b.churn_unwritten += 1
         self.over_limit["churn"] = self.over_limit.get("churn", 0) + 1
         return True
@@ -207,19 +222,36 @@ class Inbox(Fairness, Reports):
 
     def info(self, sensing: bool = False) -> dict:
         """The world's view of the run, for the CLI (`swarm agents`, `graph`, `watch`)."""
-        return run_info(self.engine, self.book, {
-            "run": self.cfg.run, "scenario": self.core.scenario.name, "clock": self.cfg.clock,
-            "paused": self.paused, "endpoint": self.cfg.listen, "pid": os.getpid(), "host": socket.gethostname(),
-            "ticks": self.ticks, "started": self.started, "garbage": self.garbage, "ignored": self.ignored,
-            "over_limit": self.over_limit, "added_ids": [self.cfg.scenario.added_id_range.start,
-                                                         self.cfg.scenario.added_id_range.stop - 1],
-            "max_added": self.cfg.scenario.added_agents_cap, "added": len(self.book) - len(self.cfg.scenario.ids)},
-            sensing)
+        return run_info(
+            self.engine,
+            self.book,
+            {
+                "run": self.cfg.run,
+                "scenario": self.core.scenario.name,
+                "clock": self.cfg.clock,
+                "paused": self.paused,
+                "endpoint": self.cfg.listen,
+                "pid": os.getpid(),
+                "host": socket.gethostname(),
+                "ticks": self.ticks,
+                "started": self.started,
+                "garbage": self.garbage,
+                "ignored": self.ignored,
+                "over_limit": self.over_limit,
+                "added_ids": [self.cfg.scenario.added_id_range.start, self.cfg.scenario.added_id_range.stop - 1],
+                "max_added": self.cfg.scenario.added_agents_cap,
+                "added": len(self.book) - len(self.cfg.scenario.ids),
+            },
+            sensing,
+        )
 
     def _on_info(self, query) -> None:
         params = str(query.parameters) if query.parameters is not None else ""
-        sensing = any(p.split("=", 1)[0] == "sensing" and p.split("=", 1)[-1] not in ("0", "false")
-                      for p in params.split(";") if p)
+        sensing = any(
+            p.split("=", 1)[0] == "sensing" and p.split("=", 1)[-1] not in ("0", "false")
+            for p in params.split(";")
+            if p
+        )
         answer(query, wire.world_info_key(self.cfg.run), wire.encode_info(self.info(sensing)))
 
     def _on_admin(self, query) -> None:

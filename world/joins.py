@@ -52,14 +52,18 @@ class Joins:
         if kid is None or (kid not in self.book and kid not in self.cfg.scenario.added_id_range):
             kid = None
         if kid not in self.join_buckets:
-            self.join_buckets[kid] = (TokenBucket(JOIN_RATE, JOIN_BURST) if kid is not None
-                                      else TokenBucket(STRANGER_RATE, STRANGER_BURST))
+            self.join_buckets[kid] = (
+                TokenBucket(JOIN_RATE, JOIN_BURST) if kid is not None else TokenBucket(STRANGER_RATE, STRANGER_BURST)
+            )
         return self.join_buckets[kid].take(time.monotonic())
 
     def _on_join(self, query) -> None:
         if not self._join_allowed(str(query.key_expr)):
-            self.limited("join_rate", f"join claims faster than {JOIN_BURST} at once and {JOIN_RATE:g} per s "
-                         "on one agent's key: claim refused")
+            self.limited(
+                "join_rate",
+                f"join claims faster than {JOIN_BURST} at once and {JOIN_RATE:g} per s "
+                "on one agent's key: claim refused",
+            )
             answer(query, str(query.key_expr), wire.encode_join_reply(False, error="too many join claims; retry later"))
             return
         try:
@@ -69,17 +73,27 @@ class Joins:
                 raise wire.WireError(f"a claim of agent {aid} on another agent's join key")
             if aid not in self.core.index:
                 if req.get("spec") is None:
-                    raise wire.WireError(f"agent {aid} is not in scenario {self.cfg.scenario.name!r} "
-                                         f"(ids: {', '.join(map(str, self.core.scenario.ids))}); "
-                                         "a new agent needs a spec (swarm spawn --role --x --y ...)")
+                    raise wire.WireError(
+                        f"agent {aid} is not in scenario {self.cfg.scenario.name!r} "
+                        f"(ids: {', '.join(map(str, self.core.scenario.ids))}); "
+                        "a new agent needs a spec (swarm spawn --role --x --y ...)"
+                    )
                 self._check_addable(aid)
                 self.add_agent(aid, req["spec"])
             key = admit(self.core, self.book[aid], req, time.monotonic())
             x, y, h = self.core.pose(aid)
             conf = BrainConf.from_scenario(self.core.scenario, aid)
-            reply = wire.encode_join_reply(True, run=self.cfg.run, agent=aid, tick=self.core.tick, key=key,
-                                           clock=self.cfg.clock, pose=[x, y, h], brain=conf.to_json(),
-                                           own_laws=conf.law != LawConf())
+            reply = wire.encode_join_reply(
+                True,
+                run=self.cfg.run,
+                agent=aid,
+                tick=self.core.tick,
+                key=key,
+                clock=self.cfg.clock,
+                pose=[x, y, h],
+                brain=conf.to_json(),
+                own_laws=conf.law != LawConf(),
+            )
         except wire.WireError as e:
             reply = wire.encode_join_reply(False, error=str(e))
         answer(query, str(query.key_expr), reply)
@@ -89,10 +103,12 @@ class Joins:
         only as many join the run as the scenario allows (run.max_added_agents)."""
         s = self.cfg.scenario
         if len(self.book) - len(s.ids) >= s.added_agents_cap:
-            self.limited("added_agents", f"{s.added_agents_cap} agents added already (run.max_added_agents): "
-                         f"agent {aid} refused")
-            raise wire.WireError(f"agent {aid}: this run has added {s.added_agents_cap} agents already, "
-                                 "its limit (run.max_added_agents)")
+            self.limited(
+                "added_agents", f"{s.added_agents_cap} agents added already (run.max_added_agents): agent {aid} refused"
+            )
+            raise wire.WireError(
+                f"agent {aid}: this run has added {s.added_agents_cap} agents already, its limit (run.max_added_agents)"
+            )
         ids = s.added_id_range
         if aid not in ids:
             raise wire.WireError(f"agent {aid}: agents added to this run take ids {ids.start}..{ids.stop - 1}")
@@ -102,6 +118,5 @@ class Joins:
         a = new_agent_spec(aid, spec, self.core)
         self.engine.add_agent(a)
         self.book[aid] = AgentBook()
-        self.sense_pub[aid] = self.session.declare_publisher(wire.agent_key(self.cfg.run, aid, "sense"),
-                                                             express=True)
+        self.sense_pub[aid] = self.session.declare_publisher(wire.agent_key(self.cfg.run, aid, "sense"), express=True)
         self.event("add", aid, f"new {a.role} at ({a.x:g}, {a.y:g}) m, {a.speed:g} m/s")

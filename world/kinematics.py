@@ -38,8 +38,9 @@ def step(x, y, heading, speed, turn_rate, dt: float):
     return x + chord * np.cos(mid), y + chord * np.sin(mid), wrap(heading + 2.0 * half)
 
 
-def step_one(x: float, y: float, heading: float, speed: float, turn_rate: float,
-             dt: float) -> tuple[float, float, float]:
+def step_one(
+    x: float, y: float, heading: float, speed: float, turn_rate: float, dt: float
+) -> tuple[float, float, float]:
     """`step` for one agent on Python floats, with the same bits (NaN where `step` gives NaN:
     a turn rate so large that the angles overflow, where math's functions would raise)."""
     half = 0.5 * turn_rate * dt

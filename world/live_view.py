@@ -37,8 +37,9 @@ def serve(ctx, name: str, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT):
     try:
         return foxglove.start_server(name=name, host=host, port=port, context=ctx, channel_filter=_serve)
     except Exception as e:  # foxglove reports a bind failure as RuntimeError
-        why = re.sub(r" \(os error \d+\)$", "", str(e).removeprefix("FoxgloveError: ")
-                     .removeprefix("Failed to bind port: "))  # as `swarm up`'s own check says it
+        why = re.sub(
+            r" \(os error \d+\)$", "", str(e).removeprefix("FoxgloveError: ").removeprefix("Failed to bind port: ")
+        )  # as `swarm up`'s own check says it
         raise LiveViewError(f"--foxglove: cannot serve on {host}:{port}: {why}") from None
 
 
@@ -53,5 +54,7 @@ def live_url(host: str, port: int) -> str:
 
 def open_hint(host: str, port: int) -> str:
     """The line to print: where to point the Foxglove app."""
-    return (f"live view: {live_url(host, port)}  (Foxglove: Open connection > Foxglove WebSocket; "
-            "layout: docs/foxglove-layout.json)")
+    return (
+        f"live view: {live_url(host, port)}  (Foxglove: Open connection > Foxglove WebSocket; "
+        "layout: docs/foxglove-layout.json)"
+    )

@@ -55,8 +55,10 @@ def run_world(cfg: WorldConfig) -> int:
                 sweep_stale(runtime_dir())  # files of worlds that were killed (their pid is gone)
                 cfg.auth = run_auth(cfg.run, cfg.listen, cfg.scenario)
         except (CredentialsError, OSError) as e:
-            print(f"swarm world: {e if isinstance(e, CredentialsError) else f'cannot write the run credentials: {e}'}",
-                  file=sys.stderr)
+            print(
+                f"swarm world: {e if isinstance(e, CredentialsError) else f'cannot write the run credentials: {e}'}",
+                file=sys.stderr,
+            )
             return 2
         return _run_world(cfg, stops, tell)
     except Stop as s:  # before the world listened: nothing recorded
@@ -168,7 +170,10 @@ def _serve(world: World, cfg: WorldConfig, live, stops: StopSignals, tell: Annou
         import traceback
 
         traceback.print_exc()
-        print(f"swarm world: internal error writing the results; recording.mcap in {cfg.out_dir} "
-              "keeps the run (swarm export)", file=sys.stderr)
+        print(
+            f"swarm world: internal error writing the results; recording.mcap in {cfg.out_dir} "
+            "keeps the run (swarm export)",
+            file=sys.stderr,
+        )
         code = 1
     return code

@@ -66,15 +66,17 @@ def angular_rate(t: np.ndarray, x: np.ndarray, y: np.ndarray, target, window: fl
     return float((theta[-1] - theta[0]) / (t[-1] - t[k0]))
 
 
-def agent_metrics(*, ids, roles, speeds, orbit_radius, t, x, y, alive, out_final, target,
-                  window: float | None = None, switches=None) -> dict[str, dict]:
+def agent_metrics(
+    *, ids, roles, speeds, orbit_radius, t, x, y, alive, out_final, target, window: float | None = None, switches=None
+) -> dict[str, dict]:
     """Per-agent metrics keyed by str(id), as written to summary.json.
 
     switches: (N,) switch counts (see `switch_ticks`), or None to leave them out."""
     leaders = {int(i) for i, r in zip(ids, roles) if r == "leader"}
     alive_final = {int(i): bool(alive[-1, k]) for k, i in enumerate(ids)}
-    out = {int(i): (None if not alive_final[int(i)] or out_final[k] < 0 else int(out_final[k]))
-           for k, i in enumerate(ids)}
+    out = {
+        int(i): (None if not alive_final[int(i)] or out_final[k] < 0 else int(out_final[k])) for k, i in enumerate(ids)
+    }
     # Dead leaders do not root anybody.
     live_leaders = {i for i in leaders if alive_final[i]}
     col = {int(i): k for k, i in enumerate(ids)}
@@ -117,9 +119,7 @@ def _finite_or_none(v: float) -> float | None:
 def converged(agents: dict[str, dict], tol: float = CONVERGED_TOL) -> bool:
     """Every live agent has a root and ends within tol * R_i of its expected radius."""
     live = [a for a in agents.values() if a["alive"]]
-    return bool(live) and all(
-        a["relative_error"] is not None and a["relative_error"] < tol for a in live
-    )
+    return bool(live) and all(a["relative_error"] is not None and a["relative_error"] < tol for a in live)
 
 
 def relative_errors(*, ids, roles, speeds, orbit_radius, x, y, alive, out, target) -> np.ndarray:
@@ -148,8 +148,14 @@ def relative_errors(*, ids, roles, speeds, orbit_radius, x, y, alive, out, targe
     return err
 
 
-def recovery(faults: list[dict], t: np.ndarray, err: np.ndarray, missed: np.ndarray, events: list[dict],
-             band: float = SETTLING_BAND) -> list[dict]:
+def recovery(
+    faults: list[dict],
+    t: np.ndarray,
+    err: np.ndarray,
+    missed: np.ndarray,
+    events: list[dict],
+    band: float = SETTLING_BAND,
+) -> list[dict]:
     """Per scripted fault (dicts with at, kind, agent...): the time from the fault until every
     live agent's radial error is back inside the band for good (up to the next fault, or the
     end), the worst relative error meanwhile, commands missed and neighbour switches."""
@@ -170,13 +176,15 @@ def recovery(faults: list[dict], t: np.ndarray, err: np.ndarray, missed: np.ndar
         else:
             rec_time = float((bad[-1] + 1) * dt) if len(bad) else 0.0
         finite = worst_row[np.isfinite(worst_row)] if len(window) else np.array([])
-        out.append({
-            **f,
-            "tick": k0,
-            "window_end_time": float(t[k1 - 1]) if k1 > k0 else None,
-            "recovery_time": rec_time,
-            "worst_relative_error": float(finite.max()) if finite.size else None,
-            "commands_missed": int(missed[k0:k1].sum()),
-            "switches": sum(1 for e in events if e.get("kind") == "switch" and k0 <= e.get("tick", -1) < k1),
-        })
+        out.append(
+            {
+                **f,
+                "tick": k0,
+                "window_end_time": float(t[k1 - 1]) if k1 > k0 else None,
+                "recovery_time": rec_time,
+                "worst_relative_error": float(finite.max()) if finite.size else None,
+                "commands_missed": int(missed[k0:k1].sum()),
+                "switches": sum(1 for e in events if e.get("kind") == "switch" and k0 <= e.get("tick", -1) < k1),
+            }
+        )
     return out

@@ -71,8 +71,9 @@ class World(Inbox, Joins, Clock):
             except OSError as e:
                 raise RecordingError(f"cannot create {self.cfg.out_dir}: {e.strerror or e}") from None
             recording = self.cfg.out_dir / RECORDING_FILE
-        self.engine = Engine(s, self.ticks, joined=False, wall_clock=time.time, on_event=self._announce,
-                             recording=recording)
+        self.engine = Engine(
+            s, self.ticks, joined=False, wall_clock=time.time, on_event=self._announce, recording=recording
+        )
         self.engine.rec = DeferredRecorder(self.engine.rec)  # written while the agents think (publish_frames)
         self.core = self.engine.core
         self.book = {i: AgentBook() for i in s.ids}
@@ -109,18 +110,22 @@ class World(Inbox, Joins, Clock):
         run = self.cfg.run
         put = self.enqueue
         self._subs = [
-            ses.declare_subscriber(wire.agent_key(run, "*", "cmd"),
-                                   lambda s: put(("cmd", str(s.key_expr), s.payload.to_bytes()))),
-            ses.liveliness().declare_subscriber(wire.agent_key(run, "*", "alive"),
-                                                lambda s: put(("alive", str(s.key_expr), s.kind), False),
-                                                history=True),
+            ses.declare_subscriber(
+                wire.agent_key(run, "*", "cmd"), lambda s: put(("cmd", str(s.key_expr), s.payload.to_bytes()))
+            ),
+            ses.liveliness().declare_subscriber(
+                wire.agent_key(run, "*", "alive"),
+                lambda s: put(("alive", str(s.key_expr), s.kind), False),
+                history=True,
+            ),
             ses.declare_queryable(wire.agent_key(run, "*", "join"), lambda q: put(("join", q))),
             ses.declare_queryable(wire.world_info_key(run), lambda q: put(("info", q))),
             ses.declare_queryable(wire.world_admin_key(run), lambda q: put(("admin", q))),
             ses.declare_queryable(wire.world_supervise_key(run), lambda q: put(("supervise", q), False)),
         ]
-        self.sense_pub = {i: ses.declare_publisher(wire.agent_key(run, i, "sense"), express=True)
-                          for i in self.cfg.scenario.ids}
+        self.sense_pub = {
+            i: ses.declare_publisher(wire.agent_key(run, i, "sense"), express=True) for i in self.cfg.scenario.ids
+        }
         self.truth_pub = ses.declare_publisher(wire.truth_key(run))
         self.events_pub = ses.declare_publisher(wire.events_key(run))
         self.control_pub = ses.declare_publisher(wire.world_control_key(run))
@@ -152,8 +157,11 @@ class World(Inbox, Joins, Clock):
         except Exception:
             pass
         if self.cfg.progress:
-            print(f"[world] t={self.core.time:8.2f}s tick {self.core.tick}: {kind} agent {agent}: {reason}",
-                  file=sys.stderr, flush=True)
+            print(
+                f"[world] t={self.core.time:8.2f}s tick {self.core.tick}: {kind} agent {agent}: {reason}",
+                file=sys.stderr,
+                flush=True,
+            )
 
     def publish_frames(self) -> set[int]:
         """Send every active agent its frame of this tick (the same numbers as WorldCore.frames)."""
@@ -173,13 +181,27 @@ class World(Inbox, Joins, Clock):
         rows = [c.index[aid] for aid in active]
         if len(c.ids) <= FRAMES_PAIRWISE:
             sens = c.scenario.sensing
-            frames = encode_frames_pairwise(c.tick, c.time, rows, c.ids, c.x, c.y, c.heading, c.present_mask(),
-                                            c.is_leader, c.target, sens.range, sens.fov, c.hops)
+            frames = encode_frames_pairwise(
+                c.tick,
+                c.time,
+                rows,
+                c.ids,
+                c.x,
+                c.y,
+                c.heading,
+                c.present_mask(),
+                c.is_leader,
+                c.target,
+                sens.range,
+                sens.fov,
+                c.hops,
+            )
         else:
             sensed, bearing, rng = c.sensing()
             tx, ty = c.target
-            frames = wire.encode_sense_rows(c.tick, c.time, rows, c.ids, c.heading, tx - c.x, ty - c.y,
-                                            c.is_leader, sensed, bearing, rng, c.hops)
+            frames = wire.encode_sense_rows(
+                c.tick, c.time, rows, c.ids, c.heading, tx - c.x, ty - c.y, c.is_leader, sensed, bearing, rng, c.hops
+            )
         pubs = self.sense_pub
         for aid, frame in zip(active, frames):
             pubs[aid].put(frame)
@@ -208,8 +230,9 @@ class World(Inbox, Joins, Clock):
         c = self.core
         self.truth_sent = now
         try:
-            self.truth_pub.put(wire.encode_truth(c.tick, c.time, c.ids, c.x, c.y, c.heading,
-                                                 u, self.engine.out, c.state))
+            self.truth_pub.put(
+                wire.encode_truth(c.tick, c.time, c.ids, c.x, c.y, c.heading, u, self.engine.out, c.state)
+            )
         except Exception:  # an observer's problem never stops the world
             pass
 
@@ -221,8 +244,7 @@ class World(Inbox, Joins, Clock):
         try:
             for aid, st in query_statuses(self.session, self.cfg.run, timeout).items():
                 if aid in self.book:
-                    reports[aid] = {k: st[k] for k in wire.STATUS_COUNTERS
-                                    if type(st.get(k)) is int and st[k] >= 0}
+                    reports[aid] = {k: st[k] for k in wire.STATUS_COUNTERS if type(st.get(k)) is int and st[k] >= 0}
         except Exception:  # the summary is written whatever the agents do
             pass
         return reports
@@ -246,15 +268,29 @@ class World(Inbox, Joins, Clock):
         if self.cfg.out_dir is None:
             return None
         own = self.agent_reports()
-        agent_extra = {str(aid): agent_figures(b, c.tick, self.cfg.clock == "realtime", **own.get(aid, {}))
-                       for aid, b in self.book.items()}
+        agent_extra = {
+            str(aid): agent_figures(b, c.tick, self.cfg.clock == "realtime", **own.get(aid, {}))
+            for aid, b in self.book.items()
+        }
         wall = getattr(self, "wall_ticks", None)
-        result = self.engine.result({
-            "engine": "up", "run": self.cfg.run, "endpoint": self.cfg.listen, "clock": self.cfg.clock,
-            "time_scale": self.cfg.time_scale, "completed": self.stopped_by is None and c.tick >= self.ticks,
-            "stopped_by_signal": self.stopped_by, "garbage_messages": self.garbage,
-            "ignored_messages": self.ignored, "rejected_commands": c.rejected, "over_limit": self.over_limit,
-            "wall_time": wall, "ticks_per_second": (c.tick / wall) if wall else None,
-            "deadline_restarts": self.restarts, **self.reproducibility(),
-        }, agent_extra)
+        result = self.engine.result(
+            {
+                "engine": "up",
+                "run": self.cfg.run,
+                "endpoint": self.cfg.listen,
+                "clock": self.cfg.clock,
+                "time_scale": self.cfg.time_scale,
+                "completed": self.stopped_by is None and c.tick >= self.ticks,
+                "stopped_by_signal": self.stopped_by,
+                "garbage_messages": self.garbage,
+                "ignored_messages": self.ignored,
+                "rejected_commands": c.rejected,
+                "over_limit": self.over_limit,
+                "wall_time": wall,
+                "ticks_per_second": (c.tick / wall) if wall else None,
+                "deadline_restarts": self.restarts,
+                **self.reproducibility(),
+            },
+            agent_extra,
+        )
         return write_run(result, self.cfg.out_dir)

@@ -25,8 +25,17 @@ TRAJECTORY_FILE = "trajectory.npz"
 SUMMARY_FILE = "summary.json"
 RESULT_FILES = (RECORDING_FILE, TRAJECTORY_FILE, SUMMARY_FILE)
 EXIT_NO_SPACE = 74  # exit code when results cannot be written (disk full, file too large): EX_IOERR
-__all__ = ["EXIT_NO_SPACE", "RECORDING_FILE", "RESULT_FILES", "RecordingError", "Recorder", "StreamRecorder", "RunResult",
-           "recover_run", "write_run"]
+__all__ = [
+    "EXIT_NO_SPACE",
+    "RECORDING_FILE",
+    "RESULT_FILES",
+    "RecordingError",
+    "Recorder",
+    "StreamRecorder",
+    "RunResult",
+    "recover_run",
+    "write_run",
+]
 
 
 def static_arrays(s: Scenario) -> dict[str, np.ndarray]:
@@ -84,9 +93,17 @@ class Recorder:
 
     def arrays(self) -> dict[str, np.ndarray]:
         n = self.rows
-        return {**static_arrays(self.scenario),
-                "t": self.t[:n], "x": self.x[:n], "y": self.y[:n], "heading": self.heading[:n],
-                "u": self.u[:n], "out": self.out[:n], "alive": self.alive[:n], "missed": self.missed[:n]}
+        return {
+            **static_arrays(self.scenario),
+            "t": self.t[:n],
+            "x": self.x[:n],
+            "y": self.y[:n],
+            "heading": self.heading[:n],
+            "u": self.u[:n],
+            "out": self.out[:n],
+            "alive": self.alive[:n],
+            "missed": self.missed[:n],
+        }
 
 
 class StreamRecorder:
@@ -146,8 +163,17 @@ class DeferredRecorder:
 
     def record(self, tick: int, time: float, x, y, heading, u, out, alive, missed: int = 0) -> None:
         self.flush()
-        self.pending = (tick, time, np.array(x), np.array(y), np.array(heading), np.array(u), np.array(out),
-                        np.array(alive), missed)
+        self.pending = (
+            tick,
+            time,
+            np.array(x),
+            np.array(y),
+            np.array(heading),
+            np.array(u),
+            np.array(out),
+            np.array(alive),
+            missed,
+        )
 
     def flush(self) -> None:
         if self.pending is not None:  # written, then forgotten: a signal in between (the world's
@@ -215,21 +241,40 @@ class RunResult:
         else:
             counts = [len(k) for k in switch_ticks(a["out"], a["alive"])]
             switches = sum(counts)
-            agents = agent_metrics(ids=a["ids"], roles=a["role"], speeds=a["speed"],
-                                   orbit_radius=a["orbit_radius"], t=a["t"], x=a["x"], y=a["y"],
-                                   alive=a["alive"], out_final=a["out"][-1], target=a["target"],
-                                   switches=counts)
+            agents = agent_metrics(
+                ids=a["ids"],
+                roles=a["role"],
+                speeds=a["speed"],
+                orbit_radius=a["orbit_radius"],
+                t=a["t"],
+                x=a["x"],
+                y=a["y"],
+                alive=a["alive"],
+                out_final=a["out"][-1],
+                target=a["target"],
+                switches=counts,
+            )
         for aid, more in self.agent_extra.items():
             if aid in agents:
                 agents[aid].update(more)
         ticks = max(len(a["t"]) - 1, 0)
         faults = []
         if self.scenario.faults and len(a["t"]) > 1:
-            err = relative_errors(ids=a["ids"], roles=a["role"], speeds=a["speed"],
-                                  orbit_radius=a["orbit_radius"], x=a["x"], y=a["y"], alive=a["alive"],
-                                  out=a["out"], target=a["target"])
-            specs = [{"index": i, **{k: v for k, v in f.model_dump().items() if v is not None}}
-                     for i, f in enumerate(self.scenario.faults)]
+            err = relative_errors(
+                ids=a["ids"],
+                roles=a["role"],
+                speeds=a["speed"],
+                orbit_radius=a["orbit_radius"],
+                x=a["x"],
+                y=a["y"],
+                alive=a["alive"],
+                out=a["out"],
+                target=a["target"],
+            )
+            specs = [
+                {"index": i, **{k: v for k, v in f.model_dump().items() if v is not None}}
+                for i, f in enumerate(self.scenario.faults)
+            ]
             faults = recovery(specs, a["t"], err, a["missed"], self.events)
         return {
             "scenario": self.scenario.name,
@@ -295,7 +340,10 @@ def recover_run(run_dir: Path) -> dict:
     rec = read_recording(path)
     if not rec.rows:
         raise ValueError(f"{path}: the recording holds no tick")
-    result = RunResult(rec.scenario, _Loaded(recording_arrays(rec)), rec.events,
-                       {"engine": "recovered", "complete": False, "recording_finished": rec.complete,
-                        "completed": False})
+    result = RunResult(
+        rec.scenario,
+        _Loaded(recording_arrays(rec)),
+        rec.events,
+        {"engine": "recovered", "complete": False, "recording_finished": rec.complete, "completed": False},
+    )
     return write_run(result, run_dir)

@@ -36,19 +36,41 @@ def run_info(engine: Engine, books: dict, header: dict, sensing: bool = False) -
         else:
             expected = err = None
         agents[str(a.id)] = {
-            "id": a.id, "role": a.role, "state": c.state[k], "alive": c.state[k] == ACTIVE,
-            "pid": b.pid, "host": b.host, "x": float(c.x[k]), "y": float(c.y[k]),
-            "heading": float(c.heading[k]), "speed": a.speed, "u": float(c.u[k]),
-            "out": out[a.id], "root": root, "hops": hops, "distance": dist,
-            "expected_radius": expected, "radial_error": err,
+            "id": a.id,
+            "role": a.role,
+            "state": c.state[k],
+            "alive": c.state[k] == ACTIVE,
+            "pid": b.pid,
+            "host": b.host,
+            "x": float(c.x[k]),
+            "y": float(c.y[k]),
+            "heading": float(c.heading[k]),
+            "speed": a.speed,
+            "u": float(c.u[k]),
+            "out": out[a.id],
+            "root": root,
+            "hops": hops,
+            "distance": dist,
+            "expected_radius": expected,
+            "radial_error": err,
             "relative_error": None if err is None else err / expected,
             "orbit_radius": a.orbit_radius,
             "last_command_age": (now - b.last_cmd_wall) if b.last_cmd_wall else None,
-            "missed": b.missed, "commands": b.commands, "joins": b.joins, "drops": b.drops,
-            "garbage": b.garbage, "rogue_commands": b.rogue,
+            "missed": b.missed,
+            "commands": b.commands,
+            "joins": b.joins,
+            "drops": b.drops,
+            "garbage": b.garbage,
+            "rogue_commands": b.rogue,
         }
-    info = {**header, "tick": c.tick, "time": c.time, "dt": c.dt, "target": [c.target[0], c.target[1]],
-            "agents": agents}
+    info = {
+        **header,
+        "tick": c.tick,
+        "time": c.time,
+        "dt": c.dt,
+        "target": [c.target[0], c.target[1]],
+        "agents": agents,
+    }
     if sensing:
         sensed, _, _ = c.sensing()
         info["sensing"] = [[int(c.ids[i]), int(c.ids[j])] for i, j in zip(*np.nonzero(sensed))]

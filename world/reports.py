@@ -58,9 +58,15 @@ class Reports:
 
     def _exit_event(self, req: dict) -> None:
         status = exit_status(req["code"])
-        self.event("crash" if req["crash"] else "exit", req["id"],
-                   f"process {req['pid']} ended ({status})" + (f": {req['cause']}" if req["cause"] else ""),
-                   code=req["code"], pid=req["pid"], cause=req["cause"], log=req["log"])
+        self.event(
+            "crash" if req["crash"] else "exit",
+            req["id"],
+            f"process {req['pid']} ended ({status})" + (f": {req['cause']}" if req["cause"] else ""),
+            code=req["code"],
+            pid=req["pid"],
+            cause=req["cause"],
+            log=req["log"],
+        )
 
     def _due_exit_reports(self) -> None:
         """Exit reports kept for agents still in the world: written once they have left;
@@ -72,5 +78,8 @@ class Reports:
                 self._exit_event(req)
             elif now > until:
                 del self.exit_reports[aid]
-                self.limited("supervise", f"a supervision report refused: agent {aid} reported ended "
-                                          f"but still in the world after {EXIT_REPORT_WAIT:g} s")
+                self.limited(
+                    "supervise",
+                    f"a supervision report refused: agent {aid} reported ended "
+                    f"but still in the world after {EXIT_REPORT_WAIT:g} s",
+                )

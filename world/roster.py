@@ -61,8 +61,9 @@ def new_agent_spec(aid: int, spec, core: WorldCore):
     if a.follow is not None and a.follow not in core.index:
         raise wire.WireError(f"agent {aid} spec: follow: no agent has id {a.follow}")
     if a.role == "follower" and a.follow is None and core.scenario.sensing.selection == "fixed":
-        raise wire.WireError(f"agent {aid} spec: follow: this run pins its graph (selection = \"fixed\"); "
-                             "a new follower needs --follow J")
+        raise wire.WireError(
+            f'agent {aid} spec: follow: this run pins its graph (selection = "fixed"); a new follower needs --follow J'
+        )
     return a
 
 
@@ -77,16 +78,25 @@ def admit(core: WorldCore, book: AgentBook, req: dict, now: float) -> int:
     return book.key
 
 
-def agent_figures(book: AgentBook, ticks: int, realtime: bool, garbage: int = 0, nonfinite: int = 0,
-                  **selection) -> dict:
+def agent_figures(
+    book: AgentBook, ticks: int, realtime: bool, garbage: int = 0, nonfinite: int = 0, **selection
+) -> dict:
     """One agent's process figures for summary.json (see docs/outputs.md, "Outputs of a run");
     `garbage`, `nonfinite` and `selection` (losses, loss_switches_max) are what the agent
     counted itself (its status)."""
     n = max(ticks, 1)
     return {
-        "pid": book.pid, "host": book.host, "commands": book.commands, "missed_ticks": book.missed,
-        "joins": book.joins, "drops": book.drops, "garbage": book.garbage + garbage,
-        "rogue_commands": book.rogue, "nonfinite": nonfinite, "flooded_messages": book.flooded,
-        "churn_events_unwritten": book.churn_unwritten, **selection,
+        "pid": book.pid,
+        "host": book.host,
+        "commands": book.commands,
+        "missed_ticks": book.missed,
+        "joins": book.joins,
+        "drops": book.drops,
+        "garbage": book.garbage + garbage,
+        "rogue_commands": book.rogue,
+        "nonfinite": nonfinite,
+        "flooded_messages": book.flooded,
+        "churn_events_unwritten": book.churn_unwritten,
+        **selection,
         **({"staleness_mean_ticks": book.stale_sum / n, "staleness_max_ticks": book.stale_max} if realtime else {}),
     }

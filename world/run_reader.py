@@ -9,8 +9,6 @@ file (swarm.plots re-exports it as `PlotError`).
 
 from __future__ import annotations
 
-from swarm.contracts.vocabulary import Coded, ExitCode
-
 import json
 import math
 from dataclasses import dataclass, field
@@ -20,12 +18,23 @@ from typing import Any
 import numpy as np
 
 from swarm.contracts.orbits import root_of
+from swarm.contracts.vocabulary import Coded, ExitCode
 from swarm.world.metrics import switch_ticks
 from swarm.world.recording import SUMMARY_FILE, TRAJECTORY_FILE
 
 __all__ = [
-    "RunReadError", "RunData", "RunEvent", "load_run", "final_graph", "switch_count", "switch_counts",
-    "run_events", "expected_radii", "first_alive", "last_alive", "EVENT_KINDS",
+    "RunReadError",
+    "RunData",
+    "RunEvent",
+    "load_run",
+    "final_graph",
+    "switch_count",
+    "switch_counts",
+    "run_events",
+    "expected_radii",
+    "first_alive",
+    "last_alive",
+    "EVENT_KINDS",
 ]
 
 # Array keys of trajectory.npz that a reader needs (heading/speed/dt are optional).

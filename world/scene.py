@@ -81,48 +81,100 @@ class SceneBuilder:
             else:
                 R = err = None
             uk = float(u[k])
-            rows.append({"id": i, "role": a.role, "alive": bool(alive[k]), "x": float(x[k]), "y": float(y[k]),
-                         "heading": float(heading[k]), "u": uk if math.isfinite(uk) else None,
-                         "out": outs[i], "root": root, "expected_radius": R, "radial_error": err})
+            rows.append(
+                {
+                    "id": i,
+                    "role": a.role,
+                    "alive": bool(alive[k]),
+                    "x": float(x[k]),
+                    "y": float(y[k]),
+                    "heading": float(heading[k]),
+                    "u": uk if math.isfinite(uk) else None,
+                    "out": outs[i],
+                    "root": root,
+                    "expected_radius": R,
+                    "radial_error": err,
+                }
+            )
         return {"tick": int(tick), "time": float(t), "agents": rows}
 
     # -- the scene ----------------------------------------------------------------------------
     def scene(self, ns, ids, x, y, out, heading, alive, numbers):
-        from foxglove.messages import (ArrowPrimitive, Color, LinePrimitive, LinePrimitiveLineType, Point3,
-                                       SceneEntity, SceneUpdate, SpherePrimitive, Vector3)
+        from foxglove.messages import (
+            ArrowPrimitive,
+            Color,
+            LinePrimitive,
+            LinePrimitiveLineType,
+            Point3,
+            SceneEntity,
+            SceneUpdate,
+            SpherePrimitive,
+            Vector3,
+        )
 
         ts = _stamp(ns)
-        red, blue, grey = Color(r=0.85, g=0.15, b=0.15, a=1.0), Color(r=0.15, g=0.35, b=0.85, a=1.0), \
-            Color(r=0.4, g=0.4, b=0.4, a=0.8)
+        red, blue, grey = (
+            Color(r=0.85, g=0.15, b=0.15, a=1.0),
+            Color(r=0.15, g=0.35, b=0.85, a=1.0),
+            Color(r=0.4, g=0.4, b=0.4, a=0.8),
+        )
         leader = self.leaders
         col = {int(i): k for k, i in enumerate(ids)}
         arrows, points = [], []
         for k in range(len(ids)):
             if not alive[k]:
                 continue
-            arrows.append(ArrowPrimitive(pose=_pose(float(x[k]), float(y[k]), float(heading[k])),
-                                         shaft_length=3.0, shaft_diameter=0.6, head_length=1.5, head_diameter=1.5,
-                                         color=red if int(ids[k]) in leader else blue))
+            arrows.append(
+                ArrowPrimitive(
+                    pose=_pose(float(x[k]), float(y[k]), float(heading[k])),
+                    shaft_length=3.0,
+                    shaft_diameter=0.6,
+                    head_length=1.5,
+                    head_diameter=1.5,
+                    color=red if int(ids[k]) in leader else blue,
+                )
+            )
             j = col.get(int(out[k]))
             if j is not None:
                 points += [Point3(x=float(x[k]), y=float(y[k]), z=0.0), Point3(x=float(x[j]), y=float(y[j]), z=0.0)]
         tx, ty = self.target
-        target = SpherePrimitive(pose=_pose(tx, ty, 0.0), size=Vector3(x=2.0, y=2.0, z=2.0),
-                                 color=Color(r=0.1, g=0.1, b=0.1, a=1.0))
+        target = SpherePrimitive(
+            pose=_pose(tx, ty, 0.0), size=Vector3(x=2.0, y=2.0, z=2.0), color=Color(r=0.1, g=0.1, b=0.1, a=1.0)
+        )
         radii = tuple(sorted({round(r["expected_radius"], 3) for r in numbers["agents"] if r["expected_radius"]}))
         if radii != self.radii:  # the circles change only when the graph does
             orbit = Color(r=0.2, g=0.6, b=0.2, a=0.6)
-            self.radii, self.circles = radii, [LinePrimitive(
-                type=LinePrimitiveLineType.LineLoop, thickness=0.2, color=orbit, points=[
-                    Point3(x=tx + R * math.cos(a), y=ty + R * math.sin(a), z=0.0)
-                    for a in np.linspace(0.0, 2 * math.pi, ORBIT_POINTS, endpoint=False)]) for R in radii]
+            self.radii, self.circles = (
+                radii,
+                [
+                    LinePrimitive(
+                        type=LinePrimitiveLineType.LineLoop,
+                        thickness=0.2,
+                        color=orbit,
+                        points=[
+                            Point3(x=tx + R * math.cos(a), y=ty + R * math.sin(a), z=0.0)
+                            for a in np.linspace(0.0, 2 * math.pi, ORBIT_POINTS, endpoint=False)
+                        ],
+                    )
+                    for R in radii
+                ],
+            )
         circles = self.circles
-        return SceneUpdate(entities=[
-            SceneEntity(timestamp=ts, frame_id="world", id="agents", arrows=arrows),
-            SceneEntity(timestamp=ts, frame_id="world", id="edges", lines=[LinePrimitive(
-                type=LinePrimitiveLineType.LineList, thickness=0.3, points=points, color=grey)]),
-            SceneEntity(timestamp=ts, frame_id="world", id="target", spheres=[target]),
-            SceneEntity(timestamp=ts, frame_id="world", id="orbits", lines=circles)])
+        return SceneUpdate(
+            entities=[
+                SceneEntity(timestamp=ts, frame_id="world", id="agents", arrows=arrows),
+                SceneEntity(
+                    timestamp=ts,
+                    frame_id="world",
+                    id="edges",
+                    lines=[
+                        LinePrimitive(type=LinePrimitiveLineType.LineList, thickness=0.3, points=points, color=grey)
+                    ],
+                ),
+                SceneEntity(timestamp=ts, frame_id="world", id="target", spheres=[target]),
+                SceneEntity(timestamp=ts, frame_id="world", id="orbits", lines=circles),
+            ]
+        )
 
     def trails_update(self, ns, ids, x, y, alive):
         """Sample the trails (every trail_every scene updates); a SceneUpdate of them every
@@ -140,11 +192,16 @@ class SceneBuilder:
 
         ts = _stamp(ns)
         leader = self.leaders
-        lines = [LinePrimitive(type=LinePrimitiveLineType.LineStrip, thickness=0.15,
-                               color=Color(r=0.85, g=0.4, b=0.4, a=0.6) if i in leader else
-                               Color(r=0.4, g=0.55, b=0.9, a=0.6),
-                               points=[Point3(x=px, y=py, z=0.0) for px, py in tr])
-                 for i, tr in self.trails.items() if len(tr) > 1]
+        lines = [
+            LinePrimitive(
+                type=LinePrimitiveLineType.LineStrip,
+                thickness=0.15,
+                color=Color(r=0.85, g=0.4, b=0.4, a=0.6) if i in leader else Color(r=0.4, g=0.55, b=0.9, a=0.6),
+                points=[Point3(x=px, y=py, z=0.0) for px, py in tr],
+            )
+            for i, tr in self.trails.items()
+            if len(tr) > 1
+        ]
         return SceneUpdate(entities=[SceneEntity(timestamp=ts, frame_id="world", id="trails", lines=lines)])
 
 
@@ -204,5 +261,6 @@ def _stamp(ns: int):
 def _pose(x: float, y: float, h: float):
     from foxglove.messages import Pose, Quaternion, Vector3
 
-    return Pose(position=Vector3(x=x, y=y, z=0.0),
-                orientation=Quaternion(x=0.0, y=0.0, z=math.sin(h / 2), w=math.cos(h / 2)))
+    return Pose(
+        position=Vector3(x=x, y=y, z=0.0), orientation=Quaternion(x=0.0, y=0.0, z=math.sin(h / 2), w=math.cos(h / 2))
+    )

@@ -44,8 +44,22 @@ def sensing_matrix(x, y, heading, present, sense_range: float | None, fov: float
     return s, bearing, rng
 
 
-def build_frames(tick, time, ids, x, y, heading, present, receivers, is_leader, target,
-                 sense_range=None, fov=None, hops=None, matrices=None) -> dict[int, SensorFrame]:
+def build_frames(
+    tick,
+    time,
+    ids,
+    x,
+    y,
+    heading,
+    present,
+    receivers,
+    is_leader,
+    target,
+    sense_range=None,
+    fov=None,
+    hops=None,
+    matrices=None,
+) -> dict[int, SensorFrame]:
     """One SensorFrame per receiver index (agents that need a frame this tick).
 
     hops: (N,) hop counts the agents last advertised (-1 none); the world relays them
@@ -66,8 +80,21 @@ def build_frames(tick, time, ids, x, y, heading, present, receivers, is_leader, 
     return frames
 
 
-def encode_frames_pairwise(tick: int, time: float, receivers, ids, x, y, heading, present, is_leader, target,
-                           sense_range: float | None, fov: float | None, hops) -> list[bytes]:
+def encode_frames_pairwise(
+    tick: int,
+    time: float,
+    receivers,
+    ids,
+    x,
+    y,
+    heading,
+    present,
+    is_leader,
+    target,
+    sense_range: float | None,
+    fov: float | None,
+    hops,
+) -> list[bytes]:
     """The encoded frames of the receivers (indices), the bytes of
     wire.encode_sense_rows(..., *sensing_matrix(...)), computed pair by pair on Python
     floats: a small swarm's frames cost fewer numpy calls this way (two: every range, then
@@ -94,5 +121,7 @@ def encode_frames_pairwise(tick: int, time: float, receivers, ids, x, y, heading
         if cone is None or abs(wrap_one(b - gs[i])) <= cone:
             contacts[i].append((idl[j], b, gs[j], rng[k], hl[j]))
     tx, ty = target
-    return [wire.encode_sense_tuples(tick, time, idl[i], gs[i], (tx - xs[i], ty - ys[i]) if lead[i] else None,
-                                     contacts[i]) for i in receivers]
+    return [
+        wire.encode_sense_tuples(tick, time, idl[i], gs[i], (tx - xs[i], ty - ys[i]) if lead[i] else None, contacts[i])
+        for i in receivers
+    ]

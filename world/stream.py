@@ -29,8 +29,6 @@ kept but the chunk being filled.
 
 from __future__ import annotations
 
-from swarm.contracts.vocabulary import Coded, ExitCode
-
 import json
 import time
 from dataclasses import dataclass, field
@@ -40,6 +38,7 @@ import numpy as np
 
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.scenario_tables import AgentSpec
+from swarm.contracts.vocabulary import Coded, ExitCode
 from swarm.world.scene import SCENE_RATE, SceneChannels, log_time
 
 RECORDING_FILE = "recording.mcap"
@@ -57,10 +56,18 @@ class RecordingError(Coded):
 def encode_tick(tick: int, t: float, ids, x, y, heading, u, out, alive, missed: int) -> bytes:
     n = len(ids)
     head = np.array([(tick, t, n, missed)], dtype=_HEAD).tobytes()
-    return b"".join((head, np.asarray(ids, "<i8").tobytes(), np.asarray(x, "<f8").tobytes(),
-                     np.asarray(y, "<f8").tobytes(), np.asarray(heading, "<f8").tobytes(),
-                     np.asarray(u, "<f8").tobytes(), np.asarray(out, "<i8").tobytes(),
-                     np.asarray(alive, np.uint8).tobytes()))
+    return b"".join(
+        (
+            head,
+            np.asarray(ids, "<i8").tobytes(),
+            np.asarray(x, "<f8").tobytes(),
+            np.asarray(y, "<f8").tobytes(),
+            np.asarray(heading, "<f8").tobytes(),
+            np.asarray(u, "<f8").tobytes(),
+            np.asarray(out, "<i8").tobytes(),
+            np.asarray(alive, np.uint8).tobytes(),
+        )
+    )
 
 
 def decode_tick(data: bytes) -> dict:
@@ -87,17 +94,25 @@ class StreamWriter:
         self.path = path
         self.ctx = foxglove.Context()  # one per recording: runs in one process never mix
         try:
-            self.writer = foxglove.open_mcap(str(path), allow_overwrite=True, context=self.ctx,
-                                             writer_options=MCAPWriteOptions(compression=MCAPCompression.Zstd,
-                                                                              chunk_size=None))
+            self.writer = foxglove.open_mcap(
+                str(path),
+                allow_overwrite=True,
+                context=self.ctx,
+                writer_options=MCAPWriteOptions(compression=MCAPCompression.Zstd, chunk_size=None),
+            )
         except Exception as e:
             raise RecordingError(f"cannot write {path}: {e}") from None
         schema = foxglove.Schema(name="swarm.Tick", encoding="", data=b"")
-        self.ticks_ch = foxglove.Channel("/swarm/ticks", schema=schema, message_encoding=TICK_ENCODING,
-                                         context=self.ctx)
+        self.ticks_ch = foxglove.Channel(
+            "/swarm/ticks", schema=schema, message_encoding=TICK_ENCODING, context=self.ctx
+        )
         self.scene_every = max(1, int(round(1.0 / (SCENE_RATE * scenario.run.dt))))
-        self.channels = SceneChannels(self.ctx, (scenario.target.x, scenario.target.y), scenario.agents,
-                                      1.0 / (self.scene_every * scenario.run.dt))
+        self.channels = SceneChannels(
+            self.ctx,
+            (scenario.target.x, scenario.target.y),
+            scenario.agents,
+            1.0 / (self.scene_every * scenario.run.dt),
+        )
         self.last_flush = time.monotonic()
         self.closed = False
         self.failed = False  # a write failed: the file ends at the last good flush
@@ -206,5 +221,6 @@ def read_recording(path: Path) -> Recording:
         raise ValueError(f"{path}: not a swarm recording (no /swarm/run header)")
     if added:  # as the world added them: each spec checked, not the scenario's cross-agent rules again
         rec.scenario = rec.scenario.model_copy(
-            update={"agents": [*rec.scenario.agents, *(AgentSpec.model_validate(a) for a in added)]})
+            update={"agents": [*rec.scenario.agents, *(AgentSpec.model_validate(a) for a in added)]}
+        )
     return rec

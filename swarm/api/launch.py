@@ -25,9 +25,10 @@ import signal
 import tempfile
 import threading
 import weakref
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from swarm.api.runs import Results, Summary, open_run
 from swarm.api.scenario import as_scenario, source_of, to_toml, with_duration
@@ -99,12 +100,22 @@ class Launch:
     `endpoint` (where the world listens), `dial` (where its clients connect), `scenario`;
     `run()` runs it, `stop(signum)` stops it. The options are `launch`'s."""
 
-    def __init__(self, scenario: Any, out: str | Path | None = None, *, force: bool = False,
-                 duration: float | None = None, clock: str | None = None, time_scale: float = 1.0,
-                 listen: str | None = None, foxglove: tuple[str, int] | None = None, world_grace: float = 10.0,
-                 say: Callable[[str], None] | None = None):
-        from swarm.runtime.launcher import Launcher, UpConfig
+    def __init__(
+        self,
+        scenario: Any,
+        out: str | Path | None = None,
+        *,
+        force: bool = False,
+        duration: float | None = None,
+        clock: str | None = None,
+        time_scale: float = 1.0,
+        listen: str | None = None,
+        foxglove: tuple[str, int] | None = None,
+        world_grace: float = 10.0,
+        say: Callable[[str], None] | None = None,
+    ):
         from swarm.offline.results import claim_out_dir
+        from swarm.runtime.launcher import Launcher, UpConfig
 
         s = as_scenario(scenario)
         with_duration(s, duration, source_of(scenario))
@@ -117,8 +128,18 @@ class Launch:
         path, tmp = scenario_file(scenario, s)
         # A temporary scenario file goes when the run is over, or with this object if it never runs.
         self._forget_tmp = weakref.finalize(self, shutil.rmtree, tmp, True) if tmp is not None else None
-        cfg = UpConfig(path, s, self.out, self.run_id, listen, duration, clock, time_scale,
-                       world_grace=world_grace, foxglove=foxglove)
+        cfg = UpConfig(
+            path,
+            s,
+            self.out,
+            self.run_id,
+            listen,
+            duration,
+            clock,
+            time_scale,
+            world_grace=world_grace,
+            foxglove=foxglove,
+        )
         self.launcher = Launcher(cfg) if say is None else Launcher(cfg, say)
         self.endpoint, self.dial = self.launcher.endpoint, self.launcher.dial
 
@@ -132,6 +153,7 @@ class Launch:
         the results of a world that died and read the summary. `progress(figures)`: the
         latest ground truth's figures (swarm/runtime/progress.py `truth_progress`: tick, time,
         errors, dropped) with `wall` (s since the agents started) and `ticks` (the run's)."""
+
         def show(p, wall):
             if p is not None and progress is not None:
                 progress({**p, "wall": wall, "ticks": self.ticks})
@@ -151,8 +173,14 @@ class Launch:
         from swarm.world.stream import RecordingError
 
         la, out = self.launcher, self.out
-        o = UpOutcome(*ending(la, code, out), self.run_id, out, exits=list(la.exits), failure=la.failure,
-                      stop_signal=la.stop_signal)
+        o = UpOutcome(
+            *ending(la, code, out),
+            self.run_id,
+            out,
+            exits=list(la.exits),
+            failure=la.failure,
+            stop_signal=la.stop_signal,
+        )
         try:
             o.recovered = recover(out)
         except (ValueError, RecordingError) as e:  # the exit code stays the run's
@@ -163,8 +191,15 @@ class Launch:
         return o
 
 
-def launch(scenario: Any, out: str | Path | None = None, *, progress: Callable[[dict], None] | None = None,
-           on_start: Callable[[Launch], None] | None = None, signals: bool = True, **options: Any) -> UpOutcome:
+def launch(
+    scenario: Any,
+    out: str | Path | None = None,
+    *,
+    progress: Callable[[dict], None] | None = None,
+    on_start: Callable[[Launch], None] | None = None,
+    signals: bool = True,
+    **options: Any,
+) -> UpOutcome:
     """Run `scenario` (a file, a Scenario, a dict or a Builder) as `swarm up` does, in this
     process, until it ends; its `UpOutcome`. Options (`Launch`): out (default
     runs/<run id>; one holding results is refused unless force=True), force, duration (s),
@@ -187,11 +222,12 @@ class stop_on_signals:
         self.stop = stop if threading.current_thread() is threading.main_thread() else None
         self.saved: dict = {}
 
-    def __enter__(self) -> "stop_on_signals":
+    def __enter__(self) -> stop_on_signals:
         if self.stop is not None:
             stop = self.stop
-            self.saved = {sig: signal.signal(sig, lambda signum, _frame: stop(signum))
-                          for sig in (signal.SIGINT, signal.SIGTERM)}
+            self.saved = {
+                sig: signal.signal(sig, lambda signum, _frame: stop(signum)) for sig in (signal.SIGINT, signal.SIGTERM)
+            }
         return self
 
     def __exit__(self, *exc) -> None:
@@ -211,8 +247,11 @@ def ending(launcher, code: int, out: Path) -> tuple[int, str | None, bool]:
     if code not in (0, EXIT_DESERTED):
         from swarm.world.recording import EXIT_NO_SPACE
 
-        return (EXIT_NO_SPACE if code == EXIT_NO_SPACE else 1,
-                f"swarm up: {launcher.world_failure()} (see {out / 'logs' / 'world.log'})", True)
+        return (
+            EXIT_NO_SPACE if code == EXIT_NO_SPACE else 1,
+            f"swarm up: {launcher.world_failure()} (see {out / 'logs' / 'world.log'})",
+            True,
+        )
     crashed = launcher.crashed()
     if crashed:
         return EXIT_AGENT_FAILED, f"swarm up: {len(crashed)} agent process(es) failed: {crashed[0].line()}", True

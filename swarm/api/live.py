@@ -17,12 +17,12 @@ agent, a spawned agent that did not join...), `UsageError` (a bad argument).
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 from swarm.api.record import Record
-from swarm.live.client import talking
 from swarm.contracts.errors import NoRunError, StoppedAnswering, UsageError
+from swarm.live.client import talking
 
 __all__ = ["Live", "LiveState", "connect", "runs"]
 
@@ -81,7 +81,7 @@ class Live:
     def close(self) -> None:
         self._lr.__exit__(None, None, None)
 
-    def __enter__(self) -> "Live":
+    def __enter__(self) -> Live:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -125,10 +125,18 @@ class Live:
 
         snap = self.snapshot()
         info = snap["info"]
-        return LiveState({"run": info.get("run"), "tick": info.get("tick"), "time": info.get("time"),
-                          "started": info.get("started"), "paused": info.get("paused"),
-                          "agents": {int(r["id"]): r for r in snap["agents"]}, "graph": graph_of(snap),
-                          "info": info})
+        return LiveState(
+            {
+                "run": info.get("run"),
+                "tick": info.get("tick"),
+                "time": info.get("time"),
+                "started": info.get("started"),
+                "paused": info.get("paused"),
+                "agents": {int(r["id"]): r for r in snap["agents"]},
+                "graph": graph_of(snap),
+                "info": info,
+            }
+        )
 
     def again(self, read, last):
         """`read()` of a watching loop (`swarm watch`, `swarm graph --watch`): its value, or
@@ -146,8 +154,10 @@ class Live:
             if not self._patience.ended():
                 return last
             if self._patience.silent:
-                raise StoppedAnswering(f"the world of run {self.run} stopped answering for {ENDED_SILENT_S:g} s "
-                                       "or more without ending (stalled, starved, or cut off from here)") from None
+                raise StoppedAnswering(
+                    f"the world of run {self.run} stopped answering for {ENDED_SILENT_S:g} s "
+                    "or more without ending (stalled, starved, or cut off from here)"
+                ) from None
             raise
         self._patience.answered()
         return value
@@ -204,8 +214,9 @@ def connect(run: str | None = None, connect: str | None = None, credentials: str
     from swarm.live.client import open_run_session
 
     with talking():
-        return Live(open_run_session(_endpoint(connect), _env(run, ENV_RUN),
-                                     None if credentials is None else Path(credentials)))
+        return Live(
+            open_run_session(_endpoint(connect), _env(run, ENV_RUN), None if credentials is None else Path(credentials))
+        )
 
 
 def runs(run: str | None = None, connect: str | None = None, credentials: str | Path | None = None) -> list[dict]:
@@ -218,17 +229,29 @@ def runs(run: str | None = None, connect: str | None = None, credentials: str | 
         found = find_runs(_endpoint(connect), creds, _env(run, ENV_RUN))
     docs = []
     for ref in found:
-        doc = {"run": ref.run, "endpoint": ref.endpoint, "scenario": None, "clock": None, "paused": None,
-               "tick": None, "ticks": None, "time": None, "agents_live": None, "agents_total": None,
-               "host": None, "pid": None}
+        doc = {
+            "run": ref.run,
+            "endpoint": ref.endpoint,
+            "scenario": None,
+            "clock": None,
+            "paused": None,
+            "tick": None,
+            "ticks": None,
+            "time": None,
+            "agents_live": None,
+            "agents_total": None,
+            "host": None,
+            "pid": None,
+        }
         try:
             with LiveRun(ref) as lr:
                 info = lr.info()
             agents = info.get("agents", {})
-            doc.update({k: info.get(k) for k in ("scenario", "clock", "paused", "tick", "ticks", "time",
-                                                 "host", "pid")},
-                       agents_live=sum(1 for a in agents.values() if a.get("alive")),
-                       agents_total=len(agents))
+            doc.update(
+                {k: info.get(k) for k in ("scenario", "clock", "paused", "tick", "ticks", "time", "host", "pid")},
+                agents_live=sum(1 for a in agents.values() if a.get("alive")),
+                agents_total=len(agents),
+            )
         except Exception:
             pass  # it ended between the two questions (NoRun): listed with what is known
         docs.append(doc)

@@ -4,7 +4,8 @@ neither numpy nor the scenario model."""
 
 from __future__ import annotations
 
-from typing import Any, Iterator, Mapping
+from collections.abc import Iterator, Mapping
+from typing import Any
 
 __all__ = ["Record"]
 

@@ -22,9 +22,10 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any
 
 import numpy as np
 
@@ -80,8 +81,13 @@ class Results:
     `run_dir` (None for a run kept in memory), and `recovered` (a `swarm.offline.results.Recovery`
     when `open_run` rebuilt them from the recording of a world that died, else None)."""
 
-    def __init__(self, arrays: dict[str, np.ndarray], summary: dict, run_dir: Path | None = None,
-                 recovered: Recovery | None = None):
+    def __init__(
+        self,
+        arrays: dict[str, np.ndarray],
+        summary: dict,
+        run_dir: Path | None = None,
+        recovered: Recovery | None = None,
+    ):
         self.arrays = arrays
         self.summary = Summary(summary)
         self.run_dir = None if run_dir is None else Path(run_dir)
@@ -91,8 +97,10 @@ class Results:
 
     def __repr__(self) -> str:
         end = float(self.t[-1]) if len(self.t) else 0.0
-        return (f"Results({len(self.ids)} agents, {len(self.t)} rows, t_end={end:g} s, "
-                f"converged={self.summary.get('converged')}, run_dir={self.run_dir})")
+        return (
+            f"Results({len(self.ids)} agents, {len(self.t)} rows, t_end={end:g} s, "
+            f"converged={self.summary.get('converged')}, run_dir={self.run_dir})"
+        )
 
     @property
     def converged(self) -> bool | None:
@@ -109,9 +117,19 @@ class Results:
         """Agent `agent_id`'s columns (views, not copies) and summary entry."""
         j = self.column(agent_id)
         col = lambda a: None if a is None else a[:, j]  # noqa: E731
-        return AgentTrack(int(agent_id), str(self.role[j]), None if self.speed is None else float(self.speed[j]),
-                          self.t, col(self.x), col(self.y), col(self.heading), col(self.u), col(self.out),
-                          col(self.alive), self.summary.agents.get(int(agent_id)))
+        return AgentTrack(
+            int(agent_id),
+            str(self.role[j]),
+            None if self.speed is None else float(self.speed[j]),
+            self.t,
+            col(self.x),
+            col(self.y),
+            col(self.heading),
+            col(self.u),
+            col(self.out),
+            col(self.alive),
+            self.summary.agents.get(int(agent_id)),
+        )
 
     @property
     def agents(self) -> dict[int, AgentTrack]:
@@ -175,9 +193,15 @@ def _write_atomic(path: Path, write: Callable) -> None:
         tmp.unlink(missing_ok=True)
 
 
-def simulate(scenario: "Scenario | dict | str | Path | Builder", duration: float | None = None,
-             out: str | Path | None = None, *, force: bool = False, batch: bool = False,
-             progress: Callable[[int, int], None] | None = None) -> Results:
+def simulate(
+    scenario: Scenario | dict | str | Path | Builder,
+    duration: float | None = None,
+    out: str | Path | None = None,
+    *,
+    force: bool = False,
+    batch: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+) -> Results:
     """Run `scenario` in this process, as `swarm sim` does, for `duration` simulated s
     (default the scenario's). `out`: write the run directory there (refused if it holds
     results, unless `force`); else everything stays in memory. `batch`: the batch engine
@@ -203,7 +227,7 @@ def simulate(scenario: "Scenario | dict | str | Path | Builder", duration: float
     t0 = time.perf_counter()
     result = engine(None if out is None else out / RECORDING_FILE)
     wall = time.perf_counter() - t0
-    sim_time = (duration if duration is not None else s.run.duration)
+    sim_time = duration if duration is not None else s.run.duration
     result.extra["wall_time"] = wall
     result.extra["sim_seconds_per_wall_second"] = sim_time / wall if wall > 0 else None
     if out is None:
@@ -235,8 +259,16 @@ def open_run(run_dir: str | Path, recover: bool = True) -> Results:
         raise RunReadError(str(e)) from None
     data = load_run(d)  # the checks (shapes, keys) and the summary
     arrays: dict[str, np.ndarray] = {
-        "ids": data.ids, "role": data.role, "target": data.target, "t": data.t, "x": data.x, "y": data.y,
-        "u": data.u, "out": data.out, "alive": data.alive}
+        "ids": data.ids,
+        "role": data.role,
+        "target": data.target,
+        "t": data.t,
+        "x": data.x,
+        "y": data.y,
+        "u": data.u,
+        "out": data.out,
+        "alive": data.alive,
+    }
     if data.orbit_radius is not None:
         arrays["orbit_radius"] = data.orbit_radius
     with np.load(d / TRAJECTORY_FILE, allow_pickle=False) as z:  # what the plots do not need

@@ -26,8 +26,7 @@ from typing import Any
 from swarm.contracts.scenario import Scenario, ScenarioError, load_scenario, parse_scenario
 from swarm.contracts.scenario_tables import GainsSpec, RunSpec, SensingSpec
 
-__all__ = ["Builder", "Scenario", "ScenarioError", "as_scenario", "from_dict", "load", "to_toml",
-           "with_duration"]
+__all__ = ["Builder", "Scenario", "ScenarioError", "as_scenario", "from_dict", "load", "to_toml", "with_duration"]
 
 _TABLES = {"run": RunSpec, "gains": GainsSpec, "sensing": SensingSpec}
 
@@ -44,7 +43,7 @@ def from_dict(data: dict, source: str = "<dict>") -> Scenario:
     return parse_scenario(data, source)
 
 
-def as_scenario(scenario: "Scenario | dict | str | Path | Builder") -> Scenario:
+def as_scenario(scenario: Scenario | dict | str | Path | Builder) -> Scenario:
     """A Scenario from a Scenario, a dict (`from_dict`), a file path (`load`) or a `Builder`."""
     if isinstance(scenario, Scenario):
         return scenario
@@ -72,8 +71,9 @@ def with_duration(s: Scenario, duration: float | None, source: str = "<scenario>
         return
     if isinstance(duration, bool) or not isinstance(duration, (int, float)):
         raise ScenarioError(f"{source}: duration must be a number of seconds, not {duration!r}")
-    parse_scenario({**s.model_dump(), "run": {**s.run.model_dump(), "duration": duration}},
-                   f"{source} with duration {duration:g}")
+    parse_scenario(
+        {**s.model_dump(), "run": {**s.run.model_dump(), "duration": duration}}, f"{source} with duration {duration:g}"
+    )
 
 
 class Builder:
@@ -87,8 +87,9 @@ class Builder:
         scenario = b.build()
     """
 
-    def __init__(self, name: str = "", *, description: str = "", target: tuple[float, float] | None = None,
-                 **fields: Any):
+    def __init__(
+        self, name: str = "", *, description: str = "", target: tuple[float, float] | None = None, **fields: Any
+    ):
         self.data: dict[str, Any] = {"name": name}
         if description:
             self.data["description"] = description
@@ -104,22 +105,24 @@ class Builder:
         self.data["agents"] = []
         self.data["faults"] = []
 
-    def agent(self, **fields: Any) -> "Builder":
+    def agent(self, **fields: Any) -> Builder:
         """One [[agents]] entry, its fields as in a file (id, role, x, y, heading, speed, ...)."""
         self.data["agents"].append(dict(fields))
         return self
 
-    def leader(self, id: int, x: float, y: float, heading: float, speed: float, orbit_radius: float,
-               **more: Any) -> "Builder":
+    def leader(
+        self, id: int, x: float, y: float, heading: float, speed: float, orbit_radius: float, **more: Any
+    ) -> Builder:
         """A leader (more: direction = "ccw" | "cw", max_turn_rate)."""
-        return self.agent(id=id, role="leader", x=x, y=y, heading=heading, speed=speed,
-                          orbit_radius=orbit_radius, **more)
+        return self.agent(
+            id=id, role="leader", x=x, y=y, heading=heading, speed=speed, orbit_radius=orbit_radius, **more
+        )
 
-    def follower(self, id: int, x: float, y: float, heading: float, speed: float, **more: Any) -> "Builder":
+    def follower(self, id: int, x: float, y: float, heading: float, speed: float, **more: Any) -> Builder:
         """A follower (more: follow, max_turn_rate)."""
         return self.agent(id=id, role="follower", x=x, y=y, heading=heading, speed=speed, **more)
 
-    def fault(self, at: float, kind: str, agent: int | None = None, **more: Any) -> "Builder":
+    def fault(self, at: float, kind: str, agent: int | None = None, **more: Any) -> Builder:
         """A scripted fault (more: duration, probability, what, delay, std)."""
         entry = {"at": at, "kind": kind, **more}
         if agent is not None:

@@ -33,9 +33,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from swarm.api.runs import Results, open_run
-from swarm.api.live import LiveState
 from swarm.api.launch import check_clock, name_stem, scenario_file
+from swarm.api.live import LiveState
+from swarm.api.runs import Results, open_run
 from swarm.api.scenario import Builder, Scenario, as_scenario, source_of, with_duration
 from swarm.contracts.errors import UpError
 from swarm.runtime.procs import Group, wait_until
@@ -45,9 +45,11 @@ __all__ = ["UpError", "UpRun", "LiveState"]
 # `swarm up`'s first line: "run case2-734b0c  endpoint unixsock-stream//tmp/...  agents 6  clock lockstep"
 BANNER_RE = re.compile(r"^run (\S+)\s+endpoint (\S+)\s+agents", re.M)
 # `swarm up`, tied to this process first (it does not tie itself: it is the one others tie to)
-_BOOT = ("import sys; from swarm.contracts.lifeline import tie_to_launcher; tie_to_launcher(); "
-         "sys.argv[0] = 'swarm'; from swarm.cli.main import main; main()")
-_RUNNING: set["UpRun"] = set()  # stopped at interpreter exit
+_BOOT = (
+    "import sys; from swarm.contracts.lifeline import tie_to_launcher; tie_to_launcher(); "
+    "sys.argv[0] = 'swarm'; from swarm.cli.main import main; main()"
+)
+_RUNNING: set[UpRun] = set()  # stopped at interpreter exit
 
 
 class UpRun:
@@ -57,24 +59,44 @@ class UpRun:
     "realtime"), duration (s), time_scale, listen (endpoint), force (replace results in
     out), world_grace (s), env (the launcher's environment; default this process's)."""
 
-    def __init__(self, scenario: Any, out: str | Path | None = None, *, clock: str | None = None,
-                 duration: float | None = None, time_scale: float | None = None, listen: str | None = None,
-                 force: bool = False, world_grace: float | None = None, env: dict | None = None):
+    def __init__(
+        self,
+        scenario: Any,
+        out: str | Path | None = None,
+        *,
+        clock: str | None = None,
+        duration: float | None = None,
+        time_scale: float | None = None,
+        listen: str | None = None,
+        force: bool = False,
+        world_grace: float | None = None,
+        env: dict | None = None,
+    ):
         from swarm.offline.results import OutDirError, results_in
 
         s = as_scenario(scenario)  # bad scenarios and options fail here, before any process
         with_duration(s, duration, source_of(scenario))
         check_clock(clock)
         self.scenario = s
-        self.out = Path(out) if out is not None else Path("runs") / (
-            f"{name_stem(scenario, s)}-up-{time.strftime('%Y%m%d-%H%M%S')}-{os.urandom(3).hex()}")
+        self.out = (
+            Path(out)
+            if out is not None
+            else Path("runs") / (f"{name_stem(scenario, s)}-up-{time.strftime('%Y%m%d-%H%M%S')}-{os.urandom(3).hex()}")
+        )
         if self.out.is_dir() and results_in(self.out) and not force:
-            raise OutDirError(f"out {self.out} already holds the results of a run ({', '.join(results_in(self.out))}); "
-                              "choose another directory, or pass force=True to replace them")
+            raise OutDirError(
+                f"out {self.out} already holds the results of a run ({', '.join(results_in(self.out))}); "
+                "choose another directory, or pass force=True to replace them"
+            )
         path, self._tmp = scenario_file(scenario, s)  # the world reads a file
         args = [sys.executable, "-c", _BOOT, "up", str(path), "--out", str(self.out), "--no-plots"]
-        for flag, value in (("--clock", clock), ("--duration", duration), ("--time-scale", time_scale),
-                            ("--listen", listen), ("--world-grace", world_grace)):
+        for flag, value in (
+            ("--clock", clock),
+            ("--duration", duration),
+            ("--time-scale", time_scale),
+            ("--listen", listen),
+            ("--world-grace", world_grace),
+        ):
             if value is not None:
                 args += [flag, str(value)]
         if force:
@@ -89,8 +111,9 @@ class UpRun:
         self._lines: list[str] = []
         self._live = None  # a swarm.api.live.Live, opened by the first state()
         self._group = Group(session=True)  # no terminal's Ctrl-C reaches it: stop() does
-        self.process = self._group.start(args, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                         stderr=subprocess.STDOUT, env=env)
+        self.process = self._group.start(
+            args, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env
+        )
         self._reader = threading.Thread(target=self._read, name=f"swarm-up-{self.process.pid}", daemon=True)
         self._reader.start()
         _RUNNING.add(self)
@@ -124,6 +147,7 @@ class UpRun:
 
     def banner(self, timeout: float = 30.0) -> tuple[str, str]:
         """(run id, endpoint), as `swarm up` prints them at start; UpError if it ends first."""
+
         def found():
             m = BANNER_RE.search(self.output)
             if m is not None:
@@ -172,7 +196,7 @@ class UpRun:
             self._tmp = None
         _RUNNING.discard(self)
 
-    def __enter__(self) -> "UpRun":
+    def __enter__(self) -> UpRun:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -245,6 +269,6 @@ def _stop_all() -> None:
             pass
 
 
-def up(scenario: "Scenario | dict | str | Path | Builder", out: str | Path | None = None, **options: Any) -> UpRun:
+def up(scenario: Scenario | dict | str | Path | Builder, out: str | Path | None = None, **options: Any) -> UpRun:
     """`swarm up` from Python: see `UpRun` for the options and the handle."""
     return UpRun(scenario, out, **options)

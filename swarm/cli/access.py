@@ -17,29 +17,61 @@ from typing import Annotated, Optional
 
 import typer
 
-from swarm.contracts.wire import MAX_AGENT_ID
 from swarm.cli.errors import fail
 from swarm.cli.options import RunOpt
 from swarm.contracts.vocabulary import ExitCode
+from swarm.contracts.wire import MAX_AGENT_ID
 
 
 def credentials(
-    agent: Annotated[Optional[int], typer.Option("--agent", metavar="ID", min=0, max=MAX_AGENT_ID,
-                                                 help="export agent ID's identity", show_default=False)] = None,
-    operator: Annotated[bool, typer.Option("--operator", help="export the operator's identity (the live "
-                                           "commands: agents, graph, watch, pause, resume, kill)")] = False,
-    host: Annotated[Optional[str], typer.Option("--host", metavar="NAME", help="export what agent host NAME "
-                                                "needs for `swarm host` (with --agents)", show_default=False)] = None,
-    agents: Annotated[Optional[str], typer.Option("--agents", metavar="IDS", help="with --host: the agents it "
-                                                  "runs, e.g. 3,4,5 or 3-5", show_default=False)] = None,
+    agent: Annotated[
+        Optional[int],
+        typer.Option(
+            "--agent", metavar="ID", min=0, max=MAX_AGENT_ID, help="export agent ID's identity", show_default=False
+        ),
+    ] = None,
+    operator: Annotated[
+        bool,
+        typer.Option(
+            "--operator",
+            help="export the operator's identity (the live commands: agents, graph, watch, pause, resume, kill)",
+        ),
+    ] = False,
+    host: Annotated[
+        Optional[str],
+        typer.Option(
+            "--host",
+            metavar="NAME",
+            help="export what agent host NAME needs for `swarm host` (with --agents)",
+            show_default=False,
+        ),
+    ] = None,
+    agents: Annotated[
+        Optional[str],
+        typer.Option(
+            "--agents", metavar="IDS", help="with --host: the agents it runs, e.g. 3,4,5 or 3-5", show_default=False
+        ),
+    ] = None,
     run: RunOpt = None,
-    endpoint: Annotated[Optional[str], typer.Option(
-        help="the endpoint the other machine dials, e.g. tls/10.0.0.5:7447 (needed when the run's own "
-             "endpoint is a Unix socket or loopback)", show_default=False)] = None,
-    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="file to write (mode 0600; default "
-                                                "<run>-agent-<ID>.cred, <run>-operator.cred or "
-                                                "<run>-host-<NAME>.cred here)",
-                                                show_default=False)] = None,
+    endpoint: Annotated[
+        Optional[str],
+        typer.Option(
+            help="the endpoint the other machine dials, e.g. tls/10.0.0.5:7447 (needed when the run's own "
+            "endpoint is a Unix socket or loopback)",
+            show_default=False,
+        ),
+    ] = None,
+    out: Annotated[
+        Optional[Path],
+        typer.Option(
+            "--out",
+            "-o",
+            help="file to write (mode 0600; default "
+            "<run>-agent-<ID>.cred, <run>-operator.cred or "
+            "<run>-host-<NAME>.cred here)",
+            show_default=False,
+        ),
+    ] = None,
     force: Annotated[bool, typer.Option("--force", help="replace --out if it exists")] = False,
 ) -> None:
     """Write one identity of a local run to a file, for an agent, a terminal or an agent host on another machine.
@@ -68,9 +100,12 @@ def credentials(
     except CredentialsError as e:
         raise fail(str(e), ExitCode.USAGE) from None
     if endpoint is None and _local_only(own.endpoint):
-        raise fail(f"run {own.run} is reached at {own.endpoint} from this machine only: give --endpoint, the "
-                   "address the other machine dials (e.g. tls/10.0.0.5:7447; start the run with --listen "
-                   "tls/0.0.0.0:7447 to be reachable)", ExitCode.USAGE)
+        raise fail(
+            f"run {own.run} is reached at {own.endpoint} from this machine only: give --endpoint, the "
+            "address the other machine dials (e.g. tls/10.0.0.5:7447; start the run with --listen "
+            "tls/0.0.0.0:7447 to be reachable)",
+            ExitCode.USAGE,
+        )
     if endpoint is not None:
         exported = replace(exported, endpoint=endpoint)
     path = out or Path(f"{own.run}-{user}.cred")
@@ -80,14 +115,14 @@ def credentials(
         C.write(exported, path)
     except OSError as e:
         raise fail(f"cannot write {path}: {e.strerror or e}", 1) from None
-    what = user if host is None else \
-        f"host {host} with agents {', '.join(map(str, exported.host_agents()))}"
+    what = user if host is None else f"host {host} with agents {', '.join(map(str, exported.host_agents()))}"
     typer.echo(f"wrote {path} ({what} of run {own.run}, endpoint {exported.endpoint}, mode 0600)")
     if host is not None:
         typer.echo(f"on the other machine: swarm host --credentials {path.name}")
     elif not operator:
-        typer.echo(f"on the other machine: swarm agent --id {agent} --connect {exported.endpoint} "
-                   f"--credentials {path.name}")
+        typer.echo(
+            f"on the other machine: swarm agent --id {agent} --connect {exported.endpoint} --credentials {path.name}"
+        )
 
 
 def _local_only(endpoint: str) -> bool:

@@ -13,13 +13,14 @@ from typing import Annotated, Optional
 import typer
 
 from swarm.api.live import connect as connect_run
-from swarm.contracts.wire import MAX_AGENT_ID
 from swarm.cli.options import ConnectOpt, CredentialsOpt, LiveRunOpt, TrustLawOpt
+from swarm.contracts.wire import MAX_AGENT_ID
 
 
 def kill(
-    agent_id: Annotated[int, typer.Argument(metavar="ID", help="the agent's id", min=0, max=MAX_AGENT_ID,
-                                            show_default=False)],
+    agent_id: Annotated[
+        int, typer.Argument(metavar="ID", help="the agent's id", min=0, max=MAX_AGENT_ID, show_default=False)
+    ],
     signal: Annotated[str, typer.Option("--signal", "-s", help="KILL | TERM | STOP | CONT")] = "KILL",
     connect: ConnectOpt = None,
     run: LiveRunOpt = None,
@@ -44,23 +45,36 @@ def kill(
 
 
 def spawn(
-    agent_id: Annotated[int, typer.Option("--id", help="the agent's id: a dropped one rejoins from "
-                                          "where it dropped; a new one needs --x --y --heading --speed",
-                                          min=0, max=MAX_AGENT_ID, show_default=False)],
+    agent_id: Annotated[
+        int,
+        typer.Option(
+            "--id",
+            help="the agent's id: a dropped one rejoins from "
+            "where it dropped; a new one needs --x --y --heading --speed",
+            min=0,
+            max=MAX_AGENT_ID,
+            show_default=False,
+        ),
+    ],
     x: Annotated[Optional[float], typer.Option(help="new agent: x (m)", show_default=False)] = None,
     y: Annotated[Optional[float], typer.Option(help="new agent: y (m)", show_default=False)] = None,
     heading: Annotated[Optional[float], typer.Option(help="new agent: heading (rad)", show_default=False)] = None,
     speed: Annotated[Optional[float], typer.Option(help="new agent: speed (m/s)", show_default=False)] = None,
-    role: Annotated[Optional[str], typer.Option(help="new agent: leader | follower [default: follower]",
-                                                show_default=False)] = None,
-    orbit_radius: Annotated[Optional[float], typer.Option(help="new leader: orbit radius (m)",
-                                                          show_default=False)] = None,
-    direction: Annotated[Optional[str], typer.Option(help="new leader: ccw | cw [default: ccw]",
-                                                     show_default=False)] = None,
-    follow: Annotated[Optional[int], typer.Option(help="new follower: fixed out-neighbour id",
-                                                  show_default=False)] = None,
-    max_turn_rate: Annotated[Optional[float], typer.Option(help="new agent: turn-rate limit (rad/s)",
-                                                           show_default=False)] = None,
+    role: Annotated[
+        Optional[str], typer.Option(help="new agent: leader | follower [default: follower]", show_default=False)
+    ] = None,
+    orbit_radius: Annotated[
+        Optional[float], typer.Option(help="new leader: orbit radius (m)", show_default=False)
+    ] = None,
+    direction: Annotated[
+        Optional[str], typer.Option(help="new leader: ccw | cw [default: ccw]", show_default=False)
+    ] = None,
+    follow: Annotated[
+        Optional[int], typer.Option(help="new follower: fixed out-neighbour id", show_default=False)
+    ] = None,
+    max_turn_rate: Annotated[
+        Optional[float], typer.Option(help="new agent: turn-rate limit (rad/s)", show_default=False)
+    ] = None,
     connect: ConnectOpt = None,
     run: LiveRunOpt = None,
     credentials: CredentialsOpt = None,
@@ -74,8 +88,17 @@ def spawn(
 
     Example: swarm spawn --id 7 --x 10 --y -5 --heading 0 --speed 20 --follow 1
     """
-    spec = dict(x=x, y=y, heading=heading, speed=speed, role=role, orbit_radius=orbit_radius,
-                direction=direction, follow=follow, max_turn_rate=max_turn_rate)
+    spec = dict(
+        x=x,
+        y=y,
+        heading=heading,
+        speed=speed,
+        role=role,
+        orbit_radius=orbit_radius,
+        direction=direction,
+        follow=follow,
+        max_turn_rate=max_turn_rate,
+    )
     with connect_run(run, connect, credentials) as live:
         typer.echo(live.spawn(agent_id, trust_law or (), **spec).line())
 

@@ -52,6 +52,7 @@ def check_endpoints(params: dict) -> None:
 def mapped(command):
     """`command` with the API's errors as their message on stderr and their exit code; its
     endpoint options checked first."""
+
     @functools.wraps(command)
     def run(*args, **kwargs):
         try:
@@ -98,7 +99,7 @@ def usage_line(e) -> str:
         name = max(opts, key=len) if opts else e.param.get_error_hint().strip("'")
         why = " ".join(str(e.message).split()).rstrip(".")
         if why.startswith("Input should be "):
-            why = why[len("Input "):]
+            why = why[len("Input ") :]
         value = _value_of(e)
         return f"{name}{'' if value is None else f' {value}'}: {why}"
     text = " ".join(e.format_message().split()).rstrip(".")

@@ -27,6 +27,7 @@ from swarm.contracts.vocabulary import ExitCode
 from swarm.live.data import graph_key
 from swarm.live.views import agents_table, graph_dot, graph_renderable, header, runs_table
 
+
 def _dumps(obj) -> str:
     return json.dumps(obj, indent=2, allow_nan=False)
 
@@ -52,9 +53,12 @@ def runs(
         typer.echo(_dumps(docs))
     where = where_looked(connect, credentials)
     if not docs:
-        raise fail(f"run {run!r} not found: looked at {where}" if run else
-                   f"no swarm is running: looked at {where} (start one with `swarm up SCENARIO`, "
-                   "or pass --connect ENDPOINT)")
+        raise fail(
+            f"run {run!r} not found: looked at {where}"
+            if run
+            else f"no swarm is running: looked at {where} (start one with `swarm up SCENARIO`, "
+            "or pass --connect ENDPOINT)"
+        )
     if not as_json:
         console().print(runs_table(docs))
 
@@ -78,9 +82,20 @@ def agents(
         snap = live.snapshot()
     info = snap["info"]
     if as_json:
-        typer.echo(_dumps({"run": info.get("run"), "scenario": info.get("scenario"), "clock": info.get("clock"),
-                           "paused": info.get("paused"), "tick": info.get("tick"), "ticks": info.get("ticks"),
-                           "time": info.get("time"), "agents": snap["agents"]}))
+        typer.echo(
+            _dumps(
+                {
+                    "run": info.get("run"),
+                    "scenario": info.get("scenario"),
+                    "clock": info.get("clock"),
+                    "paused": info.get("paused"),
+                    "tick": info.get("tick"),
+                    "ticks": info.get("ticks"),
+                    "time": info.get("time"),
+                    "agents": snap["agents"],
+                }
+            )
+        )
         return
     con = console()
     con.print(header(info), highlight=False)
@@ -93,10 +108,10 @@ def graph(
     credentials: CredentialsOpt = None,
     as_json: JsonOpt = False,
     dot: Annotated[bool, typer.Option("--dot", help="Graphviz DOT (pipe into `dot -Tpng`)")] = False,
-    watch: Annotated[bool, typer.Option("--watch", help="redraw whenever the graph changes, "
-                                        "until Ctrl-C")] = False,
-    sensing: Annotated[bool, typer.Option("--sensing", help="add who senses whom (dotted edges; "
-                                          "a `sensing` list in JSON)")] = False,
+    watch: Annotated[bool, typer.Option("--watch", help="redraw whenever the graph changes, until Ctrl-C")] = False,
+    sensing: Annotated[
+        bool, typer.Option("--sensing", help="add who senses whom (dotted edges; a `sensing` list in JSON)")
+    ] = False,
 ) -> None:
     """The live communication graph as the agents chose it (i -> out-neighbour).
 

@@ -30,9 +30,14 @@ from importlib import import_module
 GROUPS = ("up", "run", "offline", "plot", "live", "watch", "control", "access", "host")
 # command -> the group modules that are enough to run it (several commands in all: a typer app
 # of one command would run it without its name)
-LAZY = {name: modules for modules, names in ((("live", "watch"), ("runs", "agents", "graph", "watch")),
-                                             (("control",), ("kill", "spawn", "pause", "resume")))
-        for name in names}
+LAZY = {
+    name: modules
+    for modules, names in (
+        (("live", "watch"), ("runs", "agents", "graph", "watch")),
+        (("control",), ("kill", "spawn", "pause", "resume")),
+    )
+    for name in names
+}
 
 
 def _print_version(value: bool) -> None:
@@ -60,8 +65,11 @@ def build(groups=GROUPS, study: bool = True):
     )
 
     @app.callback()
-    def root(version: bool = typer.Option(False, "--version", is_eager=True, callback=_print_version,
-                                          help="print the version and exit")) -> None:
+    def root(
+        version: bool = typer.Option(
+            False, "--version", is_eager=True, callback=_print_version, help="print the version and exit"
+        ),
+    ) -> None:
         pass
 
     for group in groups:
@@ -95,8 +103,8 @@ def foxglove_argv(argv: list[str]) -> list[str]:
         a = argv[k]
         if a == "--":
             return out + list(argv[k:])
-        if a.startswith("--foxglove=") and a[len("--foxglove="):].isdigit():
-            out += ["--foxglove", "--foxglove-port", a[len("--foxglove="):]]
+        if a.startswith("--foxglove=") and a[len("--foxglove=") :].isdigit():
+            out += ["--foxglove", "--foxglove-port", a[len("--foxglove=") :]]
         elif a == "--foxglove" and k + 1 < len(argv) and argv[k + 1].isdigit():
             out += ["--foxglove", "--foxglove-port", argv[k + 1]]
             k += 1

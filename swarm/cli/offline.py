@@ -14,6 +14,7 @@ from swarm.cli.options import ScenarioArg, read_scenario
 if TYPE_CHECKING:  # the scenario model (pydantic) is imported by the commands that read one:
     from swarm.contracts.scenario import Scenario  # live commands start without it (~0.13 s)
 
+
 def check(scenario: ScenarioArg) -> None:
     """Validate a scenario file and print a short summary of it.
 
@@ -22,8 +23,10 @@ def check(scenario: ScenarioArg) -> None:
     s = read_scenario(scenario)
     r = s.run
     typer.echo(f"{scenario}: ok - {s.name or scenario.stem}")
-    typer.echo(f"  run: dt={r.dt} s, duration={r.duration} s ({r.ticks} ticks), clock={r.clock}, "
-               f"seed={r.seed}, on_dropout={r.on_dropout}")
+    typer.echo(
+        f"  run: dt={r.dt} s, duration={r.duration} s ({r.ticks} ticks), clock={r.clock}, "
+        f"seed={r.seed}, on_dropout={r.on_dropout}"
+    )
     typer.echo(f"  added agents: up to {len(s.added_id_range)} ({s.added_ids_text()})")
     typer.echo(f"  target: ({s.target.x}, {s.target.y}) m; gains: c1={s.gains.c1}, c2={s.gains.c2}")
     from swarm.contracts.laws import follower_law_name
@@ -32,32 +35,46 @@ def check(scenario: ScenarioArg) -> None:
     params = ", ".join(f"{k}={v:g}" for k, v in s.law.params.items())
     typer.echo(f"  laws: follower={follower}, leader={s.law.leader}" + (f"; params: {params}" if params else ""))
     sens = s.sensing
-    typer.echo(f"  sensing: range={'unlimited' if sens.range is None else f'{sens.range} m'}, "
-               f"fov={'all round' if sens.fov is None else f'{sens.fov} rad'}, "
-               f"selection={sens.selection}, hysteresis={sens.hysteresis}")
+    typer.echo(
+        f"  sensing: range={'unlimited' if sens.range is None else f'{sens.range} m'}, "
+        f"fov={'all round' if sens.fov is None else f'{sens.fov} rad'}, "
+        f"selection={sens.selection}, hysteresis={sens.hysteresis}"
+    )
     for a in s.agents:
-        extra = (f"R={a.orbit_radius} m {a.direction}" if a.role == "leader"
-                 else f"follow={a.follow}" if a.follow is not None else f"out-neighbour: {sens.selection}")
+        extra = (
+            f"R={a.orbit_radius} m {a.direction}"
+            if a.role == "leader"
+            else f"follow={a.follow}"
+            if a.follow is not None
+            else f"out-neighbour: {sens.selection}"
+        )
         lim = "" if a.max_turn_rate is None else f", |u|<={a.max_turn_rate} rad/s"
-        typer.echo(f"  agent {a.id:>3} {a.role:<8} at ({a.x:g}, {a.y:g}) heading {a.heading:g} rad, "
-                   f"{a.speed:g} m/s, {extra}{lim}")
+        typer.echo(
+            f"  agent {a.id:>3} {a.role:<8} at ({a.x:g}, {a.y:g}) heading {a.heading:g} rad, "
+            f"{a.speed:g} m/s, {extra}{lim}"
+        )
     for f in s.faults:
         who = "every agent" if f.agent is None else f"agent {f.agent}"
-        more = ", ".join(f"{k}={v}" for k, v in (("duration", f.duration), ("probability", f.probability),
-                                                  ("delay", f.delay), ("std", f.std)) if v is not None)
+        more = ", ".join(
+            f"{k}={v}"
+            for k, v in (("duration", f.duration), ("probability", f.probability), ("delay", f.delay), ("std", f.std))
+            if v is not None
+        )
         typer.echo(f"  fault at {f.at:g} s: {f.kind} {who}" + (f" ({more})" if more else ""))
     _warn_nearest_graph(s)
 
 
-def _warn_nearest_graph(s: "Scenario") -> None:
+def _warn_nearest_graph(s: Scenario) -> None:
     """Warn (exit 0) when the paper's nearest choice at t = 0 breaks Assumption 1."""
     from swarm.agents.selection import nearest
     from swarm.contracts.graph import analyse
     from swarm.world.core import WorldCore
 
     leaders = {a.id for a in s.agents if a.role == "leader"}
-    out = {aid: (None if aid in leaders else (c.id if (c := nearest(f.contacts)) else None))
-           for aid, f in WorldCore(s).frames().items()}
+    out = {
+        aid: (None if aid in leaders else (c.id if (c := nearest(f.contacts)) else None))
+        for aid, f in WorldCore(s).frames().items()
+    }
     g = analyse(out, leaders)
     problems = [f"follower-only cycle {' -> '.join(map(str, c + c[:1]))}" for c in g["cycles"]]
     lone = [i for i in g["unrooted"] if not any(i in c for c in g["cycles"])]
@@ -66,14 +83,18 @@ def _warn_nearest_graph(s: "Scenario") -> None:
     if not problems:
         return
     edges = ", ".join(f"{i}->{j}" for i, j in g["edges"])
-    cure = {"nearest": "this run keeps re-choosing the nearest agent and may never converge; "
-                       "selection = \"sticky\" (the default) keeps every follower rooted",
-            "sticky": "selection = \"sticky\" roots these followers on the nearest agent that has a path, "
-                      "and those that sense none shadow or search until one is in reach",
-            "rooted": "selection = \"rooted\" roots these followers on the nearest agent that has a path",
-            "fixed": "this scenario pins its graph with `follow`"}[s.sensing.selection]
-    typer.secho(f"  warning: nearest choice at t = 0 ({edges}) breaks the paper's Assumption 1: "
-                f"{'; '.join(problems)}. {cure}.", fg=typer.colors.YELLOW)
+    cure = {
+        "nearest": "this run keeps re-choosing the nearest agent and may never converge; "
+        'selection = "sticky" (the default) keeps every follower rooted',
+        "sticky": 'selection = "sticky" roots these followers on the nearest agent that has a path, '
+        "and those that sense none shadow or search until one is in reach",
+        "rooted": 'selection = "rooted" roots these followers on the nearest agent that has a path',
+        "fixed": "this scenario pins its graph with `follow`",
+    }[s.sensing.selection]
+    typer.secho(
+        f"  warning: nearest choice at t = 0 ({edges}) breaks the paper's Assumption 1: {'; '.join(problems)}. {cure}.",
+        fg=typer.colors.YELLOW,
+    )
 
 
 def schema() -> None:

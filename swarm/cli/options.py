@@ -17,23 +17,51 @@ from swarm.cli.errors import fail
 if TYPE_CHECKING:  # the scenario model (pydantic) is imported by the commands that read one:
     from swarm.contracts.scenario import Scenario  # live commands start without it (~0.13 s)
 
-ConnectOpt = Annotated[Optional[str], typer.Option(
-    "--connect", envvar=ENV_CONNECT, help="endpoint of the run, e.g. tcp/HOST:7447 or unixsock-stream/PATH "
-    "(default: $SWARM_CONNECT, else local runs in $SWARM_RUNTIME_DIR or /tmp/swarm-<uid>)", show_default=False)]
-LiveRunOpt = Annotated[Optional[str], typer.Option(
-    "--run", envvar=ENV_RUN, help="run id (default: $SWARM_RUN, else the only live run found; several runs "
-    "up: `export SWARM_RUN=ID` once)", show_default=False)]
-RunOpt = Annotated[Optional[str], typer.Option(  # commands that are not live ones: no default from the environment
-    "--run", help="run id (default: the only live run found)", show_default=False)]
+ConnectOpt = Annotated[
+    Optional[str],
+    typer.Option(
+        "--connect",
+        envvar=ENV_CONNECT,
+        help="endpoint of the run, e.g. tcp/HOST:7447 or unixsock-stream/PATH "
+        "(default: $SWARM_CONNECT, else local runs in $SWARM_RUNTIME_DIR or /tmp/swarm-<uid>)",
+        show_default=False,
+    ),
+]
+LiveRunOpt = Annotated[
+    Optional[str],
+    typer.Option(
+        "--run",
+        envvar=ENV_RUN,
+        help="run id (default: $SWARM_RUN, else the only live run found; several runs up: `export SWARM_RUN=ID` once)",
+        show_default=False,
+    ),
+]
+RunOpt = Annotated[
+    Optional[str],
+    typer.Option(  # commands that are not live ones: no default from the environment
+        "--run", help="run id (default: the only live run found)", show_default=False
+    ),
+]
 JsonOpt = Annotated[bool, typer.Option("--json", help="machine-readable JSON (see docs/cli.md)")]
-CredentialsOpt = Annotated[Optional[Path], typer.Option(
-    "--credentials", metavar="FILE", help="the run's credentials (default: $SWARM_CREDENTIALS, else the "
-    "local run's own file); for a run on another machine, a file from `swarm credentials`",
-    show_default=False)]
-TrustLawOpt = Annotated[Optional[list[str]], typer.Option(
-    "--trust-law", metavar="MODULE:FUNCTION",
-    help="a follower law of your own the agent may import if the run uses it (repeatable; built-in laws "
-         "need nothing)")]
+CredentialsOpt = Annotated[
+    Optional[Path],
+    typer.Option(
+        "--credentials",
+        metavar="FILE",
+        help="the run's credentials (default: $SWARM_CREDENTIALS, else the "
+        "local run's own file); for a run on another machine, a file from `swarm credentials`",
+        show_default=False,
+    ),
+]
+TrustLawOpt = Annotated[
+    Optional[list[str]],
+    typer.Option(
+        "--trust-law",
+        metavar="MODULE:FUNCTION",
+        help="a follower law of your own the agent may import if the run uses it (repeatable; built-in laws "
+        "need nothing)",
+    ),
+]
 
 
 def console(err: bool = False):
@@ -43,12 +71,12 @@ def console(err: bool = False):
     return Console(file=stream, width=None if stream.isatty() else 160, highlight=False)
 
 
+ScenarioArg = Annotated[
+    Path, typer.Argument(help="scenario file (TOML), e.g. scenarios/case2.toml", show_default=False)
+]
 
-ScenarioArg = Annotated[Path, typer.Argument(help="scenario file (TOML), e.g. scenarios/case2.toml",
-                                             show_default=False)]
 
-
-def read_scenario(path: Path) -> "Scenario":
+def read_scenario(path: Path) -> Scenario:
     """`swarm.load(path)`: a bad file raises ScenarioError, its message and exit 2 (swarm/cli/errors.py)."""
     from swarm.api.scenario import load
 
@@ -59,25 +87,41 @@ def out_option(help: str):
     return Annotated[Optional[Path], typer.Option("--out", "-o", help=help)]
 
 
-SimOutOpt = out_option("output directory (default runs/<scenario>-sim-<time>-<random>); one that "
-                       "already holds results is refused unless --force")
-WorldOutOpt = out_option("where to write the results (default: nowhere); one that already holds "
-                         "results is refused unless --force")
+SimOutOpt = out_option(
+    "output directory (default runs/<scenario>-sim-<time>-<random>); one that "
+    "already holds results is refused unless --force"
+)
+WorldOutOpt = out_option(
+    "where to write the results (default: nowhere); one that already holds results is refused unless --force"
+)
 ForceOpt = Annotated[bool, typer.Option("--force", help="replace the results already in --out")]
 # (no range of typer's: the scenario's own checks say what is wrong with any value, check_duration)
-DurationOpt = Annotated[Optional[float], typer.Option(help="simulated seconds (default: the "
-                                                      "scenario's run.duration)")]
+DurationOpt = Annotated[Optional[float], typer.Option(help="simulated seconds (default: the scenario's run.duration)")]
 ClockOpt = Annotated[Optional[str], typer.Option(help="lockstep | realtime (default: the scenario's)")]
-TimeScaleOpt = Annotated[float, typer.Option("--time-scale", "--speed", help="realtime clock: simulated "
-                                             "seconds per wall second", min=1e-6)]
+TimeScaleOpt = Annotated[
+    float, typer.Option("--time-scale", "--speed", help="realtime clock: simulated seconds per wall second", min=1e-6)
+]
 EndPlotsOpt = Annotated[bool, typer.Option(help="render PNG plots at the end")]
-FoxgloveOpt = Annotated[bool, typer.Option("--foxglove", help="serve the run live to the Foxglove app "
-                                           "(WebSocket, ws://HOST:PORT; `--foxglove PORT` for another port "
-                                           "than 8765; docs/outputs.md, \"Live view in Foxglove\")")]
-FoxglovePortOpt = Annotated[int, typer.Option("--foxglove-port", help="--foxglove: the port (`--foxglove PORT` "
-                                              "says the same)", min=1, max=65535)]
-FoxgloveHostOpt = Annotated[str, typer.Option("--foxglove-host", help="--foxglove: the address to bind "
-                                              "(0.0.0.0: every interface, anyone who can reach it sees the run)")]
+FoxgloveOpt = Annotated[
+    bool,
+    typer.Option(
+        "--foxglove",
+        help="serve the run live to the Foxglove app "
+        "(WebSocket, ws://HOST:PORT; `--foxglove PORT` for another port "
+        'than 8765; docs/outputs.md, "Live view in Foxglove")',
+    ),
+]
+FoxglovePortOpt = Annotated[
+    int,
+    typer.Option("--foxglove-port", help="--foxglove: the port (`--foxglove PORT` says the same)", min=1, max=65535),
+]
+FoxgloveHostOpt = Annotated[
+    str,
+    typer.Option(
+        "--foxglove-host",
+        help="--foxglove: the address to bind (0.0.0.0: every interface, anyone who can reach it sees the run)",
+    ),
+]
 
 
 def default_out(scenario_path: Path, kind: str) -> Path:
@@ -105,13 +149,15 @@ def check_duration(s, duration: float | None, path: Path) -> None:
     from swarm.contracts.scenario import ScenarioError, parse_scenario
 
     try:
-        parse_scenario({**s.model_dump(), "run": {**s.run.model_dump(), "duration": duration}},
-                       f"{path} with --duration {duration:g}")
+        parse_scenario(
+            {**s.model_dump(), "run": {**s.run.model_dump(), "duration": duration}},
+            f"{path} with --duration {duration:g}",
+        )
     except ScenarioError as e:
         why = []
         for line in str(e).splitlines()[1:]:
             line = line.strip().removeprefix("run.duration: ")
-            why.append(line[len("Input "):] if line.startswith("Input should be ") else line)
+            why.append(line[len("Input ") :] if line.startswith("Input should be ") else line)
         raise fail(f"--duration {duration:g}: {'; '.join(why)} ({path})", 2) from None
 
 

@@ -9,6 +9,7 @@ import typer
 
 from swarm.cli.errors import fail
 
+
 def render_run_plots(out: Path, formats: tuple[str, ...] = ("png",)) -> None:
     """The figures of the run in `out` in `formats`, their names printed; a plotting failure exits 1."""
     from swarm.plots import PlotError, render_plots
@@ -27,29 +28,40 @@ def say_plots(files: list[Path]) -> None:
 def _progress_bar(label: str):
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-    return Progress(TextColumn(label), BarColumn(), TextColumn("{task.completed}/{task.total} ticks"),
-                    TimeRemainingColumn(), transient=True, disable=not sys.stderr.isatty())
+    return Progress(
+        TextColumn(label),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total} ticks"),
+        TimeRemainingColumn(),
+        transient=True,
+        disable=not sys.stderr.isatty(),
+    )
 
 
 def print_summary(summary: dict, out: Path) -> None:
-    typer.echo(f"converged: {summary['converged']}  ticks: {summary['ticks']}  "
-               f"sim time: {summary['sim_time']:.2f} s  selection: {summary.get('selection', '-')}  "
-               f"switches: {summary.get('switches', '-')}")
-    typer.echo(f"  {'id':>3} {'role':<8} {'out':>4} {'root':>4} {'radius':>9} {'expected':>9} "
-               f"{'error %':>8} {'rate':>8} {'settle s':>8} {'switches':>8}")
+    typer.echo(
+        f"converged: {summary['converged']}  ticks: {summary['ticks']}  "
+        f"sim time: {summary['sim_time']:.2f} s  selection: {summary.get('selection', '-')}  "
+        f"switches: {summary.get('switches', '-')}"
+    )
+    typer.echo(
+        f"  {'id':>3} {'role':<8} {'out':>4} {'root':>4} {'radius':>9} {'expected':>9} "
+        f"{'error %':>8} {'rate':>8} {'settle s':>8} {'switches':>8}"
+    )
     for aid, a in summary["agents"].items():
+
         def f(v, fmt):
             return "-" if v is None else format(v, fmt)
-        typer.echo(f"  {aid:>3} {a['role']:<8} {f(a['out_neighbour'], 'd'):>4} {f(a['root'], 'd'):>4} "
-                   f"{a['final_radius']:9.3f} {f(a['expected_radius'], '9.3f'):>9} "
-                   f"{f(None if a['relative_error'] is None else 100 * a['relative_error'], '8.3f'):>8} "
-                   f"{f(a['angular_rate'], '8.4f'):>8} {f(a['settling_time'], '8.2f'):>8} "
-                   f"{f(a.get('switches'), 'd'):>8}"
-                   + ("" if a["alive"] else "  (dropped)"))
+
+        typer.echo(
+            f"  {aid:>3} {a['role']:<8} {f(a['out_neighbour'], 'd'):>4} {f(a['root'], 'd'):>4} "
+            f"{a['final_radius']:9.3f} {f(a['expected_radius'], '9.3f'):>9} "
+            f"{f(None if a['relative_error'] is None else 100 * a['relative_error'], '8.3f'):>8} "
+            f"{f(a['angular_rate'], '8.4f'):>8} {f(a['settling_time'], '8.2f'):>8} "
+            f"{f(a.get('switches'), 'd'):>8}" + ("" if a["alive"] else "  (dropped)")
+        )
     why = summary.get("not_reproducible") or []
     if summary.get("clock") == "lockstep" and summary.get("reproducible") is False and why:
         more = f" (and {len(why) - 1} more: summary.json, not_reproducible)" if len(why) > 1 else ""
         typer.echo(f"not what lockstep promises (swarm sim would differ): {why[0]}{more}")
     typer.echo(f"results: {out}")
-
-

@@ -51,11 +51,17 @@ def render_animation_cli(run_dir: Path, frames: int) -> None:
     from swarm.plots.animate import FPS
 
     try:
-        with Progress(TextColumn("animation"), BarColumn(), TextColumn("{task.completed}/{task.total} frames"),
-                      transient=True, disable=not sys.stderr.isatty()) as bar:
+        with Progress(
+            TextColumn("animation"),
+            BarColumn(),
+            TextColumn("{task.completed}/{task.total} frames"),
+            transient=True,
+            disable=not sys.stderr.isatty(),
+        ) as bar:
             task = bar.add_task("animation", total=None)
-            path = render_animation(run_dir, max_frames=frames,
-                                    progress=lambda i, n: bar.update(task, completed=i, total=n))
+            path = render_animation(
+                run_dir, max_frames=frames, progress=lambda i, n: bar.update(task, completed=i, total=n)
+            )
     except PlotError as e:
         raise fail(str(e), 1) from None
     from swarm.plots.animate import gif_frames
@@ -66,10 +72,10 @@ def render_animation_cli(run_dir: Path, frames: int) -> None:
 
 def plot(
     run_dir: RunDirArg,
-    format: Annotated[Optional[list[str]], typer.Option("--format", "-f", help=FORMAT_HELP,
-                                                        show_default="png")] = None,
-    animate: Annotated[bool, typer.Option("--animate", help="also write animation.gif: trails, graph edges and "
-                                          "switches over the run")] = False,
+    format: Annotated[Optional[list[str]], typer.Option("--format", "-f", help=FORMAT_HELP, show_default="png")] = None,
+    animate: Annotated[
+        bool, typer.Option("--animate", help="also write animation.gif: trails, graph edges and switches over the run")
+    ] = False,
     frames: Annotated[int, typer.Option(help="at most this many animation frames, evenly spaced over the run")] = 200,
 ) -> None:
     """Re-render the figures of a run from its trajectory.npz and summary.json.
@@ -102,8 +108,14 @@ def write_csvs(results) -> None:
 def export(
     run_dir: RunDirArg,
     plots: Annotated[bool, typer.Option(help="render PNG plots too")] = True,
-    csv: Annotated[bool, typer.Option("--csv", help="also write csv/agent-<id>.csv: one CSV per agent, a row per "
-                                      "tick (columns: docs/outputs.md, 'Outputs of a run')")] = False,
+    csv: Annotated[
+        bool,
+        typer.Option(
+            "--csv",
+            help="also write csv/agent-<id>.csv: one CSV per agent, a row per "
+            "tick (columns: docs/outputs.md, 'Outputs of a run')",
+        ),
+    ] = False,
 ) -> None:
     """Rebuild trajectory.npz and summary.json of a run from its recording.mcap; with --csv,
     write its trajectory as one CSV per agent.

@@ -8,15 +8,32 @@ from typing import Annotated, Optional
 
 import typer
 
-from swarm.contracts.lifeline import LAUNCHER_PID_ENV
-from swarm.contracts.wire import MAX_AGENT_ID
 from swarm.cli.errors import fail
 from swarm.cli.options import (
-    ClockOpt, CredentialsOpt, DurationOpt, EndPlotsOpt, FoxgloveHostOpt, FoxgloveOpt, FoxglovePortOpt, ForceOpt,
-    ScenarioArg, SimOutOpt, TimeScaleOpt, TrustLawOpt, WorldOutOpt, check_clock, check_duration, check_foxglove,
-    check_runtime_dir, claim_out, default_out, read_scenario,
+    ClockOpt,
+    CredentialsOpt,
+    DurationOpt,
+    EndPlotsOpt,
+    ForceOpt,
+    FoxgloveHostOpt,
+    FoxgloveOpt,
+    FoxglovePortOpt,
+    ScenarioArg,
+    SimOutOpt,
+    TimeScaleOpt,
+    TrustLawOpt,
+    WorldOutOpt,
+    check_clock,
+    check_duration,
+    check_foxglove,
+    check_runtime_dir,
+    claim_out,
+    default_out,
+    read_scenario,
 )
 from swarm.cli.output import _progress_bar, print_summary, render_run_plots
+from swarm.contracts.lifeline import LAUNCHER_PID_ENV
+from swarm.contracts.wire import MAX_AGENT_ID
 
 
 def sim(
@@ -25,9 +42,15 @@ def sim(
     duration: DurationOpt = None,
     plots: Annotated[bool, typer.Option(help="render PNG plots")] = True,
     force: ForceOpt = False,
-    batch: Annotated[bool, typer.Option("--batch", help="step all agents as arrays (the batch engine: the "
-                                        "same results, faster for many agents); refuses scenarios with "
-                                        "faults or a law of one's own (follower or leader)")] = False,
+    batch: Annotated[
+        bool,
+        typer.Option(
+            "--batch",
+            help="step all agents as arrays (the batch engine: the "
+            "same results, faster for many agents); refuses scenarios with "
+            "faults or a law of one's own (follower or leader)",
+        ),
+    ] = False,
 ) -> None:
     """Run a scenario in one process (the reference engine) and write its results.
 
@@ -53,8 +76,9 @@ def sim(
     try:
         with _progress_bar(f"sim {scenario.stem}") as prog:
             task = prog.add_task("sim", total=total)
-            results = simulate(s, duration, out, force=force, batch=batch,
-                               progress=lambda k, n: prog.update(task, completed=k))
+            results = simulate(
+                s, duration, out, force=force, batch=batch, progress=lambda k, n: prog.update(task, completed=k)
+            )
     except RecordingError as e:
         raise fail(f"swarm sim: {e}", EXIT_NO_SPACE) from None
     summary, wall = results.summary.to_dict(), results.summary["wall_time"]
@@ -67,22 +91,31 @@ def sim(
         from swarm.api.launch import EXIT_AGENT_FAILED
 
         e = crashes[0]
-        raise fail(f"swarm sim: {len(crashes)} agent(s) failed: agent {e['agent']} at t = {e['time']:g} s: "
-                   f"its law raised {e['cause']} (results in {out})", EXIT_AGENT_FAILED)
+        raise fail(
+            f"swarm sim: {len(crashes)} agent(s) failed: agent {e['agent']} at t = {e['time']:g} s: "
+            f"its law raised {e['cause']} (results in {out})",
+            EXIT_AGENT_FAILED,
+        )
 
 
 def world(
     scenario: ScenarioArg,
-    listen: Annotated[Optional[str], typer.Option(help="zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 "
-                                                  "or unixsock-stream/PATH (default: a Unix socket in "
-                                                  "$SWARM_RUNTIME_DIR or /tmp/swarm-<uid>)")] = None,
+    listen: Annotated[
+        Optional[str],
+        typer.Option(
+            help="zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 "
+            "or unixsock-stream/PATH (default: a Unix socket in "
+            "$SWARM_RUNTIME_DIR or /tmp/swarm-<uid>)"
+        ),
+    ] = None,
     run: Annotated[Optional[str], typer.Option(help="run id: the key prefix (default <scenario>-<random>)")] = None,
     out: WorldOutOpt = None,
     duration: Annotated[Optional[float], typer.Option(help="simulated seconds")] = None,
     clock: ClockOpt = None,
     time_scale: TimeScaleOpt = 1.0,
-    join_timeout: Annotated[Optional[float], typer.Option(help="give up if not every agent joined "
-                                                          "within this many s (default: wait)")] = None,
+    join_timeout: Annotated[
+        Optional[float], typer.Option(help="give up if not every agent joined within this many s (default: wait)")
+    ] = None,
     plots: EndPlotsOpt = True,
     force: ForceOpt = False,
     foxglove: FoxgloveOpt = False,
@@ -123,8 +156,19 @@ def world(
     if out is not None:
         claim_out(out, force)
     typer.echo(f"run {run} on {listen}; " + (f"results in {out}" if out else "no results kept (no --out)"), err=True)
-    code = run_world(WorldConfig(s, run, listen, out, clock, time_scale, duration, join_timeout,
-                                 foxglove=(foxglove_host, foxglove_port) if foxglove else None))
+    code = run_world(
+        WorldConfig(
+            s,
+            run,
+            listen,
+            out,
+            clock,
+            time_scale,
+            duration,
+            join_timeout,
+            foxglove=(foxglove_host, foxglove_port) if foxglove else None,
+        )
+    )
     summary = out / "summary.json" if out is not None else None
     # the table `swarm up` prints; not when the launcher runs us (it prints its own, and reads a
     # world's failure from the last line of its log)
@@ -140,17 +184,25 @@ def world(
 
 def agent(
     id: Annotated[int, typer.Option("--id", help="the agent's id in the scenario", min=0, max=MAX_AGENT_ID)],
-    connect: Annotated[str, typer.Option(help="the world's endpoint, e.g. tcp/HOST:7447 or "
-                                         "unixsock-stream/PATH")],
+    connect: Annotated[str, typer.Option(help="the world's endpoint, e.g. tcp/HOST:7447 or unixsock-stream/PATH")],
     run: Annotated[Optional[str], typer.Option(help="run id (default: the only run on the endpoint)")] = None,
-    wait_world: Annotated[bool, typer.Option(help="keep waiting when the world vanishes (for a new world "
-                                             "of the run) instead of exiting 4")] = False,
-    world_grace: Annotated[float, typer.Option(help="s to wait for a world that stopped answering (a "
-                                               "frozen or cut-off world; exit 5 after that)", min=0.0)] = 10.0,
-    connect_timeout: Annotated[float, typer.Option(help="s to wait for a world to listen on --connect before "
-                                                   "giving up (exit 6)", min=0.0)] = 10.0,
-    world_wait: Annotated[Optional[float], typer.Option(
-        "--world-wait", hidden=True, min=0.0, help="the old name of --connect-timeout (deprecated)")] = None,
+    wait_world: Annotated[
+        bool,
+        typer.Option(help="keep waiting when the world vanishes (for a new world of the run) instead of exiting 4"),
+    ] = False,
+    world_grace: Annotated[
+        float,
+        typer.Option(
+            help="s to wait for a world that stopped answering (a frozen or cut-off world; exit 5 after that)", min=0.0
+        ),
+    ] = 10.0,
+    connect_timeout: Annotated[
+        float, typer.Option(help="s to wait for a world to listen on --connect before giving up (exit 6)", min=0.0)
+    ] = 10.0,
+    world_wait: Annotated[
+        Optional[float],
+        typer.Option("--world-wait", hidden=True, min=0.0, help="the old name of --connect-timeout (deprecated)"),
+    ] = None,
     credentials: CredentialsOpt = None,
     trust_law: TrustLawOpt = None,
 ) -> None:
@@ -179,8 +231,18 @@ def agent(
         except CredentialsError as e:
             raise fail(f"swarm agent {id}: {e}", 3) from None
     wait = connect_timeout if world_wait is None else world_wait
-    raise typer.Exit(run_agent(id, connect, run, wait_world, world_grace=world_grace, creds_file=credentials,
-                               trust=tuple(trust_law or ()), world_wait=wait))
+    raise typer.Exit(
+        run_agent(
+            id,
+            connect,
+            run,
+            wait_world,
+            world_grace=world_grace,
+            creds_file=credentials,
+            trust=tuple(trust_law or ()),
+            world_wait=wait,
+        )
+    )
 
 
 def register(app: typer.Typer) -> None:

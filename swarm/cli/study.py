@@ -8,8 +8,9 @@ import math
 import os
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Callable, Optional
+from typing import Annotated, Optional
 
 import typer
 
@@ -36,8 +37,10 @@ def _floats(option: str, text: str, *, positive: bool = True, allow_inf: bool = 
         except ValueError:
             raise _fail(f"{option}: {part!r} is not a number (give a comma-separated list, e.g. 1,2.5)") from None
         if math.isnan(v) or (math.isinf(v) and not allow_inf) or (positive and v <= 0):
-            raise _fail(f"{option}: {part!r} must be a {'positive ' if positive else ''}finite number"
-                        + (" or inf" if allow_inf else ""))
+            raise _fail(
+                f"{option}: {part!r} must be a {'positive ' if positive else ''}finite number"
+                + (" or inf" if allow_inf else "")
+            )
         out.append(v)
     return out
 
@@ -55,8 +58,9 @@ def _ints(option: str, text: str, minimum: int) -> list[int]:
     return out
 
 
-def _run(worker, jobs: list, jobs_n: int, csv_path: Path, columns: list[str], label: str,
-         total: int) -> tuple[list[dict], bool]:
+def _run(
+    worker, jobs: list, jobs_n: int, csv_path: Path, columns: list[str], label: str, total: int
+) -> tuple[list[dict], bool]:
     """Run jobs (`total` runs: a job may be a batch of them) with a progress bar, streaming
     rows to csv_path; (rows, interrupted)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
@@ -67,8 +71,9 @@ def _run(worker, jobs: list, jobs_n: int, csv_path: Path, columns: list[str], la
     sink = CsvSink(csv_path, columns)
     tty = sys.stderr.isatty()
     last = [time.monotonic()]
-    prog = Progress(TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                    transient=True, disable=not tty)
+    prog = Progress(
+        TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), transient=True, disable=not tty
+    )
 
     def on_row(row: dict) -> None:
         sink(row)
@@ -92,16 +97,26 @@ def _run(worker, jobs: list, jobs_n: int, csv_path: Path, columns: list[str], la
     return rows, interrupted
 
 
-def _study(kind: str, worker, job_list: list, columns: list[str], summarise: Callable, jobs: int,
-           out: Optional[Path], what: str, total: int) -> tuple[Path, list[dict], list[dict], bool]:
+def _study(
+    kind: str,
+    worker,
+    job_list: list,
+    columns: list[str],
+    summarise: Callable,
+    jobs: int,
+    out: Optional[Path],
+    what: str,
+    total: int,
+) -> tuple[Path, list[dict], list[dict], bool]:
     """Run a study's jobs (`total` runs) into out/runs.csv and its summary into
     out/summary.csv; (out, rows, summary, interrupted)."""
     from swarm.study.pool import write_csv
 
     out = out or Path("runs") / f"study-{kind}-{time.strftime('%Y%m%d-%H%M%S')}"
     typer.echo(f"{what} on {jobs or os.cpu_count()} process(es); rows -> {out / 'runs.csv'}")
-    rows, stopped = _run(worker, job_list, jobs or os.cpu_count() or 1, out / "runs.csv", columns, f"study {kind}",
-                         total)
+    rows, stopped = _run(
+        worker, job_list, jobs or os.cpu_count() or 1, out / "runs.csv", columns, f"study {kind}", total
+    )
     summary = summarise(rows)
     write_csv(out / "summary.csv", summary)
     return out, rows, summary, stopped
@@ -127,11 +142,18 @@ def _num(fmt: str) -> Callable:
 
 DtOpt = Annotated[float, typer.Option(help="step (s)", min=1e-4)]
 JobsOpt = Annotated[int, typer.Option("--jobs", "-j", min=0, help="worker processes (0: one per core)")]
-OutOpt = Annotated[Optional[Path], typer.Option("--out", "-o", help="output directory "
-                                                "(default runs/study-<kind>-<time>)")]
-BatchOpt = Annotated[bool, typer.Option("--batch/--per-agent", help="run many runs per worker as arrays (the "
-                                        "batch engine, same rows) or each run through swarm sim's per-agent "
-                                        "engine")]
+OutOpt = Annotated[
+    Optional[Path], typer.Option("--out", "-o", help="output directory (default runs/study-<kind>-<time>)")
+]
+BatchOpt = Annotated[
+    bool,
+    typer.Option(
+        "--batch/--per-agent",
+        help="run many runs per worker as arrays (the "
+        "batch engine, same rows) or each run through swarm sim's per-agent "
+        "engine",
+    ),
+]
 
 
 @study_app.command()
@@ -140,13 +162,15 @@ def swarms(
     leaders: Annotated[str, typer.Option(help="leaders per swarm (list)")] = "2",
     selection: Annotated[str, typer.Option(help="selection rules (list of sticky, rooted, nearest)")] = "sticky",
     sensing_range: Annotated[str, typer.Option("--range", help="sensing ranges in m, inf = unlimited (list)")] = "inf",
-    fov: Annotated[Optional[float], typer.Option(help="field of view (rad, default all round)", min=0.01,
-                                                 max=2 * math.pi)] = None,
+    fov: Annotated[
+        Optional[float], typer.Option(help="field of view (rad, default all round)", min=0.01, max=2 * math.pi)
+    ] = None,
     seeds: Annotated[int, typer.Option(help="random swarms per setting (seeds 0..N-1)", min=1)] = 50,
     area: Annotated[float, typer.Option(help="side of the square the agents start in (m)", min=1.0)] = 120.0,
     speeds: Annotated[str, typer.Option(help="speed range MIN,MAX (m/s)")] = "15,40",
-    omega: Annotated[float, typer.Option(help="leaders' angular rate on their orbits (rad/s): R_L = v_L/omega",
-                                         min=1e-6)] = 1.0,
+    omega: Annotated[
+        float, typer.Option(help="leaders' angular rate on their orbits (rad/s): R_L = v_L/omega", min=1e-6)
+    ] = 1.0,
     c1: Annotated[float, typer.Option(help="gain C1", min=1e-9)] = 1.0,
     c2: Annotated[float, typer.Option(help="gain C2", min=1e-9)] = 0.5,
     duration: Annotated[float, typer.Option(help="simulated s per run: converged means by then", min=0.1)] = 500.0,
@@ -180,10 +204,28 @@ def swarms(
     if not (len(speeds.split(",")) == 2 and vmin <= vmax):
         raise _fail("--speeds: give MIN,MAX with MIN <= MAX, e.g. 15,40")
     ns, ls = _ints("--n", n, 2), _ints("--leaders", leaders, 1)
-    settings = [SwarmSetting(n=a, leaders=b, selection=r, range=rg, fov=fov or 2 * math.pi, area=area,
-                             speed_min=vmin, speed_max=vmax, omega=omega, c1=c1, c2=c2, duration=duration, dt=dt)
-                for a in ns for b in ls for r in rules
-                for rg in _floats("--range", sensing_range, allow_inf=True) if b < a]
+    settings = [
+        SwarmSetting(
+            n=a,
+            leaders=b,
+            selection=r,
+            range=rg,
+            fov=fov or 2 * math.pi,
+            area=area,
+            speed_min=vmin,
+            speed_max=vmax,
+            omega=omega,
+            c1=c1,
+            c2=c2,
+            duration=duration,
+            dt=dt,
+        )
+        for a in ns
+        for b in ls
+        for r in rules
+        for rg in _floats("--range", sensing_range, allow_inf=True)
+        if b < a
+    ]
     if not settings:
         raise _fail("--leaders: every setting has as many leaders as agents; a swarm needs a follower")
     runs = len(settings) * seeds
@@ -194,22 +236,40 @@ def swarms(
     else:
         worker, job_list = run_swarm, swarm_jobs(settings, range(seeds))
     out, rows, summary, stopped = _study(
-        "swarms", worker, job_list, swarm_columns(), summarise_swarms, jobs, out,
+        "swarms",
+        worker,
+        job_list,
+        swarm_columns(),
+        summarise_swarms,
+        jobs,
+        out,
         f"{len(settings)} setting(s) x {seeds} seeds = {runs} runs of {duration:g} s (dt {dt:g} s), "
-        + (f"{len(job_list)} batches" if batch else "per-agent engine"), runs)
-    _table(summary, [("setting", "setting", str), ("runs", "runs", str),
-                     ("converged", "converged_fraction", _num(".1%")),
-                     ("cut off (conv.)", "cut_off", str), ("", "cut_off_converged", lambda v: f"({v})"),
-                     ("settle med s", "settling_median_s", _num(".0f")),
-                     ("settle p90 s", "settling_p90_s", _num(".0f")),
-                     ("switches med", "switches_median", _num("g")), ("p90", "switches_p90", _num("g")),
-                     ("max", "switches_max", _num("g")),
-                     ("search med s", "searching_median_s", _num(".1f")),
-                     ("per loss max", "loss_switches_max", _num("g"))])
-    typer.echo("converged: share of all runs in which every agent ends within 1% of its expected radius; "
-               "cut off: runs with a follower that has no sensing path to a leader at t = 0; switches: "
-               "per follower; search: s a follower spends with nobody to steer by (median over runs of "
-               "the mean per follower); per loss: the most switches one loss of an out-neighbour cost")
+        + (f"{len(job_list)} batches" if batch else "per-agent engine"),
+        runs,
+    )
+    _table(
+        summary,
+        [
+            ("setting", "setting", str),
+            ("runs", "runs", str),
+            ("converged", "converged_fraction", _num(".1%")),
+            ("cut off (conv.)", "cut_off", str),
+            ("", "cut_off_converged", lambda v: f"({v})"),
+            ("settle med s", "settling_median_s", _num(".0f")),
+            ("settle p90 s", "settling_p90_s", _num(".0f")),
+            ("switches med", "switches_median", _num("g")),
+            ("p90", "switches_p90", _num("g")),
+            ("max", "switches_max", _num("g")),
+            ("search med s", "searching_median_s", _num(".1f")),
+            ("per loss max", "loss_switches_max", _num("g")),
+        ],
+    )
+    typer.echo(
+        "converged: share of all runs in which every agent ends within 1% of its expected radius; "
+        "cut off: runs with a follower that has no sensing path to a leader at t = 0; switches: "
+        "per follower; search: s a follower spends with nobody to steer by (median over runs of "
+        "the mean per follower); per loss: the most switches one loss of an out-neighbour cost"
+    )
     if plot and summary:
         from swarm.study.figures import plot_swarms
 
@@ -221,8 +281,9 @@ def swarms(
 def gains(
     c1: Annotated[str, typer.Option(help="values of C1 / omega (list)")] = "0.5,1,2",
     c2: Annotated[str, typer.Option(help="values of C2 / omega (list)")] = "0.2,0.3,0.5,1,2",
-    ratios: Annotated[str, typer.Option(help="follower / out-neighbour speed ratios (list)")] =
-    "0.4,0.6,0.8,1,1.25,1.5,2,2.5,3,4",
+    ratios: Annotated[
+        str, typer.Option(help="follower / out-neighbour speed ratios (list)")
+    ] = "0.4,0.6,0.8,1,1.25,1.5,2,2.5,3,4",
     starts: Annotated[int, typer.Option(help="random starts per cell (the worst counts)", min=1)] = 3,
     duration: Annotated[float, typer.Option(help="simulated s per run, in units of 1/omega", min=1.0)] = 300.0,
     dt: DtOpt = 0.05,
@@ -248,9 +309,17 @@ def gains(
         worker, job_list = run_gain_chunk, gain_chunks(runs, jobs or os.cpu_count() or 1)
     else:
         worker, job_list = run_gain, runs
-    out, rows, summary, stopped = _study("gains", worker, job_list, gain_columns(), summarise_gains, jobs, out,
-                                         f"{len(runs)} runs of {duration:g} s, "
-                                         + (f"{len(job_list)} batches" if batch else "per-agent engine"), len(runs))
+    out, rows, summary, stopped = _study(
+        "gains",
+        worker,
+        job_list,
+        gain_columns(),
+        summarise_gains,
+        jobs,
+        out,
+        f"{len(runs)} runs of {duration:g} s, " + (f"{len(job_list)} batches" if batch else "per-agent engine"),
+        len(runs),
+    )
     _gain_table(summary)
     if plot and summary:
         from swarm.study.figures import plot_gains

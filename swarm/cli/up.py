@@ -12,28 +12,29 @@ from typing import Annotated, Optional
 
 import typer
 
-from swarm.cli.output import print_summary, render_run_plots
 from swarm.cli.options import (
-    ScenarioArg,
-    read_scenario,
     ClockOpt,
     DurationOpt,
     EndPlotsOpt,
+    ForceOpt,
     FoxgloveHostOpt,
     FoxgloveOpt,
     FoxglovePortOpt,
-    ForceOpt,
+    ScenarioArg,
     TimeScaleOpt,
     check_clock,
     check_duration,
     check_foxglove,
     check_runtime_dir,
     out_option,
+    read_scenario,
 )
+from swarm.cli.output import print_summary, render_run_plots
 from swarm.runtime.progress import Paused, ProgressLine
 
-UpOutOpt = out_option("output directory (default runs/<run id>); one that already holds results is "
-                      "refused unless --force")
+UpOutOpt = out_option(
+    "output directory (default runs/<run id>); one that already holds results is refused unless --force"
+)
 
 
 def up(
@@ -42,12 +43,18 @@ def up(
     duration: DurationOpt = None,
     clock: ClockOpt = None,
     time_scale: TimeScaleOpt = 1.0,
-    listen: Annotated[Optional[str], typer.Option(help="endpoint of the run (default: a Unix socket in "
-                                                  "$SWARM_RUNTIME_DIR or /tmp/swarm-<uid>)")] = None,
+    listen: Annotated[
+        Optional[str],
+        typer.Option(help="endpoint of the run (default: a Unix socket in $SWARM_RUNTIME_DIR or /tmp/swarm-<uid>)"),
+    ] = None,
     plots: EndPlotsOpt = True,
     force: ForceOpt = False,
-    world_grace: Annotated[float, typer.Option(help="s the agents wait for a world that stopped answering "
-                                               "(a stalled, not a vanished, world)", min=0.0)] = 10.0,
+    world_grace: Annotated[
+        float,
+        typer.Option(
+            help="s the agents wait for a world that stopped answering (a stalled, not a vanished, world)", min=0.0
+        ),
+    ] = 10.0,
     foxglove: FoxgloveOpt = False,
     foxglove_port: FoxglovePortOpt = 8765,
     foxglove_host: FoxgloveHostOpt = "127.0.0.1",
@@ -74,8 +81,7 @@ def up(
 
     def started(run) -> None:  # checked, nothing started yet: what another terminal needs
         launched.append(run)
-        typer.echo(f"run {run.run_id}  endpoint {run.endpoint}  agents {len(s.agents)}  "
-                   f"clock {clock or s.run.clock}")
+        typer.echo(f"run {run.run_id}  endpoint {run.endpoint}  agents {len(s.agents)}  clock {clock or s.run.clock}")
         for line in attach_hints(run.run_id, run.dial, s):
             typer.echo(line)
         if live is not None:
@@ -88,8 +94,19 @@ def up(
     def progress(p: dict) -> None:  # "paused" from the world's pause/resume events the launcher heard
         line.show({**p, "paused": paused(launched[0].launcher.events) if launched else False})
 
-    o = launch(scenario, out, force=force, duration=duration, clock=clock, time_scale=time_scale, listen=listen,
-               foxglove=live, world_grace=world_grace, progress=progress, on_start=started)  # SIGINT/TERM: stop
+    o = launch(
+        scenario,
+        out,
+        force=force,
+        duration=duration,
+        clock=clock,
+        time_scale=time_scale,
+        listen=listen,
+        foxglove=live,
+        world_grace=world_grace,
+        progress=progress,
+        on_start=started,
+    )  # SIGINT/TERM: stop
     line.end()
     err = dict(err=True, fg=typer.colors.RED)
     if o.words is not None:
@@ -118,15 +135,20 @@ def attach_hints(run_id: str, dial: str, s) -> list[str]:
         others = True
     pick = f" --run {run_id}" if others else ""
     ids = s.added_id_range
-    lines = [f"watch it from another terminal: swarm watch{pick}  (table: swarm agents{pick}; graph: "
-             f"swarm graph{pick}" + (f"; or export SWARM_RUN={run_id} once" if others else "") + ")",
-             f"add an agent by hand: swarm spawn --id N{pick} (a new id, {ids.start}..{ids.stop - 1}, with "
-             "--x --y --heading --speed)" if ids else
-             f"add an agent by hand: no new id ({s.added_ids_text()}); a dropped agent rejoins with "
-             f"swarm spawn --id N{pick}"]
+    lines = [
+        f"watch it from another terminal: swarm watch{pick}  (table: swarm agents{pick}; graph: "
+        f"swarm graph{pick}" + (f"; or export SWARM_RUN={run_id} once" if others else "") + ")",
+        f"add an agent by hand: swarm spawn --id N{pick} (a new id, {ids.start}..{ids.stop - 1}, with "
+        "--x --y --heading --speed)"
+        if ids
+        else f"add an agent by hand: no new id ({s.added_ids_text()}); a dropped agent rejoins with "
+        f"swarm spawn --id N{pick}",
+    ]
     if not dial.startswith("unixsock"):
-        lines.append(f"from another machine: swarm credentials --agent N{pick}, there swarm agent --id N "
-                     f"--connect {dial} --credentials FILE (docs/resilience.md, \"Agents on other machines\")")
+        lines.append(
+            f"from another machine: swarm credentials --agent N{pick}, there swarm agent --id N "
+            f'--connect {dial} --credentials FILE (docs/resilience.md, "Agents on other machines")'
+        )
     return lines
 
 

@@ -13,22 +13,33 @@ from typing import Annotated
 import typer
 
 from swarm.api.live import connect as connect_run
-from swarm.contracts.errors import NoRunError, StoppedAnswering
 from swarm.cli.options import ConnectOpt, CredentialsOpt, LiveRunOpt, console
+from swarm.contracts.errors import NoRunError, StoppedAnswering
 from swarm.live.views import watch_frame
 from swarm.world.live_view import DEFAULT_HOST, DEFAULT_PORT
 
 WORLD_GONE_EXIT = 3.0  # s: `watch` without a terminal exits this long after the world ended
 
-WatchFoxgloveOpt = Annotated[bool, typer.Option(
-    "--foxglove", help=f"instead of the terminal view, serve the run to the Foxglove app over its WebSocket "
-    f"protocol, the topics of `swarm up --foxglove` (ws://{DEFAULT_HOST}:{DEFAULT_PORT}; `--foxglove PORT` for "
-    "another port; docs/outputs.md, \"Live view in Foxglove\"); Ctrl-C exits 130")]
-WatchFoxglovePortOpt = Annotated[int, typer.Option(
-    "--foxglove-port", help="--foxglove: the port (`--foxglove PORT` says the same)", min=1, max=65535)]
-WatchFoxgloveHostOpt = Annotated[str, typer.Option(
-    "--foxglove-host", help="--foxglove: the address to bind (0.0.0.0: every interface; anyone who can reach "
-    "the port can watch)")]
+WatchFoxgloveOpt = Annotated[
+    bool,
+    typer.Option(
+        "--foxglove",
+        help=f"instead of the terminal view, serve the run to the Foxglove app over its WebSocket "
+        f"protocol, the topics of `swarm up --foxglove` (ws://{DEFAULT_HOST}:{DEFAULT_PORT}; `--foxglove PORT` for "
+        'another port; docs/outputs.md, "Live view in Foxglove"); Ctrl-C exits 130',
+    ),
+]
+WatchFoxglovePortOpt = Annotated[
+    int,
+    typer.Option("--foxglove-port", help="--foxglove: the port (`--foxglove PORT` says the same)", min=1, max=65535),
+]
+WatchFoxgloveHostOpt = Annotated[
+    str,
+    typer.Option(
+        "--foxglove-host",
+        help="--foxglove: the address to bind (0.0.0.0: every interface; anyone who can reach the port can watch)",
+    ),
+]
 
 
 def watch(

@@ -42,8 +42,17 @@ from collections.abc import Iterable
 from swarm.contracts import wire
 from swarm.contracts.identities import HOST, OPERATOR, SUPERVISOR, agent_user, password_for
 
-ALL_MESSAGES = ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
-                "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"]
+ALL_MESSAGES = [
+    "put",
+    "delete",
+    "declare_subscriber",
+    "query",
+    "declare_queryable",
+    "reply",
+    "liveliness_token",
+    "declare_liveliness_subscriber",
+    "liveliness_query",
+]
 
 # Largest payload the hub accepts from a client, per key (bytes). zenoh drops a bigger
 # message at the hub before any Python code sees it.
@@ -76,18 +85,34 @@ def operator_rules(run: str) -> list[dict]:
     everything = f"{wire.run_prefix(run)}/**"
     return [
         _rule("op-read", ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"], [everything]),
-        _rule("op-query", ["query"], [wire.world_info_key(run), wire.world_admin_key(run),
-                                      wire.agent_key(run, "*", "status")]),
+        _rule(
+            "op-query",
+            ["query"],
+            [wire.world_info_key(run), wire.world_admin_key(run), wire.agent_key(run, "*", "status")],
+        ),
         _rule("op-ctl", ["put"], [wire.agent_key(run, "*", "ctl")]),
     ]
 
 
 def supervisor_rules(run: str) -> list[dict]:
-    return [_rule("sup-read", ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
-                  [f"{wire.run_prefix(run)}/**"]),
-            _rule("sup-query", ["query"], [wire.world_info_key(run), wire.world_admin_key(run),
-                                           wire.world_supervise_key(run), wire.agent_key(run, "*", "status")]),
-            _rule("sup-ctl", ["put"], [wire.agent_key(run, "*", "ctl")])]
+    return [
+        _rule(
+            "sup-read",
+            ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
+            [f"{wire.run_prefix(run)}/**"],
+        ),
+        _rule(
+            "sup-query",
+            ["query"],
+            [
+                wire.world_info_key(run),
+                wire.world_admin_key(run),
+                wire.world_supervise_key(run),
+                wire.agent_key(run, "*", "status"),
+            ],
+        ),
+        _rule("sup-ctl", ["put"], [wire.agent_key(run, "*", "ctl")]),
+    ]
 
 
 def access_control(run: str, agent_ids: Iterable[int], host: bool = False, operator: bool = True) -> dict:
@@ -118,8 +143,7 @@ def access_control(run: str, agent_ids: Iterable[int], host: bool = False, opera
         users[:0] = [OPERATOR, SUPERVISOR]
     rules.append(_rule("egress", ALL_MESSAGES, [f"{wire.run_prefix(run)}/**"], flow="egress"))
     policies.append({"rules": ["egress"], "subjects": users})
-    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
-            "policies": policies}
+    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies}
 
 
 def host_router_access(run: str, agent_ids: Iterable[int], hub_zid: str) -> dict:
@@ -128,8 +152,15 @@ def host_router_access(run: str, agent_ids: Iterable[int], hub_zid: str) -> dict
     to the run's hub (known by its zenoh id: the hub does not authenticate to the host)
     let through both ways for anything of the run. Default deny: nothing else gets in."""
     acl = access_control(run, agent_ids, operator=False)
-    acl["rules"].append({"id": "upstream", "permission": "allow", "flows": ["ingress", "egress"],
-                         "messages": ALL_MESSAGES, "key_exprs": [f"{wire.run_prefix(run)}/**"]})
+    acl["rules"].append(
+        {
+            "id": "upstream",
+            "permission": "allow",
+            "flows": ["ingress", "egress"],
+            "messages": ALL_MESSAGES,
+            "key_exprs": [f"{wire.run_prefix(run)}/**"],
+        }
+    )
     acl["subjects"].append({"id": "hub", "zids": [str(hub_zid)]})
     acl["policies"].append({"rules": ["upstream"], "subjects": ["hub"]})
     return acl
@@ -137,20 +168,36 @@ def host_router_access(run: str, agent_ids: Iterable[int], hub_zid: str) -> dict
 
 def size_filters(run: str) -> list[dict]:
     """zenoh's `low_pass_filter` section: the largest payload accepted on each key."""
+
     def f(fid: str, keys: list[str], limit: int) -> dict:
-        return {"id": fid, "flows": ["ingress"], "messages": ["put", "query", "reply"],
-                "key_exprs": keys, "size_limit": limit}
+        return {
+            "id": fid,
+            "flows": ["ingress"],
+            "messages": ["put", "query", "reply"],
+            "key_exprs": keys,
+            "size_limit": limit,
+        }
 
     return [
         f("cmd", [wire.agent_key(run, "*", "cmd")], CMD_LIMIT),
-        f("small", [wire.agent_key(run, "*", "status"), wire.agent_key(run, "*", "ctl"),
-                    wire.world_admin_key(run), wire.world_supervise_key(run), wire.world_info_key(run)], SMALL_LIMIT),
+        f(
+            "small",
+            [
+                wire.agent_key(run, "*", "status"),
+                wire.agent_key(run, "*", "ctl"),
+                wire.world_admin_key(run),
+                wire.world_supervise_key(run),
+                wire.world_info_key(run),
+            ],
+            SMALL_LIMIT,
+        ),
         f("join", [wire.agent_key(run, "*", "join")], JOIN_LIMIT),
     ]
 
 
-def user_dictionary(secret: str, run: str, agent_ids: Iterable[int], host: bool = False,
-                    supervisor: str | None = None) -> str:
+def user_dictionary(
+    secret: str, run: str, agent_ids: Iterable[int], host: bool = False, supervisor: str | None = None
+) -> str:
     """The hub's `dictionary_file` content: one `user:password` line per identity; the
     `supervisor` line only with its password (the launcher's: see the module)."""
     users = [OPERATOR] + [agent_user(a) for a in agent_ids] + ([HOST] if host else [])

@@ -70,24 +70,27 @@ class BrainConf:
         return asdict(self)
 
     @classmethod
-    def from_scenario(cls, scenario, agent_id: int) -> "BrainConf":
+    def from_scenario(cls, scenario, agent_id: int) -> BrainConf:
         a = scenario.agent(agent_id)
         g, s = scenario.gains, scenario.sensing
-        return cls(AgentConf(a.id, a.role, a.speed, a.orbit_radius, a.direction, a.follow, a.max_turn_rate),
-                   GainsConf(g.c1, g.c2, g.law), SensingConf(s.selection, s.hysteresis, s.range, s.fov),
-                   scenario.run.dt, len(scenario.agents),
-                   LawConf(scenario.law.follower, scenario.law.leader, dict(scenario.law.params)))
+        return cls(
+            AgentConf(a.id, a.role, a.speed, a.orbit_radius, a.direction, a.follow, a.max_turn_rate),
+            GainsConf(g.c1, g.c2, g.law),
+            SensingConf(s.selection, s.hysteresis, s.range, s.fov),
+            scenario.run.dt,
+            len(scenario.agents),
+            LawConf(scenario.law.follower, scenario.law.leader, dict(scenario.law.params)),
+        )
 
     @classmethod
-    def from_json(cls, d: dict) -> "BrainConf":
+    def from_json(cls, d: dict) -> BrainConf:
         """Rebuild and check a BrainConf received over the network; ValueError names the field."""
 
         def num(obj, key, where, positive=False, optional=False):
             v = obj.get(key) if isinstance(obj, dict) else None
             if v is None and optional:
                 return None
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
-                    or (positive and v <= 0):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or (positive and v <= 0):
                 raise ValueError(f"{where}.{key}: expected a {'positive ' if positive else ''}finite number")
             return float(v)
 
@@ -109,20 +112,30 @@ class BrainConf:
         law = g.get("law") if isinstance(g, dict) else None
         if not isinstance(law, str):
             raise ValueError("gains.law: expected a string")
-        agent = AgentConf(integer(a, "id", "agent"), choice(a, "role", "agent", ("leader", "follower")),
-                          num(a, "speed", "agent", positive=True),
-                          num(a, "orbit_radius", "agent", positive=True, optional=True),
-                          choice(a, "direction", "agent", ("ccw", "cw")),
-                          integer(a, "follow", "agent", optional=True),
-                          num(a, "max_turn_rate", "agent", positive=True, optional=True))
+        agent = AgentConf(
+            integer(a, "id", "agent"),
+            choice(a, "role", "agent", ("leader", "follower")),
+            num(a, "speed", "agent", positive=True),
+            num(a, "orbit_radius", "agent", positive=True, optional=True),
+            choice(a, "direction", "agent", ("ccw", "cw")),
+            integer(a, "follow", "agent", optional=True),
+            num(a, "max_turn_rate", "agent", positive=True, optional=True),
+        )
         if agent.role == "leader" and agent.orbit_radius is None:
             raise ValueError("agent.orbit_radius: a leader needs one")
-        return cls(agent, GainsConf(num(g, "c1", "gains"), num(g, "c2", "gains"), law),
-                   SensingConf(choice(s, "selection", "sensing", ("sticky", "nearest", "fixed", "rooted")),
-                               num(s, "hysteresis", "sensing"),
-                               num(s, "range", "sensing", positive=True, optional=True),
-                               num(s, "fov", "sensing", positive=True, optional=True)),
-                   num(d, "dt", "brain", positive=True), integer(d, "n_agents", "brain"), _law_conf(d.get("law")))
+        return cls(
+            agent,
+            GainsConf(num(g, "c1", "gains"), num(g, "c2", "gains"), law),
+            SensingConf(
+                choice(s, "selection", "sensing", ("sticky", "nearest", "fixed", "rooted")),
+                num(s, "hysteresis", "sensing"),
+                num(s, "range", "sensing", positive=True, optional=True),
+                num(s, "fov", "sensing", positive=True, optional=True),
+            ),
+            num(d, "dt", "brain", positive=True),
+            integer(d, "n_agents", "brain"),
+            _law_conf(d.get("law")),
+        )
 
 
 def _law_conf(d) -> LawConf:

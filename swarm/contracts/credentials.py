@@ -68,13 +68,20 @@ class Credentials:
     def check_agent(self, agent_id: int) -> None:
         """CredentialsError unless the hub knows `agent_id` (it refuses any other identity
         at connect, with no reason given, after its connect timeout)."""
-        if self.ids is None or agent_id in self.ids or (
-                self.added_ids is not None and self.added_ids[0] <= agent_id <= self.added_ids[1]):
+        if (
+            self.ids is None
+            or agent_id in self.ids
+            or (self.added_ids is not None and self.added_ids[0] <= agent_id <= self.added_ids[1])
+        ):
             return
-        added = (f"; agents added at run time take ids {self.added_ids[0]}..{self.added_ids[1]}"
-                 if self.added_ids is not None and self.added_ids[0] <= self.added_ids[1] else "")
-        raise CredentialsError(f"agent {agent_id} is not in scenario of run {self.run} "
-                               f"(ids: {', '.join(map(str, self.ids))}{added})")
+        added = (
+            f"; agents added at run time take ids {self.added_ids[0]}..{self.added_ids[1]}"
+            if self.added_ids is not None and self.added_ids[0] <= self.added_ids[1]
+            else ""
+        )
+        raise CredentialsError(
+            f"agent {agent_id} is not in scenario of run {self.run} (ids: {', '.join(map(str, self.ids))}{added})"
+        )
 
     def identity(self, user: str) -> tuple[str, str]:
         """(user, password) for `user`, or CredentialsError naming what the file holds."""
@@ -86,16 +93,19 @@ class Credentials:
             if agent_user(aid) == user:
                 return user, password
         where = f" in {self.path}" if self.path else ""
-        held = repr(self.user) if not self.agents else \
-            f"host {self.host!r} and agents {', '.join(str(a) for a, _ in self.agents)}"
+        held = (
+            repr(self.user)
+            if not self.agents
+            else f"host {self.host!r} and agents {', '.join(str(a) for a, _ in self.agents)}"
+        )
         raise CredentialsError(f"the credentials{where} are for {held} of run {self.run}, not {user!r}")
 
-    def export(self, user: str) -> "Credentials":
+    def export(self, user: str) -> Credentials:
         """A copy that holds only `user`'s password (for another machine; no pid either)."""
         u, p = self.identity(user)
         return replace(self, secret=None, user=u, password=p, pid=None, path=None, host=None, agents=None)
 
-    def export_host(self, name: str, agent_ids) -> "Credentials":
+    def export_host(self, name: str, agent_ids) -> Credentials:
         """A copy for agent host `name` running `agent_ids`: the `host` identity (the host
         router's, at the hub) and those agents' identities, nothing else (no secret, no pid)."""
         ids = tuple(sorted(set(agent_ids)))
@@ -105,8 +115,9 @@ class Credentials:
             self.check_agent(aid)
         agents = tuple((aid, self.identity(agent_user(aid))[1]) for aid in ids)
         u, p = self.identity(HOST)
-        return replace(self, secret=None, user=u, password=p, pid=None, path=None, host=check_host_name(name),
-                       agents=agents)
+        return replace(
+            self, secret=None, user=u, password=p, pid=None, path=None, host=check_host_name(name), agents=agents
+        )
 
     def host_agents(self) -> tuple[int, ...] | None:
         """The agent ids an agent host's file holds identities for (None: not such a file)."""
@@ -130,11 +141,25 @@ class Credentials:
         return d
 
 
-def new_credentials(run: str, endpoint: str, pid: int | None = None, tls_ca: str | None = None,
-                    hub_is_open: bool = False, ids: tuple[int, ...] | None = None,
-                    added_ids: tuple[int, int] | None = None) -> Credentials:
-    return Credentials(wire.check_run_id(run), endpoint, secret=secrets.token_hex(32), pid=pid, tls_ca=tls_ca,
-                       hub_is_open=hub_is_open, ids=ids, added_ids=added_ids)
+def new_credentials(
+    run: str,
+    endpoint: str,
+    pid: int | None = None,
+    tls_ca: str | None = None,
+    hub_is_open: bool = False,
+    ids: tuple[int, ...] | None = None,
+    added_ids: tuple[int, int] | None = None,
+) -> Credentials:
+    return Credentials(
+        wire.check_run_id(run),
+        endpoint,
+        secret=secrets.token_hex(32),
+        pid=pid,
+        tls_ca=tls_ca,
+        hub_is_open=hub_is_open,
+        ids=ids,
+        added_ids=added_ids,
+    )
 
 
 def parse(text: str, path: Path | None = None) -> Credentials:
@@ -144,7 +169,7 @@ def parse(text: str, path: Path | None = None) -> Credentials:
     except (ValueError, RecursionError) as e:
         raise CredentialsError(f"{where}: not a credentials file ({e})") from None
     if not isinstance(d, dict) or d.get("v") != 1:
-        raise CredentialsError(f"{where}: not a swarm credentials file (no \"v\": 1)")
+        raise CredentialsError(f'{where}: not a swarm credentials file (no "v": 1)')
 
     def text_field(name: str, optional: bool = True) -> str | None:
         v = d.get(name)
@@ -177,8 +202,7 @@ def parse(text: str, path: Path | None = None) -> Credentials:
     ids, added = d.get("ids"), d.get("added_ids")
     if ids is not None and not (isinstance(ids, list) and all(type(i) is int and i >= 0 for i in ids)):
         raise CredentialsError(f"{where}: ids: expected a list of agent ids")
-    if added is not None and not (isinstance(added, list) and len(added) == 2
-                                  and all(type(i) is int for i in added)):
+    if added is not None and not (isinstance(added, list) and len(added) == 2 and all(type(i) is int for i in added)):
         raise CredentialsError(f"{where}: added_ids: expected [first, last]")
     host = text_field("host")
     if host is not None:
@@ -188,16 +212,33 @@ def parse(text: str, path: Path | None = None) -> Credentials:
             raise CredentialsError(f"{where}: host: {e}") from None
     agents = d.get("agents")
     if agents is not None:
-        if not (isinstance(agents, dict) and agents and all(
+        if not (
+            isinstance(agents, dict)
+            and agents
+            and all(
                 isinstance(k, str) and k.isascii() and k.isdigit() and k == str(int(k)) and isinstance(v, str) and v
-                for k, v in agents.items())):
-            raise CredentialsError(f"{where}: agents: expected {{\"<id>\": \"<password>\", ...}}")
+                for k, v in agents.items()
+            )
+        ):
+            raise CredentialsError(f'{where}: agents: expected {{"<id>": "<password>", ...}}')
         agents = tuple(sorted((int(k), v) for k, v in agents.items()))
     if (host is None) != (agents is None):
         raise CredentialsError(f"{where}: an agent host's file has both host and agents")
-    return Credentials(run, text_field("endpoint", optional=False), secret, user, password, pid,
-                       text_field("tls_ca"), hub_is_open, None if ids is None else tuple(ids),
-                       None if added is None else (added[0], added[1]), host, agents, path)
+    return Credentials(
+        run,
+        text_field("endpoint", optional=False),
+        secret,
+        user,
+        password,
+        pid,
+        text_field("tls_ca"),
+        hub_is_open,
+        None if ids is None else tuple(ids),
+        None if added is None else (added[0], added[1]),
+        host,
+        agents,
+        path,
+    )
 
 
 def read(path: Path) -> Credentials:
@@ -282,9 +323,11 @@ def find_local(run: str | None = None, endpoint: str | None = None) -> Credentia
         return found[0]
     what = " and ".join(x for x in (f"run {run}" if run else "", f"endpoint {endpoint}" if endpoint else "") if x)
     if not found:
-        raise CredentialsError(f"no credentials for {what or 'a local run'} in {runtime_dir()} (a run on "
-                               f"another machine: a file from `swarm credentials` there, with --credentials "
-                               f"or {ENV_CREDENTIALS})")
+        raise CredentialsError(
+            f"no credentials for {what or 'a local run'} in {runtime_dir()} (a run on "
+            f"another machine: a file from `swarm credentials` there, with --credentials "
+            f"or {ENV_CREDENTIALS})"
+        )
     raise CredentialsError(f"{len(found)} local runs match ({', '.join(c.run for c in found)}); pick one with --run")
 
 

@@ -16,9 +16,9 @@ resolves a name or touches the network.
 
 from __future__ import annotations
 
-from swarm.contracts.vocabulary import Coded, ExitCode
-
 import re
+
+from swarm.contracts.vocabulary import Coded, ExitCode
 
 KINDS = ("tcp", "tls", "unixsock-stream")
 FORMS = "tcp/HOST:PORT, tls/HOST:PORT or unixsock-stream/PATH"
@@ -35,6 +35,7 @@ def check_endpoint(endpoint: str, listen: bool = False, what: str = "") -> str:
     """`endpoint` as it is if it is one (see the module docstring), else EndpointError:
     "not an endpoint: 'foo/bar' (...)", `what` ("--connect") put first when given. `listen`:
     port 0 (any free port) is allowed."""
+
     def bad(why: str) -> EndpointError:
         lead = f"{what}: " if what else ""
         return EndpointError(f"{lead}not an endpoint: {endpoint!r} ({why})")

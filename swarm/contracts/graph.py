@@ -31,7 +31,7 @@ def analyse(out: dict[int, int | None], leaders: set[int], alive: set[int] | Non
         else:
             roots[i] = {"root": None, "hops": None}
             if cur is not None and cur in path:  # a cycle among followers
-                cyc = path[path.index(cur):]
+                cyc = path[path.index(cur) :]
                 if not seen_cycle & set(cyc):
                     k = cyc.index(min(cyc))
                     cycles.append(cyc[k:] + cyc[:k])

@@ -27,7 +27,7 @@ import importlib
 import inspect
 import os
 import sys
-from typing import Callable, Iterable
+from collections.abc import Callable, Iterable
 
 FollowerLaw = Callable[[float, float, float, float, float], float]  # [gains] law
 Law = Callable[..., float]  # [law] follower / leader: law(obs) -> u
@@ -86,9 +86,11 @@ def check_trusted(name: str, trusted: set[str]) -> None:
     """LawError unless `name` is registered (built in) or trusted by this process's user."""
     if is_registered(name) or name in trusted:
         return
-    raise LawError(f"the world asks for law {name!r}, which this agent was not told to trust "
-                   f"(a law is code it would import): start it with --trust-law {name} or set "
-                   f"{ENV_TRUSTED_LAWS}={name}")
+    raise LawError(
+        f"the world asks for law {name!r}, which this agent was not told to trust "
+        f"(a law is code it would import): start it with --trust-law {name} or set "
+        f"{ENV_TRUSTED_LAWS}={name}"
+    )
 
 
 def follower_law_name(gains_law: str, follower: str) -> tuple[str, str]:
@@ -150,16 +152,24 @@ def check_law(name: str, kind: str = GAINS, dirs: Iterable = ()) -> Law:
     documents."""
     law = resolve_law(name, kind, dirs)
     if not _is_python_function(law):
-        raise LawError(f"{_what(kind)} {name!r} is {_kind_of(law)}, not a Python function (a law is a "
-                       "`def` taking " + ("(g_i, g_j, lambda_ij, c1, c2)" if kind == GAINS else "obs") +
-                       ", see docs/scenarios.md, \"Writing a law\")")
+        raise LawError(
+            f"{_what(kind)} {name!r} is {_kind_of(law)}, not a Python function (a law is a "
+            "`def` taking "
+            + ("(g_i, g_j, lambda_ij, c1, c2)" if kind == GAINS else "obs")
+            + ', see docs/scenarios.md, "Writing a law")'
+        )
     if kind == GAINS:
         if not _binds(law, 0.0, 0.0, 0.0, 1.0, 1.0):
             hint = "; a law of one argument (obs) goes in [law] follower" if _binds(law, None) else ""
             raise LawError(f"follower law {name!r} does not take (g_i, g_j, lambda_ij, c1, c2){hint}")
     elif not _binds(law, None):
-        hint = ("; a (g_i, g_j, lambda_ij, c1, c2) law goes in [gains] law"
-                if kind == FOLLOWER and _binds(law, 0.0, 0.0, 0.0, 1.0, 1.0) else "")
-        raise LawError(f"{_what(kind)} {name!r} does not take one argument (obs: an Observation, "
-                       f"see docs/scenarios.md, \"Writing a law\"){hint}")
+        hint = (
+            "; a (g_i, g_j, lambda_ij, c1, c2) law goes in [gains] law"
+            if kind == FOLLOWER and _binds(law, 0.0, 0.0, 0.0, 1.0, 1.0)
+            else ""
+        )
+        raise LawError(
+            f"{_what(kind)} {name!r} does not take one argument (obs: an Observation, "
+            f'see docs/scenarios.md, "Writing a law"){hint}'
+        )
     return law

@@ -15,7 +15,8 @@ agents/brain.py: cheap (about half a microsecond), and read-only but for `state`
 from __future__ import annotations
 
 import math
-from typing import Mapping, NamedTuple
+from collections.abc import Mapping
+from typing import NamedTuple
 
 from swarm.contracts.frames import Contact
 

@@ -36,11 +36,13 @@ def read_private(path: Path) -> bytes:
         if not stat.S_ISREG(st.st_mode):
             raise CredentialsError(f"{path}: not a regular file")
         if st.st_uid != os.getuid():
-            raise CredentialsError(f"{path}: owned by uid {st.st_uid}, not by you (uid {os.getuid()}); "
-                                   "refusing to use it")
+            raise CredentialsError(
+                f"{path}: owned by uid {st.st_uid}, not by you (uid {os.getuid()}); refusing to use it"
+            )
         if st.st_mode & 0o077:
-            raise CredentialsError(f"{path}: readable by others (mode {stat.S_IMODE(st.st_mode):04o}); "
-                                   f"run `chmod 600 {path}`")
+            raise CredentialsError(
+                f"{path}: readable by others (mode {stat.S_IMODE(st.st_mode):04o}); run `chmod 600 {path}`"
+            )
         with os.fdopen(fd, "rb", closefd=False) as f:
             data = f.read(1 << 20)
     finally:
@@ -84,11 +86,15 @@ def private_dir(path: Path) -> Path:
     if not stat.S_ISDIR(st.st_mode):
         raise CredentialsError(f"the runtime directory {path} is not a directory")
     if st.st_uid != os.getuid():
-        raise CredentialsError(f"the runtime directory {path} belongs to uid {st.st_uid}, not to you "
-                               f"(uid {os.getuid()}); set {ENV_RUNTIME_DIR} to a directory of your own")
+        raise CredentialsError(
+            f"the runtime directory {path} belongs to uid {st.st_uid}, not to you "
+            f"(uid {os.getuid()}); set {ENV_RUNTIME_DIR} to a directory of your own"
+        )
     if st.st_mode & 0o022:
-        raise CredentialsError(f"the runtime directory {path} is writable by others (mode "
-                               f"{stat.S_IMODE(st.st_mode):04o}); run `chmod 700 {path}` or set {ENV_RUNTIME_DIR}")
+        raise CredentialsError(
+            f"the runtime directory {path} is writable by others (mode "
+            f"{stat.S_IMODE(st.st_mode):04o}); run `chmod 700 {path}` or set {ENV_RUNTIME_DIR}"
+        )
     return path
 
 
@@ -106,7 +112,7 @@ def dial_endpoint(listen: str) -> str:
     if proto in ("tcp", "tls") and sep:
         for wildcard in ("0.0.0.0:", "[::]:"):
             if rest.startswith(wildcard):
-                return f"{proto}/127.0.0.1:{rest[len(wildcard):]}"
+                return f"{proto}/127.0.0.1:{rest[len(wildcard) :]}"
     return listen
 
 

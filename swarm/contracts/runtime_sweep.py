@@ -98,7 +98,7 @@ def _socket_run(name: str) -> tuple[str, str] | None:
     base = name.removesuffix(".lock")
     for suffix in SOCKET_SUFFIXES:
         if base.endswith(suffix) and len(base) > len(suffix):
-            return base, base[:-len(suffix)]
+            return base, base[: -len(suffix)]
     return None
 
 
@@ -117,7 +117,7 @@ def sweep_stale(directory: Path) -> list[Path]:
             if name.endswith(CRED) and not name.startswith("."):
                 pid = _owner_pid(path)
                 if type(pid) is int and not pid_alive(pid):
-                    run = name[:-len(CRED)]
+                    run = name[: -len(CRED)]
                     path.unlink(missing_ok=True)
                     removed.append(path)
                     (directory / f".{run}.users").unlink(missing_ok=True)

@@ -10,8 +10,6 @@ large for memory (see `Scenario._limits`).
 
 from __future__ import annotations
 
-from swarm.contracts.vocabulary import Coded, ExitCode
-
 import re
 import tomllib
 from pathlib import Path
@@ -30,6 +28,7 @@ from swarm.contracts.scenario_tables import (
     Strict,
     TargetSpec,
 )
+from swarm.contracts.vocabulary import Coded, ExitCode
 from swarm.contracts.wire import MAX_AGENT_ID, MAX_AGENTS
 
 MAX_SCENARIO_BYTES = 32 << 20  # a 10,000-agent scenario is about 1.5 MB
@@ -68,10 +67,10 @@ class Scenario(Strict):
         return agents
 
     @model_validator(mode="after")
-    def _graph(self) -> "Scenario":
+    def _graph(self) -> Scenario:
         ids = {a.id for a in self.agents}
         if not any(a.role == "leader" for a in self.agents):
-            raise ValueError("agents: at least one agent must have role = \"leader\"")
+            raise ValueError('agents: at least one agent must have role = "leader"')
         for k, a in enumerate(self.agents):
             if a.follow is not None:
                 if a.follow not in ids:
@@ -85,51 +84,53 @@ class Scenario(Strict):
             by_id = {a.id: a for a in self.agents}
             for k, a in enumerate(self.agents):
                 if a.role == "follower" and a.follow is None:
-                    raise ValueError(
-                        f"agents[{k}].follow: selection = \"fixed\" needs `follow` on every follower"
-                    )
+                    raise ValueError(f'agents[{k}].follow: selection = "fixed" needs `follow` on every follower')
             for k, a in enumerate(self.agents):
                 seen = [a.id]
                 cur = a
                 while cur.role == "follower" and cur.follow is not None:
                     cur = by_id[cur.follow]
                     if cur.id in seen:
-                        cycle = " -> ".join(str(i) for i in seen[seen.index(cur.id):] + [cur.id])
+                        cycle = " -> ".join(str(i) for i in seen[seen.index(cur.id) :] + [cur.id])
                         raise ValueError(f"agents[{k}].follow: follower-only cycle in the fixed graph: {cycle}")
                     seen.append(cur.id)
         return self
 
     @model_validator(mode="after")
-    def _one_follower_law(self) -> "Scenario":
+    def _one_follower_law(self) -> Scenario:
         if self.gains.law != "bearing" and self.law.follower != "bearing":
             raise ValueError(
                 f"law.follower: the follower law is named twice ([gains] law = {self.gains.law!r}, the "
                 f"older (g_i, g_j, lambda_ij, c1, c2) signature, and [law] follower = {self.law.follower!r}): "
-                "keep one")
+                "keep one"
+            )
         return self
 
     @model_validator(mode="after")
-    def _limits(self) -> "Scenario":
+    def _limits(self) -> Scenario:
         """What the wire and the recording can hold, counting the agents that may be added."""
         n, cap = len(self.agents), self.added_agents_cap
         default = " (the default, 4 x agents)" if self.run.max_added_agents is None else ""
         if n + cap > MAX_AGENTS:
             raise ValueError(
                 f"run.max_added_agents: {n + cap} agents ({n} + {cap} that may be added{default}), more "
-                f"than the wire carries ({MAX_AGENTS}); set run.max_added_agents = {_at_most(MAX_AGENTS - n)}")
+                f"than the wire carries ({MAX_AGENTS}); set run.max_added_agents = {_at_most(MAX_AGENTS - n)}"
+            )
         top = max(self.ids)
         if cap and top + cap > MAX_AGENT_ID:
             raise ValueError(
                 f"agents[{self.ids.index(top)}].id: the {cap} agents that may be added{default} take ids "
                 f"{top + 1}..{top + cap}, past the largest id the wire carries ({MAX_AGENT_ID}); use "
-                f"smaller ids or set run.max_added_agents = {_at_most(MAX_AGENT_ID - top)}")
+                f"smaller ids or set run.max_added_agents = {_at_most(MAX_AGENT_ID - top)}"
+            )
         ticks = self.run.ticks
         if ticks * (n + cap) > MAX_AGENT_TICKS:
             raise ValueError(
                 f"run.duration: the recording would hold {ticks} ticks x {n + cap} agents ({n} + {cap} that "
                 f"may be added{default}) = {ticks * (n + cap):.3g} agent-ticks, more than the limit of "
                 f"{RECORDING_LIMIT}; use a shorter run.duration or a larger run.dt"
-                + (", or set run.max_added_agents lower" if cap else ""))
+                + (", or set run.max_added_agents lower" if cap else "")
+            )
         return self
 
     def agent(self, agent_id: int) -> AgentSpec:
@@ -208,7 +209,7 @@ def format_validation_error(source: str, err: ValidationError) -> str:
         where = _loc(tuple(p for p in e["loc"] if p not in ("function-after",)))
         msg = e["msg"]
         if msg.startswith("Value error, "):
-            msg = msg[len("Value error, "):]
+            msg = msg[len("Value error, ") :]
         if e["type"] == "extra_forbidden":
             msg = "unknown key"
         m = re.match(r"^([a-z_]+): (.*)$", msg, re.S)

@@ -54,7 +54,8 @@ class RunSpec(Strict):
         "lockstep", description="lockstep: step when every agent answered; realtime: wall clock"
     )
     seed: Annotated[int, Field(ge=0, le=MAX_SEED)] = Field(
-        0, description="seed for every random choice of the run (0 .. 2**63 - 1)")
+        0, description="seed for every random choice of the run (0 .. 2**63 - 1)"
+    )
     on_dropout: Literal["leave", "coast"] = Field(
         "leave",
         description="what the world does with a dead agent: leave the world, or coast uncontrolled",
@@ -66,17 +67,19 @@ class RunSpec(Strict):
     max_added_agents: Annotated[int, Field(ge=0, le=MAX_AGENTS)] | None = Field(
         None,
         description="agents that may be added while the run goes (swarm spawn of a new id); "
-                    "default 4 x the scenario's agents",
+        "default 4 x the scenario's agents",
     )
 
     @model_validator(mode="after")
-    def _steps(self) -> "RunSpec":
+    def _steps(self) -> RunSpec:
         steps = self.duration / self.dt
         if not math.isfinite(steps) or steps > MAX_AGENT_TICKS:
             # even one agent would be too many for the recording (the scenario checks agents x ticks)
-            raise ValueError(f"duration: {self.duration:g} s at dt = {self.dt:g} s is {steps:.3g} steps, more "
-                             f"than the recording limit of {RECORDING_LIMIT}; use a shorter run.duration "
-                             f"or a larger run.dt")
+            raise ValueError(
+                f"duration: {self.duration:g} s at dt = {self.dt:g} s is {steps:.3g} steps, more "
+                f"than the recording limit of {RECORDING_LIMIT}; use a shorter run.duration "
+                f"or a larger run.dt"
+            )
         if self.ticks == 0:
             raise ValueError(f"duration: {self.duration:g} s is shorter than one step (dt = {self.dt:g} s)")
         return self
@@ -121,8 +124,8 @@ class GainsSpec(Strict):
     law: str = Field(
         "bearing",
         description="follower law of the older signature (g_i, g_j, lambda_ij, c1, c2): a registered "
-                    "name, or 'module:function'; anything but 'bearing' replaces [law] follower "
-                    "(see swarm/contracts/laws.py)",
+        "name, or 'module:function'; anything but 'bearing' replaces [law] follower "
+        "(see swarm/contracts/laws.py)",
     )
 
     @field_validator("law")
@@ -138,8 +141,10 @@ class LawSpec(Strict):
     follower: str = Field("bearing", description="follower law: 'bearing' (the paper's) or 'module:function'")
     leader: str = Field("cc", description="leader law: 'cc' (CC path, then orbit hold) or 'module:function'")
     params: dict[str, Finite] = Field(
-        default_factory=dict, max_length=MAX_LAW_PARAMS,
-        description="[law.params]: numbers handed to the laws as obs.params")
+        default_factory=dict,
+        max_length=MAX_LAW_PARAMS,
+        description="[law.params]: numbers handed to the laws as obs.params",
+    )
 
     @field_validator("follower")
     @classmethod
@@ -162,15 +167,15 @@ class SensingSpec(Strict):
     selection: Literal["sticky", "nearest", "fixed", "rooted"] = Field(
         "sticky",
         description="sticky (default): the nearest sensed agent once it has a path to a leader, "
-                    "kept until it is lost (finitely many switches, loop-free); nearest: the "
-                    "paper's rule, re-chosen every tick (can form follower-only cycles); fixed: "
-                    "the agent named by each follower's `follow`; rooted: the nearest sensed "
-                    "agent that advertises a path to a leader, re-chosen every tick",
+        "kept until it is lost (finitely many switches, loop-free); nearest: the "
+        "paper's rule, re-chosen every tick (can form follower-only cycles); fixed: "
+        "the agent named by each follower's `follow`; rooted: the nearest sensed "
+        "agent that advertises a path to a leader, re-chosen every tick",
     )
     hysteresis: Annotated[float, Field(ge=0, lt=1)] = Field(
         0.0,
         description="nearest, fixed, rooted: switch to a new nearest agent only if it is this "
-                    "fraction closer than the current one (sticky ignores it)",
+        "fraction closer than the current one (sticky ignores it)",
     )
 
 
@@ -189,7 +194,7 @@ class AgentSpec(Strict):
     max_turn_rate: Rate | None = Field(None, description="turn-rate limit (rad/s)")
 
     @model_validator(mode="after")
-    def _role_fields(self) -> "AgentSpec":
+    def _role_fields(self) -> AgentSpec:
         if self.role == "leader":
             if self.orbit_radius is None:
                 raise ValueError("orbit_radius: a leader needs an orbit radius (m)")
@@ -225,12 +230,14 @@ class FaultSpec(Strict):
     probability: Annotated[float, Field(ge=0, le=1)] | None = Field(None, description="loss: per message")
     what: Literal["sense", "cmd", "both"] = Field("both", description="loss: which messages")
     delay: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = Field(
-        None, description="delay: added latency of sensor frames (s of simulated time)")
+        None, description="delay: added latency of sensor frames (s of simulated time)"
+    )
     std: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = Field(
-        None, description="noise: standard deviation on sensed bearings and headings (rad)")
+        None, description="noise: standard deviation on sensed bearings and headings (rad)"
+    )
 
     @model_validator(mode="after")
-    def _fields(self) -> "FaultSpec":
+    def _fields(self) -> FaultSpec:
         if self.kind in PROCESS_FAULTS + ("partition",) and self.agent is None:
             raise ValueError(f"agent: a {self.kind} fault needs an agent id")
         if self.kind in ("partition", "loss", "delay", "noise") and self.duration is None:

@@ -33,7 +33,7 @@ class Announcer:
         self.fd = fd
 
     @classmethod
-    def from_environment(cls) -> "Announcer":
+    def from_environment(cls) -> Announcer:
         """The fd the launcher gave (taken out of the environment, so nothing else writes to it)."""
         v = os.environ.pop(ENV_READY_FD, "")
         try:

@@ -16,8 +16,8 @@ BLAS library's, may take them, and Python then runs the handler on the main thre
 from __future__ import annotations
 
 import signal
+from collections.abc import Callable
 from contextlib import contextmanager
-from typing import Callable
 
 SIGNALS = (signal.SIGTERM, signal.SIGINT)
 
@@ -41,7 +41,7 @@ class StopSignals:
         self.fired = False
         self.saved: dict = {}
 
-    def install(self) -> "StopSignals":
+    def install(self) -> StopSignals:
         self.saved = {sig: signal.signal(sig, self._handler) for sig in SIGNALS}
         return self
 

@@ -17,7 +17,6 @@ from __future__ import annotations
 import base64
 import datetime as _dt
 import ipaddress
-import os
 import socket
 from dataclasses import dataclass
 from pathlib import Path
@@ -147,8 +146,7 @@ def _dedupe_general(entries):
     return out
 
 
-def generate_run_certificates(directory: Path, run: str, hosts: list[str],
-                              days: int = VALID_DAYS) -> TlsFiles:
+def generate_run_certificates(directory: Path, run: str, hosts: list[str], days: int = VALID_DAYS) -> TlsFiles:
     """Make `directory`/ca.pem, cert.pem and key.pem (all 0600) for one run.
 
     A self-signed CA (ECDSA P-256) signs one server certificate whose subjectAltName holds
@@ -165,27 +163,40 @@ def generate_run_certificates(directory: Path, run: str, hosts: list[str],
 
     directory = Path(directory)
     directory.mkdir(mode=0o700, parents=True, exist_ok=True)
-    now = _dt.datetime.now(_dt.timezone.utc)
+    now = _dt.datetime.now(_dt.UTC)
     not_before, not_after = now - _dt.timedelta(hours=1), now + _dt.timedelta(days=days)
 
     def name(cn: str):
-        return x509.Name([x509.NameAttribute(NameOID.ORGANIZATION_NAME, "swarm"),
-                          x509.NameAttribute(NameOID.COMMON_NAME, cn[:64])])
+        return x509.Name(
+            [x509.NameAttribute(NameOID.ORGANIZATION_NAME, "swarm"), x509.NameAttribute(NameOID.COMMON_NAME, cn[:64])]
+        )
 
     ca_key = ec.generate_private_key(ec.SECP256R1())
     ca_name = name(f"swarm run {run} CA")
     ca_ski = x509.SubjectKeyIdentifier.from_public_key(ca_key.public_key())
     ca_cert = (
         x509.CertificateBuilder()
-        .subject_name(ca_name).issuer_name(ca_name)
+        .subject_name(ca_name)
+        .issuer_name(ca_name)
         .public_key(ca_key.public_key())
         .serial_number(x509.random_serial_number())
-        .not_valid_before(not_before).not_valid_after(not_after)
+        .not_valid_before(not_before)
+        .not_valid_after(not_after)
         .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
-        .add_extension(x509.KeyUsage(digital_signature=False, content_commitment=False,
-                                     key_encipherment=False, data_encipherment=False,
-                                     key_agreement=False, key_cert_sign=True, crl_sign=True,
-                                     encipher_only=False, decipher_only=False), critical=True)
+        .add_extension(
+            x509.KeyUsage(
+                digital_signature=False,
+                content_commitment=False,
+                key_encipherment=False,
+                data_encipherment=False,
+                key_agreement=False,
+                key_cert_sign=True,
+                crl_sign=True,
+                encipher_only=False,
+                decipher_only=False,
+            ),
+            critical=True,
+        )
         .add_extension(ca_ski, critical=False)
         .sign(ca_key, hashes.SHA256())
     )
@@ -193,20 +204,31 @@ def generate_run_certificates(directory: Path, run: str, hosts: list[str],
     key = ec.generate_private_key(ec.SECP256R1())
     cert = (
         x509.CertificateBuilder()
-        .subject_name(name(f"swarm run {run} hub")).issuer_name(ca_name)
+        .subject_name(name(f"swarm run {run} hub"))
+        .issuer_name(ca_name)
         .public_key(key.public_key())
         .serial_number(x509.random_serial_number())
-        .not_valid_before(not_before).not_valid_after(not_after)
+        .not_valid_before(not_before)
+        .not_valid_after(not_after)
         .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
-        .add_extension(x509.KeyUsage(digital_signature=True, content_commitment=False,
-                                     key_encipherment=False, data_encipherment=False,
-                                     key_agreement=False, key_cert_sign=False, crl_sign=False,
-                                     encipher_only=False, decipher_only=False), critical=True)
+        .add_extension(
+            x509.KeyUsage(
+                digital_signature=True,
+                content_commitment=False,
+                key_encipherment=False,
+                data_encipherment=False,
+                key_agreement=False,
+                key_cert_sign=False,
+                crl_sign=False,
+                encipher_only=False,
+                decipher_only=False,
+            ),
+            critical=True,
+        )
         .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH]), critical=False)
         .add_extension(x509.SubjectAlternativeName(_san_entries(hosts)), critical=False)
         .add_extension(x509.SubjectKeyIdentifier.from_public_key(key.public_key()), critical=False)
-        .add_extension(x509.AuthorityKeyIdentifier.from_issuer_subject_key_identifier(ca_ski),
-                       critical=False)
+        .add_extension(x509.AuthorityKeyIdentifier.from_issuer_subject_key_identifier(ca_ski), critical=False)
         .sign(ca_key, hashes.SHA256())
     )
     del ca_key  # deliberately never serialised
@@ -214,9 +236,10 @@ def generate_run_certificates(directory: Path, run: str, hosts: list[str],
     files = TlsFiles(ca=directory / "ca.pem", cert=directory / "cert.pem", key=directory / "key.pem")
     write_private(files.ca, ca_cert.public_bytes(serialization.Encoding.PEM))
     write_private(files.cert, cert.public_bytes(serialization.Encoding.PEM))
-    write_private(files.key, key.private_bytes(serialization.Encoding.PEM,
-                                                serialization.PrivateFormat.PKCS8,
-                                                serialization.NoEncryption()))
+    write_private(
+        files.key,
+        key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()),
+    )
     return files
 
 
@@ -270,6 +293,7 @@ def run_hub_settings(directory: Path, run: str, listen: str) -> tuple[dict, str]
 def client_settings_for(creds: Credentials) -> dict:
     """A client's TLS settings from the run's credentials (the CA travels inside them)."""
     if creds.tls_ca is None:
-        raise CredentialsError(f"the credentials of run {creds.run} carry no TLS certificate authority "
-                               f"(its endpoint is {creds.endpoint})")
+        raise CredentialsError(
+            f"the credentials of run {creds.run} carry no TLS certificate authority (its endpoint is {creds.endpoint})"
+        )
     return client_tls_settings_inline(creds.tls_ca.encode())

@@ -126,18 +126,21 @@ def hub_config(listen: str, auth: HubAuth | None = None, dictionary: Path | None
     if auth is not None:
         run = auth.creds.run
         user, password = auth.creds.identity(WORLD)
-        settings.update({
-            "transport/auth/usrpwd": {"user": user, "password": password, "dictionary_file": str(dictionary)},
-            "access_control": access.access_control(run, auth.agent_ids, host=True),
-            "low_pass_filter": access.size_filters(run),
-            "transport/link/rx/max_message_size": access.MAX_MESSAGE,
-            **(auth.tls or {}),
-        })
+        settings.update(
+            {
+                "transport/auth/usrpwd": {"user": user, "password": password, "dictionary_file": str(dictionary)},
+                "access_control": access.access_control(run, auth.agent_ids, host=True),
+                "low_pass_filter": access.size_filters(run),
+                "transport/link/rx/max_message_size": access.MAX_MESSAGE,
+                **(auth.tls or {}),
+            }
+        )
     return _config(settings)
 
 
-def client_config(connect: str, timeout_ms: int = CONNECT_TIMEOUT_MS, identity: tuple[str, str] | None = None,
-                  tls: dict | None = None):
+def client_config(
+    connect: str, timeout_ms: int = CONNECT_TIMEOUT_MS, identity: tuple[str, str] | None = None, tls: dict | None = None
+):
     settings = {
         "mode": "client",
         "connect/endpoints": [connect],
@@ -165,8 +168,12 @@ def open_hub(listen: str, auth: HubAuth | None = None):
     dictionary = runtime_dir() / f".{auth.creds.run}.users"
     door = local_door(auth.creds.run) if socket_path(listen) is None else None
     try:
-        write_private(dictionary, access.user_dictionary(auth.creds.secret, auth.creds.run, auth.agent_ids,
-                                                         host=True, supervisor=auth.supervisor).encode())
+        write_private(
+            dictionary,
+            access.user_dictionary(
+                auth.creds.secret, auth.creds.run, auth.agent_ids, host=True, supervisor=auth.supervisor
+            ).encode(),
+        )
         if door is not None and len(str(socket_path(door))) <= 100:  # (Unix socket paths: < 108 bytes)
             try:
                 return zenoh.open(hub_config(listen, auth, dictionary, door))
@@ -206,8 +213,15 @@ def local_door(run: str) -> str:
     return f"unixsock-stream/{runtime_dir() / (run + '.door.sock')}"
 
 
-def host_router_config(listen: str, upstream: str, run: str, identity: tuple[str, str] | None = None,
-                       dictionary: Path | None = None, acl: dict | None = None, tls: dict | None = None):
+def host_router_config(
+    listen: str,
+    upstream: str,
+    run: str,
+    identity: tuple[str, str] | None = None,
+    dictionary: Path | None = None,
+    acl: dict | None = None,
+    tls: dict | None = None,
+):
     """An agent host's router (swarm/runtime/host.py): listens on `listen` for its own agents and
     connects to the run's hub at `upstream`, as `identity` (the run's `host`). With
     `dictionary` and `acl`, only its agents get in, each confined as at the hub."""
@@ -228,17 +242,24 @@ def host_router_config(listen: str, upstream: str, run: str, identity: tuple[str
             usrpwd["dictionary_file"] = str(dictionary)
         settings["transport/auth/usrpwd"] = usrpwd
     if acl is not None:
-        settings.update({
-            "access_control": acl,
-            "low_pass_filter": access.size_filters(run),
-            "transport/link/rx/max_message_size": access.MAX_MESSAGE,
-        })
+        settings.update(
+            {
+                "access_control": acl,
+                "low_pass_filter": access.size_filters(run),
+                "transport/link/rx/max_message_size": access.MAX_MESSAGE,
+            }
+        )
     settings.update(tls or {})
     return _config(settings)
 
 
-def open_client(connect: str, timeout_ms: int = CONNECT_TIMEOUT_MS, creds: Credentials | None = None,
-                user: str = OPERATOR, door: bool = True):
+def open_client(
+    connect: str,
+    timeout_ms: int = CONNECT_TIMEOUT_MS,
+    creds: Credentials | None = None,
+    user: str = OPERATOR,
+    door: bool = True,
+):
     """Open a client session as `user` (with `creds`; without, only an open hub lets it in);
     raises zenoh.ZError when the endpoint does not answer or refuses the identity. With
     `door`, a session to its run's own endpoint goes through the run's local door when the
@@ -273,7 +294,7 @@ def default_endpoint(run: str) -> str:
 
 def socket_path(endpoint: str) -> Path | None:
     prefix = "unixsock-stream/"
-    return Path(endpoint[len(prefix):].split("#")[0]) if endpoint.startswith(prefix) else None
+    return Path(endpoint[len(prefix) :].split("#")[0]) if endpoint.startswith(prefix) else None
 
 
 QUERY_TIMEOUT = 1.0  # s
@@ -300,8 +321,9 @@ def query_statuses(session, run: str, timeout: float = QUERY_TIMEOUT, expected=N
     import zenoh
 
     # No consolidation: zenoh's default holds every reply until the query ends (its timeout)
-    replies = session.get(wire.agent_key(run, "*", "status"), timeout=timeout,
-                          consolidation=zenoh.ConsolidationMode.NONE)
+    replies = session.get(
+        wire.agent_key(run, "*", "status"), timeout=timeout, consolidation=zenoh.ConsolidationMode.NONE
+    )
     for r in replies:
         if r.ok is None:
             continue

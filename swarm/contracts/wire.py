@@ -127,8 +127,15 @@ CONTACT = struct.Struct("<idddh")  # id, bearing (rad), heading (rad), range (m)
 CMD = struct.Struct("<BBBBiqdihQ")
 # truth: kind, version, reserved x2, n agents, tick, time (s); then n agent records.
 TRUTH_HEAD = struct.Struct("<BBBBIqd")
-TRUTH_FIELDS = [("id", "<i4"), ("x", "<f8"), ("y", "<f8"), ("heading", "<f8"),
-                ("u", "<f8"), ("out", "<i4"), ("state", "u1")]  # numpy dtype of one record
+TRUTH_FIELDS = [
+    ("id", "<i4"),
+    ("x", "<f8"),
+    ("y", "<f8"),
+    ("heading", "<f8"),
+    ("u", "<f8"),
+    ("out", "<i4"),
+    ("state", "u1"),
+]  # numpy dtype of one record
 
 PHASES = ("track", "lost", "arc1", "arc2", "orbit", "shadow", "search")
 # what an agent counts itself and reports in its status (non-negative integers; the world
@@ -152,22 +159,39 @@ def encode_sense(frame: SensorFrame) -> bytes:
     return encode_sense_tuples(frame.tick, frame.time, frame.agent, frame.heading, frame.target, frame.contacts)
 
 
-def encode_sense_tuples(tick: int, time: float, agent: int, heading: float, target: tuple[float, float] | None,
-                        contacts) -> bytes:
+def encode_sense_tuples(
+    tick: int, time: float, agent: int, heading: float, target: tuple[float, float] | None, contacts
+) -> bytes:
     """encode_sense from plain values; contacts: (id, bearing, heading, range, hops) tuples
     (a Contact is one)."""
     tx, ty = target if target is not None else (math.nan, math.nan)
-    head = SENSE_HEAD.pack(KIND_SENSE, VERSION, int(target is not None), 0, agent, tick, time, heading, tx, ty,
-                           len(contacts))
+    head = SENSE_HEAD.pack(
+        KIND_SENSE, VERSION, int(target is not None), 0, agent, tick, time, heading, tx, ty, len(contacts)
+    )
     return head + b"".join(starmap(CONTACT.pack, contacts))
 
 
-CONTACT_FIELDS = [("id", "<i4"), ("bearing", "<f8"), ("heading", "<f8"), ("range", "<f8"),
-                  ("hops", "<i2")]  # == CONTACT
+CONTACT_FIELDS = [
+    ("id", "<i4"),
+    ("bearing", "<f8"),
+    ("heading", "<f8"),
+    ("range", "<f8"),
+    ("hops", "<i2"),
+]  # == CONTACT
 
 
-def encode_sense_arrays(tick: int, time: float, agent: int, heading: float,
-                        target: tuple[float, float] | None, ids, bearing, headings, ranges, hops) -> bytes:
+def encode_sense_arrays(
+    tick: int,
+    time: float,
+    agent: int,
+    heading: float,
+    target: tuple[float, float] | None,
+    ids,
+    bearing,
+    headings,
+    ranges,
+    hops,
+) -> bytes:
     """encode_sense for a frame given as numpy columns (the world's fast path); same bytes."""
     import numpy as np
 
@@ -175,12 +199,15 @@ def encode_sense_arrays(tick: int, time: float, agent: int, heading: float,
     recs["id"], recs["bearing"], recs["heading"], recs["range"] = ids, bearing, headings, ranges
     recs["hops"] = hops
     tx, ty = target if target is not None else (math.nan, math.nan)
-    return SENSE_HEAD.pack(KIND_SENSE, VERSION, int(target is not None), 0, agent, tick, time, heading,
-                           tx, ty, len(ids)) + recs.tobytes()
+    return (
+        SENSE_HEAD.pack(KIND_SENSE, VERSION, int(target is not None), 0, agent, tick, time, heading, tx, ty, len(ids))
+        + recs.tobytes()
+    )
 
 
-def encode_sense_rows(tick: int, time: float, rows, ids, heading, target_dx, target_dy, is_leader,
-                      sensed, bearing, ranges, hops) -> list[bytes]:
+def encode_sense_rows(
+    tick: int, time: float, rows, ids, heading, target_dx, target_dy, is_leader, sensed, bearing, ranges, hops
+) -> list[bytes]:
     """encode_sense_arrays for the agents at indices `rows`, all at once, from the world's
     arrays: ids, heading, hops, is_leader and the target's offset from each agent
     (target_dx, target_dy) are (N,); sensed, bearing and ranges (N, N). The same bytes as
@@ -200,9 +227,22 @@ def encode_sense_rows(tick: int, time: float, rows, ids, heading, target_dx, tar
     out, start, size, pack, nan = [], 0, CONTACT.size, SENSE_HEAD.pack, math.nan
     for k, end in zip(rows.tolist(), ends):
         lead = lead_l[k]
-        out.append(pack(KIND_SENSE, VERSION, int(lead), 0, ids_l[k], tick, time, head_l[k],
-                        dx_l[k] if lead else nan, dy_l[k] if lead else nan, end - start)
-                   + blob[start * size:end * size])
+        out.append(
+            pack(
+                KIND_SENSE,
+                VERSION,
+                int(lead),
+                0,
+                ids_l[k],
+                tick,
+                time,
+                head_l[k],
+                dx_l[k] if lead else nan,
+                dy_l[k] if lead else nan,
+                end - start,
+            )
+            + blob[start * size : end * size]
+        )
         start = end
     return out
 
@@ -218,7 +258,7 @@ def decode_sense(buf: bytes) -> SensorFrame:
     expected = SENSE_HEAD.size + n * CONTACT.size
     if len(buf) != expected:
         raise WireError(f"sense frame: {len(buf)} bytes, expected {expected} for {n} contacts")
-    contacts = tuple(map(_contact, CONTACT.iter_unpack(memoryview(buf)[SENSE_HEAD.size:])))
+    contacts = tuple(map(_contact, CONTACT.iter_unpack(memoryview(buf)[SENSE_HEAD.size :])))
     # One finiteness test for all numbers: a NaN or inf anywhere makes the sum non-finite
     # (so would finite values near 1e308, which are garbage here anyway; the ids and hops
     # summed along are integers, finite by construction).
@@ -248,11 +288,22 @@ def encode_cmd(c: Command) -> bytes:
 _PHASE_CODE = {p: k for k, p in enumerate(PHASES)}
 
 
-def encode_cmd_fields(agent: int, tick: int, u: float, out: int | None, phase: str, hops: int | None,
-                      key: int) -> bytes:
+def encode_cmd_fields(
+    agent: int, tick: int, u: float, out: int | None, phase: str, hops: int | None, key: int
+) -> bytes:
     """encode_cmd without making a Command first (an agent's path every tick)."""
-    return CMD.pack(KIND_CMD, VERSION, _PHASE_CODE[phase], 0, agent, tick, u,
-                    -1 if out is None else out, -1 if hops is None else hops, key)
+    return CMD.pack(
+        KIND_CMD,
+        VERSION,
+        _PHASE_CODE[phase],
+        0,
+        agent,
+        tick,
+        u,
+        -1 if out is None else out,
+        -1 if hops is None else hops,
+        key,
+    )
 
 
 def decode_cmd(buf: bytes) -> Command:
@@ -309,15 +360,15 @@ def decode_json(buf: bytes, what: str = "message", versions: tuple[int, ...] = (
     if len(buf) > MAX_JSON_BYTES:
         raise WireError(f"{what}: {len(buf)} bytes, more than {MAX_JSON_BYTES}")
     try:
-        obj = json.loads(bytes(buf).decode("utf-8"), parse_constant=_reject_constant,
-                         parse_float=_finite_float)
+        obj = json.loads(bytes(buf).decode("utf-8"), parse_constant=_reject_constant, parse_float=_finite_float)
     except (ValueError, RecursionError) as e:  # incl. JSONDecodeError, bad UTF-8, 4300+ digit ints
         raise WireError(f"{what}: not JSON: {str(e)[:200]}") from None
     if not isinstance(obj, dict):
         raise WireError(f"{what}: expected a JSON object")
     if type(obj.get("v")) is not int or obj["v"] not in versions:
-        raise WireError(f"{what}: protocol version {obj.get('v')!r}, this build speaks "
-                        f"{' and '.join(map(str, versions))}")
+        raise WireError(
+            f"{what}: protocol version {obj.get('v')!r}, this build speaks {' and '.join(map(str, versions))}"
+        )
     return obj
 
 
@@ -363,6 +414,7 @@ def decode_join_request(buf: bytes) -> dict:
 
 # --- every cold-path message: one encode/decode pair each ----------------------------------
 # Nothing outside this module builds or checks these payloads (docs/protocol.md, section 5).
+
 
 def encode_join_request(agent: int, pid: int, host: str, spec: dict | None = None) -> bytes:
     """agent -> agent/<id>/join (the world's queryable): claim `agent` (a new agent brings
@@ -427,8 +479,15 @@ def encode_agent_exit(agent: int, pid: int, code: int, crash: bool, cause: str, 
     code: its exit status (negative: killed by that signal); crash: a failure of the agent
     (not the end of the run, a scripted fault or a signal from outside); cause: one line;
     log: the last lines of its output (trimmed to EXIT_LOG_LINES of EXIT_LINE_CHARS)."""
-    return encode_admin("agent_exit", id=agent, pid=pid, code=code, crash=crash, cause=cause[:EXIT_LINE_CHARS],
-                        log=[line[:EXIT_LINE_CHARS] for line in log[-EXIT_LOG_LINES:]])
+    return encode_admin(
+        "agent_exit",
+        id=agent,
+        pid=pid,
+        code=code,
+        crash=crash,
+        cause=cause[:EXIT_LINE_CHARS],
+        log=[line[:EXIT_LINE_CHARS] for line in log[-EXIT_LOG_LINES:]],
+    )
 
 
 def decode_admin(buf: bytes, cmds: tuple[str, ...] = ADMIN_CMDS + SUPERVISE_CMDS) -> dict:

@@ -26,18 +26,25 @@ from __future__ import annotations
 
 import socket as so
 import time
+from collections.abc import Iterable
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable
 
 from swarm.contracts import credentials, wire
 from swarm.contracts.credentials import Credentials
+from swarm.contracts.errors import NoRunError, SwarmError, one_line
 from swarm.contracts.identities import OPERATOR, CredentialsError
 from swarm.contracts.lifeline import endpoint_refuses, endpoint_socket
-from swarm.contracts.transport import (QUERY_TIMEOUT, dial_endpoint, local_door, open_client, query_statuses,
-                                      runtime_dir, socket_path)
-from swarm.contracts.errors import NoRunError, SwarmError, one_line
+from swarm.contracts.transport import (
+    QUERY_TIMEOUT,
+    dial_endpoint,
+    local_door,
+    open_client,
+    query_statuses,
+    runtime_dir,
+    socket_path,
+)
 
 ENDED_FAILURES = 3  # failed reads in a row, ...
 ENDED_SILENT_S = 5.0  # ... over at least this long, before a world that is still there has stopped answering
@@ -157,8 +164,11 @@ def candidates(connect: str | None = None, creds_file: Path | None = None) -> li
         ref = RunRef(given.run, connect or given.endpoint, given)
         return [ref if connect else _with_door(ref)]
     dial = None if connect is None else dial_endpoint(connect)
-    return [RunRef(c.run, c.endpoint, c) if dial else _with_door(RunRef(c.run, c.endpoint, c))
-            for c in credentials.local_runs() if dial is None or c.endpoint == dial]
+    return [
+        RunRef(c.run, c.endpoint, c) if dial else _with_door(RunRef(c.run, c.endpoint, c))
+        for c in credentials.local_runs()
+        if dial is None or c.endpoint == dial
+    ]
 
 
 def _candidates(connect: str | None, creds_file: Path | None, run: str | None) -> list[RunRef]:
@@ -183,8 +193,7 @@ def where_looked(connect: str | None = None, creds_file: Path | None = None) -> 
     return f"local runs in {runtime_dir()}" + (f" on {connect}" if connect else "")
 
 
-def open_run_session(connect: str | None = None, run: str | None = None,
-                     creds_file: Path | None = None) -> "LiveRun":
+def open_run_session(connect: str | None = None, run: str | None = None, creds_file: Path | None = None) -> LiveRun:
     """A LiveRun, open, on the run a command should talk to (the session that found its world
     alive, so it is opened once), or NoRun with a one-line reason."""
     if run is not None:
@@ -206,12 +215,18 @@ def open_run_session(connect: str | None = None, run: str | None = None,
         raise NoRun("; ".join(refused))
     if not found:
         what = f"run {run!r}" if run else "no swarm is running"
-        raise NoRun(f"{what} not found: looked at {where}" if run else f"{what}: looked at {where} "
-                    "(start one with `swarm up SCENARIO`; for a run on another machine pass "
-                    "--credentials FILE from `swarm credentials`)")
+        raise NoRun(
+            f"{what} not found: looked at {where}"
+            if run
+            else f"{what}: looked at {where} "
+            "(start one with `swarm up SCENARIO`; for a run on another machine pass "
+            "--credentials FILE from `swarm credentials`)"
+        )
     if len(found) > 1:
-        raise NoRun(f"{len(found)} runs found ({', '.join(f'{r.run} on {r.endpoint}' for r, _ in found)}); "
-                    "pick one with --run (or export SWARM_RUN=ID)")
+        raise NoRun(
+            f"{len(found)} runs found ({', '.join(f'{r.run} on {r.endpoint}' for r, _ in found)}); "
+            "pick one with --run (or export SWARM_RUN=ID)"
+        )
     return LiveRun(*found[0])
 
 
@@ -233,12 +248,13 @@ class LiveRun:
         self.end_notice = False  # the world said the run ended (once `watch_end()` listens)
         self._end_sub = None
 
-    def __enter__(self) -> "LiveRun":
+    def __enter__(self) -> LiveRun:
         if self.session is not None:
             return self
         try:
-            self.session = open_client(self.ref.dial, timeout_ms=int(OPEN_TIMEOUT_S * 1000), creds=self.ref.creds,
-                                       door=False)
+            self.session = open_client(
+                self.ref.dial, timeout_ms=int(OPEN_TIMEOUT_S * 1000), creds=self.ref.creds, door=False
+            )
         except Exception:
             if not _listens(self.ref.dial, tls_too=True):
                 raise NoRun(f"nothing listens on {self.ref.dial} (the run {self.ref.run} has ended?)") from None
@@ -254,8 +270,9 @@ class LiveRun:
         """A get whose replies come as they arrive (not held back until the query ends)."""
         import zenoh
 
-        return self.session.get(selector, payload=payload, timeout=QUERY_TIMEOUT,
-                                consolidation=zenoh.ConsolidationMode.NONE)
+        return self.session.get(
+            selector, payload=payload, timeout=QUERY_TIMEOUT, consolidation=zenoh.ConsolidationMode.NONE
+        )
 
     def _get_one(self, selector: str, decode, payload: bytes | None = None) -> dict:
         ok = _first_reply(self._get(selector, payload))  # the world's reply ends it, not the timeout
@@ -280,20 +297,19 @@ class LiveRun:
         return query_statuses(self.session, self.ref.run, QUERY_TIMEOUT, expected)
 
     def admin(self, cmd: str, by: str = "swarm cli") -> dict:
-        rep = self._get_one(wire.world_admin_key(self.ref.run), wire.decode_admin_reply,
-                            wire.encode_admin(cmd, by=by))
+        rep = self._get_one(wire.world_admin_key(self.ref.run), wire.decode_admin_reply, wire.encode_admin(cmd, by=by))
         if not rep.get("ok"):
             raise NoRun(str(rep.get("error")))
         return rep
 
     def signal_agent(self, agent_id: int, signal_name: str) -> None:
         """Ask agent `agent_id` over zenoh to take a signal (KILL, TERM or STOP)."""
-        self.session.put(wire.agent_key(self.ref.run, agent_id, "ctl"),
-                         wire.encode_ctl(signal_name))
+        self.session.put(wire.agent_key(self.ref.run, agent_id, "ctl"), wire.encode_ctl(signal_name))
 
     def watch_end(self) -> None:
         """From now on, note the world's end notice (`end_notice`)."""
         if self._end_sub is None:
+
             def on_control(sample) -> None:
                 try:
                     if isinstance(wire.decode_control(sample.payload.to_bytes()), int):

@@ -96,8 +96,9 @@ def signal_agent(live, agent_id: int, signal: str = "KILL") -> Signalled:
     info = live.info()
     a = info["agents"].get(str(agent_id))
     if a is None:
-        raise LiveError(f"agent {agent_id} is not in run {info['run']} "
-                        f"(ids: {', '.join(sorted(info['agents'], key=int))})")
+        raise LiveError(
+            f"agent {agent_id} is not in run {info['run']} (ids: {', '.join(sorted(info['agents'], key=int))})"
+        )
     st = live.statuses({agent_id}).get(agent_id) if a["alive"] else None
     pid, host = (st or a).get("pid"), (st or a).get("host")
     if pid is None:
@@ -106,11 +107,12 @@ def signal_agent(live, agent_id: int, signal: str = "KILL") -> Signalled:
     local = host == here and looks_like_agent(pid, agent_id)
     if not a["alive"]:
         if host != here:
-            raise LiveError(f"agent {agent_id} is not live (state {a['state']}); it can only be signalled "
-                            f"on its own host {host} (kill -{name} {pid})")
+            raise LiveError(
+                f"agent {agent_id} is not live (state {a['state']}); it can only be signalled "
+                f"on its own host {host} (kill -{name} {pid})"
+            )
         if not local:
-            raise LiveError(f"agent {agent_id} is not live (state {a['state']}) and its process "
-                            f"(pid {pid}) is gone")
+            raise LiveError(f"agent {agent_id} is not live (state {a['state']}) and its process (pid {pid}) is gone")
     if local:
         try:
             os.kill(pid, SIGNALS[name])
@@ -121,8 +123,10 @@ def signal_agent(live, agent_id: int, signal: str = "KILL") -> Signalled:
         how = "sent"
     else:
         if name == "CONT":
-            raise LiveError(f"agent {agent_id} runs on {host}: SIGCONT cannot be delivered over zenoh "
-                            f"(a stopped process cannot act on a message); run `kill -CONT {pid}` on {host}")
+            raise LiveError(
+                f"agent {agent_id} runs on {host}: SIGCONT cannot be delivered over zenoh "
+                f"(a stopped process cannot act on a message); run `kill -CONT {pid}` on {host}"
+            )
         live.signal_agent(agent_id, name)
         how = "asked over zenoh to take"
     return Signalled(agent_id, name, pid, host, how, bool(a["alive"]))
@@ -130,6 +134,7 @@ def signal_agent(live, agent_id: int, signal: str = "KILL") -> Signalled:
 
 def wait_dropped(live, done: Signalled, timeout: float = DROP_DEADLINE) -> int:
     """The tick at which the world dropped the agent `done` signalled; LiveError after `timeout` s."""
+
     def dropped():
         now = live.info()
         return None if now["agents"][str(done.agent)]["alive"] else now
@@ -153,14 +158,18 @@ def _new_spec(info: dict, run: str, agent_id: int, given: dict) -> dict:
     added agents and the scenario schema; UsageError naming what is wrong."""
     lo, hi = info.get("added_ids", (None, None))
     if lo is not None and lo > hi:
-        raise UsageError(f"run {run} has no id left for an added agent (its scenario uses the largest "
-                         "id the wire carries)")
+        raise UsageError(
+            f"run {run} has no id left for an added agent (its scenario uses the largest id the wire carries)"
+        )
     if lo is not None and not lo <= agent_id <= hi:
-        raise UsageError(f"--id {agent_id}: agents added to run {run} take ids {lo}..{hi} "
-                         "(the hub's access rules are made for those ids before the run starts)")
+        raise UsageError(
+            f"--id {agent_id}: agents added to run {run} take ids {lo}..{hi} "
+            "(the hub's access rules are made for those ids before the run starts)"
+        )
     if info.get("added", 0) >= info.get("max_added", float("inf")):
-        raise UsageError(f"run {run} has added {info['added']} agents already, its limit "
-                         "(run.max_added_agents in the scenario)")
+        raise UsageError(
+            f"run {run} has added {info['added']} agents already, its limit (run.max_added_agents in the scenario)"
+        )
     from pydantic import ValidationError
 
     from swarm.contracts.scenario import format_validation_error
@@ -171,9 +180,10 @@ def _new_spec(info: dict, run: str, agent_id: int, given: dict) -> dict:
         AgentSpec.model_validate({**spec, "id": agent_id})
     except ValidationError as e:
         msg = format_validation_error(f"agent {agent_id}", e).splitlines()
-        raise UsageError(f"{msg[0].replace('invalid scenario', 'invalid spec')}: "
-                         f"{'; '.join(m.strip() for m in msg[1:])} (a new agent needs --x --y --heading --speed)"
-                         ) from None
+        raise UsageError(
+            f"{msg[0].replace('invalid scenario', 'invalid spec')}: "
+            f"{'; '.join(m.strip() for m in msg[1:])} (a new agent needs --x --y --heading --speed)"
+        ) from None
     follow = given.get("follow")
     if follow is not None and str(follow) not in info["agents"]:
         raise UsageError(f"--follow {follow}: no agent has that id in run {run}")
@@ -201,16 +211,17 @@ def spawn_log(info: dict, run: str, agent_id: int) -> Path:
     return logs / f"{run}-agent-{agent_id}-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.log"
 
 
-def spawn_agent(live, agent_id: int, spec: dict | None = None, trust_law: tuple[str, ...] = (),
-                timeout: float = SPAWN_DEADLINE) -> Spawned:
+def spawn_agent(
+    live, agent_id: int, spec: dict | None = None, trust_law: tuple[str, ...] = (), timeout: float = SPAWN_DEADLINE
+) -> Spawned:
     """Start agent `agent_id` on this machine (detached, its output in `spawn_log`) and wait
     until the world shows it live. An id the run knows rejoins if it is not live (no `spec`
     then; a live one is refused at once); a new one joins with `spec` (x, y, heading,
     speed, role, orbit_radius, direction, follow, max_turn_rate)."""
     from swarm.contracts.credentials import ENV_CREDENTIALS
+    from swarm.contracts.errors import NoRunError
     from swarm.contracts.identities import CredentialsError, agent_user
     from swarm.contracts.laws import ENV_TRUSTED_LAWS, with_trusted_laws
-    from swarm.contracts.errors import NoRunError
 
     given = {k: v for k, v in (spec or {}).items() if v is not None}
     info, ref = live.info(), live.ref
@@ -218,11 +229,15 @@ def spawn_agent(live, agent_id: int, spec: dict | None = None, trust_law: tuple[
     known = info["agents"].get(str(agent_id))
     if known is not None:
         if given:
-            raise UsageError(f"agent {agent_id} is already in run {ref.run}: it rejoins from where it dropped; "
-                             f"--{'/--'.join(k.replace('_', '-') for k in given)} only apply to a new id")
+            raise UsageError(
+                f"agent {agent_id} is already in run {ref.run}: it rejoins from where it dropped; "
+                f"--{'/--'.join(k.replace('_', '-') for k in given)} only apply to a new id"
+            )
         if known.get("alive"):
-            raise LiveError(f"agent {agent_id} is already live in run {ref.run} (pid {known.get('pid')} on "
-                            f"{known.get('host')}): nothing started")
+            raise LiveError(
+                f"agent {agent_id} is already live in run {ref.run} (pid {known.get('pid')} on "
+                f"{known.get('host')}): nothing started"
+            )
     else:
         new = _new_spec(info, ref.run, agent_id, given)
     log_path = spawn_log(info, ref.run, agent_id)
@@ -232,14 +247,23 @@ def spawn_agent(live, agent_id: int, spec: dict | None = None, trust_law: tuple[
     try:  # the agent connects as itself: the run's own file, or one of agent_id's
         ref.creds.identity(agent_user(agent_id))
     except CredentialsError as e:
-        raise UsageError(f"swarm spawn needs the run's own credentials (on the run's machine) or a file from "
-                         f"`swarm credentials --agent {agent_id}`: {e}") from None
+        raise UsageError(
+            f"swarm spawn needs the run's own credentials (on the run's machine) or a file from "
+            f"`swarm credentials --agent {agent_id}`: {e}"
+        ) from None
     env = {**os.environ, ENV_TRUSTED_LAWS: with_trusted_laws(list(trust_law))}
     if ref.creds.path is not None:
         env[ENV_CREDENTIALS] = str(Path(ref.creds.path).resolve())
     with open(log_path, "ab") as log:
-        proc = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
-                                start_new_session=True, close_fds=True, env=env)
+        proc = subprocess.Popen(
+            args,
+            stdin=subprocess.DEVNULL,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+            close_fds=True,
+            env=env,
+        )
 
     def started():
         rc = proc.poll()
@@ -262,5 +286,4 @@ def spawn_agent(live, agent_id: int, spec: dict | None = None, trust_law: tuple[
         proc.wait(timeout=3)
     except subprocess.TimeoutExpired:
         proc.kill()
-    raise LiveError(f"agent {agent_id} (pid {proc.pid}) did not join within {timeout:g} s; "
-                    f"stopped it (log {log_path})")
+    raise LiveError(f"agent {agent_id} (pid {proc.pid}) did not join within {timeout:g} s; stopped it (log {log_path})")

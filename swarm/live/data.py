@@ -6,10 +6,38 @@ from __future__ import annotations
 
 from swarm.contracts.graph import analyse
 
-AGENT_FIELDS = ("id", "role", "state", "alive", "answered", "pid", "host", "out", "hops", "root",
-                "phase", "fallback", "pinned", "x", "y", "heading", "speed", "u", "distance",
-                "expected_radius", "radial_error", "relative_error", "orbit_radius",
-                "last_command_age", "missed", "commands", "joins", "drops", "garbage", "rogue_commands")
+AGENT_FIELDS = (
+    "id",
+    "role",
+    "state",
+    "alive",
+    "answered",
+    "pid",
+    "host",
+    "out",
+    "hops",
+    "root",
+    "phase",
+    "fallback",
+    "pinned",
+    "x",
+    "y",
+    "heading",
+    "speed",
+    "u",
+    "distance",
+    "expected_radius",
+    "radial_error",
+    "relative_error",
+    "orbit_radius",
+    "last_command_age",
+    "missed",
+    "commands",
+    "joins",
+    "drops",
+    "garbage",
+    "rogue_commands",
+)
 
 
 def merge_agents(info: dict, statuses: dict[int, dict]) -> list[dict]:
@@ -26,14 +54,26 @@ def merge_agents(info: dict, statuses: dict[int, dict]) -> list[dict]:
         st = statuses.get(aid)
         own = st if (st is not None and a.get("alive")) else None
         row = {f: a.get(f) for f in AGENT_FIELDS}
-        row.update(id=aid, answered=st is not None, phase=None, fallback=None, pinned=None,
-                   # bad messages: dropped by the world for this agent, plus those the agent dropped
-                   garbage=(a.get("garbage") or 0) + ((st or {}).get("garbage") or 0),
-                   rogue_commands=a.get("rogue_commands") or 0)
+        row.update(
+            id=aid,
+            answered=st is not None,
+            phase=None,
+            fallback=None,
+            pinned=None,
+            # bad messages: dropped by the world for this agent, plus those the agent dropped
+            garbage=(a.get("garbage") or 0) + ((st or {}).get("garbage") or 0),
+            rogue_commands=a.get("rogue_commands") or 0,
+        )
         if own is not None:
-            row.update(pid=own.get("pid", row["pid"]), host=own.get("host", row["host"]),
-                       out=own.get("out"), hops=own.get("hops"), phase=own.get("phase"),
-                       fallback=own.get("fallback"), pinned=own.get("pinned"))
+            row.update(
+                pid=own.get("pid", row["pid"]),
+                host=own.get("host", row["host"]),
+                out=own.get("out"),
+                hops=own.get("hops"),
+                phase=own.get("phase"),
+                fallback=own.get("fallback"),
+                pinned=own.get("pinned"),
+            )
         rows.append(row)
     return rows
 
@@ -53,10 +93,23 @@ def graph_of(snap: dict, sensing: bool = False) -> dict:
     leaders = {r["id"] for r in rows if r["role"] == "leader"}
     alive = {r["id"] for r in rows if r["alive"]}
     g = analyse(out, leaders, alive)
-    doc = {"run": info.get("run"), "tick": info.get("tick"), "time": info.get("time"), **g,
-           "dead": sorted(set(out) - alive),
-           "agents": [{"id": r["id"], "role": r["role"], "alive": r["alive"], "out": r["out"],
-                       "source": "agent" if (r["answered"] and r["alive"]) else "world"} for r in rows]}
+    doc = {
+        "run": info.get("run"),
+        "tick": info.get("tick"),
+        "time": info.get("time"),
+        **g,
+        "dead": sorted(set(out) - alive),
+        "agents": [
+            {
+                "id": r["id"],
+                "role": r["role"],
+                "alive": r["alive"],
+                "out": r["out"],
+                "source": "agent" if (r["answered"] and r["alive"]) else "world",
+            }
+            for r in rows
+        ],
+    }
     if sensing:
         doc["sensing"] = [list(map(int, e)) for e in info.get("sensing", [])]
     return doc
@@ -64,5 +117,4 @@ def graph_of(snap: dict, sensing: bool = False) -> dict:
 
 def graph_key(g: dict) -> tuple:
     """What makes two graph_of() documents the same picture (tick and time aside)."""
-    return (tuple(map(tuple, g["edges"])), tuple(g["nodes"]), tuple(g["dead"]),
-            tuple(map(tuple, g.get("sensing", []))))
+    return (tuple(map(tuple, g["edges"])), tuple(g["nodes"]), tuple(g["dead"]), tuple(map(tuple, g.get("sensing", []))))

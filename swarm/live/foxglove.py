@@ -44,15 +44,23 @@ class Look(NamedTuple):
 
 def looks(info: dict) -> dict[int, Look]:
     """The agents of the world's info, by id."""
-    return {int(a["id"]): Look(int(a["id"]), str(a["role"]), float(a["speed"]), a.get("orbit_radius"))
-            for a in info["agents"].values()}
+    return {
+        int(a["id"]): Look(int(a["id"]), str(a["role"]), float(a["speed"]), a.get("orbit_radius"))
+        for a in info["agents"].values()
+    }
 
 
 def run_doc(info: dict) -> dict:
     """The first `/swarm/run` message of a watched run."""
-    return {"run": info.get("run"), "scenario_name": info.get("scenario"), "clock": info.get("clock"),
-            "ticks": info.get("ticks"), "dt": info.get("dt"), "target": info.get("target"),
-            "agents": [a._asdict() for a in looks(info).values()]}
+    return {
+        "run": info.get("run"),
+        "scenario_name": info.get("scenario"),
+        "clock": info.get("clock"),
+        "ticks": info.get("ticks"),
+        "dt": info.get("dt"),
+        "target": info.get("target"),
+        "agents": [a._asdict() for a in looks(info).values()],
+    }
 
 
 class Observer:
@@ -82,8 +90,9 @@ class Observer:
         if not final and self.last_scene is not None and t - self.last_scene < 1.0 / SCENE_RATE - 1e-9:
             return False
         self.last_scene = t
-        self.channels.tick(tick, t, recs["id"], recs["x"], recs["y"], recs["heading"], recs["u"], recs["out"],
-                           recs["state"] == ACTIVE)
+        self.channels.tick(
+            tick, t, recs["id"], recs["x"], recs["y"], recs["heading"], recs["u"], recs["out"], recs["state"] == ACTIVE
+        )
         return True
 
 
@@ -140,8 +149,10 @@ def serve_run(live, host: str, port: int, say) -> None:
         with lr:
             feed = Feed()
             with talking():
-                subs = [lr.session.declare_subscriber(wire.truth_key(live.run), feed.on_truth),
-                        lr.session.declare_subscriber(wire.events_key(live.run), feed.on_event)]
+                subs = [
+                    lr.session.declare_subscriber(wire.truth_key(live.run), feed.on_truth),
+                    lr.session.declare_subscriber(wire.events_key(live.run), feed.on_event),
+                ]
                 lr.watch_end()
             say(f"run {live.run}: {open_hint(host, port)}")
             ended = _follow(live, lr, feed, observer, int(info.get("ticks") or 0))  # a bug in it: a traceback

@@ -28,14 +28,16 @@ def graph_dot(g: dict) -> str:
     unrooted, dead = set(g["unrooted"]), set(g["dead"])
     cyc = {(c[k], c[(k + 1) % len(c)]) for c in g["cycles"] for k in range(len(c))}
     title = _dot_id(f"run {g['run']} tick {g['tick']}")
-    lines = [f"digraph {_dot_id(g['run'])} {{",
-             f"  graph [label={title}, labelloc=t, rankdir=BT];",
-             '  node [shape=circle, style=filled, fontname="Helvetica"];',
-             "  edge [color=black];"]
+    lines = [
+        f"digraph {_dot_id(g['run'])} {{",
+        f"  graph [label={title}, labelloc=t, rankdir=BT];",
+        '  node [shape=circle, style=filled, fontname="Helvetica"];',
+        "  edge [color=black];",
+    ]
     for a in g["agents"]:
         i = a["id"]
         if i in dead:
-            attrs = 'style=dashed, color=grey50, fontcolor=grey50, fillcolor=white'
+            attrs = "style=dashed, color=grey50, fontcolor=grey50, fillcolor=white"
         elif a["role"] == "leader":
             attrs = 'fillcolor="#6fa8dc", color=blue, shape=doublecircle'
         elif i in unrooted:
@@ -44,8 +46,11 @@ def graph_dot(g: dict) -> str:
             attrs = 'fillcolor="#ffe599", color="#bf9000"'
         lines.append(f"  {i} [label={_dot_id(i)}, {attrs}];")
     for i, j in g["edges"]:
-        extra = " [color=red, penwidth=2, label=cycle]" if (i, j) in cyc else (
-            " [color=grey50, style=dashed]" if j in dead else "")
+        extra = (
+            " [color=red, penwidth=2, label=cycle]"
+            if (i, j) in cyc
+            else (" [color=grey50, style=dashed]" if j in dead else "")
+        )
         lines.append(f"  {i} -> {j}{extra};")
     for i, j in g.get("sensing", []):
         lines.append(f"  {i} -> {j} [style=dotted, color=grey60, arrowsize=0.5, constraint=false];")
@@ -63,8 +68,13 @@ def graph_renderable(g: dict):
     for i, j in g["edges"]:
         kids.setdefault(j, []).append(i)
     role = {a["id"]: a["role"] for a in g["agents"]}
-    parts = [Text(f"run {g['run']}  tick {g['tick']}  t={g['time']:.2f} s  "
-                  f"agents {len(g['nodes'])} live / {len(g['agents'])}", style="bold")]
+    parts = [
+        Text(
+            f"run {g['run']}  tick {g['tick']}  t={g['time']:.2f} s  "
+            f"agents {len(g['nodes'])} live / {len(g['agents'])}",
+            style="bold",
+        )
+    ]
 
     def grow(node: Tree, i: int, seen: set[int]) -> None:
         for k in sorted(kids.get(i, [])):
@@ -82,14 +92,23 @@ def graph_renderable(g: dict):
         return ", ".join(map(str, xs)) if xs else "none"
 
     parts.append(Text(f"components: {'; '.join('{' + ids(c) + '}' for c in g['components']) or 'none'}"))
-    parts.append(Text(f"unrooted (no path to a leader): {ids(g['unrooted'])}",
-                      style="bold red" if g["unrooted"] else ""))
-    parts.append(Text("follower-only cycles: " + ("; ".join(" -> ".join(map(str, c + c[:1])) for c in g["cycles"])
-                                                  or "none"), style="bold red" if g["cycles"] else ""))
+    parts.append(
+        Text(f"unrooted (no path to a leader): {ids(g['unrooted'])}", style="bold red" if g["unrooted"] else "")
+    )
+    parts.append(
+        Text(
+            "follower-only cycles: " + ("; ".join(" -> ".join(map(str, c + c[:1])) for c in g["cycles"]) or "none"),
+            style="bold red" if g["cycles"] else "",
+        )
+    )
     parts.append(Text(f"dead: {ids(g['dead'])}", style="grey50" if g["dead"] else ""))
     if "sensing" in g:
-        parts.append(Text(f"sensing ({len(g['sensing'])} edges): "
-                          + (", ".join(f"{i}->{j}" for i, j in g["sensing"]) or "none"), style="grey50"))
+        parts.append(
+            Text(
+                f"sensing ({len(g['sensing'])} edges): " + (", ".join(f"{i}->{j}" for i, j in g["sensing"]) or "none"),
+                style="grey50",
+            )
+        )
     return Group(*parts)
 
 
@@ -116,8 +135,10 @@ def header(info: dict, ended: bool | str = False):
 
     t = Text()
     t.append(f"run {info.get('run')}", style="bold")
-    t.append(f"  scenario {info.get('scenario')}  tick {info.get('tick')}/{info.get('ticks')}  "
-             f"t={fmt(info.get('time'), '.2f')} s  clock {info.get('clock')}")
+    t.append(
+        f"  scenario {info.get('scenario')}  tick {info.get('tick')}/{info.get('ticks')}  "
+        f"t={fmt(info.get('time'), '.2f')} s  clock {info.get('clock')}"
+    )
     if info.get("paused"):
         t.append("  PAUSED", style="bold yellow")
     if ended:
@@ -137,23 +158,34 @@ def agents_table(rows: list[dict], compact: bool = False):
     cols += [("alive", "left"), ("out", "right"), ("hops", "right")]
     if not compact:
         cols += [("phase", "left")]
-    cols += [("dist m", "right"), ("err m", "right"), ("u rad/s", "right"), ("age s", "right"),
-             ("missed", "right")]
+    cols += [("dist m", "right"), ("err m", "right"), ("u rad/s", "right"), ("age s", "right"), ("missed", "right")]
     if not compact:
         cols += [("bad", "right")]
     for name, just in cols:
         t.add_column(name, justify=just, no_wrap=True)
     for r in rows:
-        style = ("grey50" if not r["alive"] else "blue" if r["role"] == "leader"
-                 else "red" if r["root"] is None and r["hops"] is None else "")
+        style = (
+            "grey50"
+            if not r["alive"]
+            else "blue"
+            if r["role"] == "leader"
+            else "red"
+            if r["root"] is None and r["hops"] is None
+            else ""
+        )
         cells = [str(r["id"]), r["role"]]
         if not compact:
             cells += [fmt(r["pid"], "d"), r["host"] or "-"]
         cells += ["yes" if r["alive"] else r["state"] or "no", fmt(r["out"], "d"), fmt(r["hops"], "d")]
         if not compact:
             cells += [r["phase"] or "-"]
-        cells += [fmt(r["distance"], ".1f"), fmt(r["radial_error"], ".2f"), fmt(r["u"], "+.3f"),
-                  fmt(r["last_command_age"], ".2f"), fmt(r["missed"], "d")]
+        cells += [
+            fmt(r["distance"], ".1f"),
+            fmt(r["radial_error"], ".2f"),
+            fmt(r["u"], "+.3f"),
+            fmt(r["last_command_age"], ".2f"),
+            fmt(r["missed"], "d"),
+        ]
         if not compact:
             cells += [str((r.get("garbage") or 0) + (r.get("rogue_commands") or 0))]
         t.add_row(*cells, style=style)
@@ -166,8 +198,21 @@ def bodies_of(snap: dict) -> list:
     from swarm.live.watch import Body
 
     g_unrooted = set(graph_of(snap)["unrooted"])
-    return [Body(r["id"], r["role"], r["x"], r["y"], r["heading"], bool(r["alive"]), r["out"],
-                 r["id"] not in g_unrooted, r["orbit_radius"], r["expected_radius"]) for r in snap["agents"]]
+    return [
+        Body(
+            r["id"],
+            r["role"],
+            r["x"],
+            r["y"],
+            r["heading"],
+            bool(r["alive"]),
+            r["out"],
+            r["id"] not in g_unrooted,
+            r["orbit_radius"],
+            r["expected_radius"],
+        )
+        for r in snap["agents"]
+    ]
 
 
 def legend():
@@ -178,8 +223,15 @@ def legend():
 
     names = {"edge": "out-neighbour", "orbit": "expected orbit"}
     t = Text()
-    for glyph, key in [("→", "leader"), ("→", "follower"), ("→", "unrooted"), (DEAD_GLYPH, "dead"),
-                       (TARGET_GLYPH, "target"), (f"{EDGE_GLYPH}{EDGE_GLYPH}→", "edge"), ("..", "orbit")]:
+    for glyph, key in [
+        ("→", "leader"),
+        ("→", "follower"),
+        ("→", "unrooted"),
+        (DEAD_GLYPH, "dead"),
+        (TARGET_GLYPH, "target"),
+        (f"{EDGE_GLYPH}{EDGE_GLYPH}→", "edge"),
+        ("..", "orbit"),
+    ]:
         t.append(glyph, style=STYLES[key])
         t.append(f" {names.get(key, key)}  ")
     return t

@@ -19,8 +19,8 @@ The screen around the picture (header, agents table, legend) is in swarm/live/vi
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Iterable, Sequence
 
 ARROWS = "→↗↑↖←↙↓↘"  # index k: direction k * 45 degrees, counter-clockwise from +x
 DEAD_GLYPH = "x"
@@ -61,8 +61,9 @@ class View:
         return int(math.floor(col + 0.5)), int(math.floor(row + 0.5))
 
 
-def fit_view(points: Iterable[tuple[float, float]], width: int, height: int,
-             aspect: float = 0.5, margin: int = 1) -> View:
+def fit_view(
+    points: Iterable[tuple[float, float]], width: int, height: int, aspect: float = 0.5, margin: int = 1
+) -> View:
     """The largest scale at which every point fits inside the grid, `margin` cells from
     its border, centred on the points' bounding box. No points: the origin, 1 col/m."""
     if width < 1 or height < 1:
@@ -112,8 +113,10 @@ def circle_cells(view: View, x: float, y: float, radius: float) -> list[tuple[in
     if radius <= 0 or not math.isfinite(radius):
         return [view.cell(x, y)]
     n = max(8, int(math.ceil(2 * math.pi * radius * view.scale)) * 2)
-    samples = [view.cell(x + radius * math.cos(2 * math.pi * k / n), y + radius * math.sin(2 * math.pi * k / n))
-               for k in range(n)]
+    samples = [
+        view.cell(x + radius * math.cos(2 * math.pi * k / n), y + radius * math.sin(2 * math.pi * k / n))
+        for k in range(n)
+    ]
     cells: list[tuple[int, int]] = []
     for a, b in zip(samples, samples[1:] + samples[:1]):
         for cell in line_cells(*a, *b)[:-1]:  # b starts the next segment
@@ -175,8 +178,9 @@ class Canvas:
 
     def free(self, col: int, row: int, n: int, below: int) -> bool:
         """True when n cells from (col, row) are inside and under layer `below`."""
-        return all(0 <= col + k < self.width and 0 <= row < self.height and self.layers[row][col + k] < below
-                   for k in range(n))
+        return all(
+            0 <= col + k < self.width and 0 <= row < self.height and self.layers[row][col + k] < below for k in range(n)
+        )
 
     def lines(self) -> list[str]:
         return ["".join(r) for r in self.chars]
@@ -244,8 +248,9 @@ def orbit_radii(bodies: Iterable[Body]) -> list[tuple[float, bool]]:
     return list(seen.values())
 
 
-def scene_view(target: tuple[float, float], bodies: Sequence[Body], width: int, height: int,
-               aspect: float = 0.5) -> View:
+def scene_view(
+    target: tuple[float, float], bodies: Sequence[Body], width: int, height: int, aspect: float = 0.5
+) -> View:
     """A view holding the target, every agent and every orbit circle drawn."""
     tx, ty = target
     pts = [(tx, ty)] + [(b.x, b.y) for b in bodies]
@@ -254,8 +259,14 @@ def scene_view(target: tuple[float, float], bodies: Sequence[Body], width: int, 
     return fit_view(pts, width, height, aspect, margin=1)
 
 
-def draw_scene(target: tuple[float, float], bodies: Sequence[Body], width: int, height: int,
-               aspect: float = 0.5, labels: bool = True) -> Canvas:
+def draw_scene(
+    target: tuple[float, float],
+    bodies: Sequence[Body],
+    width: int,
+    height: int,
+    aspect: float = 0.5,
+    labels: bool = True,
+) -> Canvas:
     """The top-down picture: dashed orbits about the target, out-neighbour edges as dotted
     lines with an arrowhead next to the out-neighbour, the target, the agents as arrows of
     their headings (x when dead) in their role's colour, and their ids beside them."""
@@ -297,4 +308,3 @@ def draw_scene(target: tuple[float, float], bodies: Sequence[Body], width: int, 
                 start = min(max(c + 1, 0), max(width - len(label), 0))
                 canvas.text(start, rr, label, STYLES[b.kind], L_LABEL)
     return canvas
-

@@ -18,8 +18,8 @@ range and field of view may differ per member.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -43,8 +43,7 @@ def refusal(s: Scenario) -> str | None:
         name = s.gains.law if s.gains.law != "bearing" else s.law.follower
         return f"its follower law is {name!r}: only the built-in 'bearing' law is batched"
     if s.law.leader != "cc":
-        return (f"its leader law is {s.law.leader!r}: only the built-in 'cc' law (CC path, then orbit hold) "
-                "is batched")
+        return f"its leader law is {s.law.leader!r}: only the built-in 'cc' law (CC path, then orbit hold) is batched"
     return None
 
 
@@ -68,9 +67,13 @@ class MemberRecording:
         return {**static_arrays(self.scenario), **self._arrays}
 
 
-def run_batch(scenarios: list[Scenario], duration: float | None = None,
-              progress: Callable[[int, int], None] | None = None, recording: Path | None = None,
-              lean: bool = False) -> list[RunResult]:
+def run_batch(
+    scenarios: list[Scenario],
+    duration: float | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    recording: Path | None = None,
+    lean: bool = False,
+) -> list[RunResult]:
     """Run every scenario for `duration` simulated seconds (default: their own), one
     RunResult each, in order. recording: stream the one member's recording.mcap there
     (a batch of one); lean: keep only what summaries read (x, y, out; no headings or
@@ -87,13 +90,20 @@ def run_batch(scenarios: list[Scenario], duration: float | None = None,
         raise ValueError("a streamed recording is for a batch of one")
     dt, ticks, n, mode = keys.pop()
     world = BatchWorld(scenarios)
-    brains = BatchBrains([s.agents for s in scenarios], [s.gains for s in scenarios],
-                         [s.sensing for s in scenarios], dt, n)
+    brains = BatchBrains(
+        [s.agents for s in scenarios], [s.gains for s in scenarios], [s.sensing for s in scenarios], dt, n
+    )
     B = len(scenarios)
     rec = None if recording is None else StreamRecorder(scenarios[0], ticks, recording)
     keep = ("x", "y", "out") if lean else ("x", "y", "heading", "u", "out")
-    hist = {} if rec is not None else {k: np.full((B, ticks + 1, n), -1 if k == "out" else np.nan,
-                                                  dtype=np.int64 if k == "out" else float) for k in keep}
+    hist = (
+        {}
+        if rec is not None
+        else {
+            k: np.full((B, ticks + 1, n), -1 if k == "out" else np.nan, dtype=np.int64 if k == "out" else float)
+            for k in keep
+        }
+    )
     pinned = brains.pinned if mode == "fixed" else None
     events: list[list[dict]] = [[] for _ in range(B)]
     out = np.full((B, n), -1, dtype=np.int64)  # Engine.out, as columns
@@ -139,18 +149,33 @@ def _switches(k: int, dt: float, world: BatchWorld, frames, out, new, changed, p
         old, to = int(out[b, i]), int(new[b, i])
         ids = world.ids[b]
         reason = world.switch_reason(frames, b, i, old, to, None if pinned is None else int(pinned[b, i]))
-        yield b, {"tick": k, "time": k * dt, "agent": int(ids[i]), "kind": "switch", "reason": reason,
-                  "from": None if old < 0 else int(ids[old]), "to": None if to < 0 else int(ids[to])}
+        yield (
+            b,
+            {
+                "tick": k,
+                "time": k * dt,
+                "agent": int(ids[i]),
+                "kind": "switch",
+                "reason": reason,
+                "from": None if old < 0 else int(ids[old]),
+                "to": None if to < 0 else int(ids[to]),
+            },
+        )
 
 
-def _result(s: Scenario, b: int, rec, hist: dict, events: list[dict], world: BatchWorld, brains: BatchBrains,
-            ticks: int) -> RunResult:
+def _result(
+    s: Scenario, b: int, rec, hist: dict, events: list[dict], world: BatchWorld, brains: BatchBrains, ticks: int
+) -> RunResult:
     extra = {"engine": ENGINE, "rejected_commands": int(world.rejected[b]), "lost_frames": 0, "lost_commands": 0}
     agent_extra = {str(a.id): brains.figures(b, i) for i, a in enumerate(s.agents)}
     if rec is None:
         shape = (ticks + 1, len(s.agents))
         arrays = {k: hist[k][b] if k in hist else np.broadcast_to(np.nan, shape) for k in ("x", "y", "heading", "u")}
-        arrays.update(t=np.arange(ticks + 1) * world.dt, out=hist["out"][b], alive=np.broadcast_to(True, shape),
-                      missed=np.zeros(ticks + 1, dtype=np.int64))
+        arrays.update(
+            t=np.arange(ticks + 1) * world.dt,
+            out=hist["out"][b],
+            alive=np.broadcast_to(True, shape),
+            missed=np.zeros(ticks + 1, dtype=np.int64),
+        )
         rec = MemberRecording(s, arrays)
     return RunResult(s, rec, events, extra, agent_extra)

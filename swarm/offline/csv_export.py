@@ -64,8 +64,20 @@ def agent_table(run: RunData, heading: np.ndarray, j: int, expected: float) -> n
     """(T, len(COLUMNS)) rows of the agent in column `j`."""
     tx, ty = run.target
     r = np.hypot(run.x[:, j] - tx, run.y[:, j] - ty)
-    return np.column_stack([run.t, run.x[:, j], run.y[:, j], heading[:, j], run.u[:, j], run.out[:, j],
-                            run.alive[:, j].astype(float), r, np.full(run.n_rows, expected), r - expected])
+    return np.column_stack(
+        [
+            run.t,
+            run.x[:, j],
+            run.y[:, j],
+            heading[:, j],
+            run.u[:, j],
+            run.out[:, j],
+            run.alive[:, j].astype(float),
+            r,
+            np.full(run.n_rows, expected),
+            r - expected,
+        ]
+    )
 
 
 def write_agent_csvs(run_dir: Path) -> list[Path]:
@@ -82,8 +94,14 @@ def write_agent_csvs(run_dir: Path) -> list[Path]:
         path = folder / csv_name(int(a))
         tmp = path.with_name(f".{path.name}.tmp")
         try:
-            np.savetxt(tmp, agent_table(run, heading, j, float(expected[j])), fmt=list(_FORMATS), delimiter=",",
-                       header=",".join(COLUMNS), comments="")
+            np.savetxt(
+                tmp,
+                agent_table(run, heading, j, float(expected[j])),
+                fmt=list(_FORMATS),
+                delimiter=",",
+                header=",".join(COLUMNS),
+                comments="",
+            )
             tmp.replace(path)
         finally:
             tmp.unlink(missing_ok=True)

@@ -10,11 +10,10 @@
 
 from __future__ import annotations
 
-from swarm.contracts.vocabulary import Coded, ExitCode
-
 from dataclasses import dataclass
 from pathlib import Path
 
+from swarm.contracts.vocabulary import Coded, ExitCode
 from swarm.world.recording import RECORDING_FILE, RESULT_FILES, SUMMARY_FILE, TRAJECTORY_FILE
 
 PLOT_NAMES = ("trajectories.png", "distance.png", "control.png", "graph.png", "overview.png", "neighbours.png")
@@ -46,8 +45,10 @@ def claim_out_dir(out: Path, force: bool) -> None:
         raise OutDirError(f"--out {out} is a file, not a directory")
     held = results_in(out) if out.is_dir() else []
     if held and not force:
-        raise OutDirError(f"--out {out} already holds the results of a run ({', '.join(held)}); "
-                          "choose another directory, or pass --force to replace them")
+        raise OutDirError(
+            f"--out {out} already holds the results of a run ({', '.join(held)}); "
+            "choose another directory, or pass --force to replace them"
+        )
     try:
         out.mkdir(parents=True, exist_ok=True)
         for name in held:
@@ -64,7 +65,8 @@ def claim_out_dir(out: Path, force: bool) -> None:
 def needs_export(run_dir: Path) -> bool:
     """A recording without the files made from it (the world died before its end)."""
     return (run_dir / RECORDING_FILE).is_file() and not (
-        (run_dir / TRAJECTORY_FILE).is_file() and (run_dir / SUMMARY_FILE).is_file())
+        (run_dir / TRAJECTORY_FILE).is_file() and (run_dir / SUMMARY_FILE).is_file()
+    )
 
 
 @dataclass(frozen=True)
@@ -79,9 +81,11 @@ class Recovery:
 
     def line(self) -> str:
         """The line `swarm plot / export / up` print about it."""
-        return (f"recovered {self.ticks + 1} ticks (t = 0 to {self.sim_time:.2f} s) from the recording "
-                f"({'finished' if self.finished else 'cut short'}) into {self.run_dir}: trajectory.npz, "
-                "summary.json (complete: false)")
+        return (
+            f"recovered {self.ticks + 1} ticks (t = 0 to {self.sim_time:.2f} s) from the recording "
+            f"({'finished' if self.finished else 'cut short'}) into {self.run_dir}: trajectory.npz, "
+            "summary.json (complete: false)"
+        )
 
 
 def recover(run_dir: Path) -> Recovery | None:

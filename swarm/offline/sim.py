@@ -8,8 +8,8 @@ reference that `swarm up --clock lockstep` equals, and a fast tool for studies.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from swarm.agents.brain import AgentBrain
 from swarm.contracts.scenario import Scenario
@@ -17,8 +17,12 @@ from swarm.world.engine import Engine
 from swarm.world.recording import RunResult
 
 
-def run_sim(scenario: Scenario, duration: float | None = None,
-            progress: Callable[[int, int], None] | None = None, recording: Path | None = None) -> RunResult:
+def run_sim(
+    scenario: Scenario,
+    duration: float | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    recording: Path | None = None,
+) -> RunResult:
     """Run `scenario` for `duration` simulated seconds (default: the scenario's), streaming
     the recording to `recording` (a recording.mcap) if given, else keeping it in memory.
 
@@ -71,6 +75,12 @@ def run_sim(scenario: Scenario, duration: float | None = None,
     engine.close()
     if progress is not None:
         progress(ticks, ticks)
-    return engine.result({"engine": "sim", "rejected_commands": engine.core.rejected,
-                          "lost_frames": engine.fault_plan.lost_sense, "lost_commands": engine.fault_plan.lost_cmd},
-                         {str(aid): b.figures() for aid, b in brains.items()})
+    return engine.result(
+        {
+            "engine": "sim",
+            "rejected_commands": engine.core.rejected,
+            "lost_frames": engine.fault_plan.lost_sense,
+            "lost_commands": engine.fault_plan.lost_cmd,
+        },
+        {str(aid): b.figures() for aid, b in brains.items()},
+    )

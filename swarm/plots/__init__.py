@@ -38,5 +38,17 @@ from swarm.plots.style import MAX_POINTS  # noqa: E402
 from swarm.world.run_reader import RunData, final_graph, load_run, switch_count  # noqa: E402
 from swarm.world.run_reader import RunReadError as PlotError  # noqa: E402
 
-__all__ = ["PlotError", "RunData", "load_run", "render_plots", "render_animation", "final_graph", "switch_count",
-           "MAX_POINTS", "PLOT_FILES", "FORMATS", "ANIMATION_FILE", "check_formats"]
+__all__ = [
+    "PlotError",
+    "RunData",
+    "load_run",
+    "render_plots",
+    "render_animation",
+    "final_graph",
+    "switch_count",
+    "MAX_POINTS",
+    "PLOT_FILES",
+    "FORMATS",
+    "ANIMATION_FILE",
+    "check_formats",
+]

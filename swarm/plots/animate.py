@@ -13,8 +13,8 @@ in seconds.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -68,28 +68,54 @@ class _Frames:
         self.index = run.column_of()
         ticks = switch_ticks(run.out, run.alive)
         self.switch_at = [set(int(k) for k in ks) for ks in ticks]
-        self.switch_cum = np.cumsum(np.bincount(np.concatenate(ticks + [np.zeros(0, np.int64)]).astype(np.int64),
-                                                minlength=run.n_rows))
-        self.trails = [ax.plot([], [], color=looks.colours[j], lw=looks.width(j), alpha=0.75, zorder=2)[0]
-                       for j in range(run.n_agents)]
+        self.switch_cum = np.cumsum(
+            np.bincount(np.concatenate(ticks + [np.zeros(0, np.int64)]).astype(np.int64), minlength=run.n_rows)
+        )
+        self.trails = [
+            ax.plot([], [], color=looks.colours[j], lw=looks.width(j), alpha=0.75, zorder=2)[0]
+            for j in range(run.n_agents)
+        ]
         self.edges = LineCollection([], lw=0.9, alpha=0.8, zorder=1.5)
         ax.add_collection(self.edges)
         lead = [j for j in range(run.n_agents) if looks.leader[j]]
         foll = [j for j in range(run.n_agents) if not looks.leader[j]]
-        self.groups = [(foll, ax.scatter([], [], s=40, marker="o", edgecolors="k", linewidths=0.5, zorder=4)),
-                       (lead, ax.scatter([], [], s=170, marker=LEADER_MARKER, edgecolors="k", linewidths=0.6,
-                                         zorder=4.5))]
-        self.rings = ax.scatter([], [], s=size_for(run.n_agents, 260, 140), facecolors="none", edgecolors="red",
-                                linewidths=1.8, zorder=5)
+        self.groups = [
+            (foll, ax.scatter([], [], s=40, marker="o", edgecolors="k", linewidths=0.5, zorder=4)),
+            (lead, ax.scatter([], [], s=170, marker=LEADER_MARKER, edgecolors="k", linewidths=0.6, zorder=4.5)),
+        ]
+        self.rings = ax.scatter(
+            [], [], s=size_for(run.n_agents, 260, 140), facecolors="none", edgecolors="red", linewidths=1.8, zorder=5
+        )
         fs = size_for(run.n_agents, 8, 6)
         beside = offset_copy(ax.transData, fig=ax.figure, x=6, y=4, units="points")
-        self.labels = ([ax.text(0, 0, looks.labels[j], fontsize=fs, zorder=6, clip_on=True, transform=beside,
-                                fontweight="bold" if looks.leader[j] else "normal")
-                        for j in range(run.n_agents)] if run.n_agents <= GROUP_ABOVE else [])
-        self.clock = ax.text(0.02, 0.98, "", transform=ax.transAxes, va="top", fontsize=9,
-                             bbox=dict(boxstyle="round,pad=0.3", fc="white", ec="0.6", alpha=0.9), zorder=7)
-        self.artists = [self.edges, *self.trails, *(sc for _, sc in self.groups), self.rings, *self.labels,
-                        self.clock]
+        self.labels = (
+            [
+                ax.text(
+                    0,
+                    0,
+                    looks.labels[j],
+                    fontsize=fs,
+                    zorder=6,
+                    clip_on=True,
+                    transform=beside,
+                    fontweight="bold" if looks.leader[j] else "normal",
+                )
+                for j in range(run.n_agents)
+            ]
+            if run.n_agents <= GROUP_ABOVE
+            else []
+        )
+        self.clock = ax.text(
+            0.02,
+            0.98,
+            "",
+            transform=ax.transAxes,
+            va="top",
+            fontsize=9,
+            bbox=dict(boxstyle="round,pad=0.3", fc="white", ec="0.6", alpha=0.9),
+            zorder=7,
+        )
+        self.artists = [self.edges, *self.trails, *(sc for _, sc in self.groups), self.rings, *self.labels, self.clock]
         for a in self.artists:
             a.set_animated(True)  # drawn by frame, not with the background
 
@@ -100,8 +126,9 @@ class _Frames:
         alive = run.alive[k]
         for j, line in enumerate(self.trails):
             idx = np.r_[lo:k:step, k]
-            line.set_data(np.where(run.alive[idx, j], run.x[idx, j], np.nan),
-                          np.where(run.alive[idx, j], run.y[idx, j], np.nan))
+            line.set_data(
+                np.where(run.alive[idx, j], run.x[idx, j], np.nan), np.where(run.alive[idx, j], run.y[idx, j], np.nan)
+            )
         segs, cols = [], []
         for j in range(run.n_agents):
             o = int(run.out[k, j])
@@ -120,13 +147,15 @@ class _Frames:
             text.set_position((run.x[k, j], run.y[k, j]))
             text.set_text(looks.labels[j] if np.isfinite(run.x[k, j]) else "")
         gone = int((~alive).sum())
-        self.clock.set_text(f"t = {run.t[k]:6.1f} s   switches: {int(self.switch_cum[k])}"
-                            + (f"   not alive: {gone}" if gone else ""))
+        self.clock.set_text(
+            f"t = {run.t[k]:6.1f} s   switches: {int(self.switch_cum[k])}" + (f"   not alive: {gone}" if gone else "")
+        )
         return self.artists
 
 
-def render_animation(run_dir: Path, max_frames: int = MAX_FRAMES, fps: int = FPS,
-                     progress: Callable[[int, int], None] | None = None) -> Path:
+def render_animation(
+    run_dir: Path, max_frames: int = MAX_FRAMES, fps: int = FPS, progress: Callable[[int, int], None] | None = None
+) -> Path:
     """Write ``animation.gif`` into `run_dir` (at most `max_frames` frames at `fps`);
     `progress(frame, total)` is called as frames are written. Returns the path."""
     run_dir = Path(run_dir)
@@ -148,11 +177,17 @@ def render_animation(run_dir: Path, max_frames: int = MAX_FRAMES, fps: int = FPS
     ax.grid(True, lw=0.3, alpha=0.5)
     name = run.summary.get("scenario")
     ax.set_title(f"{name + ': ' if name else ''}{run.n_agents} agents, {float(run.t[-1]):.0f} s")
-    fig.legend(handles=[Line2D([], [], ls="", marker=LEADER_MARKER, ms=11, mfc="0.7", mec="k", label="leader"),
-                        Line2D([], [], color="0.4", lw=1.0, label="follower → out-neighbour"),
-                        Line2D([], [], ls="", marker="o", ms=10, mfc="none", mec="red", mew=1.8, label="switch"),
-                        Line2D([], [], ls="", marker="o", ms=6, mfc=DEAD_COLOUR, mec="k", label="not alive")],
-               loc="outside lower center", ncol=4, fontsize=7)
+    fig.legend(
+        handles=[
+            Line2D([], [], ls="", marker=LEADER_MARKER, ms=11, mfc="0.7", mec="k", label="leader"),
+            Line2D([], [], color="0.4", lw=1.0, label="follower → out-neighbour"),
+            Line2D([], [], ls="", marker="o", ms=10, mfc="none", mec="red", mew=1.8, label="switch"),
+            Line2D([], [], ls="", marker="o", ms=6, mfc=DEAD_COLOUR, mec="k", label="not alive"),
+        ],
+        loc="outside lower center",
+        ncol=4,
+        fontsize=7,
+    )
     frames = _Frames(ax, ctx, rows)
     fig.set_dpi(DPI)
     fig.get_layout_engine().execute(fig)  # lay out once, not at every frame
@@ -193,4 +228,3 @@ def gif_frames(path: Path) -> int:
     """Number of frames in a GIF (for the tests and the CLI's report)."""
     with Image.open(path) as im:
         return int(getattr(im, "n_frames", 1))
-

@@ -126,9 +126,19 @@ def mark_clips(ax: Axes, rng: ControlRange, looks: Looks, columns: list[int]) ->
         off = stack_offsets(xs, np.zeros(len(side)), sep=6.0, step=7.0)
         sign = -1.0 if top else 1.0  # stack into the axes
         for c, (dx, dy) in zip(side, off):
-            ax.plot([c.t], [rng.hi if top else rng.lo], ls="", marker="^" if top else "v", ms=7,
-                    mfc=looks.colours[c.column], mec="k", mew=0.6, clip_on=False, zorder=6,
-                    transform=_offset(ax, dx, sign * (dy + 3.5)))
+            ax.plot(
+                [c.t],
+                [rng.hi if top else rng.lo],
+                ls="",
+                marker="^" if top else "v",
+                ms=7,
+                mfc=looks.colours[c.column],
+                mec="k",
+                mew=0.6,
+                clip_on=False,
+                zorder=6,
+                transform=_offset(ax, dx, sign * (dy + 3.5)),
+            )
         _name(ax, clip_text(side, looks), side[0], rng.hi if top else rng.lo, top)
 
 
@@ -138,10 +148,19 @@ def _name(ax: Axes, text: str, big: Clip, edge: float, top: bool) -> None:
     just inside for the bottom one; on the marker's right in the first half of the run."""
     x0, x1 = ax.get_xlim()
     right = (big.t - x0) / max(x1 - x0, 1e-12) < 0.5
-    ax.annotate(text, (big.t, edge), xytext=(16.0 if right else -16.0, 5.0 if top else 10.0),
-                textcoords="offset points", ha="left" if right else "right", va="bottom", fontsize=NOTE_FONT,
-                bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="0.5", lw=0.6, alpha=0.9), annotation_clip=False,
-                arrowprops=dict(arrowstyle="->", color="0.3", lw=0.7, shrinkB=7), zorder=7)
+    ax.annotate(
+        text,
+        (big.t, edge),
+        xytext=(16.0 if right else -16.0, 5.0 if top else 10.0),
+        textcoords="offset points",
+        ha="left" if right else "right",
+        va="bottom",
+        fontsize=NOTE_FONT,
+        bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="0.5", lw=0.6, alpha=0.9),
+        annotation_clip=False,
+        arrowprops=dict(arrowstyle="->", color="0.3", lw=0.7, shrinkB=7),
+        zorder=7,
+    )
 
 
 def _offset(ax: Axes, dx_pt: float, dy_pt: float) -> Transform:

@@ -7,9 +7,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from swarm.offline.csv_export import expected_by_column
 from swarm.plots.palette import Looks, agent_looks
 from swarm.plots.style import MAX_POINTS, decimation_rows
-from swarm.offline.csv_export import expected_by_column
 from swarm.world.run_reader import RunData, RunEvent, run_events
 
 #: Above this many agents the time series are drawn as small multiples, a panel per tree.
@@ -34,8 +34,14 @@ class Ctx:
 
 def make_context(run: RunData, max_points: int = MAX_POINTS) -> Ctx:
     max_points = max(16, int(max_points))
-    return Ctx(run, decimation_rows(run, max_points), agent_looks(run), named_faults(run, run_events(run)),
-               expected_by_column(run), max_points)
+    return Ctx(
+        run,
+        decimation_rows(run, max_points),
+        agent_looks(run),
+        named_faults(run, run_events(run)),
+        expected_by_column(run),
+        max_points,
+    )
 
 
 def named_faults(run: RunData, events: list[RunEvent]) -> list[RunEvent]:
@@ -52,8 +58,12 @@ def named_faults(run: RunData, events: list[RunEvent]) -> list[RunEvent]:
             agent = words[1] if len(words) > 1 else None
             for f in faults:
                 at = f.get("at", f.get("time")) if isinstance(f, dict) else None
-                if (isinstance(at, (int, float)) and abs(at - ev.time) <= dt / 2 and isinstance(f.get("kind"), str)
-                        and (None if f.get("agent") is None else str(f.get("agent"))) == agent):
+                if (
+                    isinstance(at, (int, float))
+                    and abs(at - ev.time) <= dt / 2
+                    and isinstance(f.get("kind"), str)
+                    and (None if f.get("agent") is None else str(f.get("agent"))) == agent
+                ):
                     ev = RunEvent(ev.time, ev.kind, f["kind"] + (f" {agent}" if agent else ""))
                     break
         out.append(ev)
@@ -68,7 +78,7 @@ def panel_groups(ctx: Ctx) -> list[tuple[str, list[int]]]:
         cols = tree.columns
         lead, rest = (cols[:1], cols[1:]) if tree.root is not None else ([], cols)
         size = PER_PANEL - len(lead)
-        parts = [rest[k:k + size] for k in range(0, len(rest), size)] or [[]]
+        parts = [rest[k : k + size] for k in range(0, len(rest), size)] or [[]]
         for p, part in enumerate(parts):
             title = tree.title + (f" ({p + 1}/{len(parts)})" if len(parts) > 1 else "")
             out.append((title, lead + part))

@@ -41,21 +41,45 @@ def panel_graph(ax: Axes, ctx: Ctx) -> None:
     fs = size_for(n, 10, 6)
     for a, b in edges.items():
         src_dead = a in dead or b in dead
-        ax.add_patch(FancyArrowPatch(
-            pos[a], pos[b], arrowstyle="-|>", mutation_scale=size_for(n, 14, 8), shrinkA=radius_pt + 1,
-            shrinkB=radius_pt + 2, color=DEAD_COLOUR if src_dead else "0.15", ls="--" if src_dead else "-", lw=1.0,
-            connectionstyle="arc3,rad=0.08", zorder=2,
-        ))
+        ax.add_patch(
+            FancyArrowPatch(
+                pos[a],
+                pos[b],
+                arrowstyle="-|>",
+                mutation_scale=size_for(n, 14, 8),
+                shrinkA=radius_pt + 1,
+                shrinkB=radius_pt + 2,
+                color=DEAD_COLOUR if src_dead else "0.15",
+                ls="--" if src_dead else "-",
+                lw=1.0,
+                connectionstyle="arc3,rad=0.08",
+                zorder=2,
+            )
+        )
     for j, a in enumerate(run.ids):
         a = int(a)
         face = DEAD_COLOUR if a in dead else looks.colours[j]
         flagged = a in orphans
         if looks.leader[j]:  # a leader: a black ring round its node
             ax.scatter(*pos[a], s=node_s * 1.55, c="white", edgecolors="k", linewidths=2.2, zorder=2.9)
-        ax.scatter(*pos[a], s=node_s, c=[face], edgecolors=FLAG_COLOUR if flagged else "k",
-                   linewidths=2.5 if flagged else 0.8, zorder=3)
-        ax.text(*pos[a], looks.labels[j], ha="center", va="center", fontsize=fs * (0.9 if looks.leader[j] else 1.0),
-                zorder=4, color=text_colour(face), fontweight="bold" if looks.leader[j] else "normal")
+        ax.scatter(
+            *pos[a],
+            s=node_s,
+            c=[face],
+            edgecolors=FLAG_COLOUR if flagged else "k",
+            linewidths=2.5 if flagged else 0.8,
+            zorder=3,
+        )
+        ax.text(
+            *pos[a],
+            looks.labels[j],
+            ha="center",
+            va="center",
+            fontsize=fs * (0.9 if looks.leader[j] else 1.0),
+            zorder=4,
+            color=text_colour(face),
+            fontweight="bold" if looks.leader[j] else "normal",
+        )
     ax.set_aspect("equal")
     ax.set_xlim(-1.3, 1.3)
     ax.set_ylim(-1.3, 1.3)
@@ -67,8 +91,9 @@ def panel_graph(ax: Axes, ctx: Ctx) -> None:
     ax.set_title(f"(a) final communication graph, after {n_sw} switch{'es' if n_sw != 1 else ''}")
     handles = [Line2D([], [], ls="", marker="o", ms=9, mfc="0.85", mec="k", label="follower (id)")]
     if run.leaders():
-        handles.insert(0, Line2D([], [], ls="", marker="o", ms=9, mfc="0.85", mec="k", mew=2.2,
-                                 label="leader (L + id, ringed)"))
+        handles.insert(
+            0, Line2D([], [], ls="", marker="o", ms=9, mfc="0.85", mec="k", mew=2.2, label="leader (L + id, ringed)")
+        )
     if dead:
         handles.append(Line2D([], [], ls="", marker="o", ms=9, mfc=DEAD_COLOUR, mec="k", label="dead"))
     if orphans:
@@ -82,8 +107,16 @@ def panel_graph(ax: Axes, ctx: Ctx) -> None:
         text = ", ".join(str(a) for a in listed[:MAX_LISTED])
         if len(listed) > MAX_LISTED:
             text += f", … (+{len(listed) - MAX_LISTED} more)"
-        ax.text(0.99, 0.01, "\n".join(textwrap.wrap(f"no path to a leader ({len(listed)}): {text}", 40)),
-                transform=ax.transAxes, ha="right", va="bottom", fontsize=7, color=FLAG_COLOUR)
+        ax.text(
+            0.99,
+            0.01,
+            "\n".join(textwrap.wrap(f"no path to a leader ({len(listed)}): {text}", 40)),
+            transform=ax.transAxes,
+            ha="right",
+            va="bottom",
+            fontsize=7,
+            color=FLAG_COLOUR,
+        )
 
 
 def panel_neighbours(ax: Axes, ctx: Ctx) -> None:
@@ -114,8 +147,15 @@ def panel_neighbours(ax: Axes, ctx: Ctx) -> None:
             ax.barh(row, x1 - x0, left=x0, height=0.7, **kw)
             if o >= 0 and (x1 - x0) > 0.04 * span:
                 face = looks.colours[index[o]] if o in index else "0.3"
-                ax.text(0.5 * (x0 + x1), row, looks.labels[index[o]] if o in index else str(o), ha="center",
-                        va="center", fontsize=fs, color=text_colour(face))
+                ax.text(
+                    0.5 * (x0 + x1),
+                    row,
+                    looks.labels[index[o]] if o in index else str(o),
+                    ha="center",
+                    va="center",
+                    fontsize=fs,
+                    color=text_colour(face),
+                )
     ax.set_yticks(range(len(followers)), [looks.labels[j] for j in followers], fontsize=fs)
     for tick, j in zip(ax.get_yticklabels(), followers):
         tick.set_bbox(dict(boxstyle="round,pad=0.15", fc=looks.colours[j], ec="none", alpha=0.55))
@@ -127,13 +167,39 @@ def panel_neighbours(ax: Axes, ctx: Ctx) -> None:
     n_sw = sum(counts)
     ax.set_title(f"out-neighbour of each follower over time ({n_sw} switch{'es' if n_sw != 1 else ''})")
     ax.grid(True, axis="x", lw=0.3, alpha=0.5)
-    handles = [Line2D([], [], ls="", marker="s", ms=8, mfc="0.85", mec="k",
-                      label="bar: the out-neighbour followed (its colour and label; L = a leader)"),
-               Line2D([], [], ls="", marker="s", ms=8, mfc="white", mec=FLAG_COLOUR, label="none (searching)"),
-               Line2D([], [], ls="", marker="s", ms=8, mfc=DEAD_COLOUR, mec="none", label="not alive")]
+    handles = [
+        Line2D(
+            [],
+            [],
+            ls="",
+            marker="s",
+            ms=8,
+            mfc="0.85",
+            mec="k",
+            label="bar: the out-neighbour followed (its colour and label; L = a leader)",
+        ),
+        Line2D([], [], ls="", marker="s", ms=8, mfc="white", mec=FLAG_COLOUR, label="none (searching)"),
+        Line2D([], [], ls="", marker="s", ms=8, mfc=DEAD_COLOUR, mec="none", label="not alive"),
+    ]
     ax.figure.legend(handles=handles, fontsize=7, loc="outside lower center", ncol=3, framealpha=0.8)
-    ax.annotate("switches", (1.0, 1.0), xycoords="axes fraction", xytext=(3, 2), textcoords="offset points",
-                va="bottom", fontsize=fs, color="0.3")
+    ax.annotate(
+        "switches",
+        (1.0, 1.0),
+        xycoords="axes fraction",
+        xytext=(3, 2),
+        textcoords="offset points",
+        va="bottom",
+        fontsize=fs,
+        color="0.3",
+    )
     for k, j in enumerate(followers):
-        ax.annotate(f"{counts[j]}", (1.0, k), xycoords=("axes fraction", "data"), xytext=(3, 0),
-                    textcoords="offset points", va="center", fontsize=fs, color="0.3")
+        ax.annotate(
+            f"{counts[j]}",
+            (1.0, k),
+            xycoords=("axes fraction", "data"),
+            xytext=(3, 0),
+            textcoords="offset points",
+            va="center",
+            fontsize=fs,
+            color="0.3",
+        )

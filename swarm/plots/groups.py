@@ -6,7 +6,7 @@ the control panels sharing one y-range so that they compare."""
 from __future__ import annotations
 
 import math
-from typing import Callable
+from collections.abc import Callable
 
 import matplotlib.pyplot as plt
 from matplotlib.axes import Axes
@@ -25,11 +25,17 @@ def small_multiples(ctx: Ctx, draw: Callable[[Axes, str, list[int]], None], titl
     groups = panel_groups(ctx)
     ncol = 1 if len(groups) <= 3 else 2
     nrow = math.ceil(len(groups) / ncol)
-    fig, axs = plt.subplots(nrow, ncol, figsize=(PANEL_W * ncol + 0.6, PANEL_H * nrow + 1.0), sharex=True,
-                            squeeze=False, layout="constrained")
+    fig, axs = plt.subplots(
+        nrow,
+        ncol,
+        figsize=(PANEL_W * ncol + 0.6, PANEL_H * nrow + 1.0),
+        sharex=True,
+        squeeze=False,
+        layout="constrained",
+    )
     for ax, (name, cols) in zip(axs.flat, groups):
         draw(ax, name, cols)
-    for ax in list(axs.flat)[len(groups):]:
+    for ax in list(axs.flat)[len(groups) :]:
         ax.set_visible(False)
     for col in range(ncol):  # the time axis under the last panel of each column
         shown = [axs[r, col] for r in range(nrow) if axs[r, col].get_visible()]
@@ -46,9 +52,11 @@ def grouped_distance(ctx: Ctx, suffix: str) -> Figure:
         panel_distance(ax, ctx, cols, title=name, legend=False)
 
     fig = small_multiples(ctx, draw, "(c) distance from target, by tree" + suffix)
-    key = [Line2D([], [], color="0.3", lw=2.0 * ctx.looks.lw, label="leader (L)"),
-           Line2D([], [], ls="--", color=EXPECTED_COLOUR, label="expected radius"),
-           Line2D([], [], ls="", marker="|", ms=9, mew=1.6, color="0.3", label="out-neighbour switch")]
+    key = [
+        Line2D([], [], color="0.3", lw=2.0 * ctx.looks.lw, label="leader (L)"),
+        Line2D([], [], ls="--", color=EXPECTED_COLOUR, label="expected radius"),
+        Line2D([], [], ls="", marker="|", ms=9, mew=1.6, color="0.3", label="out-neighbour switch"),
+    ]
     if not ctx.run.alive[-1].all():
         key.append(Line2D([], [], ls=":", color=DEAD_COLOUR, label="dead / coasting"))
     fig.legend(handles=key, loc="outside lower center", ncol=len(key), fontsize=7)

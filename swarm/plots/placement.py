@@ -6,7 +6,8 @@ stacked. Sizes are in points; an axes' size in points comes from the figure's la
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -74,8 +75,9 @@ def stack_offsets(x: np.ndarray, y: np.ndarray, sep: float, step: float, levels:
     return off
 
 
-def place_point_labels(ax: Axes, xy: np.ndarray, texts: list[str], fontsize: float,
-                       obstacles: np.ndarray | None = None) -> list[tuple[float, float]]:
+def place_point_labels(
+    ax: Axes, xy: np.ndarray, texts: list[str], fontsize: float, obstacles: np.ndarray | None = None
+) -> list[tuple[float, float]]:
     """Offsets (points) for labels of the data points `xy` (K, 2), chosen greedily (in the
     given order) among positions round each point so that no label box overlaps another
     label or a point of `xy` / `obstacles`; far-off labels should get a leader line."""
@@ -86,8 +88,11 @@ def place_point_labels(ax: Axes, xy: np.ndarray, texts: list[str], fontsize: flo
     if ax.get_aspect() == 1.0:  # equal aspect: the tighter scale wins once the limits adjust
         kx = ky = min(kx, ky)
     pts = np.column_stack([xy[:, 0] * kx, xy[:, 1] * ky])
-    obs = pts if obstacles is None or not len(obstacles) else np.vstack(
-        [pts, np.column_stack([obstacles[:, 0] * kx, obstacles[:, 1] * ky])])
+    obs = (
+        pts
+        if obstacles is None or not len(obstacles)
+        else np.vstack([pts, np.column_stack([obstacles[:, 0] * kx, obstacles[:, 1] * ky])])
+    )
     boxes: list[tuple[float, float, float, float]] = []
     r_mark = 4.0
     dirs = [(1, 1), (1, -1), (-1, 1), (-1, -1), (1, 0), (-1, 0), (0, 1), (0, -1)]
@@ -114,8 +119,9 @@ def place_point_labels(ax: Axes, xy: np.ndarray, texts: list[str], fontsize: flo
     return result
 
 
-def _free(box: tuple[float, float, float, float], boxes: list[tuple[float, float, float, float]],
-          points: np.ndarray, r: float) -> bool:
+def _free(
+    box: tuple[float, float, float, float], boxes: list[tuple[float, float, float, float]], points: np.ndarray, r: float
+) -> bool:
     a0, b0, a1, b1 = box
     for c0, d0, c1, d1 in boxes:
         if a0 < c1 and c0 < a1 and b0 < d1 and d0 < b1:
@@ -126,5 +132,7 @@ def _free(box: tuple[float, float, float, float], boxes: list[tuple[float, float
 
 def ha_va(ox: float, oy: float) -> tuple[str, str]:
     """Text alignment for a label offset by (ox, oy) from its point."""
-    return ("left" if ox > 0 else "right" if ox < 0 else "center",
-            "bottom" if oy > 0 else "top" if oy < 0 else "center")
+    return (
+        "left" if ox > 0 else "right" if ox < 0 else "center",
+        "bottom" if oy > 0 else "top" if oy < 0 else "center",
+    )

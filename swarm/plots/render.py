@@ -5,12 +5,14 @@ Above `GROUP_ABOVE` agents distance and control become small multiples, a panel 
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any
 
 import matplotlib.pyplot as plt
 from matplotlib.figure import Figure
 
+from swarm.offline.results import PLOT_NAMES
 from swarm.plots.context import GROUP_ABOVE, Ctx, grouped, make_context
 from swarm.plots.graph import panel_graph, panel_neighbours
 from swarm.plots.groups import grouped_control, grouped_distance
@@ -18,7 +20,6 @@ from swarm.plots.style import DPI, MAX_POINTS
 from swarm.plots.timeseries import panel_control, panel_distance
 from swarm.plots.trajectories import figure_size as trajectories_size
 from swarm.plots.trajectories import panel_trajectories
-from swarm.offline.results import PLOT_NAMES
 from swarm.world.run_reader import RunData, load_run
 
 #: Files written by `render_plots` (as PNG), in the order they are returned.
@@ -35,7 +36,7 @@ RC = {"pdf.fonttype": 42, "svg.fonttype": "path"}
 
 
 def title_suffix(run: RunData) -> str:
-    """" (scenario, converged)" from the summary, "" when it says neither."""
+    """ " (scenario, converged)" from the summary, "" when it says neither."""
     sc = run.summary.get("scenario")
     conv = run.summary.get("converged")
     parts = []

@@ -39,8 +39,16 @@ def key_legend(ax: Axes, handles: list[Line2D], ncol: int | None = None, **kw: A
     if not handles:
         return
     below = offset_copy(ax.transAxes, fig=ax.figure, y=-KEY_DROP_PT, units="points")  # under the x label
-    ax.legend(handles=handles, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=below,
-              ncol=ncol or min(len(handles), 4), framealpha=0.8, **kw)
+    ax.legend(
+        handles=handles,
+        fontsize=7,
+        loc="upper center",
+        bbox_to_anchor=(0.5, 0.0),
+        bbox_transform=below,
+        ncol=ncol or min(len(handles), 4),
+        framealpha=0.8,
+        **kw,
+    )
 
 
 def decimation_rows(run: RunData, max_points: int) -> np.ndarray:

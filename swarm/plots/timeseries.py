@@ -30,8 +30,13 @@ def merged(events: list[RunEvent]) -> list[RunEvent]:
     for ev in events:
         head, _, who = ev.label.partition(" ")
         prev = out[-1][0] if out else None
-        if prev is not None and prev.kind == ev.kind and abs(prev.time - ev.time) < 1e-9 and \
-                prev.label.partition(" ")[0] == head and who:
+        if (
+            prev is not None
+            and prev.kind == ev.kind
+            and abs(prev.time - ev.time) < 1e-9
+            and prev.label.partition(" ")[0] == head
+            and who
+        ):
             out[-1][1].append(who)
         else:
             out.append((ev, [who] if who else []))
@@ -63,10 +68,21 @@ def draw_events(ax: Axes, events: list[RunEvent]) -> None:
         x = (ev.time - x0) * kx
         dx = max(0.0, right_edge + step - x)  # shift right past the previous label
         right_edge = x + dx
-        ax.annotate(ev.label, (ev.time, 1.0), xycoords=ax.get_xaxis_transform(), xytext=(dx + 1.5, -3),
-                    textcoords="offset points", rotation=90, va="top", ha="left", fontsize=EVENT_FONT, color=colour,
-                    annotation_clip=True, zorder=3.5,
-                    bbox=dict(boxstyle="square,pad=0.05", fc="white", ec="none", alpha=0.8))
+        ax.annotate(
+            ev.label,
+            (ev.time, 1.0),
+            xycoords=ax.get_xaxis_transform(),
+            xytext=(dx + 1.5, -3),
+            textcoords="offset points",
+            rotation=90,
+            va="top",
+            ha="left",
+            fontsize=EVENT_FONT,
+            color=colour,
+            annotation_clip=True,
+            zorder=3.5,
+            bbox=dict(boxstyle="square,pad=0.05", fc="white", ec="none", alpha=0.8),
+        )
 
 
 def last_finite(values: np.ndarray) -> np.ndarray:
@@ -97,12 +113,29 @@ def label_line_ends(ax: Axes, ctx: Ctx, values: np.ndarray, columns: list[int]) 
     for j, w, g in zip(cols, want, got):
         colour = ctx.looks.colours[j] if ctx.run.alive[-1, j] else DEAD_COLOUR
         if abs(g - w) * h_pt > 1.5:  # moved: a leader line, under every label
-            ax.annotate("", (1.0, w), xycoords="axes fraction", xytext=(1.0, g), textcoords=text_at,
-                        annotation_clip=False, zorder=3,
-                        arrowprops=dict(arrowstyle="-", color=colour, lw=0.6, shrinkA=0, shrinkB=0))
-        ax.annotate(ctx.looks.labels[j], (1.0, g), xycoords=text_at, fontsize=fs, va="center", ha="left",
-                    color="k", fontweight="bold" if ctx.looks.leader[j] else "normal", annotation_clip=False,
-                    zorder=5, bbox=dict(boxstyle="round,pad=0.12", fc=colour, ec="none", alpha=0.7))
+            ax.annotate(
+                "",
+                (1.0, w),
+                xycoords="axes fraction",
+                xytext=(1.0, g),
+                textcoords=text_at,
+                annotation_clip=False,
+                zorder=3,
+                arrowprops=dict(arrowstyle="-", color=colour, lw=0.6, shrinkA=0, shrinkB=0),
+            )
+        ax.annotate(
+            ctx.looks.labels[j],
+            (1.0, g),
+            xycoords=text_at,
+            fontsize=fs,
+            va="center",
+            ha="left",
+            color="k",
+            fontweight="bold" if ctx.looks.leader[j] else "normal",
+            annotation_clip=False,
+            zorder=5,
+            bbox=dict(boxstyle="round,pad=0.12", fc=colour, ec="none", alpha=0.7),
+        )
 
 
 def finish_time_axes(ax: Axes, ctx: Ctx, lines: np.ndarray, columns: list[int], ylabel: str, title: str) -> None:
@@ -153,13 +186,22 @@ def draw_switches(ax: Axes, ctx: Ctx, t: np.ndarray, v: np.ndarray, c: np.ndarra
     for dx, dy in np.unique(off, axis=0):
         sel = (off[:, 0] == dx) & (off[:, 1] == dy)
         tr = offset_copy(ax.transData, fig=ax.figure, x=float(dx), y=float(dy), units="points")
-        ax.scatter(t[sel], v[sel], marker="|", s=45, c=[ctx.looks.colours[int(j)] for j in c[sel]], lw=1.5,
-                   zorder=4, transform=tr)
+        ax.scatter(
+            t[sel],
+            v[sel],
+            marker="|",
+            s=45,
+            c=[ctx.looks.colours[int(j)] for j in c[sel]],
+            lw=1.5,
+            zorder=4,
+            transform=tr,
+        )
         ax.scatter(t[sel], v[sel], marker="|", s=60, c="k", lw=2.5, zorder=3.9, transform=tr)
 
 
-def panel_distance(ax: Axes, ctx: Ctx, columns: list[int] | None = None, title: str = "(c) distance from target",
-                   legend: bool = True) -> None:
+def panel_distance(
+    ax: Axes, ctx: Ctx, columns: list[int] | None = None, title: str = "(c) distance from target", legend: bool = True
+) -> None:
     run, looks, rows = ctx.run, ctx.looks, ctx.rows
     columns = ctx.all_columns if columns is None else columns
     tx, ty = run.target
@@ -173,17 +215,26 @@ def panel_distance(ax: Axes, ctx: Ctx, columns: list[int] | None = None, title: 
         ax.plot(t, live[rows], color=looks.colours[j], lw=looks.width(j), zorder=2.5 if looks.leader[j] else 2)
         if np.isfinite(dead[rows]).any():
             ax.plot(t, dead[rows], color=DEAD_COLOUR, lw=0.8, ls=":", zorder=2)
-    radii = sorted({round(float(ctx.expected[j]), 6) for j in columns  # a dead agent's orbit is gone
-                    if np.isfinite(ctx.expected[j]) and run.alive[-1, j]})
+    radii = sorted(
+        {
+            round(float(ctx.expected[j]), 6)
+            for j in columns  # a dead agent's orbit is gone
+            if np.isfinite(ctx.expected[j]) and run.alive[-1, j]
+        }
+    )
     for r in radii:
         ax.axhline(r, color=EXPECTED_COLOUR, ls="--", lw=0.8, zorder=1)
     ax.set_ylim(bottom=0, top=max(ax.get_ylim()[1], 1.0))
     marks = switch_marks(ctx, dist, columns)
     if legend:
-        extra = [Line2D([], [], color="0.3", lw=2.0 * looks.lw, label="leader (L)"),
-                 Line2D([], [], ls="--", color=EXPECTED_COLOUR, label="expected radius")]
-        if any(first_alive(run.alive[:, j]) is not None and not run.alive[first_alive(run.alive[:, j]):, j].all()
-               for j in columns):
+        extra = [
+            Line2D([], [], color="0.3", lw=2.0 * looks.lw, label="leader (L)"),
+            Line2D([], [], ls="--", color=EXPECTED_COLOUR, label="expected radius"),
+        ]
+        if any(
+            first_alive(run.alive[:, j]) is not None and not run.alive[first_alive(run.alive[:, j]) :, j].all()
+            for j in columns
+        ):
             extra.append(Line2D([], [], ls=":", color=DEAD_COLOUR, label="dead / coasting"))
         if marks[0].size:
             extra.append(Line2D([], [], ls="", marker="|", ms=9, mew=1.6, color="0.3", label="out-neighbour switch"))
@@ -193,8 +244,14 @@ def panel_distance(ax: Axes, ctx: Ctx, columns: list[int] | None = None, title: 
         draw_switches(ax, ctx, *marks)
 
 
-def panel_control(ax: Axes, ctx: Ctx, columns: list[int] | None = None, title: str = "(d) control inputs",
-                  rng: ControlRange | None = None, legend: bool = True) -> None:
+def panel_control(
+    ax: Axes,
+    ctx: Ctx,
+    columns: list[int] | None = None,
+    title: str = "(d) control inputs",
+    rng: ControlRange | None = None,
+    legend: bool = True,
+) -> None:
     run, looks = ctx.run, ctx.looks
     columns = ctx.all_columns if columns is None else columns
     u = np.where(run.alive, run.u, np.nan)
@@ -209,6 +266,5 @@ def panel_control(ax: Axes, ctx: Ctx, columns: list[int] | None = None, title: s
         if rng.clipped:
             extra.append(Line2D([], [], ls="", marker="^", ms=7, mfc="0.6", mec="k", label="clipped (beyond the axis)"))
         key_legend(ax, extra)
-    finish_time_axes(ax, ctx, np.where(np.isfinite(u), np.clip(u, rng.lo, rng.hi), np.nan), columns, "u (rad/s)",
-                     title)
+    finish_time_axes(ax, ctx, np.where(np.isfinite(u), np.clip(u, rng.lo, rng.hi), np.nan), columns, "u (rad/s)", title)
     mark_clips(ax, rng, looks, columns)

@@ -54,8 +54,14 @@ def panel_trajectories(ax: Axes, ctx: Ctx, tree_legend: bool | None = None) -> N
         first = first_alive(col)
         live_x, dead_x = split_alive(run.x[:, j], col, first)
         live_y, dead_y = split_alive(run.y[:, j], col, first)
-        ax.plot(live_x[rows], live_y[rows], color=looks.colours[j], lw=looks.width(j), alpha=0.9,
-                zorder=2.5 if looks.leader[j] else 2)
+        ax.plot(
+            live_x[rows],
+            live_y[rows],
+            color=looks.colours[j],
+            lw=looks.width(j),
+            alpha=0.9,
+            zorder=2.5 if looks.leader[j] else 2,
+        )
         if np.isfinite(dead_x[rows]).any():
             ax.plot(dead_x[rows], dead_y[rows], color=DEAD_COLOUR, lw=0.8, ls=":", zorder=2)
         s = first if first is not None else 0
@@ -68,8 +74,15 @@ def panel_trajectories(ax: Axes, ctx: Ctx, tree_legend: bool | None = None) -> N
         finals[j] = end
         alive_end = bool(col[-1])
         if alive_end:
-            ax.plot(*end, marker=LEADER_MARKER if looks.leader[j] else FOLLOWER_MARKER,
-                    ms=13 if looks.leader[j] else 6, mfc=looks.colours[j], mec="k", mew=0.6, zorder=4.5)
+            ax.plot(
+                *end,
+                marker=LEADER_MARKER if looks.leader[j] else FOLLOWER_MARKER,
+                ms=13 if looks.leader[j] else 6,
+                mfc=looks.colours[j],
+                mec="k",
+                mew=0.6,
+                zorder=4.5,
+            )
         else:
             ax.plot(*end, marker="x", ms=6, color=DEAD_COLOUR, mew=1.5, zorder=4)
     ax.plot(tx, ty, marker="*", ms=14, color=TARGET_COLOUR, mec="k", mew=0.6, zorder=6)
@@ -89,9 +102,17 @@ def panel_trajectories(ax: Axes, ctx: Ctx, tree_legend: bool | None = None) -> N
         extra.append(Line2D([], [], ls=":", marker="x", color=DEAD_COLOUR, label="dead / coasting"))
     if big if tree_legend is None else tree_legend:  # a figure legend: the layout makes room for it
         handles, ncol = tree_legend_handles(looks)
-        ax.figure.legend(handles=handles, ncol=ncol, fontsize=size_for(run.n_agents, 7, 6), loc="outside right upper",
-                         handlelength=1.6, columnspacing=1.0, title="agents by tree", title_fontsize=7,
-                         framealpha=0.8)
+        ax.figure.legend(
+            handles=handles,
+            ncol=ncol,
+            fontsize=size_for(run.n_agents, 7, 6),
+            loc="outside right upper",
+            handlelength=1.6,
+            columnspacing=1.0,
+            title="agents by tree",
+            title_fontsize=7,
+            framealpha=0.8,
+        )
     key_legend(ax, extra, ncol=3)
     equal_aspect(ax)
     _label_finals(ax, ctx, finals, [j for j in finals if looks.leader[j] or not big], np.array(starts))
@@ -111,8 +132,9 @@ def equal_aspect(ax: Axes) -> None:
     ax.set_aspect("equal", adjustable="box")  # the box absorbs what the final layout still changes
 
 
-def _label_finals(ax: Axes, ctx: Ctx, finals: dict[int, tuple[float, float]], labelled: list[int],
-                  starts: np.ndarray) -> None:
+def _label_finals(
+    ax: Axes, ctx: Ctx, finals: dict[int, tuple[float, float]], labelled: list[int], starts: np.ndarray
+) -> None:
     """Labels next to the final markers, leaders first, none over another or a marker."""
     if not labelled:
         return
@@ -125,7 +147,16 @@ def _label_finals(ax: Axes, ctx: Ctx, finals: dict[int, tuple[float, float]], la
     for j, text, (ox, oy) in zip(labelled, texts, place_point_labels(ax, xy, texts, fs, obstacles)):
         ha, va = ha_va(ox, oy)
         far = abs(ox) > 6 or abs(oy) > 6
-        ax.annotate(text, finals[j], xytext=(ox, oy), textcoords="offset points", fontsize=fs, ha=ha, va=va,
-                    fontweight="bold" if ctx.looks.leader[j] else "normal", zorder=7,
-                    bbox=dict(boxstyle="round,pad=0.1", fc="white", ec=ctx.looks.colours[j], lw=0.8, alpha=0.85),
-                    arrowprops=dict(arrowstyle="-", color="0.3", lw=0.5, shrinkA=0, shrinkB=3) if far else None)
+        ax.annotate(
+            text,
+            finals[j],
+            xytext=(ox, oy),
+            textcoords="offset points",
+            fontsize=fs,
+            ha=ha,
+            va=va,
+            fontweight="bold" if ctx.looks.leader[j] else "normal",
+            zorder=7,
+            bbox=dict(boxstyle="round,pad=0.1", fc="white", ec=ctx.looks.colours[j], lw=0.8, alpha=0.85),
+            arrowprops=dict(arrowstyle="-", color="0.3", lw=0.5, shrinkA=0, shrinkB=3) if far else None,
+        )

@@ -24,8 +24,8 @@ import signal
 import subprocess
 import sys
 import threading
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from swarm.runtime.procs import Group, wait_until
 
@@ -146,8 +146,13 @@ class AgentStarter:
                 self.say(f"{e}; agents are exec'd from now on")
                 self.close(kill=True)
         with open(log, "ab") as out:
-            return self.group.start([sys.executable, "-m", "swarm.agents.process", *args], stdin=subprocess.DEVNULL,
-                                    stdout=out, stderr=subprocess.STDOUT, env={**self.env, **(extra_env or {})})
+            return self.group.start(
+                [sys.executable, "-m", "swarm.agents.process", *args],
+                stdin=subprocess.DEVNULL,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                env={**self.env, **(extra_env or {})},
+            )
 
     def close(self, kill: bool = False) -> None:
         """No more forks: end the server (at once with `kill`: it failed) and stop being a
@@ -163,8 +168,13 @@ class ForkServer:
 
     def __init__(self, group: Group, env: dict, log: Path):
         with open(log, "ab") as err:
-            self.proc = group.start([sys.executable, "-m", "swarm.agents.forkserver"], stdin=subprocess.PIPE,
-                                    stdout=subprocess.PIPE, stderr=err, env=env)
+            self.proc = group.start(
+                [sys.executable, "-m", "swarm.agents.forkserver"],
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                stderr=err,
+                env=env,
+            )
         self.broken: str | None = None
         self.ready = False
 

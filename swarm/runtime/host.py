@@ -28,16 +28,16 @@ import shutil
 import signal
 import subprocess
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 from swarm.contracts import credentials, wire
 from swarm.contracts.identities import agent_user
 from swarm.contracts.laws import ENV_TRUSTED_LAWS, with_trusted_laws
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV, endpoint_refuses, exit_status
-from swarm.runtime.host_setup import EXIT_FAILED, HostError, HostSetup
 from swarm.runtime.forks import AgentStarter
+from swarm.runtime.host_setup import EXIT_FAILED, HostError, HostSetup
 from swarm.runtime.procs import Group
 from swarm.runtime.supervision import AgentExitReport, agent_exit
 
@@ -95,11 +95,17 @@ class Host(HostSetup):
 
     def start_agent(self, aid: int) -> subprocess.Popen:
         if self.starter is None:  # forked by a fork server where it can (swarm/runtime/forks.py)
-            env = {**os.environ, LAUNCHER_PID_ENV: str(os.getpid()),  # they stop when the host dies
-                   ENV_TRUSTED_LAWS: with_trusted_laws(self.cfg.trust)}
+            env = {
+                **os.environ,
+                LAUNCHER_PID_ENV: str(os.getpid()),  # they stop when the host dies
+                ENV_TRUSTED_LAWS: with_trusted_laws(self.cfg.trust),
+            }
             self.starter = AgentStarter(self.group, env, self.logs, lambda m: self.say(f"swarm host: {m}"))
-        p = self.starter.start([str(aid), self.local, self.creds.run, "--world-grace", str(self.cfg.world_grace)],
-                               f"agent-{aid}.log", {credentials.ENV_CREDENTIALS: str(self.agent_file(aid))})
+        p = self.starter.start(
+            [str(aid), self.local, self.creds.run, "--world-grace", str(self.cfg.world_grace)],
+            f"agent-{aid}.log",
+            {credentials.ENV_CREDENTIALS: str(self.agent_file(aid))},
+        )
         self.procs[aid] = p
         return p
 
@@ -116,12 +122,16 @@ class Host(HostSetup):
                     self.say(f"swarm host: {e}")
                 return e.code if self.stop_signal is None else 128 + self.stop_signal
             run = self.creds.run
-            self.say(f"host {self.name}: router on {self.local}, linked to the world of run {run} at "
-                     f"{self.upstream} (hub {self.hub_zid[:8]}...)")
+            self.say(
+                f"host {self.name}: router on {self.local}, linked to the world of run {run} at "
+                f"{self.upstream} (hub {self.hub_zid[:8]}...)"
+            )
             for aid in self.ids:
                 self.start_agent(aid)
-            self.say(f"host {self.name}: agents {', '.join(f'{a} (pid {p.pid})' for a, p in self.procs.items())}; "
-                     f"logs in {self.logs}")
+            self.say(
+                f"host {self.name}: agents {', '.join(f'{a} (pid {p.pid})' for a, p in self.procs.items())}; "
+                f"logs in {self.logs}"
+            )
             while self.stop_signal is None:
                 self.supervise()
                 if all(p.poll() is not None for p in self.procs.values()):
@@ -162,12 +172,18 @@ class Host(HostSetup):
                     self.world_ended = self.world_ended or isinstance(wire.decode_control(value), int)
                 except wire.WireError:
                     pass
-            elif str(value).endswith("DELETE") and not (self.world_gone or self.world_ended) \
-                    and self.router is not None and endpoint_refuses(self.upstream):
+            elif (
+                str(value).endswith("DELETE")
+                and not (self.world_gone or self.world_ended)
+                and self.router is not None
+                and endpoint_refuses(self.upstream)
+            ):
                 self.world_gone = True
                 self._close_router()
-                self.say(f"host {self.name}: the world of run {self.creds.run} is gone ({self.upstream} "
-                         "refuses connections); router closed")
+                self.say(
+                    f"host {self.name}: the world of run {self.creds.run} is gone ({self.upstream} "
+                    "refuses connections); router closed"
+                )
 
     def stop(self) -> None:
         """The agents first (SIGTERM, SIGKILL 3 s later; every one reaped), then the router;
@@ -201,8 +217,10 @@ class Host(HostSetup):
         by = {}
         for r in sorted(self.exits, key=lambda r: r.agent):
             by.setdefault(exit_status(r.code), []).append(str(r.agent))
-        return "; ".join(f"agent{'s' if len(a) > 1 else ''} {', '.join(a)}: {s}"
-                         for s, a in sorted(by.items())) or "no agent started"
+        return (
+            "; ".join(f"agent{'s' if len(a) > 1 else ''} {', '.join(a)}: {s}" for s, a in sorted(by.items()))
+            or "no agent started"
+        )
 
     def _on_signal(self, signum, _frame) -> None:
         self.stop_signal = signum

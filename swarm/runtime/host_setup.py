@@ -58,8 +58,10 @@ class HostSetup:
         self.local = c.listen or f"unixsock-stream/{d / 'router.sock'}"
         other = _pid_in(d / "pid")
         if other is not None and other != os.getpid() and pid_alive(other):
-            raise HostError(f"host {self.name} of run {creds.run} is already running here (pid {other}); give "
-                            "another --name", EXIT_USAGE)
+            raise HostError(
+                f"host {self.name} of run {creds.run} is already running here (pid {other}); give another --name",
+                EXIT_USAGE,
+            )
         sock = socket_path(self.local)
         if sock is not None and sock.exists():
             if not endpoint_refuses(self.local):
@@ -103,8 +105,10 @@ class HostSetup:
         if self.stop_signal is not None:
             raise HostError("stopped", 128 + self.stop_signal)
         if not found:
-            raise HostError(f"cannot reach the world of run {run} at {self.upstream} as {HOST!r} within "
-                            f"{self.cfg.wait:g} s ({last[0]}; no world there, or it refused these credentials)")
+            raise HostError(
+                f"cannot reach the world of run {run} at {self.upstream} as {HOST!r} within "
+                f"{self.cfg.wait:g} s ({last[0]}; no world there, or it refused these credentials)"
+            )
         return found[0]
 
     def open_router(self) -> None:
@@ -117,28 +121,36 @@ class HostSetup:
             self.router = _open(zenoh, cfg, self.local)
         else:
             users = self.dir / "users"  # read once by zenoh at open, then removed
-            write_private(users, access.host_dictionary(
-                creds.identity(agent_user(a)) for a in self.ids).encode())
+            write_private(users, access.host_dictionary(creds.identity(agent_user(a)) for a in self.ids).encode())
             try:
-                cfg = host_router_config(self.local, self.upstream, run, creds.identity(HOST), users,
-                                         access.host_router_access(run, self.ids, self.hub_zid), tls)
+                cfg = host_router_config(
+                    self.local,
+                    self.upstream,
+                    run,
+                    creds.identity(HOST),
+                    users,
+                    access.host_router_access(run, self.ids, self.hub_zid),
+                    tls,
+                )
                 self.router = _open(zenoh, cfg, self.local)
             finally:
                 users.unlink(missing_ok=True)
         put = self.events.put
-        self.router.liveliness().declare_subscriber(wire.world_alive_key(run), lambda s: put(("alive", s.kind)),
-                                                    history=True)
+        self.router.liveliness().declare_subscriber(
+            wire.world_alive_key(run), lambda s: put(("alive", s.kind)), history=True
+        )
         self.router.declare_subscriber(wire.world_control_key(run), lambda s: put(("control", s.payload.to_bytes())))
 
         def linked() -> bool:
             if self.stop_signal is not None:
                 return True
-            return any(r.ok is not None for r in
-                       self.router.liveliness().get(wire.world_alive_key(run), timeout=0.5))
+            return any(r.ok is not None for r in self.router.liveliness().get(wire.world_alive_key(run), timeout=0.5))
 
         if not wait_until(linked, self.cfg.wait, 0.1):
-            raise HostError(f"the host router reached no world of run {run} at {self.upstream} within "
-                            f"{self.cfg.wait:g} s (did the world restart meanwhile?)")
+            raise HostError(
+                f"the host router reached no world of run {run} at {self.upstream} within "
+                f"{self.cfg.wait:g} s (did the world restart meanwhile?)"
+            )
         if self.stop_signal is not None:
             raise HostError("stopped", 128 + self.stop_signal)
 
@@ -163,4 +175,3 @@ def _open(zenoh, cfg, local: str):
         return zenoh.open(cfg)
     except Exception as e:
         raise HostError(f"cannot open the host router on {local}: {str(e).strip().splitlines()[0]}") from None
-

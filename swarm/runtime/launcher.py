@@ -29,9 +29,9 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable
 
 from swarm.contracts import credentials, wire
 from swarm.contracts.identities import ENV_SUPERVISOR, SUPERVISOR
@@ -42,8 +42,8 @@ from swarm.contracts.startup import ENV_READY_FD, ReadyWait
 from swarm.contracts.transport import default_endpoint, dial_endpoint, open_client
 from swarm.runtime.forks import AgentStarter
 from swarm.runtime.procs import Group, Reaper, wait_until
-from swarm.runtime.supervision import AgentExitReport, agent_exit, send_report, world_failure
 from swarm.runtime.progress import AddedSpec, added_specs, truth_progress
+from swarm.runtime.supervision import AgentExitReport, agent_exit, send_report, world_failure
 
 EXIT_WORLD_FAILED = 1
 # The world says when it listens (swarm/contracts/startup.py); these bounds are last resorts
@@ -107,18 +107,36 @@ class Launcher:
 
     # -- processes --------------------------------------------------------------------------
     def _env(self) -> dict:
-        return {**os.environ, LAUNCHER_PID_ENV: str(os.getpid()),  # children stop when we die
-                # the laws of our own scenario are the laws our agents may import, from its directory too
-                ENV_TRUSTED_LAWS: with_trusted_laws(self.cfg.scenario.law_names),
-                ENV_LAW_PATH: with_law_path([self.cfg.scenario_path.resolve().parent]),
-                # our agents use our run's own credentials, whatever the shell says
-                credentials.ENV_CREDENTIALS: str(credentials.run_file(self.cfg.run))}
+        return {
+            **os.environ,
+            LAUNCHER_PID_ENV: str(os.getpid()),  # children stop when we die
+            # the laws of our own scenario are the laws our agents may import, from its directory too
+            ENV_TRUSTED_LAWS: with_trusted_laws(self.cfg.scenario.law_names),
+            ENV_LAW_PATH: with_law_path([self.cfg.scenario_path.resolve().parent]),
+            # our agents use our run's own credentials, whatever the shell says
+            credentials.ENV_CREDENTIALS: str(credentials.run_file(self.cfg.run)),
+        }
 
     def start_world(self) -> None:
         c = self.cfg
-        args = [sys.executable, "-m", "swarm", "world", str(c.scenario_path), "--listen", self.endpoint,
-                "--run", c.run, "--out", str(c.out_dir), "--time-scale", str(c.time_scale), "--no-plots",
-                "--join-timeout", str(c.join_timeout)]
+        args = [
+            sys.executable,
+            "-m",
+            "swarm",
+            "world",
+            str(c.scenario_path),
+            "--listen",
+            self.endpoint,
+            "--run",
+            c.run,
+            "--out",
+            str(c.out_dir),
+            "--time-scale",
+            str(c.time_scale),
+            "--no-plots",
+            "--join-timeout",
+            str(c.join_timeout),
+        ]
         if c.duration is not None:
             args += ["--duration", str(c.duration)]
         if c.clock is not None:
@@ -130,8 +148,9 @@ class Launcher:
         try:
             with open(self.logs / "world.log", "ab") as log:
                 env = {**self._env(), ENV_SUPERVISOR: self.supervisor_password, ENV_READY_FD: str(w)}
-                self.world = self.group.start(args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
-                                              pass_fds=(w,), env=env)
+                self.world = self.group.start(
+                    args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, pass_fds=(w,), env=env
+                )
         except BaseException:
             os.close(r)
             raise
@@ -149,8 +168,10 @@ class Launcher:
         if w.ended:  # it exited (or closed its end and exits): its exit code comes in a moment
             wait_until(lambda: self.world_exit_code() is not None, 5.0, 0.02)
         elif self.stop_signal is None and self.world_exit_code() is None:
-            self.failure = (f"the world (pid {self.world.pid}) did not get ready within {timeout:g} s: it was "
-                            f"still {w.doing()} (see {self.logs / 'world.log'})")
+            self.failure = (
+                f"the world (pid {self.world.pid}) did not get ready within {timeout:g} s: it was "
+                f"still {w.doing()} (see {self.logs / 'world.log'})"
+            )
             self.failed = True
         return False
 
@@ -162,8 +183,10 @@ class Launcher:
 
     def start_agent(self, agent_id: int) -> subprocess.Popen:
         self.start_starter()
-        p = self.starter.start([str(agent_id), self.dial, self.cfg.run, "--world-grace", str(self.cfg.world_grace)],
-                               f"agent-{agent_id}.log")
+        p = self.starter.start(
+            [str(agent_id), self.dial, self.cfg.run, "--world-grace", str(self.cfg.world_grace)],
+            f"agent-{agent_id}.log",
+        )
         self.agents[agent_id] = p
         self.procs.append((agent_id, p))
         return p
@@ -250,15 +273,20 @@ class Launcher:
             session = self.connect() if self.wait_ready() else None
             if session is not None:
                 self.listening = True
-                self._subs = [session.declare_subscriber(wire.truth_key(self.cfg.run), self._on_truth),
-                              session.declare_subscriber(wire.events_key(self.cfg.run), self._on_event),
-                              session.declare_subscriber(wire.world_control_key(self.cfg.run),
-                                                         lambda s: self.notices.append(s.payload.to_bytes()))]
+                self._subs = [
+                    session.declare_subscriber(wire.truth_key(self.cfg.run), self._on_truth),
+                    session.declare_subscriber(wire.events_key(self.cfg.run), self._on_event),
+                    session.declare_subscriber(
+                        wire.world_control_key(self.cfg.run), lambda s: self.notices.append(s.payload.to_bytes())
+                    ),
+                ]
                 for a in self.cfg.scenario.agents:
                     self.start_agent(a.id)
             elif not self.failed and self.stop_signal is None and self.world_exit_code() is None:
-                self.failure = (f"the world listens on {self.endpoint} but did not let the launcher in within "
-                                f"{CONNECT_DEADLINE:g} s (see {self.logs / 'world.log'})")
+                self.failure = (
+                    f"the world listens on {self.endpoint} but did not let the launcher in within "
+                    f"{CONNECT_DEADLINE:g} s (see {self.logs / 'world.log'})"
+                )
                 self.failed = True
             t0 = time.monotonic()
             while self.stop_signal is None and not self.failed:
@@ -350,8 +378,13 @@ class Launcher:
                 except ProcessLookupError:
                     pass
             if session is not None:
-                list(session.get(wire.world_supervise_key(self.cfg.run), timeout=2.0,
-                                 payload=wire.encode_admin("fault_done", index=index)))
+                list(
+                    session.get(
+                        wire.world_supervise_key(self.cfg.run),
+                        timeout=2.0,
+                        payload=wire.encode_admin("fault_done", index=index),
+                    )
+                )
 
     def stop(self, signum: int = signal.SIGTERM) -> None:
         """Stop the run as signal `signum` asks (`run` returns soon after, the world told with

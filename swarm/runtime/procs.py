@@ -27,7 +27,8 @@ import os
 import signal
 import subprocess
 import time
-from typing import Callable, Iterable, TypeVar
+from collections.abc import Callable, Iterable
+from typing import TypeVar
 
 T = TypeVar("T")
 
@@ -212,7 +213,7 @@ def group_runs(pgid: int) -> bool | None:
                 stat = f.read()
         except OSError:  # gone meanwhile
             continue
-        state, _ppid, pgrp = stat[stat.rindex(b")") + 2:].split()[:3]
+        state, _ppid, pgrp = stat[stat.rindex(b")") + 2 :].split()[:3]
         if int(pgrp) == pgid and state != b"Z":
             return True
     return False
@@ -241,4 +242,3 @@ def agent_id_of(parts: list[str]) -> int | None:
         return None
     i = words.index("swarm.agents.process") + 1
     return int(words[i]) if i < len(words) and words[i].isdigit() else None
-

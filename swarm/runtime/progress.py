@@ -41,8 +41,12 @@ class AddedSpec:
 def added_spec(row: dict) -> AddedSpec | None:
     """An `AddedSpec` from one agent's row of the world's info (None if it lacks a field)."""
     try:
-        return AddedSpec(int(row["id"]), str(row["role"]), float(row["speed"]),
-                         None if row.get("orbit_radius") is None else float(row["orbit_radius"]))
+        return AddedSpec(
+            int(row["id"]),
+            str(row["role"]),
+            float(row["speed"]),
+            None if row.get("orbit_radius") is None else float(row["orbit_radius"]),
+        )
     except (KeyError, TypeError, ValueError):
         return None
 
@@ -63,7 +67,7 @@ def added_specs(session, run: str, ids: set[int]) -> dict[int, AddedSpec]:
     return {}
 
 
-def truth_progress(buf: bytes | None, s: "Scenario", added: dict[int, AddedSpec] | None = None) -> dict | None:
+def truth_progress(buf: bytes | None, s: Scenario, added: dict[int, AddedSpec] | None = None) -> dict | None:
     """Figures for the progress line from a ground-truth message (None: none, or unreadable).
     `added`: the specs of agents added at run time; one not (yet) known is left out."""
     if buf is None:
@@ -153,7 +157,7 @@ class ProgressLine:
         if self.tty:  # one terminal row: a wrapped line would not be cleared by the next one
             import shutil
 
-            typer.echo("\r\033[K" + line[:max(20, shutil.get_terminal_size().columns - 1)], nl=False)
+            typer.echo("\r\033[K" + line[: max(20, shutil.get_terminal_size().columns - 1)], nl=False)
         else:
             typer.echo(line)
 
@@ -162,7 +166,6 @@ class ProgressLine:
             import typer
 
             typer.echo("")
-
 
 
 class Paused:
@@ -174,7 +177,7 @@ class Paused:
 
     def __call__(self, events: list[dict]) -> bool:
         n = len(events)
-        for ev in events[self.seen:n]:
+        for ev in events[self.seen : n]:
             if ev.get("kind") in ("pause", "resume"):
                 self.paused = ev["kind"] == "pause"
         self.seen = n

@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Sequence
+from collections.abc import Sequence
 
-from swarm.study.swarms import SwarmSetting, cut_off_at_start, random_swarm, swarm_row
 from swarm.study.gains import GainJob, gain_row, pair_scenario
+from swarm.study.swarms import SwarmSetting, cut_off_at_start, random_swarm, swarm_row
 
 MAX_MEMBERS = 64  # runs per batch, at most: beyond this the per-tick overhead is already paid
 CHUNKS_PER_WORKER = 4  # at least this many chunks per worker when there are enough runs
@@ -30,14 +30,15 @@ def chunk_size(runs: int, workers: int, agents: int, ticks: int) -> int:
     return max(1, min(MAX_MEMBERS, by_memory, by_spread))
 
 
-def swarm_chunks(settings: Sequence[SwarmSetting], seeds: Sequence[int],
-                 workers: int) -> list[tuple[SwarmSetting, tuple[int, ...]]]:
+def swarm_chunks(
+    settings: Sequence[SwarmSetting], seeds: Sequence[int], workers: int
+) -> list[tuple[SwarmSetting, tuple[int, ...]]]:
     """(setting, seeds) jobs: each setting's seeds cut into chunks."""
     seeds = list(seeds)
     jobs = []
     for st in settings:
         size = chunk_size(len(seeds), workers, st.n, int(round(st.duration / st.dt)))
-        jobs += [(st, tuple(seeds[k:k + size])) for k in range(0, len(seeds), size)]
+        jobs += [(st, tuple(seeds[k : k + size])) for k in range(0, len(seeds), size)]
     return jobs
 
 
@@ -62,7 +63,7 @@ def gain_chunks(jobs: Sequence[GainJob], workers: int) -> list[tuple[GainJob, ..
     out = []
     for (duration, dt), js in groups.items():
         size = chunk_size(len(js), workers, 2, int(round(duration / dt)))
-        out += [tuple(js[k:k + size]) for k in range(0, len(js), size)]
+        out += [tuple(js[k : k + size]) for k in range(0, len(js), size)]
     return out
 
 

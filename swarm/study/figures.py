@@ -38,16 +38,25 @@ def plot_swarms(summary: list[dict], rows: list[dict], path: Path) -> Path:
     ax.set_xlabel("converged fraction")
     ax.set_title("converged within the run")
     ax = axs[1]
-    data = [[float(r["settling_time"]) for r in by_label.get(lab, [])
-             if is_true(r["converged"]) and math.isfinite(float(r["settling_time"]))] or [math.nan] for lab in labels]
+    data = [
+        [
+            float(r["settling_time"])
+            for r in by_label.get(lab, [])
+            if is_true(r["converged"]) and math.isfinite(float(r["settling_time"]))
+        ]
+        or [math.nan]
+        for lab in labels
+    ]
     ax.boxplot(data, orientation="horizontal", positions=y, widths=0.6, showfliers=True)
     ax.set_yticks(y, [""] * len(labels))
     ax.invert_yaxis()
     ax.set_xlabel("settling time of converged runs (s)")
     ax.set_title("last agent into the 2% band")
     ax = axs[2]
-    sw = [[int(c) for r in by_label.get(lab, []) for c in str(r["switch_counts"]).split(";") if c != ""] or [0]
-          for lab in labels]
+    sw = [
+        [int(c) for r in by_label.get(lab, []) for c in str(r["switch_counts"]).split(";") if c != ""] or [0]
+        for lab in labels
+    ]
     ax.boxplot([np.asarray(v) + 1 for v in sw], orientation="horizontal", positions=y, widths=0.6)
     ax.set_xscale("log")
     ax.set_yticks(y, [""] * len(labels))
@@ -71,19 +80,32 @@ def plot_gains(summary: list[dict], path: Path, duration: float) -> Path:
     cells = {(r["c1"], r["c2"], r["ratio"]): r["worst_settling_s"] for r in summary}
     finite = [v for v in cells.values() if math.isfinite(v)]
     vmax = max(finite) if finite else 1.0
-    fig, axs = plt.subplots(1, len(c1s), figsize=(1.2 + 0.55 * len(ratios) * len(c1s) + 1.5, 1.5 + 0.5 * len(c2s)),
-                            layout="constrained", squeeze=False)
+    fig, axs = plt.subplots(
+        1,
+        len(c1s),
+        figsize=(1.2 + 0.55 * len(ratios) * len(c1s) + 1.5, 1.5 + 0.5 * len(c2s)),
+        layout="constrained",
+        squeeze=False,
+    )
     im = None
     for ax, a in zip(axs[0], c1s):
         grid = np.array([[cells.get((a, b, q), math.nan) for q in ratios] for b in c2s])
         never = ~np.isfinite(grid)
         ax.imshow(np.where(never, 1.0, np.nan), cmap="Greys", vmin=0, vmax=4, origin="lower", aspect="auto")
-        im = ax.imshow(np.where(never, np.nan, grid), cmap="viridis_r", vmin=0, vmax=vmax, origin="lower",
-                       aspect="auto")
+        im = ax.imshow(
+            np.where(never, np.nan, grid), cmap="viridis_r", vmin=0, vmax=vmax, origin="lower", aspect="auto"
+        )
         for i in range(len(c2s)):
             for j in range(len(ratios)):
-                ax.text(j, i, "never" if never[i, j] else f"{grid[i, j]:.0f}", ha="center", va="center",
-                        fontsize=6, color="w" if not never[i, j] and grid[i, j] > 0.5 * vmax else "k")
+                ax.text(
+                    j,
+                    i,
+                    "never" if never[i, j] else f"{grid[i, j]:.0f}",
+                    ha="center",
+                    va="center",
+                    fontsize=6,
+                    color="w" if not never[i, j] and grid[i, j] > 0.5 * vmax else "k",
+                )
         ax.set_xticks(range(len(ratios)), [f"{q:g}" for q in ratios], fontsize=7)
         ax.set_yticks(range(len(c2s)), [f"{b:g}" for b in c2s], fontsize=7)
         ax.set_xlabel("speed ratio v_i / v_j")
@@ -91,8 +113,10 @@ def plot_gains(summary: list[dict], path: Path, duration: float) -> Path:
         ax.set_title(f"C1 / omega = {a:g}")
     if im is not None:
         fig.colorbar(im, ax=axs[0].tolist(), label="worst time into the 2% band (1/omega)")
-    fig.suptitle(f"single follower behind a leader on its orbit (omega = 1 rad/s): where the law settles "
-                 f"within {duration:g} s (worst of the starts)")
+    fig.suptitle(
+        f"single follower behind a leader on its orbit (omega = 1 rad/s): where the law settles "
+        f"within {duration:g} s (worst of the starts)"
+    )
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path

@@ -34,18 +34,35 @@ def pair_scenario(job: GainJob) -> Scenario:
     v_l = 20.0
     r = rng.uniform(0.2, 3.0) * v_l
     phi = rng.uniform(-math.pi, math.pi)
-    return parse_scenario({
-        "name": "pair",
-        "run": {"dt": job.dt, "duration": job.duration},
-        "gains": {"c1": job.c1, "c2": job.c2},
-        "sensing": {"selection": "fixed"},
-        "agents": [
-            {"id": 1, "role": "leader", "x": v_l, "y": 0.0, "heading": math.pi / 2, "speed": v_l,
-             "orbit_radius": v_l},
-            {"id": 2, "role": "follower", "x": r * math.cos(phi), "y": r * math.sin(phi),
-             "heading": float(rng.uniform(-math.pi, math.pi)), "speed": job.ratio * v_l, "follow": 1},
-        ],
-    }, "gain pair")
+    return parse_scenario(
+        {
+            "name": "pair",
+            "run": {"dt": job.dt, "duration": job.duration},
+            "gains": {"c1": job.c1, "c2": job.c2},
+            "sensing": {"selection": "fixed"},
+            "agents": [
+                {
+                    "id": 1,
+                    "role": "leader",
+                    "x": v_l,
+                    "y": 0.0,
+                    "heading": math.pi / 2,
+                    "speed": v_l,
+                    "orbit_radius": v_l,
+                },
+                {
+                    "id": 2,
+                    "role": "follower",
+                    "x": r * math.cos(phi),
+                    "y": r * math.sin(phi),
+                    "heading": float(rng.uniform(-math.pi, math.pi)),
+                    "speed": job.ratio * v_l,
+                    "follow": 1,
+                },
+            ],
+        },
+        "gain pair",
+    )
 
 
 def run_gain(job: GainJob) -> dict:
@@ -75,6 +92,13 @@ def summarise_gains(rows: list[dict]) -> list[dict]:
     groups: dict[tuple, list[float]] = {}
     for r in rows:
         groups.setdefault((float(r["c1"]), float(r["c2"]), float(r["ratio"])), []).append(float(r["settling_time"]))
-    return [{"c1": k[0], "c2": k[1], "ratio": k[2], "starts": len(v),
-             "worst_settling_s": max(v) if all(math.isfinite(x) for x in v) else math.nan}
-            for k, v in sorted(groups.items())]
+    return [
+        {
+            "c1": k[0],
+            "c2": k[1],
+            "ratio": k[2],
+            "starts": len(v),
+            "worst_settling_s": max(v) if all(math.isfinite(x) for x in v) else math.nan,
+        }
+        for k, v in sorted(groups.items())
+    ]

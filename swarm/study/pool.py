@@ -8,20 +8,22 @@ from __future__ import annotations
 import csv
 import multiprocessing
 import signal
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 
 def _quiet_worker() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and ends the pool
 
 
-def run_rows(worker: Callable[[object], dict | list[dict]], jobs: list, jobs_n: int,
-             on_row: Callable[[dict], None]) -> None:
+def run_rows(
+    worker: Callable[[object], dict | list[dict]], jobs: list, jobs_n: int, on_row: Callable[[dict], None]
+) -> None:
     """Run `worker` over `jobs` on `jobs_n` spawned processes (1: in this process), calling
     `on_row` with each row as it finishes (a worker returns a row, or a list of rows for
     a batch of runs). Ctrl-C ends the workers and re-raises KeyboardInterrupt; every row
     finished before it has been handed to `on_row`."""
+
     def emit(rows: dict | list[dict]) -> None:
         for row in rows if isinstance(rows, list) else [rows]:
             on_row(row)

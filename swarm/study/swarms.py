@@ -21,8 +21,8 @@ from __future__ import annotations
 import math
 import statistics
 import time
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass, fields
-from typing import Iterable
 
 import numpy as np
 
@@ -64,8 +64,14 @@ def random_swarm(setting: SwarmSetting, seed: int) -> Scenario:
     speed = rng.uniform(setting.speed_min, setting.speed_max, size=setting.n)
     agents = []
     for k in range(setting.n):
-        a = {"id": k + 1, "role": "leader" if k < setting.leaders else "follower",
-             "x": float(xy[k, 0]), "y": float(xy[k, 1]), "heading": float(heading[k]), "speed": float(speed[k])}
+        a = {
+            "id": k + 1,
+            "role": "leader" if k < setting.leaders else "follower",
+            "x": float(xy[k, 0]),
+            "y": float(xy[k, 1]),
+            "heading": float(heading[k]),
+            "speed": float(speed[k]),
+        }
         if k < setting.leaders:
             a["orbit_radius"] = float(speed[k]) / setting.omega
         agents.append(a)
@@ -74,13 +80,16 @@ def random_swarm(setting: SwarmSetting, seed: int) -> Scenario:
         sensing["range"] = setting.range
     if setting.fov < 2 * math.pi:
         sensing["fov"] = setting.fov
-    return parse_scenario({
-        "name": f"study-{seed}",
-        "run": {"dt": setting.dt, "duration": setting.duration, "seed": seed},
-        "gains": {"c1": setting.c1, "c2": setting.c2},
-        "sensing": sensing,
-        "agents": agents,
-    }, f"random swarm (seed {seed})")
+    return parse_scenario(
+        {
+            "name": f"study-{seed}",
+            "run": {"dt": setting.dt, "duration": setting.duration, "seed": seed},
+            "gains": {"c1": setting.c1, "c2": setting.c2},
+            "sensing": sensing,
+            "agents": agents,
+        },
+        f"random swarm (seed {seed})",
+    )
 
 
 def cut_off_at_start(s: Scenario) -> bool:
@@ -140,13 +149,21 @@ def swarm_row(setting: SwarmSetting, seed: int, cut: bool, res, wall: float) -> 
     dt = float(a["t"][1] - a["t"][0]) if len(a["t"]) > 1 else 0.0
     searching = ((a["out"][:-1] < 0) & a["alive"][:-1]).sum(axis=0)[follower] * dt  # the last row is the end
     fol = [v for v in agents if v["role"] == "follower"]
-    row = SwarmRow(seed, bool(summary["converged"]), cut,
-                   max(settle) if settle and None not in settle else math.nan,
-                   sum(counts), max(counts, default=0), ";".join(map(str, counts)),
-                   sum(1 for v in fol if v["root"] is None),
-                   float(searching.mean()) if searching.size else 0.0, float(searching.max(initial=0.0)),
-                   sum(v.get("losses", 0) for v in fol), max((v.get("loss_switches_max", 0) for v in fol), default=0),
-                   wall)
+    row = SwarmRow(
+        seed,
+        bool(summary["converged"]),
+        cut,
+        max(settle) if settle and None not in settle else math.nan,
+        sum(counts),
+        max(counts, default=0),
+        ";".join(map(str, counts)),
+        sum(1 for v in fol if v["root"] is None),
+        float(searching.mean()) if searching.size else 0.0,
+        float(searching.max(initial=0.0)),
+        sum(v.get("losses", 0) for v in fol),
+        max((v.get("loss_switches_max", 0) for v in fol), default=0),
+        wall,
+    )
     return {**asdict(setting), **asdict(row)}
 
 
@@ -178,24 +195,26 @@ def summarise_swarms(rows: list[dict]) -> list[dict]:
         settle = sorted(float(r["settling_time"]) for r in conv if math.isfinite(float(r["settling_time"])))
         per_agent = [int(c) for r in rs for c in str(r["switch_counts"]).split(";") if c != ""]
         search = sorted(float(r.get("searching_s", math.nan)) for r in rs)
-        out.append({
-            "setting": setting.label(),
-            "runs": len(rs),
-            "cut_off": len(cut),
-            "cut_off_converged": sum(1 for r in cut if is_true(r["converged"])),
-            "converged": len(conv),
-            "converged_fraction": len(conv) / len(rs) if rs else math.nan,
-            "settling_median_s": statistics.median(settle) if settle else math.nan,
-            "settling_p90_s": settle[min(len(settle) - 1, int(0.9 * len(settle)))] if settle else math.nan,
-            "switches_median": statistics.median(per_agent) if per_agent else math.nan,
-            "switches_p90": sorted(per_agent)[int(0.9 * (len(per_agent) - 1))] if per_agent else math.nan,
-            "switches_max": max(per_agent, default=0),
-            "searching_median_s": statistics.median(search) if search else math.nan,
-            "searching_max_s": max((float(r.get("searching_max_s", math.nan)) for r in rs), default=math.nan),
-            "losses": sum(int(r.get("losses", 0)) for r in rs),
-            "loss_switches_max": max((int(r.get("loss_switches_max", 0)) for r in rs), default=0),
-            **{k: getattr(setting, k) for k in ("n", "leaders", "selection", "range", "fov")},
-        })
+        out.append(
+            {
+                "setting": setting.label(),
+                "runs": len(rs),
+                "cut_off": len(cut),
+                "cut_off_converged": sum(1 for r in cut if is_true(r["converged"])),
+                "converged": len(conv),
+                "converged_fraction": len(conv) / len(rs) if rs else math.nan,
+                "settling_median_s": statistics.median(settle) if settle else math.nan,
+                "settling_p90_s": settle[min(len(settle) - 1, int(0.9 * len(settle)))] if settle else math.nan,
+                "switches_median": statistics.median(per_agent) if per_agent else math.nan,
+                "switches_p90": sorted(per_agent)[int(0.9 * (len(per_agent) - 1))] if per_agent else math.nan,
+                "switches_max": max(per_agent, default=0),
+                "searching_median_s": statistics.median(search) if search else math.nan,
+                "searching_max_s": max((float(r.get("searching_max_s", math.nan)) for r in rs), default=math.nan),
+                "losses": sum(int(r.get("losses", 0)) for r in rs),
+                "loss_switches_max": max((int(r.get("loss_switches_max", 0)) for r in rs), default=0),
+                **{k: getattr(setting, k) for k in ("n", "leaders", "selection", "range", "fov")},
+            }
+        )
     return out
 
 
