@@ -1,5 +1,8 @@
 """The project's vocabulary, in one place: the exit codes every process and command uses
-(docs: reference/exit-codes), and the base class of errors that carry one.
+(docs: reference/exit-codes), the base class of errors that carry one, the kinds of the
+world's events, the reasons of "switch" events, the states of an agent in the world and the
+phases an agent reports. The string vocabularies are `StrEnum`s: each member is equal to
+the string written on the wire and in the outputs, so those stay as they were.
 
 One code can mean different things in different processes (4 is "the world is gone" for an
 agent, "an agent failed" for `swarm up` and `swarm host`); each meaning has its own name, the
@@ -9,10 +12,10 @@ A process stopped by signal N exits 128 + N (`signal_exit`).
 
 from __future__ import annotations
 
-from enum import IntEnum
+from enum import IntEnum, StrEnum
 from typing import ClassVar
 
-__all__ = ["Coded", "ExitCode", "signal_exit"]
+__all__ = ["AgentState", "Coded", "EventKind", "ExitCode", "Phase", "SwitchReason", "signal_exit"]
 
 
 class ExitCode(IntEnum):
@@ -41,3 +44,58 @@ class Coded(Exception):
     swarm/cli/errors.py prints its message as one line and exits with that code."""
 
     exit_code: ClassVar[int] = ExitCode.FAILED
+
+
+class EventKind(StrEnum):
+    """`kind` of an event on `swarm/<run>/events` and in summary.json (docs: reference/protocol)."""
+
+    JOIN = "join"
+    REJOIN = "rejoin"
+    DROP = "drop"
+    SWITCH = "switch"
+    START = "start"
+    ADD = "add"
+    PAUSE = "pause"
+    RESUME = "resume"
+    FAULT = "fault"
+    FAULT_SKIPPED = "fault_skipped"
+    FAULT_LATE = "fault_late"
+    ROGUE = "rogue"
+    CRASH = "crash"
+    EXIT = "exit"
+    LIMIT = "limit"
+    DESERTED = "deserted"
+
+
+class SwitchReason(StrEnum):
+    """The `reason` of a "switch" event: what ground truth says about the follower's change of
+    out-neighbour (both engines write these words; "no out-neighbour: ..." takes a suffix)."""
+
+    CHOSEN = "out-neighbour chosen"
+    LEFT = "out-neighbour left the world"
+    OUT_OF_SIGHT = "out-neighbour out of sight"
+    NO_PATH = "out-neighbour has no path to a leader"
+    ANOTHER = "another agent chosen"
+    PINNED_NOT_SENSED = "pinned out-neighbour not sensed"
+    NONE_SEARCHING = "no out-neighbour: searching"
+    NONE_LOITERING = "no out-neighbour: loitering"
+
+
+class AgentState(StrEnum):
+    """An agent's state in the world (`WorldCore.state`, the `now` of a "drop" event)."""
+
+    ACTIVE = "active"
+    COASTING = "coasting"  # its process died and the scenario says on_dropout = "coast"
+    GONE = "gone"
+
+
+class Phase(StrEnum):
+    """The phase an agent reports with its command (`Decision.phase`)."""
+
+    ARC1 = "arc1"  # leaders: the first arc of the circle-circle path
+    ARC2 = "arc2"  # leaders: the second arc
+    ORBIT = "orbit"  # leaders: on the orbit
+    TRACK = "track"  # followers: steering by out, advertising a path through it
+    SHADOW = "shadow"  # followers: steering by out without a path to a leader
+    SEARCH = "search"  # followers (sticky): nobody to steer by, flying a search pattern
+    LOST = "lost"  # followers: nobody to steer by and no search
