@@ -1,6 +1,18 @@
 """Shared fixtures: a small valid scenario as a dict, a TOML writer for it, `rt` (a
 private runtime for the multi-process tests) and `shipped_sim` (each shipped scenario run
-once by `swarm sim`, for every test that checks it or compares with it)."""
+once by `swarm sim`, for every test that checks it or compares with it); and the tiers.
+
+Every test carries one tier marker, what it needs to run (`pytest -m pure`, `-m "not process"`...):
+
+    pure     maths, models and files in this process: no zenoh session, no other process
+    seam     the world or an agent driven through the fake zenoh session of tests/fakes.py
+    zenoh    real zenoh sessions inside this process (routing, transport, TLS, credentials)
+    process  other processes: `swarm` commands, the world and agents as OS processes
+
+A file's tier (`TIERS`) is what its most demanding test needs; a test that takes the `rt`
+fixture (a private runtime for processes) is `process` wherever it is. `slow` is the other
+axis: the long tests of every tier (`-m "not slow"` is the fast tier, about 25 s).
+"""
 
 from __future__ import annotations
 
@@ -18,6 +30,39 @@ import pytest
 # sake. The children get the default disposition back from this process.
 if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
+
+TIERS = {
+    "pure": {
+        "test_batch", "test_batch_decisions", "test_cli_offline", "test_follower", "test_kinematics", "test_layers",
+        "test_plots", "test_recording_deferred", "test_rooted", "test_scenario", "test_search", "test_selection",
+        "test_sim", "test_spl_law", "test_sticky", "test_wire",
+    },
+    "seam": {"test_law_api", "test_shells", "test_supervision"},
+    "zenoh": {"test_credentials", "test_tls", "test_transport", "test_zenoh_routing"},
+    "process": {
+        "test_access", "test_api", "test_api_launch", "test_api_live", "test_forkserver", "test_foxglove",
+        "test_hub_door", "test_leader", "test_live_cli", "test_live_scale", "test_messages", "test_multihost",
+        "test_packaging", "test_procs", "test_recording_stream", "test_remote_access", "test_resilience",
+        "test_runtime", "test_runtime_faults", "test_startup", "test_study", "test_supervision_runtime",
+        "test_world_memory",
+    },
+}
+TIER_OF = {module: tier for tier, modules in TIERS.items() for module in modules}
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark every test with its tier; a test file missing from TIERS is an error (say its tier)."""
+    missing = set()
+    for item in items:
+        module = item.path.stem
+        tier = "process" if "rt" in getattr(item, "fixturenames", ()) else TIER_OF.get(module)
+        if tier is None:
+            missing.add(module)
+            continue
+        item.add_marker(getattr(pytest.mark, tier))
+    if missing:
+        raise pytest.UsageError(f"tests/conftest.py TIERS: no tier for {', '.join(sorted(missing))}")
+
 
 # One leader (agents[0], id 1) and two followers in a fixed chain 2 -> 1, 3 -> 2.
 BASE = {
