@@ -37,6 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench_runtime import PY, MemSampler, Tracked, is_agent, is_world, log, scenario_toml, world_started  # noqa: E402
 
+from swarm.contracts.vocabulary import EventKind  # noqa: E402
 from swarm.runtime.procs import wait_until  # noqa: E402
 
 
@@ -105,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         tr.stop()
     summary = json.loads((out / "summary.json").read_text())
-    start = next((e for e in summary.get("events", []) if e.get("kind") == "start"), {})
+    start = next((e for e in summary.get("events", []) if e.get("kind") == EventKind.START), {})
     agents = summary["agents"]
     rel = [v["relative_error"] for v in agents.values()]
     res.update(

@@ -59,7 +59,9 @@ import psutil
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from swarm.runtime.procs import Group, agent_id_of, stop_groups, wait_until  # noqa: E402  (the repository, not an installed copy)
+# (the repository, not an installed copy)
+from swarm.contracts.vocabulary import EventKind  # noqa: E402
+from swarm.runtime.procs import Group, agent_id_of, stop_groups, wait_until  # noqa: E402
 
 BENCH = Path(__file__).resolve().parent
 PY = sys.executable
@@ -657,7 +659,7 @@ def run_swarm(
     except (OSError, ValueError) as e:
         res["error"] = f"no summary.json ({e}); see {d}"
         return res
-    start = next((e for e in summary.get("events", []) if e.get("kind") == "start"), None)
+    start = next((e for e in summary.get("events", []) if e.get("kind") == EventKind.START), None)
     agents = summary.get("agents", {})
     res.update(
         ok=bool(summary.get("completed")) and summary.get("ticks_per_second") is not None,

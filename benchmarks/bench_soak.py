@@ -40,6 +40,7 @@ sys.path.insert(0, str(ROOT))
 from swarm.contracts import credentials, wire
 from swarm.contracts.scenario import load_scenario
 from swarm.contracts.transport import open_client
+from swarm.contracts.vocabulary import EventKind
 from swarm.runtime.procs import Group, wait_until
 
 
@@ -252,8 +253,8 @@ def main() -> int:
         summary = json.loads((out / "summary.json").read_text())
     except (OSError, ValueError, KeyError) as e:
         print(f"cannot read the results in {out}: {e}")
-    drops = sum(1 for e in summary.get("events", []) if e["kind"] == "drop")
-    rejoins = sum(1 for e in summary.get("events", []) if e["kind"] == "rejoin")
+    drops = sum(1 for e in summary.get("events", []) if e["kind"] == EventKind.DROP)
+    rejoins = sum(1 for e in summary.get("events", []) if e["kind"] == EventKind.REJOIN)
 
     after = [s for s in samples if s[0] >= warm]
     r_warm = rss_at(samples, warm) if samples else 0

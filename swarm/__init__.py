@@ -1,11 +1,13 @@
 """swarm: an agent-per-process runtime for bearing-based circumnavigation over zenoh.
 
-`import swarm` is the Python API (swarm/api/runs.py, README "Python API"): `swarm.load`,
+`import swarm` is the Python API (swarm/api/runs.py; docs/reference/api.md): `swarm.load`,
 `swarm.from_dict`, `swarm.Builder`, `swarm.simulate`, `swarm.open_run`, `swarm.up`,
 `swarm.launch`, `swarm.Results`..., and a live run: `swarm.connect`, `swarm.runs` (swarm/api/live.py); the
 errors are swarm/contracts/errors.py's. Every name is imported on first use (module `__getattr__`), so
 `import swarm.contracts.wire` in an agent process still costs nothing more than it did.
 """
+
+from importlib import import_module
 
 __version__ = "0.1.0"  # the one place the version is written (pyproject.toml reads it)
 
@@ -39,8 +41,6 @@ def __getattr__(name: str):
     module = _WHERE.get(name)
     if module is None:
         raise AttributeError(f"module 'swarm' has no attribute {name!r}")
-    from importlib import import_module
-
     value = getattr(import_module(f"swarm.{module}"), name)
     globals()[name] = value
     return value

@@ -34,6 +34,7 @@ TICK_AT = struct.calcsize("<BBBBi")  # where a frame's tick is (wire.SENSE_HEAD:
 def _null_agents() -> None:
     from swarm.agents.node import AgentNode
     from swarm.contracts import wire
+    from swarm.contracts.vocabulary import Phase
 
     tick_of = struct.Struct("<q").unpack_from
 
@@ -42,9 +43,9 @@ def _null_agents() -> None:
         tick = tick_of(payload, TICK_AT)[0]
         spec = self.spec
         if spec.role == "leader":
-            u, phase, hops = spec.speed / spec.orbit_radius * spec.direction_sign, "orbit", 0
+            u, phase, hops = spec.speed / spec.orbit_radius * spec.direction_sign, Phase.ORBIT, 0
         else:
-            u, phase, hops = self.conf.gains.c2, "lost", None
+            u, phase, hops = self.conf.gains.c2, Phase.LOST, None
         self.cmd_pub.put(wire.encode_cmd_fields(self.id, tick, u, None, phase, hops, self.key))
 
     AgentNode.on_sense_sample = on_sense_sample

@@ -19,6 +19,7 @@ from __future__ import annotations
 import json
 import os
 import secrets
+import stat
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -261,8 +262,6 @@ def _refuse_if_not_credentials(path: Path) -> None:
     """CredentialsError "not a credentials file" if `path`, a regular file that read_private
     refused, does not parse as one; nothing if it does or cannot be read (read_private's
     reason stands). What it reads is only parsed, never used."""
-    import stat
-
     try:
         if not stat.S_ISREG(os.lstat(path).st_mode):
             return

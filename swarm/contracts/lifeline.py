@@ -18,6 +18,7 @@ Standard library only; imported by the world and the agents (docs/protocol.md, s
 
 from __future__ import annotations
 
+import ctypes
 import os
 import signal
 import socket
@@ -34,8 +35,6 @@ def tie_to_launcher(sig: int = signal.SIGTERM, env: dict | None = None) -> bool:
     if not want or not want.isdigit() or not sys.platform.startswith("linux"):
         return False
     try:
-        import ctypes
-
         libc = ctypes.CDLL(None, use_errno=True)
         if libc.prctl(PR_SET_PDEATHSIG, int(sig), 0, 0, 0) != 0:
             return False

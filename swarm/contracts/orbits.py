@@ -28,7 +28,7 @@ def wrap_array(angle):
     """`wrap` on a numpy array (or anything numpy takes), the same bits: exact in numpy for
     |angle| < 1.25 tau (there the remainder subtracts at most one tau, and by Sterbenz's
     lemma that subtraction is exact); larger angles go through math.remainder."""
-    import numpy as np
+    import numpy as np  # lazy: agent processes import this module and never load numpy
 
     a = np.asarray(angle, dtype=float)
     w = np.where(a > math.pi, a - TAU, np.where(a < -math.pi, a + TAU, a))

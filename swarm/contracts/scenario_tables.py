@@ -14,7 +14,7 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
-from swarm.contracts.laws import MAX_LAW_PARAMS
+from swarm.contracts.laws import MAX_LAW_PARAMS, LawError, check_law
 from swarm.contracts.wire import MAX_AGENT_ID, MAX_AGENTS
 
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -101,8 +101,6 @@ def check_law_field(name: str, kind: str, info: ValidationInfo) -> str:
     """A law named in the scenario, imported and checked for its signature. The validation
     context may give "law_dirs" (the scenario file's directory: load_scenario) and
     "check_laws": False (a scenario read back from a recording: nothing imported)."""
-    from swarm.contracts.laws import LawError, check_law
-
     ctx = info.context or {}
     if not ctx.get("check_laws", True):
         return name

@@ -123,6 +123,7 @@ def hosts_of_endpoint(endpoint: str) -> list[str]:
 
 
 def _san_entries(hosts: list[str]):
+    # lazy: cryptography (30 ms) only where a certificate is read or made, not in every process
     from cryptography import x509
 
     entries = []
@@ -156,6 +157,7 @@ def generate_run_certificates(directory: Path, run: str, hosts: list[str], days:
     cannot mint further certificates that the run's clients would trust. A new run (or new
     hosts) means a new CA, which is the point of a per-run CA.
     """
+    # lazy: cryptography (30 ms) only where a certificate is read or made, not in every process
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes, serialization
     from cryptography.hazmat.primitives.asymmetric import ec

@@ -1,10 +1,11 @@
-"""Zenoh sessions the way ZENOH.md says they work on these machines.
+"""Zenoh sessions, set up the same way for every process of a run (docs/design/architecture.md#zenoh).
 
 The world is the hub: a router-mode session that listens; everything else is a client
 connected to it, either directly or through the router of its agent host (`swarm host`:
 a router-mode session on the agent's machine, connected to the hub as `host`). Multicast
 scouting is off everywhere (two runs on defaults hear each other), and every process sets
-its own link lease so that a frozen process is noticed within about a second. Never open a session at import time, never fork after opening.
+its own link lease so that a frozen process is noticed within about a second. Never open a
+session at import time, never fork after opening.
 Routers keep their door open to the run's own processes while strangers crowd it (`DOOR`,
 `listen_endpoint`), and a hub on tcp/ or tls/ has a local door too (`local_door`).
 """
@@ -13,10 +14,12 @@ from __future__ import annotations
 
 import json
 import os
+import resource
+import socket
 from dataclasses import dataclass
 from pathlib import Path
 
-from swarm.contracts import access, wire
+from swarm.contracts import access, tls, wire
 from swarm.contracts.credentials import Credentials
 from swarm.contracts.identities import OPERATOR, WORLD
 from swarm.contracts.runtime_dir import dial_endpoint as dial_endpoint  # re-exported
@@ -72,8 +75,6 @@ def listen_endpoint(listen: str) -> str:
 def raise_open_files(want: int = ACCEPT_PENDING + 1024) -> None:
     """Lift this process's soft limit on open files towards `want` (never past the hard one):
     a router holds one per waiting connection."""
-    import resource
-
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     target = want if hard == resource.RLIM_INFINITY else min(want, hard)
     if soft != resource.RLIM_INFINITY and soft < target:
@@ -84,7 +85,7 @@ def raise_open_files(want: int = ACCEPT_PENDING + 1024) -> None:
 
 
 def _config(settings: dict):
-    import zenoh
+    import zenoh  # lazy: only a process that opens a session loads zenoh's native library
 
     cfg = zenoh.Config()
     for key, value in settings.items():
@@ -160,7 +161,7 @@ def open_hub(listen: str, auth: HubAuth | None = None):
     """Open the run's hub. With `auth`, only the run's identities may connect and each may
     do only what swarm/contracts/access.py allows. zenoh reads the user dictionary once,
     at open: it lives in a private file for that moment only."""
-    import zenoh
+    import zenoh  # lazy: only a process that opens a session loads zenoh's native library
 
     raise_open_files()
     if auth is None:
@@ -195,8 +196,6 @@ def door_of(connect: str, creds: Credentials | None) -> str | None:
     path = socket_path(door)
     if not path.exists():
         return None
-    import socket
-
     with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
         s.settimeout(0.2)
         try:
@@ -264,7 +263,7 @@ def open_client(
     raises zenoh.ZError when the endpoint does not answer or refuses the identity. With
     `door`, a session to its run's own endpoint goes through the run's local door when the
     hub has one on this machine (`local_door`), falling back to `connect`."""
-    import zenoh
+    import zenoh  # lazy: only a process that opens a session loads zenoh's native library
 
     identity = creds.identity(user) if creds is not None and not creds.hub_is_open else None
     via = door_of(connect, creds) if door else None
@@ -283,8 +282,6 @@ def client_tls(creds: Credentials) -> dict | None:
 
 
 def _client_tls(creds: Credentials) -> dict | None:
-    from swarm.contracts import tls
-
     return tls.client_settings_for(creds)
 
 
@@ -318,7 +315,7 @@ def query_statuses(session, run: str, timeout: float = QUERY_TIMEOUT, expected=N
     out: dict[int, dict] = {}
     if want is not None and not want:
         return out
-    import zenoh
+    import zenoh  # lazy: only a process that opens a session loads zenoh's native library
 
     # No consolidation: zenoh's default holds every reply until the query ends (its timeout)
     replies = session.get(

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 from itertools import starmap
 
 from swarm.contracts.frames import Contact, SensorFrame
+from swarm.contracts.vocabulary import AgentState, Phase
 
 VERSION = 1
 # A join reply whose brain names laws other than the built-in ones ("law": [law] follower /
@@ -137,11 +138,12 @@ TRUTH_FIELDS = [
     ("state", "u1"),
 ]  # numpy dtype of one record
 
-PHASES = ("track", "lost", "arc1", "arc2", "orbit", "shadow", "search")
+# the order is the wire code (a command's phase byte, the truth record's state byte)
+PHASES = (Phase.TRACK, Phase.LOST, Phase.ARC1, Phase.ARC2, Phase.ORBIT, Phase.SHADOW, Phase.SEARCH)
 # what an agent counts itself and reports in its status (non-negative integers; the world
 # copies them into the run's summary): see docs/outputs.md, "Outputs of a run"
 STATUS_COUNTERS = ("garbage", "nonfinite", "losses", "loss_switches_max")
-STATES = ("active", "coasting", "gone")
+STATES = (AgentState.ACTIVE, AgentState.COASTING, AgentState.GONE)
 
 
 def _check_head(buf: bytes, head: struct.Struct, kind: int, what: str) -> tuple:
@@ -193,7 +195,7 @@ def encode_sense_arrays(
     hops,
 ) -> bytes:
     """encode_sense for a frame given as numpy columns (the world's fast path); same bytes."""
-    import numpy as np
+    import numpy as np  # lazy: agent processes import wire and never load numpy
 
     recs = np.empty(len(ids), dtype=np.dtype(CONTACT_FIELDS))
     recs["id"], recs["bearing"], recs["heading"], recs["range"] = ids, bearing, headings, ranges
@@ -212,7 +214,7 @@ def encode_sense_rows(
     arrays: ids, heading, hops, is_leader and the target's offset from each agent
     (target_dx, target_dy) are (N,); sensed, bearing and ranges (N, N). The same bytes as
     one encode_sense_arrays per agent, in one numpy pass over every sensed pair."""
-    import numpy as np
+    import numpy as np  # lazy: agent processes import wire and never load numpy
 
     rows = np.asarray(rows, dtype=np.int64)
     r, j = np.nonzero(sensed[rows])
@@ -320,7 +322,7 @@ def decode_cmd(buf: bytes) -> Command:
 
 
 def encode_truth(tick: int, time: float, ids, x, y, heading, u, out, states: list[str]) -> bytes:
-    import numpy as np
+    import numpy as np  # lazy: agent processes import wire and never load numpy
 
     recs = np.empty(len(ids), dtype=np.dtype(TRUTH_FIELDS))
     recs["id"], recs["x"], recs["y"], recs["heading"] = ids, x, y, heading
@@ -331,7 +333,7 @@ def encode_truth(tick: int, time: float, ids, x, y, heading, u, out, states: lis
 
 def decode_truth(buf: bytes):
     """(tick, time, records): records is a numpy structured array with TRUTH_FIELDS."""
-    import numpy as np
+    import numpy as np  # lazy: agent processes import wire and never load numpy
 
     dtype = np.dtype(TRUTH_FIELDS)
     _, _, _, _, n, tick, time = _check_head(buf, TRUTH_HEAD, KIND_TRUTH, "truth")

@@ -31,6 +31,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
+import zenoh
+
 from swarm.contracts import credentials, wire
 from swarm.contracts.credentials import Credentials
 from swarm.contracts.errors import NoRunError, SwarmError, one_line
@@ -45,6 +47,7 @@ from swarm.contracts.transport import (
     runtime_dir,
     socket_path,
 )
+from swarm.contracts.wire import WireError
 
 ENDED_FAILURES = 3  # failed reads in a row, ...
 ENDED_SILENT_S = 5.0  # ... over at least this long, before a world that is still there has stopped answering
@@ -268,8 +271,6 @@ class LiveRun:
 
     def _get(self, selector: str, payload: bytes | None = None):
         """A get whose replies come as they arrive (not held back until the query ends)."""
-        import zenoh
-
         return self.session.get(
             selector, payload=payload, timeout=QUERY_TIMEOUT, consolidation=zenoh.ConsolidationMode.NONE
         )
@@ -358,9 +359,6 @@ class Patience:
 def talking():
     """Errors of the layers below while talking to a run (zenoh's, malformed replies,
     credentials) as a NoRunError of one line."""
-    from swarm.contracts.identities import CredentialsError
-    from swarm.contracts.wire import WireError
-
     try:
         yield
     except SwarmError:

@@ -21,7 +21,11 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from swarm.contracts.errors import LiveError, UsageError
+from swarm.contracts.credentials import ENV_CREDENTIALS
+from swarm.contracts.errors import LiveError, NoRunError, UsageError
+from swarm.contracts.identities import CredentialsError, agent_user
+from swarm.contracts.laws import ENV_TRUSTED_LAWS, with_trusted_laws
+from swarm.contracts.transport import runtime_dir
 from swarm.runtime.procs import agent_id_of, command_words, wait_until
 
 SPAWN_DEADLINE = 10.0  # s for a spawned agent to show up alive in the world's info
@@ -170,8 +174,10 @@ def _new_spec(info: dict, run: str, agent_id: int, given: dict) -> dict:
         raise UsageError(
             f"run {run} has added {info['added']} agents already, its limit (run.max_added_agents in the scenario)"
         )
+    # lazy: pydantic and the scenario's models (0.1 s) for a new agent's spec only; other live commands never load them
     from pydantic import ValidationError
 
+    # lazy: (as above)
     from swarm.contracts.scenario import format_validation_error
     from swarm.contracts.scenario_tables import AgentSpec
 
@@ -204,8 +210,6 @@ def spawn_log(info: dict, run: str, agent_id: int) -> Path:
                 return logs / f"agent-{agent_id}.log"
         except OSError:
             pass
-    from swarm.contracts.transport import runtime_dir
-
     logs = runtime_dir() / "logs"
     logs.mkdir(mode=0o700, parents=True, exist_ok=True)
     return logs / f"{run}-agent-{agent_id}-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.log"
@@ -218,11 +222,6 @@ def spawn_agent(
     until the world shows it live. An id the run knows rejoins if it is not live (no `spec`
     then; a live one is refused at once); a new one joins with `spec` (x, y, heading,
     speed, role, orbit_radius, direction, follow, max_turn_rate)."""
-    from swarm.contracts.credentials import ENV_CREDENTIALS
-    from swarm.contracts.errors import NoRunError
-    from swarm.contracts.identities import CredentialsError, agent_user
-    from swarm.contracts.laws import ENV_TRUSTED_LAWS, with_trusted_laws
-
     given = {k: v for k, v in (spec or {}).items() if v is not None}
     info, ref = live.info(), live.ref
     new = None

@@ -25,12 +25,17 @@ import threading
 import time
 from typing import NamedTuple
 
+import foxglove
+
 from swarm.contracts import wire
 from swarm.contracts.errors import NoRunError, StoppedAnswering
+from swarm.contracts.vocabulary import AgentState
+from swarm.live.client import LiveRun, talking
+from swarm.world.live_view import open_hint, serve
 from swarm.world.scene import SCENE_RATE, SceneChannels
 
 SILENT_CHECK = 1.0  # s without ground truth before asking whether the world is still there
-ACTIVE = wire.STATES.index("active")
+ACTIVE = wire.STATES.index(AgentState.ACTIVE)
 
 
 class Look(NamedTuple):
@@ -134,11 +139,6 @@ def serve_run(live, host: str, port: int, say) -> None:
     gone, saying so with `say` when the run ended. Raises swarm.world.live_view.LiveViewError (the
     port in use), StoppedAnswering (the world stopped answering without ending the run) and
     KeyboardInterrupt (Ctrl-C)."""
-    import foxglove
-
-    from swarm.live.client import LiveRun, talking
-    from swarm.world.live_view import open_hint, serve
-
     info = live.info()
     ctx = foxglove.Context()
     observer = Observer(ctx, info)

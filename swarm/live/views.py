@@ -1,5 +1,6 @@
 """How the live commands look: rich renderables and Graphviz DOT, each a pure function of the
-data of `swarm.live.data` (no zenoh, no printing). rich is imported inside the functions."""
+data of `swarm.live.data` (no zenoh, no printing). rich is imported inside the functions
+(`--json`, `--dot` never load it)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import io
 import math
 
 from swarm.live.data import graph_of
+from swarm.live.watch import DEAD_GLYPH, EDGE_GLYPH, STYLES, TARGET_GLYPH, Body, draw_scene
 
 
 def fmt(v, spec: str, none: str = "-") -> str:
@@ -60,6 +62,7 @@ def graph_dot(g: dict) -> str:
 
 def graph_renderable(g: dict):
     """The graph for humans: a tree per leader (who follows whom), then what is wrong."""
+    # lazy: rich (30 ms) only to draw; --json and --dot never load it
     from rich.console import Group
     from rich.text import Text
     from rich.tree import Tree
@@ -115,6 +118,7 @@ def graph_renderable(g: dict):
 # --- swarm runs / agents -----------------------------------------------------------------------------
 def runs_table(docs: list[dict]):
     """The live runs (the documents of `swarm runs --json`) as a rich table."""
+    # lazy: rich (30 ms) only to draw; --json and --dot never load it
     from rich.table import Table
 
     t = Table(header_style="bold", show_edge=False, pad_edge=False, box=None)
@@ -131,6 +135,7 @@ def runs_table(docs: list[dict]):
 def header(info: dict, ended: bool | str = False):
     """One line about the run: id, scenario, tick, time, clock; PAUSED, world ended (or what
     `ended` says, when it is a string)."""
+    # lazy: rich (30 ms) only to draw; --json and --dot never load it
     from rich.text import Text
 
     t = Text()
@@ -148,6 +153,7 @@ def header(info: dict, ended: bool | str = False):
 
 def agents_table(rows: list[dict], compact: bool = False):
     """The agents as a rich table (compact: the columns `swarm watch` has room for)."""
+    # lazy: rich (30 ms) only to draw; --json and --dot never load it
     from rich import box
     from rich.table import Table
 
@@ -195,8 +201,6 @@ def agents_table(rows: list[dict], compact: bool = False):
 # --- swarm watch -------------------------------------------------------------------------------------
 def bodies_of(snap: dict) -> list:
     """The agents of a snapshot as the picture's `swarm.live.watch.Body`s."""
-    from swarm.live.watch import Body
-
     g_unrooted = set(graph_of(snap)["unrooted"])
     return [
         Body(
@@ -217,9 +221,8 @@ def bodies_of(snap: dict) -> list:
 
 def legend():
     """The line under the picture: each glyph in its style, and what it means."""
+    # lazy: rich (30 ms) only to draw; --json and --dot never load it
     from rich.text import Text
-
-    from swarm.live.watch import DEAD_GLYPH, EDGE_GLYPH, STYLES, TARGET_GLYPH
 
     names = {"edge": "out-neighbour", "orbit": "expected orbit"}
     t = Text()
@@ -240,11 +243,10 @@ def legend():
 def watch_frame(snap: dict, ended: bool | str, width: int, height: int):
     """One screen of `swarm watch`: header (`ended`: see `header`), picture beside (or above)
     the agents table, legend."""
+    # lazy: rich (30 ms) only to draw; --json and --dot never load it
     from rich.console import Console, Group
     from rich.measure import Measurement
     from rich.table import Table
-
-    from swarm.live.watch import draw_scene
 
     info, rows = snap["info"], snap["agents"]
     table = agents_table(rows, compact=True)

@@ -190,7 +190,7 @@ class Canvas:
 
     def to_rich(self):
         """A rich Text of the canvas, styles included (rich is imported here only)."""
-        from rich.text import Text
+        from rich.text import Text  # lazy: rich only when a frame is drawn (a plain canvas needs none)
 
         out = Text(no_wrap=True, overflow="crop")
         for r in range(self.height):

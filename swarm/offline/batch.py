@@ -25,6 +25,7 @@ import numpy as np
 
 from swarm.agents.batch import BatchBrains
 from swarm.contracts.scenario import Scenario
+from swarm.contracts.vocabulary import EventKind
 from swarm.world.batch import BatchWorld
 from swarm.world.recording import RunResult, StreamRecorder, static_arrays
 
@@ -155,7 +156,7 @@ def _switches(k: int, dt: float, world: BatchWorld, frames, out, new, changed, p
                 "tick": k,
                 "time": k * dt,
                 "agent": int(ids[i]),
-                "kind": "switch",
+                "kind": EventKind.SWITCH,
                 "reason": reason,
                 "from": None if old < 0 else int(ids[old]),
                 "to": None if to < 0 else int(ids[to]),

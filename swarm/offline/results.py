@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from swarm.contracts.vocabulary import Coded, ExitCode
-from swarm.world.recording import RECORDING_FILE, RESULT_FILES, SUMMARY_FILE, TRAJECTORY_FILE
+from swarm.world.recording import RECORDING_FILE, RESULT_FILES, SUMMARY_FILE, TRAJECTORY_FILE, recover_run
 
 PLOT_NAMES = ("trajectories.png", "distance.png", "control.png", "graph.png", "overview.png", "neighbours.png")
 PLOT_SUFFIXES = (".png", ".pdf", ".svg")  # `swarm plot --format`
@@ -94,7 +94,5 @@ def recover(run_dir: Path) -> Recovery | None:
     swarm.world.stream.RecordingError (the files cannot be written)."""
     if not needs_export(run_dir):
         return None
-    from swarm.world.recording import recover_run
-
     summary = recover_run(run_dir)
     return Recovery(run_dir, int(summary["ticks"]), float(summary["sim_time"]), bool(summary.get("recording_finished")))

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from swarm.agents.brain import AgentBrain
 from swarm.contracts.scenario import Scenario
+from swarm.contracts.vocabulary import EventKind
 from swarm.world.engine import Engine
 from swarm.world.recording import RunResult
 
@@ -64,7 +65,7 @@ def run_sim(
                 d = brains[aid].decide(frame)
             except Exception as e:  # its law raised: as `swarm up` reports an agent process that died of it
                 cause = f"{type(e).__name__}: {e}"
-                engine.event("crash", aid, f"its law raised: {cause}", cause=cause)
+                engine.event(EventKind.CRASH, aid, f"its law raised: {cause}", cause=cause)
                 engine.drop(aid, "its law raised (crash)")
                 frozen.discard(aid)
                 continue

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from swarm.contracts.vocabulary import EventKind
 from swarm.offline.csv_export import expected_by_column
 from swarm.plots.palette import Looks, agent_looks
 from swarm.plots.style import MAX_POINTS, decimation_rows
@@ -54,7 +55,7 @@ def named_faults(run: RunData, events: list[RunEvent]) -> list[RunEvent]:
     out = []
     for ev in events:
         words = ev.label.split()
-        if ev.kind == "fault" and words and words[0] == "fault":
+        if ev.kind == EventKind.FAULT and words and words[0] == "fault":
             agent = words[1] if len(words) > 1 else None
             for f in faults:
                 at = f.get("at", f.get("time")) if isinstance(f, dict) else None

@@ -14,6 +14,7 @@ from matplotlib.axes import Axes
 from matplotlib.lines import Line2D
 from matplotlib.transforms import offset_copy
 
+from swarm.contracts.vocabulary import EventKind
 from swarm.world.run_reader import RunData
 
 #: Upper bound on the number of points drawn per line.
@@ -23,7 +24,12 @@ DEAD_COLOUR = "0.6"
 FLAG_COLOUR = "red"
 TARGET_COLOUR = "red"
 EXPECTED_COLOUR = "0.35"  # dashed expected orbits / radii
-EVENT_COLOURS = {"drop": "tab:red", "rejoin": "tab:green", "fault": "tab:purple", "kill": "tab:purple"}
+EVENT_COLOURS = {
+    EventKind.DROP: "tab:red",
+    EventKind.REJOIN: "tab:green",
+    EventKind.FAULT: "tab:purple",
+    "kill": "tab:purple",
+}
 DPI = 120
 KEY_DROP_PT = 34.0  # the key legend's top, this far under the axes (below tick labels and x label)
 

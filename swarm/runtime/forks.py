@@ -17,6 +17,7 @@ Standard library only.
 
 from __future__ import annotations
 
+import ctypes
 import json
 import os
 import select
@@ -52,8 +53,6 @@ def make_subreaper() -> bool:
 def set_subreaper(on: bool) -> bool:
     """Make this process a child subreaper, or no longer one; True when done."""
     try:
-        import ctypes
-
         libc = ctypes.CDLL(None, use_errno=True)
         return libc.prctl(PR_SET_CHILD_SUBREAPER, int(on), 0, 0, 0) == 0
     except (OSError, AttributeError):

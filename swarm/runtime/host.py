@@ -29,20 +29,21 @@ import signal
 import subprocess
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from swarm.contracts import credentials, wire
 from swarm.contracts.identities import agent_user
 from swarm.contracts.laws import ENV_TRUSTED_LAWS, with_trusted_laws
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV, endpoint_refuses, exit_status
+from swarm.contracts.vocabulary import ExitCode, signal_exit
 from swarm.runtime.forks import AgentStarter
-from swarm.runtime.host_setup import EXIT_FAILED, HostError, HostSetup
+from swarm.runtime.host_setup import HostError, HostSetup
 from swarm.runtime.procs import Group
 from swarm.runtime.supervision import AgentExitReport, agent_exit
 
-EXIT_OK, EXIT_AGENT_FAILED = 0, 4  # and EXIT_FAILED = 1, EXIT_USAGE = 2 (swarm/runtime/host_setup.py)
-WORLD_GONE_CODES = (4, 5)  # agent exits: the world vanished, or stopped answering past the grace
+# agent exits: the world vanished, or stopped answering past the grace
+WORLD_GONE_CODES = (ExitCode.WORLD_GONE, ExitCode.WORLD_SILENT)
 
 
 @dataclass
@@ -88,8 +89,6 @@ class Host(HostSetup):
     # -- the agents (after HostSetup: credentials, router) ----------------------------------------
     def agent_file(self, aid: int) -> Path:
         """Agent `aid`'s own identity (nothing else), for dialling this host's router."""
-        from dataclasses import replace
-
         one = replace(self.creds.export(agent_user(aid)), endpoint=self.local, tls_ca=None)
         return credentials.write(one, self.dir / f"agent-{aid}.cred")
 
@@ -120,7 +119,7 @@ class Host(HostSetup):
             except HostError as e:
                 if self.stop_signal is None:
                     self.say(f"swarm host: {e}")
-                return e.code if self.stop_signal is None else 128 + self.stop_signal
+                return e.code if self.stop_signal is None else signal_exit(self.stop_signal)
             run = self.creds.run
             self.say(
                 f"host {self.name}: router on {self.local}, linked to the world of run {run} at "
@@ -154,7 +153,7 @@ class Host(HostSetup):
                 continue
             r = agent_exit(aid, p.pid, code, self.logs / f"agent-{aid}.log", before_start=False)
             self.exits.append(r)
-            if code != 0 and not quiet:
+            if code != ExitCode.OK and not quiet:
                 self.say(f"host {self.name}: {r.line()}")
 
     def watch_world(self) -> None:
@@ -206,12 +205,12 @@ class Host(HostSetup):
         """Exit code: 128+signal when stopped; 4 when an agent failed (a crash: an exception,
         refused); 1 when the world went away before the run ended; otherwise 0."""
         if self.stop_signal is not None:
-            return 128 + self.stop_signal
+            return signal_exit(self.stop_signal)
         if any(r.crash for r in self.exits):
-            return EXIT_AGENT_FAILED
+            return ExitCode.AGENT_FAILED
         if any(r.code in WORLD_GONE_CODES for r in self.exits):
-            return EXIT_FAILED
-        return EXIT_OK
+            return ExitCode.FAILED
+        return ExitCode.OK
 
     def summary(self) -> str:
         by = {}

@@ -12,23 +12,25 @@ A mixin of `Host`, whose state it fills in; `HostError` says what is wrong, in o
 from __future__ import annotations
 
 import os
+import re
 import socket
 from pathlib import Path
+
+import zenoh
 
 from swarm.contracts import access, credentials, wire
 from swarm.contracts.identities import HOST, CredentialsError, agent_user, check_host_name
 from swarm.contracts.lifeline import endpoint_refuses
 from swarm.contracts.runtime_dir import pid_alive, private_dir, runtime_dir, write_private
 from swarm.contracts.transport import client_tls, host_router_config, open_client, socket_path
+from swarm.contracts.vocabulary import ExitCode, signal_exit
 from swarm.runtime.procs import wait_until
-
-EXIT_FAILED, EXIT_USAGE = 1, 2  # and EXIT_OK = 0, EXIT_AGENT_FAILED = 4 (swarm/runtime/host.py)
 
 
 class HostError(Exception):
     """The host cannot start; one line, and the exit code."""
 
-    def __init__(self, message: str, code: int = EXIT_FAILED):
+    def __init__(self, message: str, code: int = ExitCode.FAILED):
         super().__init__(message)
         self.code = code
 
@@ -52,7 +54,7 @@ class HostSetup:
             self.name = check_host_name(c.name or creds.host or _host_name())
             d = private_dir(runtime_dir() / f"{creds.run}-host-{self.name}")
         except CredentialsError as e:
-            raise HostError(str(e), EXIT_USAGE) from None
+            raise HostError(str(e), ExitCode.USAGE) from None
         self.creds, self.ids = creds, tuple(ids)
         self.upstream = c.connect or creds.endpoint
         self.local = c.listen or f"unixsock-stream/{d / 'router.sock'}"
@@ -60,12 +62,12 @@ class HostSetup:
         if other is not None and other != os.getpid() and pid_alive(other):
             raise HostError(
                 f"host {self.name} of run {creds.run} is already running here (pid {other}); give another --name",
-                EXIT_USAGE,
+                ExitCode.USAGE,
             )
         sock = socket_path(self.local)
         if sock is not None and sock.exists():
             if not endpoint_refuses(self.local):
-                raise HostError(f"{self.local} is in use", EXIT_USAGE)
+                raise HostError(f"{self.local} is in use", ExitCode.USAGE)
             sock.unlink()  # left by a host that was killed
         write_private(d / "pid", f"{os.getpid()}\n".encode())
         self.dir = d  # ours from here on (removed at the end)
@@ -73,7 +75,7 @@ class HostSetup:
         try:
             self.logs.mkdir(parents=True, exist_ok=True)
         except OSError as e:
-            raise HostError(f"cannot create the log directory {self.logs}: {e.strerror or e}", EXIT_USAGE) from None
+            raise HostError(f"cannot create the log directory {self.logs}: {e.strerror or e}", ExitCode.USAGE) from None
 
     def probe_hub(self) -> str:
         """The hub's zenoh id, from a short client session as `host` (retried for cfg.wait s
@@ -103,7 +105,7 @@ class HostSetup:
 
         wait_until(attempt, self.cfg.wait, 0.2)
         if self.stop_signal is not None:
-            raise HostError("stopped", 128 + self.stop_signal)
+            raise HostError("stopped", signal_exit(self.stop_signal))
         if not found:
             raise HostError(
                 f"cannot reach the world of run {run} at {self.upstream} as {HOST!r} within "
@@ -112,8 +114,6 @@ class HostSetup:
         return found[0]
 
     def open_router(self) -> None:
-        import zenoh
-
         creds, run = self.creds, self.creds.run
         tls = client_tls(creds) if self.upstream.startswith("tls/") else None
         if creds.hub_is_open:  # the hub checks nothing: nor does its host
@@ -152,7 +152,7 @@ class HostSetup:
                 f"{self.cfg.wait:g} s (did the world restart meanwhile?)"
             )
         if self.stop_signal is not None:
-            raise HostError("stopped", 128 + self.stop_signal)
+            raise HostError("stopped", signal_exit(self.stop_signal))
 
 
 def _pid_in(path: Path) -> int | None:
@@ -164,8 +164,6 @@ def _pid_in(path: Path) -> int | None:
 
 def _host_name() -> str:
     """This machine's host name as a host name of ours (first label, other characters as -)."""
-    import re
-
     name = re.sub(r"[^A-Za-z0-9_.-]", "-", socket.gethostname().split(".")[0])[:32]
     return name or "host"
 

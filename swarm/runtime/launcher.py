@@ -40,12 +40,12 @@ from swarm.contracts.lifeline import LAUNCHER_PID_ENV
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.startup import ENV_READY_FD, ReadyWait
 from swarm.contracts.transport import default_endpoint, dial_endpoint, open_client
+from swarm.contracts.vocabulary import EventKind, ExitCode
 from swarm.runtime.forks import AgentStarter
 from swarm.runtime.procs import Group, Reaper, wait_until
 from swarm.runtime.progress import AddedSpec, added_specs, truth_progress
 from swarm.runtime.supervision import AgentExitReport, agent_exit, send_report, world_failure
 
-EXIT_WORLD_FAILED = 1
 # The world says when it listens (swarm/contracts/startup.py); these bounds are last resorts
 # only, for a world that neither gets there nor exits, and for our own session after that.
 READY_DEADLINE = 300.0
@@ -246,9 +246,9 @@ class Launcher:
             return
         with self.lock:
             self.events.append(ev)
-        if ev["kind"] == "start":
+        if ev["kind"] == EventKind.START:
             self.started = True
-        elif ev["kind"] == "add" and isinstance(ev.get("agent"), int):
+        elif ev["kind"] == EventKind.ADD and isinstance(ev.get("agent"), int):
             self.unknown_added.add(ev["agent"])
 
     def progress(self, session=None) -> dict | None:
@@ -311,7 +311,7 @@ class Launcher:
                 session.close()
             self.stop_all()
         if self.failed or self.world is None:
-            return EXIT_WORLD_FAILED
+            return ExitCode.FAILED  # the world failed
         return self.world.returncode
 
     # -- supervision --------------------------------------------------------------------------
@@ -323,7 +323,7 @@ class Launcher:
             if code is None or p.pid in self.seen_exit:
                 continue
             self.seen_exit.add(p.pid)
-            if code == 0 or p.pid in self.scripted:
+            if code == ExitCode.OK or p.pid in self.scripted:
                 continue  # the end of the run, or a scripted fault (the world has its event)
             r = agent_exit(aid, p.pid, code, self.logs / f"agent-{aid}.log", before_start=not self.started)
             if session is None and not r.crash:

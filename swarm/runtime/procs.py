@@ -26,6 +26,7 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
+import threading
 import time
 from collections.abc import Callable, Iterable
 from typing import TypeVar
@@ -165,8 +166,6 @@ class Reaper:
     for its timeout): a member that exits is reaped within `interval` s. `stop()` ends it."""
 
     def __init__(self, group: Group, interval: float = 0.2):
-        import threading
-
         self.group = group
         self.interval = interval
         self._stop = threading.Event()
@@ -193,7 +192,7 @@ def stop_groups(groups: Iterable[Group], grace: float = 3.0, timeout: float = 5.
             break
         for g in busy:
             g.signal(sig)
-        wait_until(lambda: not any(g.running() for g in busy), grace, 0.02)
+        wait_until(lambda busy=busy: not any(g.running() for g in busy), grace, 0.02)
     for g in groups:
         g.reap(timeout)
 

@@ -15,11 +15,16 @@ otherwise shows 0 ticks/s, not the last rate it had.
 from __future__ import annotations
 
 import math
+import shutil
+import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import zenoh
+
 from swarm.contracts import wire
 from swarm.contracts.orbits import expected_radius, root_of
+from swarm.contracts.vocabulary import EventKind
 
 if TYPE_CHECKING:  # annotations only: `swarm up` imports this module for every command's app
     from swarm.contracts.scenario import Scenario
@@ -54,8 +59,6 @@ def added_spec(row: dict) -> AddedSpec | None:
 def added_specs(session, run: str, ids: set[int]) -> dict[int, AddedSpec]:
     """The specs of agents `ids`, added at run time, from the world's info (those it knows;
     none if it does not answer now)."""
-    import zenoh
-
     try:
         for r in session.get(wire.world_info_key(run), timeout=1.0, consolidation=zenoh.ConsolidationMode.NONE):
             if r.ok is not None:
@@ -106,7 +109,7 @@ def progress_errors(p: dict) -> str:
     """The progress line's radial errors: one per agent for a small swarm; for a large one
     how many are settled, the worst few of the others, how many have no leader to follow
     and how many dropped."""
-    from swarm.world.metrics import SETTLING_BAND  # (numpy: not at import, for the other commands' sake)
+    from swarm.world.metrics import SETTLING_BAND  # lazy: it imports numpy (0.1 s), which the launcher never needs else
 
     errs, dropped = p["errors"], p["dropped"]
     gone = f"dropped {', '.join(map(str, dropped))}" if dropped else ""
@@ -136,9 +139,7 @@ class ProgressLine:
         self.clock = ""  # the rate (or "paused") last shown
 
     def show(self, p: dict) -> None:
-        import time
-
-        import typer
+        import typer  # lazy: typer (30 ms) only where the line is shown; swarm.launch does not
 
         now = time.monotonic()
         still = p["tick"] == self.tick and self.wall > 0
@@ -155,15 +156,13 @@ class ProgressLine:
         self.last, self.tick, self.wall, self.clock = now, p["tick"], p["wall"], clock
         line = f"t={p['time']:7.2f}s tick {p['tick']}/{p['ticks']} {clock}  " + progress_errors(p)
         if self.tty:  # one terminal row: a wrapped line would not be cleared by the next one
-            import shutil
-
             typer.echo("\r\033[K" + line[: max(20, shutil.get_terminal_size().columns - 1)], nl=False)
         else:
             typer.echo(line)
 
     def end(self) -> None:
         if self.tty:
-            import typer
+            import typer  # lazy: as in show()
 
             typer.echo("")
 
@@ -178,7 +177,7 @@ class Paused:
     def __call__(self, events: list[dict]) -> bool:
         n = len(events)
         for ev in events[self.seen : n]:
-            if ev.get("kind") in ("pause", "resume"):
-                self.paused = ev["kind"] == "pause"
+            if ev.get("kind") in (EventKind.PAUSE, EventKind.RESUME):
+                self.paused = ev["kind"] == EventKind.PAUSE
         self.seen = n
         return self.paused

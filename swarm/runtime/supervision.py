@@ -36,10 +36,14 @@ from pathlib import Path
 
 from swarm.contracts import wire
 from swarm.contracts.lifeline import exit_status
+from swarm.contracts.vocabulary import ExitCode, signal_exit
 
 LOG_TAIL_LINES = 20  # (wire.EXIT_LOG_LINES at most)
 # Exits that are not the agent's own failure (agents/process.py, agents/world_link.py).
-NOT_A_CRASH = {4: "the world vanished", 5: "the world did not answer within the grace"}
+NOT_A_CRASH = {
+    ExitCode.WORLD_GONE: "the world vanished",
+    ExitCode.WORLD_SILENT: "the world did not answer within the grace",
+}
 OUTSIDE_SIGNALS = (signal.SIGKILL, signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
 _RUST_SOURCE = re.compile(r"\s+at /\S+?\.rs:\d+\.?")  # zenoh errors name their source line
 
@@ -71,11 +75,11 @@ class AgentExitReport:
 
 def is_crash(code: int) -> bool:
     """Whether an exit status (not caused by the launcher) is the agent's own failure."""
-    if code == 0 or code in NOT_A_CRASH:
+    if code == ExitCode.OK or code in NOT_A_CRASH:
         return False
     if code < 0:
         return -code not in OUTSIDE_SIGNALS
-    return not (code > 128 and code - 128 in OUTSIDE_SIGNALS)
+    return not any(code == signal_exit(s) for s in OUTSIDE_SIGNALS)
 
 
 def tail(path: Path, lines: int = LOG_TAIL_LINES, max_bytes: int = 16384) -> list[str]:

@@ -15,6 +15,7 @@ import math
 import time
 from collections.abc import Sequence
 
+from swarm.offline.batch import run_batch
 from swarm.study.gains import GainJob, gain_row, pair_scenario
 from swarm.study.swarms import SwarmSetting, cut_off_at_start, random_swarm, swarm_row
 
@@ -44,8 +45,6 @@ def swarm_chunks(
 
 def run_swarm_chunk(job: tuple[SwarmSetting, tuple[int, ...]]) -> list[dict]:
     """Worker: a chunk of one setting's random swarms as one batch; their rows."""
-    from swarm.offline.batch import run_batch
-
     setting, seeds = job
     t0 = time.perf_counter()
     scenarios = [random_swarm(setting, sd) for sd in seeds]
@@ -69,7 +68,5 @@ def gain_chunks(jobs: Sequence[GainJob], workers: int) -> list[tuple[GainJob, ..
 
 def run_gain_chunk(jobs: tuple[GainJob, ...]) -> list[dict]:
     """Worker: a chunk of gain-map pairs as one batch; their rows."""
-    from swarm.offline.batch import run_batch
-
     results = run_batch([pair_scenario(j) for j in jobs], lean=True)
     return [gain_row(j, r) for j, r in zip(jobs, results)]

@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass, fields
 import numpy as np
 
 from swarm.contracts.scenario import Scenario, parse_scenario
+from swarm.offline.sim import run_sim
 from swarm.world.metrics import SETTLING_BAND, settling_time
 
 
@@ -67,8 +68,6 @@ def pair_scenario(job: GainJob) -> Scenario:
 
 def run_gain(job: GainJob) -> dict:
     """Worker: the pair's follower settling time (s; nan if it never settles)."""
-    from swarm.offline.sim import run_sim
-
     return gain_row(job, run_sim(pair_scenario(job)))
 
 

@@ -27,6 +27,8 @@ from dataclasses import asdict, dataclass, fields
 import numpy as np
 
 from swarm.contracts.scenario import Scenario, parse_scenario
+from swarm.offline.sim import run_sim
+from swarm.world.core import WorldCore
 from swarm.world.metrics import switch_ticks
 
 
@@ -95,8 +97,6 @@ def random_swarm(setting: SwarmSetting, seed: int) -> Scenario:
 def cut_off_at_start(s: Scenario) -> bool:
     """Some follower has no path to a leader in the sensing graph at t = 0: it cannot be
     rooted before it moves (only possible with a range or field of view)."""
-    from swarm.world.core import WorldCore
-
     sensed = WorldCore(s).sensing()[0]
     reach = {k for k, a in enumerate(s.agents) if a.role == "leader"}
     grew = True
@@ -128,8 +128,6 @@ class SwarmRow:
 
 def run_swarm(job: tuple[SwarmSetting, int]) -> dict:
     """Worker: one random swarm through `swarm sim`'s engine; a flat dict for the CSV."""
-    from swarm.offline.sim import run_sim
-
     setting, seed = job
     t0 = time.perf_counter()
     s = random_swarm(setting, seed)
