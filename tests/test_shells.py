@@ -10,6 +10,7 @@ from fakes import FakeQuery, FakeSession
 
 from swarm.contracts import wire
 from swarm.contracts.scenario import parse_scenario
+from swarm.contracts.vocabulary import ExitCode
 from swarm.world.engine import Engine
 from swarm.world.process import World, WorldConfig
 
@@ -45,7 +46,7 @@ def claim(world, aid: int, on: int | None = None) -> dict:
     """Agent `aid` claims its id on agent `on`'s join key (default: its own)."""
     key = wire.agent_key(RUN, aid if on is None else on, "join")
     q = FakeQuery(wire.encode_join_request(aid, 100 + aid, "host"), key_expr=key)
-    world._on_join(q)
+    world.joins.on_join(q)
     ((reply_key, payload),) = q.replies
     assert reply_key == key
     assert q.dropped, "the join query was answered but not finished (its asker waits out its timeout)"
@@ -54,7 +55,7 @@ def claim(world, aid: int, on: int | None = None) -> dict:
 
 def join(world, aid: int) -> int:
     rep = claim(world, aid)
-    world._on_alive(wire.agent_key(RUN, aid, "alive"), zenoh.SampleKind.PUT, None)
+    world.inbox.on_alive(wire.agent_key(RUN, aid, "alive"), zenoh.SampleKind.PUT, None)
     return rep["key"]
 
 
@@ -75,7 +76,7 @@ def test_world_joins_on_the_token_and_drops_when_it_goes():
     world, _ = open_world()
     join(world, 1)
     assert [e["kind"] for e in world.engine.events] == ["join"]
-    world._on_alive(wire.agent_key(RUN, 1, "alive"), zenoh.SampleKind.DELETE, None)
+    world.inbox.on_alive(wire.agent_key(RUN, 1, "alive"), zenoh.SampleKind.DELETE, None)
     assert [e["kind"] for e in world.engine.events] == ["join", "drop"]
     assert world.book[1].drops == 1 and world.core.active_ids() == []
 
@@ -88,17 +89,19 @@ def test_world_latches_owned_commands_and_counts_the_rest():
     frames = {wire.decode_sense(p).agent: wire.decode_sense(p) for k, p in ses.sent if k.endswith("/sense")}
     assert set(frames) == {1, 2} and frames[1].target is not None and frames[2].target is None
     cmd_key = wire.agent_key(RUN, 2, "cmd")
-    world._on_cmd(cmd_key, wire.encode_cmd(wire.Command(2, 0, 0.3, 1, "track", 1, key2 ^ 1)), pending)
+    world.inbox.on_cmd(cmd_key, wire.encode_cmd(wire.Command(2, 0, 0.3, 1, "track", 1, key2 ^ 1)), pending)
     assert world.book[2].rogue == 1 and pending == {1, 2}  # not the owner's key: ignored
-    world._on_cmd(cmd_key, b"garbage", pending)
-    world._on_cmd(cmd_key, wire.encode_cmd(wire.Command(2, 0, 0.3, 2, "track", 1, key2)), pending)  # follows itself
+    world.inbox.on_cmd(cmd_key, b"garbage", pending)
+    world.inbox.on_cmd(
+        cmd_key, wire.encode_cmd(wire.Command(2, 0, 0.3, 2, "track", 1, key2)), pending
+    )  # follows itself
     # the world's count, and agent 2's: what the world dropped on that agent's keys (README)
-    assert world.garbage == 2 and world.book[2].garbage == 2 and world.book[1].garbage == 0
-    world._on_cmd(cmd_key, wire.encode_cmd(wire.Command(2, 0, 0.3, 1, "track", 1, key2)), pending)
+    assert world.state.garbage == 2 and world.book[2].garbage == 2 and world.book[1].garbage == 0
+    world.inbox.on_cmd(cmd_key, wire.encode_cmd(wire.Command(2, 0, 0.3, 1, "track", 1, key2)), pending)
     assert pending == {1} and world.core.u[1] == 0.3 and world.engine.out[1] == 1
     (switch,) = [e for e in world.engine.events if e["kind"] == "switch"]
     assert (switch["agent"], switch["from"], switch["to"], switch["reason"]) == (2, None, 1, "out-neighbour chosen")
-    world._on_cmd(
+    world.inbox.on_cmd(
         wire.agent_key(RUN, 1, "cmd"), wire.encode_cmd(wire.Command(1, 0, 0.1, None, "orbit", 0, key1)), pending
     )
     assert pending == set()
@@ -109,19 +112,21 @@ def test_world_latches_owned_commands_and_counts_the_rest():
 def test_world_admin_pauses_and_refuses_unknown_commands():
     world, _ = open_world()
     q = FakeQuery(wire.encode_admin("pause", by="test"))
-    world._on_admin(q)
-    assert world.paused and wire.decode_admin_reply(q.replies[0][1])["paused"] is True
+    world.inbox.on_admin(q)
+    assert world.state.paused and wire.decode_admin_reply(q.replies[0][1])["paused"] is True
     q = FakeQuery(wire.encode_json({"cmd": "explode"}))
-    world._on_admin(q)
+    world.inbox.on_admin(q)
     rep = wire.decode_admin_reply(q.replies[0][1])
-    assert rep["ok"] is False and "unknown cmd" in rep["error"] and world.garbage == 1
+    assert rep["ok"] is False and "unknown cmd" in rep["error"] and world.state.garbage == 1
 
 
 def test_world_info_reports_expected_radius_through_the_chosen_graph():
     world, _ = open_world()
     key2 = join(world, 2)
     join(world, 1)
-    world._on_cmd(wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd(wire.Command(2, 0, 0.0, 1, "track", 1, key2)), None)
+    world.inbox.on_cmd(
+        wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd(wire.Command(2, 0, 0.0, 1, "track", 1, key2)), None
+    )
     info = wire.decode_info(wire.encode_info(world.info()))
     a2 = info["agents"]["2"]
     assert (a2["root"], a2["hops"], a2["expected_radius"]) == (1, 1, 15.0)  # 1.5 m/s at omega 0.1
@@ -163,7 +168,7 @@ def add(world, aid: int, spec: dict | None = None) -> dict:
     q = FakeQuery(
         wire.encode_join_request(aid, 100 + aid, "host", spec or NEW), key_expr=wire.agent_key(RUN, aid, "join")
     )
-    world._on_join(q)
+    world.joins.on_join(q)
     return wire.decode_join_reply(q.replies[0][1])
 
 
@@ -177,12 +182,12 @@ def test_added_agents_take_reserved_ids_up_to_the_cap():
     assert (s.added_agents_cap, s.added_id_range) == (8, range(3, 11))
     outside = add(world, 11)
     assert not outside["ok"] and "take ids 3..10" in outside["error"]
-    assert "added_agents" not in world.over_limit  # a wrong id is not the cap
+    assert "added_agents" not in world.state.over_limit  # a wrong id is not the cap
     assert all(add(world, aid)["ok"] for aid in range(3, 11))
     assert world.info()["added"] == 8
     refused = [add(world, aid) for aid in (11, 12, 11)]
     assert all(not r["ok"] and "its limit (run.max_added_agents)" in r["error"] for r in refused)
-    assert world.over_limit["added_agents"] == 3 and world.info()["over_limit"] == {"added_agents": 3}
+    assert world.state.over_limit["added_agents"] == 3 and world.info()["over_limit"] == {"added_agents": 3}
     assert [e["kind"] for e in events].count("limit") == 1
     assert len(world.book) == 10
 
@@ -197,7 +202,7 @@ def test_join_claims_are_rate_limited_per_agent_with_one_event_and_a_count():
     world.engine.on_event = events.append
     replies = [claim(world, 2) for _ in range(JOIN_BURST + 5)]
     limited = [r for r in replies if not r["ok"] and "too many join claims" in r["error"]]
-    assert len(limited) == 5 and world.over_limit["join_rate"] == 5
+    assert len(limited) == 5 and world.state.over_limit["join_rate"] == 5
     assert [e["kind"] for e in events].count("limit") == 1
     assert claim(world, 1)["ok"], "agent 2's flood blocked agent 1's claim"
 
@@ -209,13 +214,13 @@ def test_a_full_inbox_drops_commands_and_queries_but_never_liveliness(monkeypatc
     world, _ = open_world()
     events = []
     world.engine.on_event = events.append
-    for k in range(5):
-        world.enqueue(("cmd", wire.agent_key(RUN, 1, "cmd"), b"x"))
-    world.enqueue(("alive", wire.agent_key(RUN, 1, "alive"), zenoh.SampleKind.PUT), False)
-    assert world.inbox.qsize() == 4 and world.inbox_dropped == 2
-    while world.drain(None, 0):
+    for _ in range(5):
+        world.queue.enqueue(("cmd", wire.agent_key(RUN, 1, "cmd"), b"x"))
+    world.queue.enqueue(("alive", wire.agent_key(RUN, 1, "alive"), zenoh.SampleKind.PUT), False)
+    assert world.queue.qsize() == 4 and world.queue.dropped == 2
+    while world.inbox.drain(None, 0):
         pass
-    assert world.over_limit["inbox"] == 2 and [e["kind"] for e in events].count("limit") == 1
+    assert world.state.over_limit["inbox"] == 2 and [e["kind"] for e in events].count("limit") == 1
 
 
 def test_one_keys_flood_costs_no_other_agent_a_command():
@@ -229,15 +234,17 @@ def test_one_keys_flood_costs_no_other_agent_a_command():
     world.engine.on_event = events.append
     for _ in range(PER_KEY_MAX + 500):
         cmd = wire.encode_cmd_fields(2, 0, 0.1, None, "track", None, k2)
-        world.enqueue(("cmd", wire.agent_key(RUN, 2, "cmd"), cmd))
-    world.enqueue(("cmd", wire.agent_key(RUN, 1, "cmd"), wire.encode_cmd_fields(1, 0, 0.1, None, "track", None, k1)))
+        world.queue.enqueue(("cmd", wire.agent_key(RUN, 2, "cmd"), cmd))
+    world.queue.enqueue(
+        ("cmd", wire.agent_key(RUN, 1, "cmd"), wire.encode_cmd_fields(1, 0, 0.1, None, "track", None, k1))
+    )
     pending = {1, 2}
-    while world.drain(pending, 0):
+    while world.inbox.drain(pending, 0):
         pass
     assert world.book[1].commands == 1 and world.book[1].flooded == 0
     assert world.book[2].flooded == 500 and world.book[2].commands == 1
     assert [e.get("key") for e in events if e["kind"] == "limit"] == [wire.agent_key(RUN, 2, "cmd")]
-    assert not world.fair.waiting, "the count of waiting messages went astray"
+    assert not world.queue.waiting, "the count of waiting messages went astray"
 
 
 def test_a_rogues_flood_on_an_agents_key_costs_that_agent_nothing():
@@ -249,13 +256,15 @@ def test_a_rogues_flood_on_an_agents_key_costs_that_agent_nothing():
     join(world, 1)
     k2 = join(world, 2)
     for _ in range(4 * PER_KEY_MAX):
-        world.enqueue(
+        world.queue.enqueue(
             ("cmd", wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd_fields(2, 0, 5.0, None, "track", None, k2 ^ 1))
         )
-    world.enqueue(("cmd", wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd_fields(2, 0, 0.1, None, "track", None, k2)))
-    assert world.inbox.qsize() == 1
+    world.queue.enqueue(
+        ("cmd", wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd_fields(2, 0, 0.1, None, "track", None, k2))
+    )
+    assert world.queue.qsize() == 1
     pending = {2}
-    while world.drain(pending, 0):
+    while world.inbox.drain(pending, 0):
         pass
     b = world.book[2]
     assert (b.commands, b.flooded, b.rogue) == (1, 0, 4 * PER_KEY_MAX) and not pending
@@ -271,14 +280,14 @@ def test_a_flapping_token_is_seen_at_its_latest_state_and_its_churn_is_capped():
     join(world, 1)
     key = wire.agent_key(RUN, 2, "alive")
     for i in range(100_000):
-        world.enqueue(("alive", key, zenoh.SampleKind.PUT if i % 2 == 0 else zenoh.SampleKind.DELETE), False)
-    assert world.inbox.qsize() == 1
-    while world.drain(None, 0):
+        world.queue.enqueue(("alive", key, zenoh.SampleKind.PUT if i % 2 == 0 else zenoh.SampleKind.DELETE), False)
+    assert world.queue.qsize() == 1
+    while world.inbox.drain(None, 0):
         pass
     assert 2 not in world.core.active_ids() and world.book[2].joins == 0  # last state: gone
     for i in range(2 * CHURN_EVENTS + 11):  # handled one by one: each a join or a drop
-        world.enqueue(("alive", key, zenoh.SampleKind.PUT if i % 2 == 0 else zenoh.SampleKind.DELETE), False)
-        world.drain(None, 0)
+        world.queue.enqueue(("alive", key, zenoh.SampleKind.PUT if i % 2 == 0 else zenoh.SampleKind.DELETE), False)
+        world.inbox.drain(None, 0)
     b = world.book[2]
     written = [e for e in world.engine.events if e["agent"] == 2 and e["kind"] in ("join", "rejoin", "drop")]
     assert len(written) == CHURN_EVENTS and b.churn_unwritten == CHURN_EVENTS + 11 and b.joins + b.drops == b.churn
@@ -294,7 +303,7 @@ def test_a_law_from_the_join_reply_is_not_imported_unless_trusted(tmp_path, monk
 
     import pytest
 
-    from swarm.agents.joining import EXIT_REFUSED, AgentExit
+    from swarm.agents.joining import AgentExit
     from swarm.agents.node import AgentNode
 
     marker = tmp_path / "imported"
@@ -309,7 +318,7 @@ def test_a_law_from_the_join_reply_is_not_imported_unless_trusted(tmp_path, monk
     brain["gains"]["law"] = "evil_law:law"
     with pytest.raises(AgentExit) as exc:
         AgentNode(FakeSession(), RUN, 2, {**reply, "brain": brain}, wait_world=False)
-    assert exc.value.code == EXIT_REFUSED and "--trust-law evil_law:law" in exc.value.message
+    assert exc.value.code == ExitCode.REFUSED and "--trust-law evil_law:law" in exc.value.message
     assert not marker.exists() and "evil_law" not in sys.modules
     node = AgentNode(FakeSession(), RUN, 2, {**reply, "brain": brain}, wait_world=False, trusted={"evil_law:law"})
     assert marker.exists() and node.brain is not None

@@ -101,12 +101,12 @@ def test_agent_exit_round_trip_and_limits():
 
 def _admin(world, payload: bytes, on: str = "supervise") -> dict:
     q = FakeQuery(payload)
-    (world._on_supervise if on == "supervise" else world._on_admin)(q)
+    (world.inbox.reports.on_supervise if on == "supervise" else world.inbox.on_admin)(q)
     return wire.decode_admin_reply(q.replies[0][1])
 
 
 def _leave(world, aid: int) -> None:
-    world._on_alive(wire.agent_key(RUN, aid, "alive"), zenoh.SampleKind.DELETE, None)
+    world.inbox.on_alive(wire.agent_key(RUN, aid, "alive"), zenoh.SampleKind.DELETE, None)
 
 
 def test_world_records_crash_and_exit_events():
@@ -121,14 +121,14 @@ def test_world_records_crash_and_exit_events():
     _admin(world, wire.encode_agent_exit(1, 101, -9, False, "", []))  # before its token went: kept
     assert [e["kind"] for e in world.engine.events if e["kind"] in ("crash", "exit")] == ["crash"]
     _leave(world, 1)
-    world.drain(None, 0)
+    world.inbox.drain(None, 0)
     crash, gone = [e for e in world.engine.events if e["kind"] in ("crash", "exit")]
     assert (crash["kind"], crash["agent"], crash["code"], crash["cause"]) == ("crash", 2, 1, "RuntimeError: boom")
     assert crash["reason"] == "process 102 ended (exit code 1): RuntimeError: boom"
     assert crash["log"] == ["Traceback", "RuntimeError: boom"]
     assert (gone["kind"], gone["reason"]) == ("exit", "process 101 ended (killed by SIGKILL)")
     stranger = _admin(world, wire.encode_agent_exit(9, 1, 1, True, "x", []))
-    assert not stranger["ok"] and "not in the run" in stranger["error"] and world.over_limit["supervise"] == 1
+    assert not stranger["ok"] and "not in the run" in stranger["error"] and world.state.over_limit["supervise"] == 1
 
 
 def test_lockstep_holds_a_lost_token_unless_the_launcher_reported_the_exit():
@@ -138,17 +138,17 @@ def test_lockstep_holds_a_lost_token_unless_the_launcher_reported_the_exit():
     world, _ = open_world()
     join(world, 1)
     join(world, 2)
-    world.started = True
+    world.state.started = True
     _leave(world, 1)
-    assert 1 in world.core.active_ids() and 1 in world.lost_after_stall
-    world._on_alive(wire.agent_key(RUN, 1, "alive"), zenoh.SampleKind.PUT, None)
-    assert 1 in world.core.active_ids() and not world.lost_after_stall and world.disturbed == 1
+    assert 1 in world.core.active_ids() and 1 in world.inbox.lost_after_stall
+    world.inbox.on_alive(wire.agent_key(RUN, 1, "alive"), zenoh.SampleKind.PUT, None)
+    assert 1 in world.core.active_ids() and not world.inbox.lost_after_stall and world.inbox.disturbed == 1
     assert _admin(world, wire.encode_agent_exit(2, 102, -9, False, "", []))["ok"]
     _leave(world, 2)
-    world.drain(None, 0)
+    world.inbox.drain(None, 0)
     assert world.core.active_ids() == [1]
     assert [e["kind"] for e in world.engine.events if e["agent"] == 2][-2:] == ["drop", "exit"]
-    assert world.irreproducible == [f"agent 2 dropped at tick {world.core.tick}, not by a scripted fault"]
+    assert world.state.irreproducible == [f"agent 2 dropped at tick {world.core.tick}, not by a scripted fault"]
 
 
 def test_a_report_on_a_live_agent_never_reaches_the_record(monkeypatch):
@@ -162,13 +162,13 @@ def test_a_report_on_a_live_agent_never_reaches_the_record(monkeypatch):
     join(world, 1)
     join(world, 2)
     assert _admin(world, wire.encode_agent_exit(2, 1, 1, True, "forged", []))["ok"]
-    world.drain(None, 0)
+    world.inbox.drain(None, 0)
     assert not [e for e in world.engine.events if e["kind"] in ("crash", "exit")]
-    assert world.over_limit["supervise"] == 1 and not world.exit_reports
+    assert world.state.over_limit["supervise"] == 1 and not world.inbox.reports.exit_reports
     rep = _admin(world, wire.encode_admin("fault_done", index=0))
-    assert not rep["ok"] and "not being carried out" in rep["error"] and not world.faults_done
-    world.fault_awaited = 0
-    assert _admin(world, wire.encode_admin("fault_done", index=0))["ok"] and world.faults_done == {0}
+    assert not rep["ok"] and "not being carried out" in rep["error"] and not world.state.faults_done
+    world.state.fault_awaited = 0
+    assert _admin(world, wire.encode_admin("fault_done", index=0))["ok"] and world.state.faults_done == {0}
     for forged in (wire.encode_agent_exit(2, 1, 1, True, "forged", []), wire.encode_admin("fault_done", index=0)):
         rep = _admin(world, forged, on="admin")
         assert not rep["ok"] and "unknown cmd" in rep["error"]
@@ -233,17 +233,17 @@ def test_world_rides_out_its_own_stall():
     world, _ = open_world()
     join(world, 1)
     join(world, 2)
-    alive = lambda aid, kind: world._on_alive(wire.agent_key(RUN, aid, "alive"), kind, None)  # noqa: E731
-    world.stall_seen = time.monotonic()  # the world was just stopped
+    alive = lambda aid, kind: world.inbox.on_alive(wire.agent_key(RUN, aid, "alive"), kind, None)  # noqa: E731
+    world.inbox.stall_seen = time.monotonic()  # the world was just stopped
     alive(1, zenoh.SampleKind.DELETE)
     alive(2, zenoh.SampleKind.DELETE)
     alive(1, zenoh.SampleKind.PUT)  # agent 1's link came back: nothing happened to it
     assert sorted(world.core.active_ids()) == [1, 2]
-    world.lost_after_stall[2] = time.monotonic() - 0.01  # agent 2's did not, in time
-    world.drain(None, 0)
+    world.inbox.lost_after_stall[2] = time.monotonic() - 0.01  # agent 2's did not, in time
+    world.inbox.drain(None, 0)
     kinds = [(e["kind"], e["agent"]) for e in world.engine.events if e["kind"] in ("drop", "rejoin")]
     assert kinds == [("drop", 2)] and world.book[2].drops == 1 and world.core.active_ids() == [1]
-    world.stall_seen -= inbox.REJOIN_WAIT + 1  # long after a stall: a lost token is a drop at once
+    world.inbox.stall_seen -= inbox.REJOIN_WAIT + 1  # long after a stall: a lost token is a drop at once
     alive(1, zenoh.SampleKind.DELETE)
     assert world.core.active_ids() == []
 
@@ -253,13 +253,13 @@ def test_deserted_run_ends_unless_a_restart_is_scripted(monkeypatch):
 
     world, _ = open_world()
     join(world, 1)
-    assert not world.deserted()
-    world._on_alive(wire.agent_key(RUN, 1, "alive"), zenoh.SampleKind.DELETE, None)
-    assert not world.deserted() and world.deserted_since is not None  # the grace starts
-    world.deserted_since -= clock.DESERTED_GRACE + 0.1
-    assert world.deserted()
+    assert not world.clock.deserted()
+    world.inbox.on_alive(wire.agent_key(RUN, 1, "alive"), zenoh.SampleKind.DELETE, None)
+    assert not world.clock.deserted() and world.clock.deserted_since is not None  # the grace starts
+    world.clock.deserted_since -= clock.DESERTED_GRACE + 0.1
+    assert world.clock.deserted()
     join(world, 1)
-    assert not world.deserted() and world.deserted_since is None
+    assert not world.clock.deserted() and world.clock.deserted_since is None
 
 
 # -- the agent's link to its world ------------------------------------------------------------------

@@ -3,100 +3,122 @@
 `lockstep` waits each tick for every live agent's command (up to the deadline);
 `realtime` ticks at dt / time_scale of wall time with whatever commands arrived.
 Both hold for pause and for scripted process faults, which the launcher carries out
-while the clock waits for the drop or the rejoin. A mixin of `World`
-(world/process.py).
+while the clock waits for the drop or the rejoin. `Clock` gets in its constructor the
+run's state (world/state.py), the inbox it drains (world/inbox.py) and the shell that
+sends frames and steps the engine (`TickShell`: the world process, world/process.py).
 
 When no agent is left in a started run and no scripted restart or thaw is to bring one
 back, the lockstep clock holds (there is nobody to step for) and the realtime clock goes
 on; if nobody joins within DESERTED_GRACE s of wall time, the world records a `deserted`
-event and ends the run (exit EXIT_DESERTED; `completed` is false).
+event and ends the run (exit ExitCode.DESERTED; `completed` is false).
 """
 
 from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable, Iterable
+from typing import Any, Protocol
 
 from swarm.contracts import wire
 from swarm.contracts.lifeline import tie_to_launcher
+from swarm.contracts.scenario_tables import FaultSpec
 from swarm.contracts.transport import answer
-from swarm.world.core import ACTIVE
+from swarm.contracts.vocabulary import AgentState, EventKind, ExitCode
 from swarm.world.faults import fault_event
+from swarm.world.inbox import Inbox
 from swarm.world.memory import Trimmer
+from swarm.world.state import RunState
 
 DESERTED_GRACE = 5.0  # s of wall time a started run may go on with no agent at all
 STALL_GRACE = 3.0  # s the agents get to answer after a stall of the world (their links come back in ~0.5 s)
 RESEND_S = 0.25  # s between resends of a tick's frames after a stall of the world
-MAX_REASONS = 20  # reasons kept for `not_reproducible`
-EXIT_DESERTED = 5
+EXIT_DESERTED = ExitCode.DESERTED  # (kept for swarm/api/launch.py and swarm/cli/run.py)
+
+ACTIVE = AgentState.ACTIVE
+
+
+class TickShell(Protocol):
+    """What the clock asks of the world process in a tick (world/process.py)."""
+
+    def publish_frames(self) -> set[int]:
+        """Send this tick's frames; the agents that were sent one."""
+        ...
+
+    def resend_frames(self, aids: Iterable[int]) -> None: ...
+
+    def record_and_step(self) -> None: ...
+
+    def send_control(self, payload: bytes) -> None:
+        """A message to the launcher on world/control (a scripted fault to carry out)."""
+        ...
 
 
 class Clock:
-    deserted_since: float | None = None  # monotonic s since when no agent is in the started run
-    restarts: int = 0  # lockstep: deadlines restarted (a stall of the world, a link back)
-    carrying: int | None = None  # the agent a scripted fault is being carried out on
+    def __init__(self, state: RunState, inbox: Inbox, shell: TickShell, deadline: float):
+        self.state = state
+        self.inbox = inbox
+        self.shell = shell
+        self.deadline = deadline  # lockstep: s each tick waits for the agents' commands
+        self.deserted_since: float | None = None  # monotonic s since when no agent is in the started run
+        self.restarts = 0  # lockstep: deadlines restarted (a stall of the world, a link back)
+        self.held = 0.0  # wall s the clock held for process faults
+        self.late: dict[int, int] = {}  # lockstep: commands per agent that missed the deadline
+        self.t_start = 0.0
+        self.wall_ticks: float | None = None  # wall s from the first tick to the last (set at the end)
+        self.trimmer: Trimmer | None = None
 
     def answer_pause_waiters(self) -> None:
         """Answer the pause queries that came during a tick, now that it is done, with the
         clock's state now (a resume in the same tick: paused false), and finish them."""
-        for q in self.pause_waiters:
+        st = self.state
+        for q in st.pause_waiters:
             answer(
                 q,
-                wire.world_admin_key(self.cfg.run),
-                wire.encode_admin_reply(True, paused=self.paused, tick=self.core.tick),
+                wire.world_admin_key(st.cfg.run),
+                wire.encode_admin_reply(True, paused=st.paused, tick=st.core.tick),
             )
-        self.pause_waiters.clear()
+        st.pause_waiters.clear()
 
     def wait_for_agents(self) -> None:
-        ids = self.cfg.scenario.ids
-        t_end = None if self.cfg.join_timeout is None else time.monotonic() + self.cfg.join_timeout
+        st = self.state
+        cfg, core = st.cfg, st.core
+        ids = cfg.scenario.ids
+        t_end = None if cfg.join_timeout is None else time.monotonic() + cfg.join_timeout
         last_note = 0.0
         while True:
-            missing = [i for i in ids if self.core.state[self.core.index[i]] != ACTIVE]
+            missing = [i for i in ids if core.state[core.index[i]] != ACTIVE]
             if not missing:
                 return
             now = time.monotonic()
             if t_end is not None and now > t_end:
-                raise TimeoutError(
-                    f"agents {', '.join(map(str, missing))} did not join within {self.cfg.join_timeout} s"
-                )
-            if self.cfg.progress and now - last_note > 5.0:
+                raise TimeoutError(f"agents {', '.join(map(str, missing))} did not join within {cfg.join_timeout} s")
+            if cfg.progress and now - last_note > 5.0:
                 last_note = now
                 print(
                     f"[world] waiting for agents {', '.join(map(str, missing))}: "
-                    f"swarm agent --id N --connect {self.cfg.listen}",
+                    f"swarm agent --id N --connect {cfg.listen}",
                     file=sys.stderr,
                     flush=True,
                 )
-            self.drain(None, 0.1)
+            self.inbox.drain(None, 0.1)
 
-    def _wait(self, cond, timeout: float) -> bool:
+    def _wait(self, cond: Callable[[], bool], timeout: float) -> bool:
         t_end = time.monotonic() + timeout
         while not cond():
             left = t_end - time.monotonic()
             if left <= 0:
                 return False
-            self.drain(None, min(left, 0.05))
+            self.inbox.drain(None, min(left, 0.05))
         return True
 
-    def unscripted(self, aid: int, what: str) -> None:
-        """Agent `aid` joined or left the started run, not by a scripted fault: `swarm sim`
-        cannot do the same, so the run is no longer reproducible (its reasons say why)."""
-        if self.started and aid != self.carrying:
-            self.not_reproducible(f"agent {aid} {what} at tick {self.core.tick}, not by a scripted fault")
-
-    def not_reproducible(self, reason: str) -> None:
-        if len(self.irreproducible) < MAX_REASONS:
-            self.irreproducible.append(reason)
-        elif len(self.irreproducible) == MAX_REASONS:
-            self.irreproducible.append("... and more")
-
-    def reproducibility(self) -> dict:
+    def reproducibility(self) -> dict[str, Any]:
         """summary.json's `reproducible` (bool) and `not_reproducible` (reasons): whether
         `swarm sim` of the same scenario gives this run's trajectories exactly."""
-        reasons = list(self.irreproducible)
-        if self.cfg.clock != "lockstep":
-            reasons.insert(0, f"clock {self.cfg.clock}: commands are used as they arrive")
+        st = self.state
+        reasons = list(st.irreproducible)
+        if st.cfg.clock != "lockstep":
+            reasons.insert(0, f"clock {st.cfg.clock}: commands are used as they arrive")
         late = {aid: n for aid, n in self.late.items() if n}
         if late:
             n = sum(late.values())
@@ -106,59 +128,61 @@ class Clock:
                 f"{'s' if len(late) > 1 else ''} {', '.join(map(str, sorted(late)))}): "
                 "the last command was held instead",
             )
-        if len(self.book) > len(self.cfg.scenario.ids):
-            reasons.append(f"{len(self.book) - len(self.cfg.scenario.ids)} agents added at run time")
+        if len(st.book) > len(st.cfg.scenario.ids):
+            reasons.append(f"{len(st.book) - len(st.cfg.scenario.ids)} agents added at run time")
         return {"reproducible": not reasons, "not_reproducible": reasons}
 
-    def carry_out(self, index: int, f) -> None:
+    def carry_out(self, index: int, f: FaultSpec) -> None:
         """A scripted fault is due at this tick. Network faults are the fault plan's job;
         process faults are asked of the launcher (it owns the processes) while the clock
         holds, and then, for kill and restart, the world waits to see the drop or the join."""
         if f.kind not in ("kill", "restart", "freeze", "thaw"):
             return
         t_hold = time.monotonic()
-        self.carrying = f.agent  # its drop or join is the fault's (see `unscripted`)
+        self.state.carrying = f.agent  # its drop or join is the fault's (RunState.unscripted)
         try:
             self._carry_out(index, f)
         finally:
-            self.carrying = None
+            self.state.carrying = None
             self.held += time.monotonic() - t_hold
 
-    def _carry_out(self, index: int, f) -> None:
-        self.fault_awaited = index  # the one fault_done the launcher may report now (world/inbox.py)
-        self.control_pub.put(wire.encode_fault_notice(index, self.core.tick, fault_event(index, f)))
-        done = self._wait(lambda: index in self.faults_done, 5.0)
-        self.fault_awaited = None
+    def _carry_out(self, index: int, f: FaultSpec) -> None:
+        st, core = self.state, self.state.core
+        st.fault_awaited = index  # the one fault_done the launcher may report now (world/reports.py)
+        self.shell.send_control(wire.encode_fault_notice(index, core.tick, fault_event(index, f)))
+        done = self._wait(lambda: index in st.faults_done, 5.0)
+        st.fault_awaited = None
         if not done:
-            self.event("fault_skipped", f.agent, f"nobody carried out the {f.kind} (no launcher?)")
-            self.not_reproducible(f"the scripted {f.kind} of agent {f.agent} did not land on tick {self.core.tick}")
+            st.event(EventKind.FAULT_SKIPPED, f.agent, f"nobody carried out the {f.kind} (no launcher?)")
+            st.not_reproducible(f"the scripted {f.kind} of agent {f.agent} did not land on tick {core.tick}")
             return
-        k = self.core.index[f.agent]
+        k = core.index[f.agent]
         # Hold the clock until the fault has taken effect, so that it lands on this tick as
         # in `swarm sim`: a killed process is dropped when its socket closes, a frozen one
         # when its link lease runs out; a restarted or thawed one rejoins.
         if f.kind in ("kill", "freeze"):
-            if not self._wait(lambda: self.core.state[k] != ACTIVE, 3.0 if f.kind == "kill" else 6.0):
-                self.event("fault_late", f.agent, f"the {f.kind} did not drop the agent in time")
-                self.not_reproducible(f"the scripted {f.kind} of agent {f.agent} did not land on tick {self.core.tick}")
-        elif not self._wait(lambda: self.core.state[k] == ACTIVE, 20.0):
-            self.event("fault_late", f.agent, f"the {f.kind} agent did not rejoin within 20 s")
-            self.not_reproducible(f"the scripted {f.kind} of agent {f.agent} did not land on tick {self.core.tick}")
+            if not self._wait(lambda: core.state[k] != ACTIVE, 3.0 if f.kind == "kill" else 6.0):
+                st.event(EventKind.FAULT_LATE, f.agent, f"the {f.kind} did not drop the agent in time")
+                st.not_reproducible(f"the scripted {f.kind} of agent {f.agent} did not land on tick {core.tick}")
+        elif not self._wait(lambda: core.state[k] == ACTIVE, 20.0):
+            st.event(EventKind.FAULT_LATE, f.agent, f"the {f.kind} agent did not rejoin within 20 s")
+            st.not_reproducible(f"the scripted {f.kind} of agent {f.agent} did not land on tick {core.tick}")
 
     def deserted(self) -> bool:
         """No agent in the run, and no scripted restart or thaw to come (see the module)."""
-        if ACTIVE in self.core.state:
+        st, core = self.state, self.state.core
+        if ACTIVE in core.state:
             self.deserted_since = None
             return False
-        plan = self.engine.fault_plan
-        if any(f.kind in ("restart", "thaw") and t >= self.core.tick for t, f in zip(plan.tick_of, plan.faults)):
+        plan = st.engine.fault_plan
+        if any(f.kind in ("restart", "thaw") and t >= core.tick for t, f in zip(plan.tick_of, plan.faults)):
             return False
         now = time.monotonic()
         if self.deserted_since is None:
             self.deserted_since = now
-            if self.cfg.progress:
+            if st.cfg.progress:
                 print(
-                    f"[world] no agent left at tick {self.core.tick}; ending the run unless one joins within "
+                    f"[world] no agent left at tick {core.tick}; ending the run unless one joins within "
                     f"{DESERTED_GRACE:g} s",
                     file=sys.stderr,
                     flush=True,
@@ -173,117 +197,125 @@ class Clock:
         with the links); an agent whose token is being ridden out (world/inbox.py,
         `rides_out`) is waited for until it is back or dropped; whatever reached the inbox
         before the deadline counts."""
-        pending = self.publish_frames()
+        st, inbox = self.state, self.inbox
+        pending = self.shell.publish_frames()
         t_end = time.monotonic() + self.deadline
-        seen, resent = self.disturbed, None
+        seen: int = inbox.disturbed
+        resent: float | None = None
         while pending:
             now = time.monotonic()
-            if self.disturbed != seen:  # not the agents' fault
-                seen, resent = self.disturbed, now
+            if inbox.disturbed != seen:  # not the agents' fault
+                seen, resent = inbox.disturbed, now
                 t_end = now + max(self.deadline, STALL_GRACE)
                 self.restarts += 1
-                self.resend_frames(pending)
+                self.shell.resend_frames(pending)
             elif resent is not None and now - resent >= RESEND_S:
                 resent = now
-                self.resend_frames(pending)
+                self.shell.resend_frames(pending)
             left = t_end - now
             if left <= 0:
-                while pending and self.drain(pending, 0):  # already here: not missed
+                while pending and inbox.drain(pending, 0):  # already here: not missed
                     pass
-                if not pending or self.disturbed != seen:
+                if not pending or inbox.disturbed != seen:
                     continue
-                if self.lost_after_stall and pending & self.lost_after_stall.keys():
-                    self.drain(pending, RESEND_S)  # held: back (a disturbance) or dropped (not pending)
+                if inbox.lost_after_stall and pending & inbox.lost_after_stall.keys():
+                    inbox.drain(pending, RESEND_S)  # held: back (a disturbance) or dropped (not pending)
                     continue
                 for aid in pending:
-                    self.book[aid].missed += 1
+                    st.book[aid].missed += 1
                     self.late[aid] = self.late.get(aid, 0) + 1
-                self.engine.miss(len(pending))
+                st.engine.miss(len(pending))
                 break
-            self.drain(pending, left if resent is None else min(left, RESEND_S))
-        while self.drain(None, 0):  # joins/drops that arrived meanwhile take effect now
+            inbox.drain(pending, left if resent is None else min(left, RESEND_S))
+        while inbox.drain(None, 0):  # joins/drops that arrived meanwhile take effect now
             pass
 
     def realtime_tick(self, t_next: float) -> None:
-        tick = self.core.tick
-        self.publish_frames()
+        st, inbox = self.state, self.inbox
+        tick = st.core.tick
+        self.shell.publish_frames()
         while True:
             left = t_next - time.monotonic()
             if left <= 0:
                 break
-            self.drain(None, left)
+            inbox.drain(None, left)
         # Behind the clock (a starved world catching up) the loop above takes nothing: what
         # came meanwhile is handled all the same, or the inbox (and the native memory under
         # it, world/memory.py) grows with every tick until the world has caught up.
-        for _ in range(self.inbox.qsize()):
-            if not self.drain(None, 0):
+        for _ in range(inbox.queue.qsize()):
+            if not inbox.drain(None, 0):
                 break
-        for aid in self.core.active_ids():
-            b = self.book[aid]
+        for aid in st.core.active_ids():
+            b = st.book[aid]
             stale = tick - b.last_cmd_tick if b.last_cmd_tick >= 0 else tick + 1
             b.stale_sum += stale
             b.stale_max = max(b.stale_max, stale)
 
     def run(self) -> int:
+        """The run from the first join to the last tick; its exit code (OK, or DESERTED)."""
+        st, inbox = self.state, self.inbox
+        cfg, core = st.cfg, st.core
         tie_to_launcher()  # started by `swarm up`: SIGTERM (results written) when the launcher dies
         self.t_start = time.monotonic()
-        period = self.core.dt / self.cfg.time_scale
+        period = core.dt / cfg.time_scale
         last_note = time.monotonic()
         t0_ticks = time.monotonic()
         self.wait_for_agents()
-        self.event(
-            "start",
+        st.event(
+            EventKind.START,
             None,
-            f"all {len(self.book)} agents joined; clock {self.cfg.clock}",
+            f"all {len(st.book)} agents joined; clock {cfg.clock}",
             startup_s=time.monotonic() - self.t_start,
         )
-        self.started = True
+        st.started = True
         t_next = time.monotonic() + period
         t0_ticks = time.monotonic()
-        self.trimmer = Trimmer()  # freed native memory back to the system (world/memory.py)
-        while self.core.tick < self.ticks:
+        self.trimmer = trimmer = Trimmer()  # freed native memory back to the system (world/memory.py)
+        while core.tick < st.ticks:
             if self.deserted():
-                self.event(
-                    "deserted", None, f"no agent process for {DESERTED_GRACE:g} s of wall time; the run ends here"
+                st.event(
+                    EventKind.DESERTED,
+                    None,
+                    f"no agent process for {DESERTED_GRACE:g} s of wall time; the run ends here",
                 )
                 self.wall_ticks = time.monotonic() - t0_ticks
-                return EXIT_DESERTED
-            if self.cfg.clock == "lockstep" and self.deserted_since is not None:
+                return ExitCode.DESERTED
+            if cfg.clock == "lockstep" and self.deserted_since is not None:
                 t_hold = time.monotonic()
-                self.drain(None, 0.1)  # nobody to step for: hold (a join ends the hold)
+                inbox.drain(None, 0.1)  # nobody to step for: hold (a join ends the hold)
                 t0_ticks += time.monotonic() - t_hold
                 continue
             self.answer_pause_waiters()  # a pause (and a resume) asked during the last tick
-            if self.paused:
+            if st.paused:
                 t_pause = time.monotonic()
-                while self.paused:
-                    self.drain(None, 0.1)
+                while st.paused:
+                    inbox.drain(None, 0.1)
                 t_next += time.monotonic() - t_pause
                 t0_ticks += time.monotonic() - t_pause
-            due = self.engine.due()
+            due = st.engine.due()
             if due:
                 held = self.held
                 for i, f in due:
                     self.carry_out(i, f)
                 t_next += self.held - held  # realtime: the hold is not lateness
                 t0_ticks += self.held - held
-            self.ticking = True
-            if self.cfg.clock == "lockstep":
+            st.ticking = True
+            if cfg.clock == "lockstep":
                 self.lockstep_tick()
             else:
                 self.realtime_tick(t_next)
                 t_next += period
-            self.record_and_step()
-            self.ticking = False
+            self.shell.record_and_step()
+            st.ticking = False
             now = time.monotonic()
-            self.trimmer.maybe(now)
-            if self.cfg.progress and now - last_note > 2.0:
+            trimmer.maybe(now)
+            if cfg.progress and now - last_note > 2.0:
                 last_note = now
-                rate = self.core.tick / max(now - t0_ticks, 1e-9)
+                rate = core.tick / max(now - t0_ticks, 1e-9)
                 print(
-                    f"[world] tick {self.core.tick}/{self.ticks} t={self.core.time:.2f}s {rate:.0f} ticks/s",
+                    f"[world] tick {core.tick}/{st.ticks} t={core.time:.2f}s {rate:.0f} ticks/s",
                     file=sys.stderr,
                     flush=True,
                 )
         self.wall_ticks = time.monotonic() - t0_ticks
-        return 0
+        return ExitCode.OK

@@ -1,5 +1,6 @@
-"""Fairness of the world's inbox: no identity's messages may cost another's (a mixin of
-`Inbox`, world/inbox.py; the zenoh callbacks call `enqueue`, the main thread `_taken`).
+"""Fairness of the world's inbox: no identity's messages may cost another's. `FairQueue` is
+the queue between the zenoh callbacks (`enqueue`) and the world's main thread (`get`,
+`taken`; world/inbox.py handles what it takes).
 
 Liveliness changes are coalesced per key (the main thread sees the latest state of each
 token, however fast it flaps); every other message counts against its key (one agent's
@@ -12,30 +13,19 @@ session flooding an agent's key with forged commands takes none of that agent's 
 
 from __future__ import annotations
 
+import queue
 import threading
+from typing import Any
 
 from swarm.contracts import wire
-from swarm.world.core import ACTIVE
+from swarm.contracts.vocabulary import AgentState
+from swarm.world.state import RunState
 
 INBOX_MAX = 100_000  # messages waiting for the main thread; commands and queries past it are dropped
 PER_KEY_MAX = 256  # messages waiting on one key (a command every tick needs 1 to 2)
-_FAIR_INIT = threading.Lock()
 
 
-class _Fair:
-    """What the zenoh callbacks and the main thread share: messages waiting per key, the
-    latest state of each liveliness token not yet handled, drops per key."""
-
-    def __init__(self):
-        self.lock = threading.Lock()
-        self.waiting: dict[str, int] = {}
-        self.alive: dict[str, object] = {}
-        self.flooded: dict[str, int] = {}
-        self.noted: set[str] = set()  # keys whose drops have had their `limit` event
-        self.rogue: dict[int, int] = {}  # agent -> commands without its owner's claim key, not yet counted
-
-
-def _key_of(item) -> str:
+def _key_of(item: tuple) -> str:
     """The key a queued message counts against: its sample's key, or its query's."""
     if item[0] in ("cmd", "alive"):
         return item[1]
@@ -45,78 +35,53 @@ def _key_of(item) -> str:
         return item[0]
 
 
-class Fairness:
-    inbox_dropped = 0  # messages dropped by the callbacks (see `enqueue`)
+class FairQueue:
+    """The world's inbox queue, shared by the zenoh callbacks and the main thread: messages
+    waiting per key, the latest state of each liveliness token not yet handled, the
+    messages dropped per key and the rogue commands counted per agent, under one lock.
+    `state` is read (not changed) by the callbacks to tell a rogue's command (`_rogue`)."""
 
-    def _note_inbox_dropped(self) -> None:
-        """Messages the zenoh callbacks dropped (see `enqueue`): counted to the agent whose
-        key they came on, and one `limit` event per key the first time."""
-        fair = self.fair
-        with fair.lock:
-            flooded, fair.flooded = fair.flooded, {}
-            rogue, fair.rogue = fair.rogue, {}
-        for aid, n in rogue.items():
-            self.count_rogue(aid, n)
-        if not flooded:
-            return
-        self.over_limit["inbox"] = self.inbox_dropped
-        for key, n in flooded.items():
-            try:
-                aid = wire.agent_of_key(key)
-            except wire.WireError:
-                aid = None
-            b = self.book.get(aid) if aid is not None else None
-            if b is not None:
-                b.flooded += n
-            if key not in fair.noted:
-                fair.noted.add(key)
-                self.event(
-                    "limit",
-                    aid,
-                    f"more than {PER_KEY_MAX} messages waiting on {key} (or {INBOX_MAX} in "
-                    "all): its messages dropped, no one else's",
-                    limit="inbox",
-                    key=key,
-                )
+    def __init__(self, state: RunState):
+        self.state = state
+        self.queue: queue.SimpleQueue[tuple] = queue.SimpleQueue()
+        self.lock = threading.Lock()
+        self.waiting: dict[str, int] = {}
+        self.alive: dict[str, Any] = {}
+        self.flooded: dict[str, int] = {}
+        self.noted: set[str] = set()  # keys whose drops have had their `limit` event
+        self.rogue: dict[int, int] = {}  # agent -> commands without its owner's claim key, not yet counted
+        self.dropped = 0  # messages dropped by the callbacks (see `enqueue`)
 
-    @property
-    def fair(self) -> _Fair:
-        st = self.__dict__.get("_fair")
-        if st is None:
-            with _FAIR_INIT:
-                st = self.__dict__.setdefault("_fair", _Fair())
-        return st
-
-    def enqueue(self, item, droppable: bool = True) -> None:
+    # -- the zenoh callbacks' side --------------------------------------------------------------
+    def enqueue(self, item: tuple, droppable: bool = True) -> None:
         """What a zenoh callback does with a message: queue it for the main thread. A
         liveliness change replaces the one of the same token still waiting (never dropped);
         past PER_KEY_MAX waiting on its key, or INBOX_MAX in all, a message is dropped and
         counted (see the module)."""
-        fair = self.fair
         key = _key_of(item)
         if item[0] == "alive":
-            with fair.lock:
-                first = key not in fair.alive
-                fair.alive[key] = item[2]
+            with self.lock:
+                first = key not in self.alive
+                self.alive[key] = item[2]
             if first:
-                self.inbox.put(("alive", key))
+                self.queue.put(("alive", key))
             return
         if item[0] == "cmd":
             decoded = self._decoded(key, item[2])
             if decoded is not None and self._rogue(*decoded):
                 return
-            item = ("cmd", key, item[2], decoded)  # decoded once, here (world/inbox.py, _on_cmd)
-        with fair.lock:
-            n = fair.waiting.get(key, 0)
-            if droppable and (n >= PER_KEY_MAX or self.inbox.qsize() >= INBOX_MAX):
-                fair.flooded[key] = fair.flooded.get(key, 0) + 1
-                self.inbox_dropped += 1
+            item = ("cmd", key, item[2], decoded)  # decoded once, here (world/inbox.py, on_cmd)
+        with self.lock:
+            n = self.waiting.get(key, 0)
+            if droppable and (n >= PER_KEY_MAX or self.queue.qsize() >= INBOX_MAX):
+                self.flooded[key] = self.flooded.get(key, 0) + 1
+                self.dropped += 1
                 return
-            fair.waiting[key] = n + 1
-        self.inbox.put(item)
+            self.waiting[key] = n + 1
+        self.queue.put(item)
 
     @staticmethod
-    def _decoded(key: str, payload: bytes):
+    def _decoded(key: str, payload: bytes) -> tuple[int, wire.Command] | None:
         """(agent id of the key, the command) when both decode and agree; None: garbage,
         which the main thread counts."""
         try:
@@ -125,39 +90,69 @@ class Fairness:
             return None
         return (aid, cmd) if cmd.agent == aid else None
 
-    def _rogue(self, aid: int, cmd) -> bool:
+    def _rogue(self, aid: int, cmd: wire.Command) -> bool:
         """A well-formed command on an agent's key without the claim key of the process that
         owns the id (a rogue session's, or a stale process's): counted here and not queued,
         so that a rogue's flood never takes its owner's place in the inbox (the main thread
-        only counts it: `_note_inbox_dropped`)."""
-        b, core = self.book.get(aid), self.core
+        only counts it: world/inbox.py, `note_dropped`)."""
+        b, core = self.state.book.get(aid), self.state.core
         if b is None or b.key is None or cmd.key == b.key:
             return False
         k = core.index.get(aid)
         if (
             (cmd.out is not None and (cmd.out == aid or cmd.out not in core.index))
             or k is None
-            or core.state[k] != ACTIVE
+            or core.state[k] != AgentState.ACTIVE
             or cmd.tick > core.tick
         ):
-            return False  # garbage or ignored, as the main thread says (world/inbox.py, _on_cmd)
-        with self.fair.lock:
-            self.fair.rogue[aid] = self.fair.rogue.get(aid, 0) + 1
+            return False  # garbage or ignored, as the main thread says (world/inbox.py, on_cmd)
+        with self.lock:
+            self.rogue[aid] = self.rogue.get(aid, 0) + 1
         return True
 
-    def _latest_alive(self, key: str):
-        with self.fair.lock:
-            return self.fair.alive.pop(key)
+    # -- the main thread's side -----------------------------------------------------------------
+    def get(self, timeout: float | None) -> tuple | None:
+        """The next message, waiting up to `timeout` s (None: for ever; 0 or less: not at
+        all); None when none came."""
+        try:
+            return self.queue.get(timeout=timeout) if timeout is None or timeout > 0 else self.queue.get_nowait()
+        except queue.Empty:
+            return None
 
-    def _taken(self, item) -> None:
+    def get_nowait(self) -> tuple | None:
+        try:
+            return self.queue.get_nowait()
+        except queue.Empty:
+            return None
+
+    def qsize(self) -> int:
+        return self.queue.qsize()
+
+    def latest_alive(self, key: str) -> Any:
+        """The latest state of the token on `key` (its inbox entry is being handled)."""
+        with self.lock:
+            return self.alive.pop(key)
+
+    def taken(self, item: tuple) -> None:
         """The main thread took `item` off the inbox: one less waiting on its key."""
         if item[0] == "alive":
             return
-        fair = self.fair
         key = _key_of(item)
-        with fair.lock:
-            n = fair.waiting.get(key, 0) - 1
+        with self.lock:
+            n = self.waiting.get(key, 0) - 1
             if n > 0:
-                fair.waiting[key] = n
+                self.waiting[key] = n
             else:
-                fair.waiting.pop(key, None)
+                self.waiting.pop(key, None)
+
+    def has_dropped(self) -> bool:
+        """Messages dropped or rogue commands counted since `take_dropped` (read without the
+        lock: a count that just came is seen at the next look)."""
+        return bool(self.flooded or self.rogue)
+
+    def take_dropped(self) -> tuple[dict[str, int], dict[int, int]]:
+        """(messages dropped per key, rogue commands per agent) since the last call."""
+        with self.lock:
+            flooded, self.flooded = self.flooded, {}
+            rogue, self.rogue = self.rogue, {}
+        return flooded, rogue

@@ -6,97 +6,85 @@ sends every live agent its own sensor frame, collects commands, steps `WorldCore
 and records the tick. At the end (or on SIGTERM/SIGINT) it writes trajectory.npz
 and summary.json into its output directory, announces the end and closes.
 
-All zenoh callbacks only put (kind, ...) tuples on one inbox queue; everything else
-happens on the main thread. `World` is assembled from four parts: this module (state,
-keys, publishing, results), `world/inbox.py` (what each message does), `world/joins.py`
-(join queries) and `world/clock.py` (how ticks are paced); `world/main.py` runs it
-from start to end.
+All zenoh callbacks only put (kind, ...) tuples on one queue (world/fairness.py);
+everything else happens on the main thread. `World` is composed of parts, each with
+what it depends on in its constructor: the run's shared state (world/state.py), the
+inbox (world/inbox.py: what each message does), the joins (world/joins.py: join
+queries) and the clock (world/clock.py: how ticks are paced); this module keeps the
+zenoh keys, publishing and the results. world/main.py runs it from start to end.
 """
 
 from __future__ import annotations
 
-import queue
 import sys
 import time
-from dataclasses import dataclass, field
-from pathlib import Path
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 
 from swarm.contracts import wire
-from swarm.contracts.scenario import Scenario
-from swarm.contracts.transport import HubAuth, open_hub, query_statuses
+from swarm.contracts.transport import open_hub, query_statuses
 from swarm.world.clock import Clock
 from swarm.world.engine import Engine
+from swarm.world.fairness import FairQueue
 from swarm.world.inbox import Inbox
-from swarm.world.joins import Joins, TokenBucket
+from swarm.world.joins import Joins
 from swarm.world.recording import RECORDING_FILE, DeferredRecorder, RecordingError, write_run
-from swarm.world.roster import AgentBook, agent_figures
+from swarm.world.roster import agent_figures
 from swarm.world.sensing import encode_frames_pairwise
+from swarm.world.state import RunState, WorldConfig
+
+__all__ = ["FRAMES_PAIRWISE", "TRUTH_PERIOD", "World", "WorldConfig"]
 
 FRAMES_PAIRWISE = 8  # agents: up to this many, frames are built pair by pair (world/sensing.py)
 TRUTH_PERIOD = 0.02  # s of wall time between ground-truth messages (observers, not the recording)
 
 
-@dataclass
-class WorldConfig:
-    scenario: Scenario
-    run: str
-    listen: str
-    out_dir: Path | None  # where the results go (None: nowhere)
-    clock: str = "lockstep"
-    time_scale: float = 1.0  # realtime clock: simulated s per wall s
-    duration: float | None = None
-    join_timeout: float | None = None  # s to wait for every agent before tick 0; None = forever
-    deadline: float | None = None  # lockstep deadline override (s)
-    progress: bool = True
-    auth: HubAuth | None = None  # who may connect and do what (None: an open hub)
-    foxglove: tuple[str, int] | None = None  # (host, port) to serve the live view on (world/live_view.py)
+class World:
+    """The world process of one run: `state` (shared by the parts), `queue` (filled by the
+    zenoh callbacks), `joins`, `inbox`, `clock`; the zenoh keys and what goes out on them."""
 
-
-@dataclass
-class World(Inbox, Joins, Clock):
-    cfg: WorldConfig
-    inbox: queue.SimpleQueue = field(default_factory=queue.SimpleQueue)
-
-    def __post_init__(self):
-        s = self.cfg.scenario
-        self.ticks = int(round((self.cfg.duration or s.run.duration) / s.run.dt))
+    def __init__(self, cfg: WorldConfig):
+        self.cfg = cfg
+        s = cfg.scenario
+        self.ticks = int(round((cfg.duration or s.run.duration) / s.run.dt))
         # The tick itself (faults, frames, commands, events, record, step) is the engine's,
         # the same one `swarm sim` drives; this class is its zenoh shell.
         recording = None
-        if self.cfg.out_dir is not None:
+        if cfg.out_dir is not None:
             try:
-                self.cfg.out_dir.mkdir(parents=True, exist_ok=True)
+                cfg.out_dir.mkdir(parents=True, exist_ok=True)
             except OSError as e:
-                raise RecordingError(f"cannot create {self.cfg.out_dir}: {e.strerror or e}") from None
-            recording = self.cfg.out_dir / RECORDING_FILE
+                raise RecordingError(f"cannot create {cfg.out_dir}: {e.strerror or e}") from None
+            recording = cfg.out_dir / RECORDING_FILE
         self.engine = Engine(
             s, self.ticks, joined=False, wall_clock=time.time, on_event=self._announce, recording=recording
         )
-        self.engine.rec = DeferredRecorder(self.engine.rec)  # written while the agents think (publish_frames)
+        self.rec = DeferredRecorder(self.engine.rec)  # written while the agents think (publish_frames)
+        self.engine.rec = self.rec  # type: ignore[assignment]  # a Recorder's interface, writes deferred
         self.core = self.engine.core
-        self.book = {i: AgentBook() for i in s.ids}
-        self.garbage = 0  # malformed or foreign messages on keys the world listens to
-        self.over_limit: dict[str, int] = {}  # how often each limit refused something (world/inbox.py)
-        self.join_buckets: dict[int | None, TokenBucket] = {}  # join claims per agent id (world/joins.py)
-        self.ignored = 0
-        self.deadline = self.cfg.deadline or s.run.lockstep_deadline
-        self.stopped_by: int | None = None
+        self.state = RunState(cfg, self.engine, self.ticks)
+        self.book = self.state.book
+        self.queue = FairQueue(self.state)
+        self.joins = Joins(self.state, self.add_sense)
+        self.inbox = Inbox(self.state, self.queue, self.joins)
+        self.clock = Clock(self.state, self.inbox, self, cfg.deadline or s.run.lockstep_deadline)
+        self.stopped_by: int | None = None  # the signal that stopped the run (-1: an error)
         self.truth_sent = 0.0
-        self.faults_done: set[int] = set()
-        self.held = 0.0  # wall s the clock held for process faults
-        self.paused = False
-        self.started = False  # every agent joined and the clock runs
-        self.ticking = False  # between the first frame of a tick and its step
-        self.pause_waiters: list = []
-        self.t_start = 0.0
         self.frames_sent: dict[int, bytes] = {}  # this tick's encoded frames, by agent
-        self.late: dict[int, int] = {}  # lockstep: commands per agent that missed the deadline
-        self.irreproducible: list[str] = []  # why `swarm sim` would not give this run (world/clock.py)
+        self.session: Any = None  # the zenoh session (`_open`)
+
+    def run(self) -> int:
+        """The run from the first join to the last tick (world/clock.py); its exit code."""
+        return self.clock.run()
+
+    def info(self, sensing: bool = False) -> dict[str, Any]:
+        """The world's view of the run (world/inbox.py)."""
+        return self.inbox.info(sensing)
 
     # -- zenoh plumbing (callbacks: enqueue only) -----------------------------------------
-    def _open(self, session=None):
+    def _open(self, session: Any = None) -> None:
         """Declare the world's keys on `session` (default: a new hub on cfg.listen; tests
         pass a fake one, tests/fakes.py); a failure closes the session again."""
         self.session = session if session is not None else open_hub(self.cfg.listen, self.cfg.auth)
@@ -106,9 +94,9 @@ class World(Inbox, Joins, Clock):
             self.session.close()
             raise
 
-    def _declare(self, ses) -> None:
+    def _declare(self, ses: Any) -> None:
         run = self.cfg.run
-        put = self.enqueue
+        put = self.queue.enqueue
         self._subs = [
             ses.declare_subscriber(
                 wire.agent_key(run, "*", "cmd"), lambda s: put(("cmd", str(s.key_expr), s.payload.to_bytes()))
@@ -131,25 +119,23 @@ class World(Inbox, Joins, Clock):
         self.control_pub = ses.declare_publisher(wire.world_control_key(run))
         self.token = ses.liveliness().declare_token(wire.world_alive_key(run))
 
-    def _close(self):
+    def add_sense(self, aid: int) -> None:
+        """The publisher of agent `aid`'s frames (an agent added at run time, world/joins.py)."""
+        self.sense_pub[aid] = self.session.declare_publisher(wire.agent_key(self.cfg.run, aid, "sense"), express=True)
+
+    def send_control(self, payload: bytes) -> None:
+        """To the launcher, on world/control (a scripted fault to carry out, world/clock.py)."""
+        self.control_pub.put(payload)
+
+    def _close(self) -> None:
         try:
             self.control_pub.put(wire.encode_end(self.core.tick))
         except Exception:
             pass
         self.session.close()
 
-    def info(self, sensing: bool = False) -> dict:
-        """The world's view (world/inbox.py), with where its results go (`out`, absolute;
-        None without --out): `swarm spawn` puts an agent's log in its `logs/`."""
-        d = super().info(sensing)
-        d["out"] = str(self.cfg.out_dir.resolve()) if self.cfg.out_dir is not None else None
-        return d
-
     # -- events -----------------------------------------------------------------------------
-    def event(self, kind: str, agent: int | None, reason: str, **more) -> None:
-        self.engine.event(kind, agent, reason, **more)
-
-    def _announce(self, ev: dict) -> None:
+    def _announce(self, ev: dict[str, Any]) -> None:
         """Every event, as it happens: to observers over zenoh, and to the log."""
         kind, agent, reason = ev["kind"], ev["agent"], ev["reason"]
         try:
@@ -174,7 +160,7 @@ class World(Inbox, Joins, Clock):
             self.frames_sent = {aid: wire.encode_sense(frame) for aid, frame in frames.items()}
             for aid, buf in self.frames_sent.items():
                 self.sense_pub[aid].put(buf)
-            self.engine.rec.flush()
+            self.rec.flush()
             return set(frames)
         self.engine.mark_frames()  # the same numbers, encoded straight from the arrays
         active = c.active_ids()
@@ -206,10 +192,10 @@ class World(Inbox, Joins, Clock):
         for aid, frame in zip(active, frames):
             pubs[aid].put(frame)
         self.frames_sent = dict(zip(active, frames))  # sent again as they are after a stall (world/clock.py)
-        self.engine.rec.flush()  # the last tick's recording, while the agents answer these frames
+        self.rec.flush()  # the last tick's recording, while the agents answer these frames
         return set(active)
 
-    def resend_frames(self, aids) -> None:
+    def resend_frames(self, aids: Iterable[int]) -> None:
         """This tick's frames again, byte for byte, to agents that have not answered (after a
         stall of the world: the first ones may have been lost with the agents' links). An
         agent answers a repeated frame with the command it already sent (agents/node.py)."""
@@ -221,7 +207,7 @@ class World(Inbox, Joins, Clock):
     def record_and_step(self) -> None:
         self.engine.end_tick(observe=self.publish_truth)
 
-    def publish_truth(self, u, force: bool = False) -> None:
+    def publish_truth(self, u: np.ndarray, force: bool = False) -> None:
         """Ground truth for observers, at most every TRUTH_PERIOD s (the world itself
         records every tick; observers only draw and report)."""
         now = time.monotonic()
@@ -259,7 +245,7 @@ class World(Inbox, Joins, Clock):
                 pass
             rec.path.unlink(missing_ok=True)
 
-    def finish(self) -> dict | None:
+    def finish(self) -> dict[str, Any] | None:
         """Record the final state row and write the results; returns the summary."""
         c = self.core
         if c.tick <= self.ticks and self.engine.rec.rows <= c.tick:
@@ -272,7 +258,8 @@ class World(Inbox, Joins, Clock):
             str(aid): agent_figures(b, c.tick, self.cfg.clock == "realtime", **own.get(aid, {}))
             for aid, b in self.book.items()
         }
-        wall = getattr(self, "wall_ticks", None)
+        st, clock = self.state, self.clock
+        wall = clock.wall_ticks
         result = self.engine.result(
             {
                 "engine": "up",
@@ -282,14 +269,14 @@ class World(Inbox, Joins, Clock):
                 "time_scale": self.cfg.time_scale,
                 "completed": self.stopped_by is None and c.tick >= self.ticks,
                 "stopped_by_signal": self.stopped_by,
-                "garbage_messages": self.garbage,
-                "ignored_messages": self.ignored,
+                "garbage_messages": st.garbage,
+                "ignored_messages": st.ignored,
                 "rejected_commands": c.rejected,
-                "over_limit": self.over_limit,
+                "over_limit": st.over_limit,
                 "wall_time": wall,
                 "ticks_per_second": (c.tick / wall) if wall else None,
-                "deadline_restarts": self.restarts,
-                **self.reproducibility(),
+                "deadline_restarts": clock.restarts,
+                **clock.reproducibility(),
             },
             agent_extra,
         )
