@@ -20,6 +20,7 @@ from typer.testing import CliRunner
 
 from swarm.cli.main import app, foxglove_argv
 from swarm.contracts.scenario import load_scenario
+from swarm.contracts.vocabulary import ExitCode
 from swarm.world.live_view import LIVE_TOPICS, LiveViewError, start_live_view
 
 REPO = Path(__file__).resolve().parents[1]
@@ -68,11 +69,11 @@ def test_port_in_use_is_one_line():
             ["world", str(CASE2), "--out", "/nonexistent/never", "--foxglove", "--foxglove-port", str(port)],
         ):
             res = CliRunner().invoke(app, cmd)
-            assert res.exit_code == 2, res.output
+            assert res.exit_code == ExitCode.USAGE, res.output
             lines = res.output.strip().splitlines()
             assert len(lines) == 1 and lines[0].startswith("--foxglove: cannot serve on 127.0.0.1:"), res.output
         res = CliRunner().invoke(app, ["world", str(CASE2), "--foxglove"])
-        assert res.exit_code == 2 and "--foxglove needs --out" in res.output
+        assert res.exit_code == ExitCode.USAGE and "--foxglove needs --out" in res.output
     finally:
         held.close()
 
@@ -282,7 +283,7 @@ def test_up_serves_the_run_live(rt, tmp_path):
     finally:
         ws.close()
         os.kill(up.launcher.pid, signal.SIGINT)
-    assert up.launcher.wait(60) == 130
+    assert up.launcher.wait(60) == ExitCode.INTERRUPTED
     assert f"ws://127.0.0.1:{port}" in up.launcher.text()
     assert (tmp_path / "run" / "summary.json").exists()
 
@@ -335,7 +336,7 @@ def test_watch_serves_a_live_run(rt, tmp_path):
     held, busy = busy_port()
     try:
         refused = rt.tracker.spawn(swarm_cmd("watch", "--foxglove", busy), "watch-busy")
-        assert refused.wait(30) == 2
+        assert refused.wait(30) == ExitCode.USAGE
     finally:
         held.close()
     assert refused.text().strip().splitlines() == [
@@ -379,7 +380,7 @@ def test_watch_serves_a_live_run(rt, tmp_path):
             got_scene = got_scene or (topic == "/swarm/scene" and len(doc) > 0)
         victim = 3
         kill = rt.tracker.spawn(swarm_cmd("kill", victim), "kill")
-        assert kill.wait(30) == 0, kill.text()
+        assert kill.wait(30) == ExitCode.OK, kill.text()
         end = time.monotonic() + 20
         dropped = dead = False
         while not (dropped and dead):
@@ -392,12 +393,12 @@ def test_watch_serves_a_live_run(rt, tmp_path):
     finally:
         ws.close()
         os.kill(watcher.pid, signal.SIGINT)
-    assert watcher.wait(30) == 130, watcher.text()
+    assert watcher.wait(30) == ExitCode.INTERRUPTED, watcher.text()
     assert watcher.text().strip().splitlines()[-1] == "stopped (Ctrl-C); the live view is closed", watcher.text()
     assert up.launcher.poll() is None  # the run goes on without its watcher
     os.kill(up.launcher.pid, signal.SIGINT)
-    assert up.launcher.wait(60) == 130
-    assert stays.wait(30) == 0, stays.text()  # the other watcher saw the run end
+    assert up.launcher.wait(60) == ExitCode.INTERRUPTED
+    assert stays.wait(30) == ExitCode.OK, stays.text()  # the other watcher saw the run end
     lines = stays.text().strip().splitlines()
     assert lines[0].startswith(f"run {up.banner()[0]}: live view: ws://127.0.0.1:{other}"), lines
     assert len(lines) == 2 and re.fullmatch(

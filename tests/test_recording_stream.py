@@ -18,9 +18,10 @@ from typer.testing import CliRunner
 from swarm.cli.main import app
 from swarm.contracts.scenario import load_scenario
 from swarm.contracts.scenario_tables import AgentSpec
+from swarm.contracts.vocabulary import ExitCode
 from swarm.offline.results import OutDirError, claim_out_dir, needs_export
 from swarm.offline.sim import run_sim
-from swarm.world.recording import EXIT_NO_SPACE, Recorder, StreamRecorder, recover_run, write_run
+from swarm.world.recording import Recorder, StreamRecorder, recover_run, write_run
 from swarm.world.run_reader import load_run
 from swarm.world.stream import decode_tick, encode_tick, read_recording
 
@@ -142,12 +143,12 @@ def test_out_dir_is_never_overwritten_without_force(tmp_path):
 def test_sim_refuses_an_out_with_results_then_force(tmp_path):
     out = tmp_path / "run"
     args = ["sim", str(CASE2), "--out", str(out), "--no-plots", "--duration", "1"]
-    assert CliRunner().invoke(app, args).exit_code == 0
+    assert CliRunner().invoke(app, args).exit_code == ExitCode.OK
     before = (out / "summary.json").read_bytes()
     r = CliRunner().invoke(app, args)
-    assert r.exit_code == 2 and "already holds the results" in r.output and "--force" in r.output
+    assert r.exit_code == ExitCode.USAGE and "already holds the results" in r.output and "--force" in r.output
     assert (out / "summary.json").read_bytes() == before  # untouched
-    assert CliRunner().invoke(app, [*args, "--force"]).exit_code == 0
+    assert CliRunner().invoke(app, [*args, "--force"]).exit_code == ExitCode.OK
 
 
 @pytest.mark.slow  # a child process with a file-size limit
@@ -157,7 +158,8 @@ def test_full_disk_is_one_line_and_leaves_no_half_file(tmp_path):
     completed before is untouched."""
     done = tmp_path / "done"
     assert (
-        CliRunner().invoke(app, ["sim", str(CASE2), "--out", str(done), "--no-plots", "--duration", "5"]).exit_code == 0
+        CliRunner().invoke(app, ["sim", str(CASE2), "--out", str(done), "--no-plots", "--duration", "5"]).exit_code
+        == ExitCode.OK
     )
     before = {p.name: p.read_bytes() for p in done.iterdir()}
     code = (
@@ -173,7 +175,7 @@ def test_full_disk_is_one_line_and_leaves_no_half_file(tmp_path):
         timeout=120,
         cwd=ROOT,
     )
-    assert p.returncode == EXIT_NO_SPACE, p.stderr[-2000:]
+    assert p.returncode == ExitCode.NO_SPACE, p.stderr[-2000:]
     lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and "cannot" in lines[0] and str(out) in lines[0], p.stderr
     assert "Traceback" not in p.stderr
@@ -211,7 +213,7 @@ def test_sigkilled_world_loses_at_most_a_second(rt, tmp_path):
     for name in ("summary.json", "trajectory.npz", "overview.png"):
         (out / name).unlink(missing_ok=True)  # (no plots: started with --no-plots)
     p = rt.tracker.spawn(swarm_cmd("plot", out), "plot")  # and so does swarm plot
-    assert p.wait(120) == 0, p.text()[-2000:]
+    assert p.wait(120) == ExitCode.OK, p.text()[-2000:]
     assert "recovered" in p.text() and "complete: false" in p.text()
     summ = json.loads((out / "summary.json").read_text())
     assert summ["complete"] is False and summ["recording_finished"] is False
@@ -239,7 +241,7 @@ def test_full_disk_under_swarm_up(rt, tmp_path):
         [sys.executable, "-c", code, "up", str(CASE2), "--out", str(out), "--no-plots", "--clock", "lockstep"], "up"
     )
     up = UpRun(p, out, rt.tracker)
-    assert p.wait(180) == EXIT_NO_SPACE, p.text()[-3000:]
+    assert p.wait(180) == ExitCode.NO_SPACE, p.text()[-3000:]
     rt.tracker.assert_none_left(timeout=10)
     said = [ln for ln in p.text().splitlines() if "cannot write" in ln]
     assert len(said) == 1 and str(out / "recording.mcap") in said[0], p.text()[-3000:]

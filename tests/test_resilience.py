@@ -59,6 +59,7 @@ from runtime_helpers import (
 
 from swarm.contracts import wire
 from swarm.contracts.graph import analyse
+from swarm.contracts.vocabulary import ExitCode
 
 pytestmark = pytest.mark.slow
 
@@ -169,7 +170,7 @@ def test_faults_toml_through_up(rt, tmp_path, shipped_sim):
 
     # One engine: every fault kind means the same in `swarm sim`, so the runs are equal.
     res, sim_out = shipped_sim("faults")  # the session's run of faults.toml (conftest)
-    assert res.exit_code == 0, res.output[-3000:]
+    assert res.exit_code == ExitCode.OK, res.output[-3000:]
     sim_traj, sim_summ = sim_results(sim_out)
     dist = max(np.max(np.abs(traj["x"] - sim_traj["x"])), np.max(np.abs(traj["y"] - sim_traj["y"])))
     print(f"  swarm up vs swarm sim: max |dx|, |dy| = {dist:.3g} m")

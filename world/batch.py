@@ -17,6 +17,8 @@ import math
 import numpy as np
 
 from swarm.contracts.frames import Contact
+from swarm.contracts.vocabulary import SwitchReason
+from swarm.world.core import switch_reason
 from swarm.world.kinematics import step, wrap
 
 NONE = -1
@@ -153,20 +155,24 @@ class BatchWorld:
         self.x, self.y, self.heading = step(self.x, self.y, self.heading, self.speed, self.u, self.dt)
         self.tick += 1
 
-    def switch_reason(self, frames: BatchFrames, b: int, i: int, old: int, new: int, pinned: int | None) -> str:
+    def switch_reason(
+        self, frames: BatchFrames, b: int, i: int, old: int, new: int, pinned: int | None
+    ) -> SwitchReason:
         """WorldCore.switch_reason for member b's agent in column i, columns old -> new
         (-1 none); pinned: the column of its `follow` under selection = "fixed", else None.
         Nobody leaves the world in a batch run, so that reason never comes up."""
-        if new < 0:
-            return "no out-neighbour: " + ("searching" if self.sticky else "loitering")
-        if pinned is not None and new != pinned:
-            return "pinned out-neighbour not sensed"
-        if old < 0:
-            return "out-neighbour chosen"
-        j = np.full((1, self.n), NONE, dtype=np.int64)
-        j[0, i] = old
-        if not frames.sensed_pairs(j, slice(b, b + 1))[0, i]:
-            return "out-neighbour out of sight"
-        if frames.hops[b, old] < 0:
-            return "out-neighbour has no path to a leader"
-        return "another agent chosen"
+
+        def in_sight() -> bool:
+            j = np.full((1, self.n), NONE, dtype=np.int64)
+            j[0, i] = old
+            return bool(frames.sensed_pairs(j, slice(b, b + 1))[0, i])
+
+        return switch_reason(
+            sticky=self.sticky,
+            new=new >= 0,
+            pinned_missed=pinned is not None and new != pinned,
+            old=old >= 0,
+            old_left=lambda: False,
+            old_in_sight=in_sight,
+            old_hopless=lambda: bool(frames.hops[b, old] < 0),
+        )

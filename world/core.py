@@ -17,14 +17,17 @@ integrated (the last good one is held), and one above the agent's limit is satur
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
 from swarm.contracts.scenario import Scenario
+from swarm.contracts.vocabulary import AgentState, SwitchReason
 from swarm.world.kinematics import step, step_one
 from swarm.world.sensing import SensorFrame, build_frames, sensing_matrix
 
-ACTIVE, COASTING, GONE = "active", "coasting", "gone"
+# The states as module names (world/, tests/test_sim.py import them)
+ACTIVE, COASTING, GONE = AgentState.ACTIVE, AgentState.COASTING, AgentState.GONE
 STEP_ONE_BY_ONE = 32  # agents: up to this many, `step` goes agent by agent (world/kinematics.py)
 
 
@@ -43,7 +46,7 @@ class WorldCore:
         self.u = np.zeros(len(agents))  # last applied turn rate (rad/s)
         # advertised hops to a leader (-1 none); leaders advertise 0 from the start
         self.hops = np.where(self.is_leader, 0, -1).astype(np.int64)
-        self.state = [ACTIVE if joined else GONE for _ in agents]
+        self.state: list[AgentState] = [ACTIVE if joined else GONE for _ in agents]
         self.target = (scenario.target.x, scenario.target.y)
         self.dt = scenario.run.dt
         self.tick = 0
@@ -139,7 +142,7 @@ class WorldCore:
         self.x, self.y, self.heading = np.array(x), np.array(y), np.array(g)
         self.tick += 1
 
-    def drop(self, agent_id: int) -> str:
+    def drop(self, agent_id: int) -> AgentState:
         """An agent's process died: it leaves the world or coasts (scenario on_dropout)."""
         self._sensing = None
         k = self.index[agent_id]
@@ -174,26 +177,52 @@ class WorldCore:
         self.hops = np.append(self.hops, 0 if spec.role == "leader" else -1)
         self.state.append(GONE)
 
-    def switch_reason(self, agent_id: int, old: int | None, new: int | None, hops_sent) -> str:
-        """Why `agent_id` changed its out-neighbour from `old` to `new` this tick, in the
-        words both engines write into "switch" events: what ground truth and the hop
-        counts sent in this tick's frames (`hops_sent`, (N,)) say about the old one."""
-        if new is None:
-            return "no out-neighbour: " + ("searching" if self.scenario.sensing.selection == "sticky" else "loitering")
+    def switch_reason(self, agent_id: int, old: int | None, new: int | None, hops_sent: np.ndarray) -> SwitchReason:
+        """Why `agent_id` changed its out-neighbour from `old` to `new` this tick (`switch_reason`
+        below): what ground truth and the hop counts sent in this tick's frames (`hops_sent`,
+        (N,)) say about the old one."""
         spec = self.scenario.agents[self.index[agent_id]]
-        if self.scenario.sensing.selection == "fixed" and spec.follow is not None and new != spec.follow:
-            return "pinned out-neighbour not sensed"
-        if old is None:
-            return "out-neighbour chosen"
-        j = self.index.get(old)
-        if j is None or self.state[j] == GONE:
-            return "out-neighbour left the world"
-        if not self.sensing()[0][self.index[agent_id], j]:
-            return "out-neighbour out of sight"
-        if j < len(hops_sent) and hops_sent[j] < 0:
-            return "out-neighbour has no path to a leader"
-        return "another agent chosen"
+        j = self.index.get(old) if old is not None else None
+        return switch_reason(
+            sticky=self.scenario.sensing.selection == "sticky",
+            new=new is not None,
+            pinned_missed=self.scenario.sensing.selection == "fixed" and spec.follow is not None and new != spec.follow,
+            old=old is not None,
+            old_left=lambda: j is None or self.state[j] == GONE,
+            old_in_sight=lambda: bool(self.sensing()[0][self.index[agent_id], j]),
+            old_hopless=lambda: j is not None and j < len(hops_sent) and bool(hops_sent[j] < 0),
+        )
 
     def pose(self, agent_id: int) -> tuple[float, float, float]:
         k = self.index[agent_id]
         return float(self.x[k]), float(self.y[k]), float(self.heading[k])
+
+
+def switch_reason(
+    *,
+    sticky: bool,
+    new: bool,
+    pinned_missed: bool,
+    old: bool,
+    old_left: Callable[[], bool],
+    old_in_sight: Callable[[], bool],
+    old_hopless: Callable[[], bool],
+) -> SwitchReason:
+    """The reason of a "switch" event, the rule both engines follow (`WorldCore.switch_reason`,
+    world/batch.py `BatchWorld.switch_reason`): `new` / `old`, whether the follower has a new
+    / had an old out-neighbour; `pinned_missed`, the new one is not the agent it is pinned to
+    (selection = "fixed"); about the old one, asked in this order and only as far as needed:
+    it left the world, it is in the follower's sight, its frame advertised no path to a leader."""
+    if not new:
+        return SwitchReason.NONE_SEARCHING if sticky else SwitchReason.NONE_LOITERING
+    if pinned_missed:
+        return SwitchReason.PINNED_NOT_SENSED
+    if not old:
+        return SwitchReason.CHOSEN
+    if old_left():
+        return SwitchReason.LEFT
+    if not old_in_sight():
+        return SwitchReason.OUT_OF_SIGHT
+    if old_hopless():
+        return SwitchReason.NO_PATH
+    return SwitchReason.ANOTHER

@@ -26,6 +26,7 @@ import numpy as np
 
 from swarm.contracts.frames import SensorFrame
 from swarm.contracts.scenario import Scenario
+from swarm.contracts.vocabulary import EventKind
 from swarm.world.core import ACTIVE, WorldCore
 from swarm.world.faults import FaultPlan, fault_event
 from swarm.world.recording import Recorder, RunResult, StreamRecorder
@@ -90,7 +91,7 @@ class Engine:
         shell carries out the process faults among them."""
         due = self.fault_plan.due(self.core.tick)
         for i, f in due:
-            self.event("fault", f.agent, f"scripted {f.kind}", fault=fault_event(i, f))
+            self.event(EventKind.FAULT, f.agent, f"scripted {f.kind}", fault=fault_event(i, f))
         return due
 
     def drop(self, agent: int, reason: str, quiet: bool = False) -> str | None:
@@ -102,7 +103,7 @@ class Engine:
         state = self.core.drop(agent)
         self.out[k] = -1
         if not quiet:
-            self.event("drop", agent, reason, now=state)
+            self.event(EventKind.DROP, agent, reason, now=state)
         return state
 
     def join(self, agent: int, reason: str, rejoin: bool, quiet: bool = False, **more) -> bool:
@@ -112,7 +113,7 @@ class Engine:
             return False
         self.core.join(agent)
         if not quiet:
-            self.event("rejoin" if rejoin else "join", agent, reason, **more)
+            self.event(EventKind.REJOIN if rejoin else EventKind.JOIN, agent, reason, **more)
         return True
 
     def add_agent(self, spec) -> None:
@@ -162,7 +163,10 @@ class Engine:
         if new != self.out[k] and not self.core.is_leader[k]:
             old = None if self.out[k] < 0 else int(self.out[k])
             self.event(
-                "switch", agent, self.core.switch_reason(agent, old, out, self.hops_sent), **{"from": old, "to": out}
+                EventKind.SWITCH,
+                agent,
+                self.core.switch_reason(agent, old, out, self.hops_sent),
+                **{"from": old, "to": out},
             )
         self.out[k] = new
         return LATCHED

@@ -14,7 +14,7 @@ import shutil
 import sys
 from dataclasses import replace
 
-from swarm.contracts import credentials
+from swarm.contracts import credentials, tls
 from swarm.contracts.identities import ENV_SUPERVISOR, CredentialsError
 from swarm.contracts.runtime_dir import pid_alive
 from swarm.contracts.scenario import Scenario
@@ -32,8 +32,6 @@ def run_auth(run: str, listen: str, scenario: Scenario) -> HubAuth | None:
         raise CredentialsError(f"run {run} is already running (world pid {old.pid})")
     tls_settings, ca = None, None
     if listen.startswith("tls/"):
-        from swarm.contracts import tls
-
         try:
             tls_settings, ca = tls.run_hub_settings(runtime_dir(), run, listen)
         except ValueError as e:
@@ -80,6 +78,4 @@ def forget_run(run: str, listen: str) -> None:
         return
     path.unlink(missing_ok=True)
     if listen.startswith("tls/"):
-        from swarm.contracts.tls import run_tls_dir
-
-        shutil.rmtree(run_tls_dir(d, run), ignore_errors=True)
+        shutil.rmtree(tls.run_tls_dir(d, run), ignore_errors=True)

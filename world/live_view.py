@@ -5,7 +5,7 @@ The server is attached to the context of the run's recording writer (world/strea
 it serves exactly the recording's channels, as they are logged, with nothing logged twice:
 `/swarm/scene`, `/swarm/trails`, `/swarm/agents`, `/swarm/events` and `/swarm/run`. Only
 `/swarm/ticks` (every tick, in the project's own binary encoding, which Foxglove cannot
-draw) is left out. Without --foxglove this module is not imported and nothing runs.
+draw) is left out. Without --foxglove nothing here runs (and foxglove is not imported).
 
 `swarm watch --foxglove` serves the same channels from an observer of a live run
 (swarm/live/foxglove.py), with `serve` on a context of its own.
@@ -32,7 +32,7 @@ def serve(ctx, name: str, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT):
     """Serve the channels of `ctx` (a foxglove.Context; all but `/swarm/ticks`) on
     ws://host:port as server `name`; returns the server (`.stop()` ends it). Raises
     LiveViewError with one line naming host and port on failure (the port in use)."""
-    import foxglove
+    import foxglove  # lazy: `swarm watch` imports this module and must start fast without --foxglove
 
     try:
         return foxglove.start_server(name=name, host=host, port=port, context=ctx, channel_filter=_serve)

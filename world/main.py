@@ -9,25 +9,29 @@ refused); the `World` (world/process.py) listens, says `ready` to the launcher (
 swarm/contracts/startup.py, with each step before), runs its ticks and writes its
 results, which are written even when it is stopped, after a disk-full error or a bug, so
 nothing recorded is lost.
-Exit codes: 0 the run completed, 128+signal stopped, 2 cannot listen (the endpoint in
-use or unusable, or the --foxglove port in use) or write the credentials, 3 agents did
-not join in time, 1 an internal error, EXIT_NO_SPACE the recording or the results could
-not be written, EXIT_DESERTED (world/clock.py) no agent was left.
+Exit codes (swarm/contracts/vocabulary.py, `ExitCode`): OK the run completed, 128+signal
+stopped, USAGE cannot listen (the endpoint in use or unusable, or the --foxglove port in
+use) or write the credentials, JOIN_TIMEOUT agents did not join in time, FAILED an
+internal error, NO_SPACE the recording or the results could not be written, DESERTED
+(world/clock.py) no agent was left.
 """
 
 from __future__ import annotations
 
 import sys
+import traceback
 
 from swarm.contracts.identities import CredentialsError
 from swarm.contracts.runtime_sweep import sweep_stale, unix_socket_answers
 from swarm.contracts.startup import Announcer
 from swarm.contracts.stop_signals import StopSignals
 from swarm.contracts.transport import runtime_dir, socket_path
+from swarm.contracts.vocabulary import ExitCode, signal_exit
 from swarm.world.hub_auth import forget_run, run_auth
+from swarm.world.live_view import LiveViewError, open_hint, start_live_view
 from swarm.world.memory import limit_arenas
 from swarm.world.process import World, WorldConfig
-from swarm.world.recording import EXIT_NO_SPACE, RecordingError
+from swarm.world.recording import RecordingError
 
 
 class Stop(BaseException):
@@ -40,8 +44,8 @@ class Stop(BaseException):
 
 
 def run_world(cfg: WorldConfig) -> int:
-    """Run a world to the end; exit code 0 when the run completed, 128+signal when stopped,
-    EXIT_NO_SPACE when the recording or the results could not be written."""
+    """Run a world to the end; exit code OK when the run completed, 128+signal when stopped,
+    NO_SPACE when the recording or the results could not be written (see the module)."""
     limit_arenas()  # before zenoh's and foxglove's threads start (world/memory.py)
     # Stop (SIGTERM/SIGINT) from the first moment: the run's credentials, once written,
     # must go with it however early it is stopped; held back while the hub opens
@@ -59,10 +63,10 @@ def run_world(cfg: WorldConfig) -> int:
                 f"swarm world: {e if isinstance(e, CredentialsError) else f'cannot write the run credentials: {e}'}",
                 file=sys.stderr,
             )
-            return 2
+            return ExitCode.USAGE
         return _run_world(cfg, stops, tell)
     except Stop as s:  # before the world listened: nothing recorded
-        return 128 + s.signum
+        return signal_exit(s.signum)
     finally:
         stops.ignore()
         forget_run(cfg.run, cfg.listen)
@@ -84,24 +88,22 @@ def _run_world(cfg: WorldConfig, stops: StopSignals, tell: Announcer) -> int:
     sock = socket_path(cfg.listen)
     if not _free_socket(sock):
         print(f"swarm world: {cfg.listen} is in use by another run", file=sys.stderr)
-        return 2
+        return ExitCode.USAGE
     tell.say("recording")
     try:
         world = World(cfg)
     except RecordingError as e:
         print(f"swarm world: {e}", file=sys.stderr)
-        return EXIT_NO_SPACE
+        return ExitCode.NO_SPACE
     live = None  # the --foxglove server (world/live_view.py)
     try:
         if cfg.foxglove is not None:  # before listening: a port in use stops the run before it starts
-            from swarm.world.live_view import LiveViewError, start_live_view
-
             try:
                 live = start_live_view(world.engine.rec.writer, cfg.run, *cfg.foxglove)
             except LiveViewError as e:
                 world.discard_recording()
                 print(f"swarm world: {e}", file=sys.stderr)
-                return 2
+                return ExitCode.USAGE
         tell.say("listening")
         try:
             # a stop comes once the session is the world's, to be closed (the hub opens in
@@ -112,11 +114,11 @@ def _run_world(cfg: WorldConfig, stops: StopSignals, tell: Announcer) -> int:
             stops.ignore()
             world.discard_recording()
             world._close()
-            return 128 + s.signum
+            return signal_exit(s.signum)
         except Exception as e:  # zenoh.ZError: endpoint unusable
             world.discard_recording()
             print(f"swarm world: cannot listen on {cfg.listen}: {e}", file=sys.stderr)
-            return 2
+            return ExitCode.USAGE
         try:
             return _serve(world, cfg, live, stops, tell)
         finally:  # however it ends (a stop while handling another ending too), the session closes
@@ -131,49 +133,43 @@ def _run_world(cfg: WorldConfig, stops: StopSignals, tell: Announcer) -> int:
 
 def _serve(world: World, cfg: WorldConfig, live, stops: StopSignals, tell: Announcer) -> int:
     """The run, listening, from its first tick to its results; its exit code."""
-    code = 0
+    code: int = ExitCode.OK
     try:
         tell.ready()
         if cfg.progress:
             if live is not None:
-                from swarm.world.live_view import open_hint
-
                 print(f"[world] {open_hint(*cfg.foxglove)}", file=sys.stderr, flush=True)
             print(f"[world] run {cfg.run} listening on {cfg.listen}", file=sys.stderr, flush=True)
         code = world.run()
     except Stop as s:
         world.stopped_by = s.signum
-        code = 128 + s.signum
+        code = signal_exit(s.signum)
     except TimeoutError as e:
         print(f"swarm world: {e}", file=sys.stderr)
-        code = 3
+        code = ExitCode.JOIN_TIMEOUT
     except RecordingError as e:  # disk full mid-run: what reached the disk stays readable
         print(f"swarm world: {e}; stopping the run", file=sys.stderr)
         world.stopped_by = -1
-        code = EXIT_NO_SPACE
+        code = ExitCode.NO_SPACE
     except Exception:  # a bug: say so, but still write what was recorded and close cleanly
-        import traceback
-
         traceback.print_exc()
         print("swarm world: internal error; results so far are written", file=sys.stderr)
         world.stopped_by = -1
-        code = 1
+        code = ExitCode.FAILED
     # Results are written even when stopped: nothing recorded is lost.
     stops.ignore()
     try:
         world.finish()
     except RecordingError as e:
-        if code != EXIT_NO_SPACE:
+        if code != ExitCode.NO_SPACE:
             print(f"swarm world: {e}", file=sys.stderr)
-        code = EXIT_NO_SPACE
+        code = ExitCode.NO_SPACE
     except Exception:  # a bug in writing the results: say so, and still close (end notice)
-        import traceback
-
         traceback.print_exc()
         print(
             f"swarm world: internal error writing the results; recording.mcap in {cfg.out_dir} "
             "keeps the run (swarm export)",
             file=sys.stderr,
         )
-        code = 1
+        code = ExitCode.FAILED
     return code

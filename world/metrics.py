@@ -17,6 +17,7 @@ import math
 import numpy as np
 
 from swarm.contracts.orbits import expected_radius, root_of
+from swarm.contracts.vocabulary import EventKind
 
 SETTLING_BAND = 0.02  # 2% band
 CONVERGED_TOL = 0.01  # a run has converged when every live agent is within 1% of R_i
@@ -184,7 +185,9 @@ def recovery(
                 "recovery_time": rec_time,
                 "worst_relative_error": float(finite.max()) if finite.size else None,
                 "commands_missed": int(missed[k0:k1].sum()),
-                "switches": sum(1 for e in events if e.get("kind") == "switch" and k0 <= e.get("tick", -1) < k1),
+                "switches": sum(
+                    1 for e in events if e.get("kind") == EventKind.SWITCH and k0 <= e.get("tick", -1) < k1
+                ),
             }
         )
     return out

@@ -18,13 +18,14 @@ from pathlib import Path
 import numpy as np
 
 from swarm.contracts.scenario import Scenario
+from swarm.contracts.vocabulary import EventKind, ExitCode
 from swarm.world.metrics import agent_metrics, converged, recovery, relative_errors, switch_ticks
 from swarm.world.stream import RECORDING_FILE, Recording, RecordingError, StreamWriter, read_recording
 
 TRAJECTORY_FILE = "trajectory.npz"
 SUMMARY_FILE = "summary.json"
 RESULT_FILES = (RECORDING_FILE, TRAJECTORY_FILE, SUMMARY_FILE)
-EXIT_NO_SPACE = 74  # exit code when results cannot be written (disk full, file too large): EX_IOERR
+EXIT_NO_SPACE = ExitCode.NO_SPACE  # (kept for swarm/api/launch.py and swarm/cli/run.py)
 __all__ = [
     "EXIT_NO_SPACE",
     "RECORDING_FILE",
@@ -279,7 +280,7 @@ class RunResult:
         return {
             "scenario": self.scenario.name,
             # An agent process that crashed (not a scripted kill: that is a "fault") fails the run.
-            "converged": converged(agents) and not any(e["kind"] == "crash" for e in self.events),
+            "converged": converged(agents) and not any(e["kind"] == EventKind.CRASH for e in self.events),
             "ticks": ticks,
             "selection": self.scenario.sensing.selection,
             "switches": switches,

@@ -12,7 +12,11 @@ from __future__ import annotations
 import secrets
 from dataclasses import dataclass
 
+from pydantic import ValidationError
+
 from swarm.contracts import wire
+from swarm.contracts.scenario import format_validation_error
+from swarm.contracts.scenario_tables import AgentSpec
 from swarm.world.core import ACTIVE, WorldCore
 
 CLAIM_TTL = 10.0  # s: an accepted join claim waits this long for the agent's token
@@ -45,11 +49,6 @@ class AgentBook:
 
 def new_agent_spec(aid: int, spec, core: WorldCore):
     """The AgentSpec of an agent added at run time (`swarm spawn`); WireError names the field."""
-    from pydantic import ValidationError
-
-    from swarm.contracts.scenario import format_validation_error
-    from swarm.contracts.scenario_tables import AgentSpec
-
     if aid in core.index:
         raise wire.WireError(f"agent {aid} already exists")
     if not isinstance(spec, dict):

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from swarm.contracts.orbits import root_of
-from swarm.contracts.vocabulary import Coded, ExitCode
+from swarm.contracts.vocabulary import Coded, EventKind, ExitCode
 from swarm.world.metrics import switch_ticks
 from swarm.world.recording import SUMMARY_FILE, TRAJECTORY_FILE
 
@@ -41,7 +41,7 @@ __all__ = [
 REQUIRED_KEYS = ("ids", "role", "target", "t", "x", "y", "u", "out", "alive")
 
 #: Kinds of summary.json events that `run_events` reports.
-EVENT_KINDS = ("drop", "rejoin", "fault")
+EVENT_KINDS = (EventKind.DROP, EventKind.REJOIN, EventKind.FAULT)
 
 
 class RunReadError(Coded):
@@ -257,7 +257,7 @@ def run_events(run: RunData) -> list[RunEvent]:
                 continue
             agent = ev.get("agent")
             kind = str(ev["kind"])
-            if kind == "fault":
+            if kind == EventKind.FAULT:
                 seen_faults.add((round(tm, 9), agent))
             out.append(RunEvent(tm, kind, f"{kind} {agent}" if agent is not None else kind))
     faults = run.summary.get("faults")
@@ -270,6 +270,6 @@ def run_events(run: RunData) -> list[RunEvent]:
             if tm is None or (round(tm, 9), agent) in seen_faults:
                 continue
             kind = str(ev.get("kind", "fault"))
-            out.append(RunEvent(tm, "fault", f"{kind} {agent}" if agent is not None else kind))
+            out.append(RunEvent(tm, EventKind.FAULT, f"{kind} {agent}" if agent is not None else kind))
     out.sort(key=lambda e: e.time)
     return out

@@ -100,6 +100,7 @@ class SceneBuilder:
 
     # -- the scene ----------------------------------------------------------------------------
     def scene(self, ns, ids, x, y, out, heading, alive, numbers):
+        # lazy: foxglove (18 ms) only where a scene is drawn; readers of a run import this module (world/stream.py)
         from foxglove.messages import (
             ArrowPrimitive,
             Color,
@@ -188,6 +189,7 @@ class SceneBuilder:
                 tr.append((float(x[k]), float(y[k])))
         if (self.updates // self.trail_every) % TRAIL_EVERY != 1:
             return None
+        # lazy: foxglove (18 ms) only where a scene is drawn; readers of a run import this module (world/stream.py)
         from foxglove.messages import Color, LinePrimitive, LinePrimitiveLineType, Point3, SceneEntity, SceneUpdate
 
         ts = _stamp(ns)
@@ -210,6 +212,7 @@ class SceneChannels:
     order: `/swarm/events`, `/swarm/run`, `/swarm/scene`, `/swarm/agents`, `/swarm/trails`."""
 
     def __init__(self, ctx, target: tuple[float, float], agents, scene_rate: float):
+        # lazy: foxglove (18 ms) only where a scene is drawn; readers of a run import this module (world/stream.py)
         import foxglove
         from foxglove.channels import SceneUpdateChannel
 
@@ -253,13 +256,13 @@ def _plain(o):
 
 
 def _stamp(ns: int):
-    from foxglove.messages import Timestamp
+    from foxglove.messages import Timestamp  # lazy: as in SceneChannels.scene
 
     return Timestamp(sec=ns // 10**9, nsec=ns % 10**9)
 
 
 def _pose(x: float, y: float, h: float):
-    from foxglove.messages import Pose, Quaternion, Vector3
+    from foxglove.messages import Pose, Quaternion, Vector3  # lazy: as in SceneChannels.scene
 
     return Pose(
         position=Vector3(x=x, y=y, z=0.0), orientation=Quaternion(x=0.0, y=0.0, z=math.sin(h / 2), w=math.cos(h / 2))

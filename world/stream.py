@@ -88,6 +88,7 @@ class StreamWriter:
     """Writes one run's recording.mcap; `close()` finishes the file."""
 
     def __init__(self, path: Path, scenario: Scenario, ticks: int):
+        # lazy: foxglove (18 ms) only to write a recording; readers of a run (plots, results) import this module
         import foxglove
         from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
@@ -175,6 +176,7 @@ def _records(f):
     """The MCAP records of `f` up to its end, or up to where it is torn (a writer killed
     mid-chunk): whatever the reader raises there (a short read, a bad length, a truncated
     compressed chunk) ends the file. The second value says whether the footer was reached."""
+    # lazy: mcap (zstandard) only to read a recording back; the world that writes one never does
     from mcap.records import Footer
     from mcap.stream_reader import StreamReader
 
@@ -192,7 +194,7 @@ def _records(f):
 def read_recording(path: Path) -> Recording:
     """Read a recording.mcap, finished or cut short (a torn tail is where it stops).
     Raises ValueError when the file is not a swarm recording at all."""
-    from mcap.records import Channel, Message
+    from mcap.records import Channel, Message  # lazy: as in _records
 
     topics: dict[int, str] = {}
     rec: Recording | None = None
