@@ -172,16 +172,17 @@ def parse(text: str, path: Path | None = None) -> Credentials:
     if not isinstance(d, dict) or d.get("v") != 1:
         raise CredentialsError(f'{where}: not a swarm credentials file (no "v": 1)')
 
-    def text_field(name: str, optional: bool = True) -> str | None:
+    def required_field(name: str) -> str:
         v = d.get(name)
-        if v is None and optional:
-            return None
         if not isinstance(v, str) or not v:
             raise CredentialsError(f"{where}: {name}: expected a non-empty string")
         return v
 
+    def text_field(name: str) -> str | None:
+        return None if d.get(name) is None else required_field(name)
+
     try:
-        run = wire.check_run_id(text_field("run", optional=False))
+        run = wire.check_run_id(required_field("run"))
     except wire.WireError as e:
         raise CredentialsError(f"{where}: run: {e}") from None
     secret = text_field("secret")
@@ -227,7 +228,7 @@ def parse(text: str, path: Path | None = None) -> Credentials:
         raise CredentialsError(f"{where}: an agent host's file has both host and agents")
     return Credentials(
         run,
-        text_field("endpoint", optional=False),
+        required_field("endpoint"),
         secret,
         user,
         password,

@@ -20,12 +20,11 @@ def analyse(out: dict[int, int | None], leaders: set[int], alive: set[int] | Non
     cycles: list[list[int]] = []
     seen_cycle: set[int] = set()
     for i in sorted(nodes):
-        path, cur = [], i
-        while cur in nodes and cur not in leaders and cur not in path:
+        path: list[int] = []
+        cur: int | None = i
+        while cur is not None and cur in nodes and cur not in leaders and cur not in path:
             path.append(cur)
             cur = succ.get(cur)
-            if cur is None:
-                break
         if cur is not None and cur in leaders and cur in nodes:
             roots[i] = {"root": cur, "hops": len(path)}
         else:

@@ -23,12 +23,13 @@ import os
 import signal
 import socket
 import sys
+from collections.abc import Mapping
 
 LAUNCHER_PID_ENV = "SWARM_LAUNCHER_PID"
 PR_SET_PDEATHSIG = 1
 
 
-def tie_to_launcher(sig: int = signal.SIGTERM, env: dict | None = None) -> bool:
+def tie_to_launcher(sig: int = signal.SIGTERM, env: Mapping[str, str] | None = None) -> bool:
     """Get `sig` when the launcher named in $SWARM_LAUNCHER_PID dies; True when armed."""
     env = os.environ if env is None else env
     want = env.get(LAUNCHER_PID_ENV)
@@ -61,6 +62,7 @@ def endpoint_socket(endpoint: str, timeout: float):
     `timeout`; None when `endpoint` cannot be parsed."""
     kind, _, rest = endpoint.partition("/")
     rest = rest.split("#")[0].split("?")[0]
+    addr: str | tuple[str, int]
     try:
         if kind == "unixsock-stream":
             s, addr = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM), rest

@@ -45,10 +45,11 @@ def root_of(agent: int, out: dict[int, int | None], leaders: set[int]) -> tuple[
     seen = set()
     cur, hops = agent, 0
     while cur not in leaders:
-        if cur in seen or out.get(cur) is None:
+        nxt = out.get(cur)
+        if cur in seen or nxt is None:
             return None, None
         seen.add(cur)
-        cur = out[cur]
+        cur = nxt
         hops += 1
     return cur, hops
 
@@ -68,12 +69,13 @@ def roots(out: dict[int, int | None], leaders: set[int]) -> dict[int, int | None
             if cur in leaders:
                 root = cur
                 break
-            if cur in on_path or out.get(cur) is None:
+            nxt = out.get(cur)
+            if cur in on_path or nxt is None:
                 root = None
                 break
             on_path.add(cur)
             path.append(cur)
-            cur = out[cur]
+            cur = nxt
         for a in path:
             found[a] = root
         found.setdefault(start, root)

@@ -37,8 +37,8 @@ MAX_SCENARIO_BYTES = 32 << 20  # a 10,000-agent scenario is about 1.5 MB
 class Scenario(Strict):
     """A whole scenario file."""
 
-    name: str = Field("", description="free-text name")
-    description: str = Field("", description="free text: where the numbers come from")
+    name: str = Field(default="", description="free-text name")
+    description: str = Field(default="", description="free text: where the numbers come from")
     run: RunSpec = RunSpec()
     target: TargetSpec = TargetSpec()
     gains: GainsSpec

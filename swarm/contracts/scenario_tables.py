@@ -48,24 +48,24 @@ class Strict(BaseModel):
 class RunSpec(Strict):
     """[run]: how the world steps."""
 
-    dt: PositiveFloat = Field(0.01, description="world step (s)")
-    duration: PositiveFloat = Field(60.0, description="simulated time to run (s)")
+    dt: PositiveFloat = Field(default=0.01, description="world step (s)")
+    duration: PositiveFloat = Field(default=60.0, description="simulated time to run (s)")
     clock: Literal["lockstep", "realtime"] = Field(
-        "lockstep", description="lockstep: step when every agent answered; realtime: wall clock"
+        default="lockstep", description="lockstep: step when every agent answered; realtime: wall clock"
     )
     seed: Annotated[int, Field(ge=0, le=MAX_SEED)] = Field(
-        0, description="seed for every random choice of the run (0 .. 2**63 - 1)"
+        default=0, description="seed for every random choice of the run (0 .. 2**63 - 1)"
     )
     on_dropout: Literal["leave", "coast"] = Field(
-        "leave",
+        default="leave",
         description="what the world does with a dead agent: leave the world, or coast uncontrolled",
     )
     lockstep_deadline: Annotated[float, Field(gt=0, le=MAX_WAIT, allow_inf_nan=False)] = Field(
-        0.5,
+        default=0.5,
         description="lockstep: wall seconds to wait for a live agent's command before holding its last one",
     )
     max_added_agents: Annotated[int, Field(ge=0, le=MAX_AGENTS)] | None = Field(
-        None,
+        default=None,
         description="agents that may be added while the run goes (swarm spawn of a new id); "
         "default 4 x the scenario's agents",
     )
@@ -120,7 +120,7 @@ class GainsSpec(Strict):
     c1: Rate = Field(description="gain on the heading difference wrap(g_j - g_i) (1/s)")
     c2: Rate = Field(description="gain on sin(lambda_ij - g_i) (rad/s)")
     law: str = Field(
-        "bearing",
+        default="bearing",
         description="follower law of the older signature (g_i, g_j, lambda_ij, c1, c2): a registered "
         "name, or 'module:function'; anything but 'bearing' replaces [law] follower "
         "(see swarm/contracts/laws.py)",
@@ -136,8 +136,8 @@ class LawSpec(Strict):
     """[law]: the guidance laws, each law(obs) -> u (docs/scenarios.md, "Writing a law"), and their
     parameters."""
 
-    follower: str = Field("bearing", description="follower law: 'bearing' (the paper's) or 'module:function'")
-    leader: str = Field("cc", description="leader law: 'cc' (CC path, then orbit hold) or 'module:function'")
+    follower: str = Field(default="bearing", description="follower law: 'bearing' (the paper's) or 'module:function'")
+    leader: str = Field(default="cc", description="leader law: 'cc' (CC path, then orbit hold) or 'module:function'")
     params: dict[str, Finite] = Field(
         default_factory=dict,
         max_length=MAX_LAW_PARAMS,
@@ -158,12 +158,12 @@ class LawSpec(Strict):
 class SensingSpec(Strict):
     """[sensing]: who senses whom, and how followers pick their out-neighbour."""
 
-    range: Length | None = Field(None, description="sensing range (m); unlimited if absent")
+    range: Length | None = Field(default=None, description="sensing range (m); unlimited if absent")
     fov: Annotated[float, Field(gt=0, le=2 * math.pi)] | None = Field(
-        None, description="full field of view (rad) centred on the heading; 2*pi or absent = all round"
+        default=None, description="full field of view (rad) centred on the heading; 2*pi or absent = all round"
     )
     selection: Literal["sticky", "nearest", "fixed", "rooted"] = Field(
-        "sticky",
+        default="sticky",
         description="sticky (default): the nearest sensed agent once it has a path to a leader, "
         "kept until it is lost (finitely many switches, loop-free); nearest: the "
         "paper's rule, re-chosen every tick (can form follower-only cycles); fixed: "
@@ -171,7 +171,7 @@ class SensingSpec(Strict):
         "agent that advertises a path to a leader, re-chosen every tick",
     )
     hysteresis: Annotated[float, Field(ge=0, lt=1)] = Field(
-        0.0,
+        default=0.0,
         description="nearest, fixed, rooted: switch to a new nearest agent only if it is this "
         "fraction closer than the current one (sticky ignores it)",
     )
@@ -186,10 +186,10 @@ class AgentSpec(Strict):
     y: Coord
     heading: Angle = Field(description="initial heading (rad)")
     speed: Speed = Field(description="constant forward speed (m/s)")
-    orbit_radius: Length | None = Field(None, description="leaders: orbit radius (m)")
-    direction: Literal["ccw", "cw"] = Field("ccw", description="leaders: orbit direction")
-    follow: AgentId | None = Field(None, description="followers: fixed out-neighbour id")
-    max_turn_rate: Rate | None = Field(None, description="turn-rate limit (rad/s)")
+    orbit_radius: Length | None = Field(default=None, description="leaders: orbit radius (m)")
+    direction: Literal["ccw", "cw"] = Field(default="ccw", description="leaders: orbit direction")
+    follow: AgentId | None = Field(default=None, description="followers: fixed out-neighbour id")
+    max_turn_rate: Rate | None = Field(default=None, description="turn-rate limit (rad/s)")
 
     @model_validator(mode="after")
     def _role_fields(self) -> AgentSpec:
@@ -223,15 +223,15 @@ class FaultSpec(Strict):
 
     at: Annotated[float, Field(ge=0, allow_inf_nan=False)] = Field(description="simulated time (s)")
     kind: Literal["kill", "restart", "freeze", "thaw", "partition", "loss", "delay", "noise"]
-    agent: AgentId | None = Field(None, description="agent id; loss/delay/noise without it hit every agent")
-    duration: PositiveFloat | None = Field(None, description="partition/loss/delay/noise: how long (s)")
-    probability: Annotated[float, Field(ge=0, le=1)] | None = Field(None, description="loss: per message")
-    what: Literal["sense", "cmd", "both"] = Field("both", description="loss: which messages")
+    agent: AgentId | None = Field(default=None, description="agent id; loss/delay/noise without it hit every agent")
+    duration: PositiveFloat | None = Field(default=None, description="partition/loss/delay/noise: how long (s)")
+    probability: Annotated[float, Field(ge=0, le=1)] | None = Field(default=None, description="loss: per message")
+    what: Literal["sense", "cmd", "both"] = Field(default="both", description="loss: which messages")
     delay: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = Field(
-        None, description="delay: added latency of sensor frames (s of simulated time)"
+        default=None, description="delay: added latency of sensor frames (s of simulated time)"
     )
     std: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = Field(
-        None, description="noise: standard deviation on sensed bearings and headings (rad)"
+        default=None, description="noise: standard deviation on sensed bearings and headings (rad)"
     )
 
     @model_validator(mode="after")

@@ -69,18 +69,19 @@ class ReadyWait:
     """The launcher's side, on the reading end `fd` (owned: closed by `close`)."""
 
     def __init__(self, fd: int):
-        self.fd = fd
+        self.fd: int | None = fd
         self.step = ""  # the last word read
         self.ended = False  # the pipe ended (the world exited, or closed it after `ready`)
         self._buf = b""
 
     def poll(self, timeout: float) -> bool:
         """Read what the world wrote within `timeout` s; True once it said `ready`."""
-        if self.step == READY or self.ended:
+        fd = self.fd
+        if self.step == READY or self.ended or fd is None:  # (None: closed)
             return self.step == READY
-        readable, _, _ = select.select([self.fd], [], [], max(0.0, timeout))
+        readable, _, _ = select.select([fd], [], [], max(0.0, timeout))
         if readable:
-            data = os.read(self.fd, 4096)
+            data = os.read(fd, 4096)
             if not data:
                 self.ended = True
             self._buf += data

@@ -76,7 +76,7 @@ def _local_addresses() -> list[str]:
         infos = socket.getaddrinfo(hostname, None, type=socket.SOCK_STREAM)
     except OSError:
         infos = []
-    found += [info[4][0].split("%", 1)[0] for info in infos]
+    found += [str(info[4][0]).split("%", 1)[0] for info in infos]
     # The address of the default route (a UDP "connect" sends nothing), which the
     # hostname often does not resolve to (Debian maps it to 127.0.1.1).
     for family, probe in ((socket.AF_INET, "192.0.2.1"), (socket.AF_INET6, "2001:db8::1")):
@@ -126,7 +126,7 @@ def _san_entries(hosts: list[str]):
     # lazy: cryptography (30 ms) only where a certificate is read or made, not in every process
     from cryptography import x509
 
-    entries = []
+    entries: list[x509.GeneralName] = []
     for h in _dedupe(list(hosts) + ["localhost", "127.0.0.1"]):
         h = h.strip().strip("[]")
         if not h:

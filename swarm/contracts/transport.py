@@ -166,13 +166,16 @@ def open_hub(listen: str, auth: HubAuth | None = None):
     raise_open_files()
     if auth is None:
         return zenoh.open(hub_config(listen))
+    secret = auth.creds.secret
+    if secret is None:
+        raise ValueError("the hub needs the run's own credentials (with its secret)")
     dictionary = runtime_dir() / f".{auth.creds.run}.users"
     door = local_door(auth.creds.run) if socket_path(listen) is None else None
     try:
         write_private(
             dictionary,
             access.user_dictionary(
-                auth.creds.secret, auth.creds.run, auth.agent_ids, host=True, supervisor=auth.supervisor
+                secret, auth.creds.run, auth.agent_ids, host=True, supervisor=auth.supervisor
             ).encode(),
         )
         if door is not None and len(str(socket_path(door))) <= 100:  # (Unix socket paths: < 108 bytes)
@@ -194,7 +197,7 @@ def door_of(connect: str, creds: Credentials | None) -> str | None:
         return None
     door = local_door(creds.run)
     path = socket_path(door)
-    if not path.exists():
+    if path is None or not path.exists():
         return None
     with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
         s.settimeout(0.2)

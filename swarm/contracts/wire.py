@@ -287,7 +287,7 @@ def encode_cmd(c: Command) -> bytes:
     return encode_cmd_fields(c.agent, c.tick, c.u, c.out, c.phase, c.hops, c.key)
 
 
-_PHASE_CODE = {p: k for k, p in enumerate(PHASES)}
+_PHASE_CODE: dict[str, int] = {p: k for k, p in enumerate(PHASES)}
 
 
 def encode_cmd_fields(

@@ -75,7 +75,8 @@ def _with_door(ref: RunRef) -> RunRef:
         return ref
     door = local_door(ref.run)
     path = socket_path(door)
-    return RunRef(ref.run, ref.endpoint, ref.creds, door) if path.exists() and _socket_answers(path) else ref
+    answers = path is not None and path.exists() and _socket_answers(path)
+    return RunRef(ref.run, ref.endpoint, ref.creds, door) if answers else ref
 
 
 def _socket_answers(path) -> bool:

@@ -6,9 +6,13 @@ from __future__ import annotations
 
 import io
 import math
+from typing import TYPE_CHECKING
 
 from swarm.live.data import graph_of
 from swarm.live.watch import DEAD_GLYPH, EDGE_GLYPH, STYLES, TARGET_GLYPH, Body, draw_scene
+
+if TYPE_CHECKING:  # annotations only (rich is imported where a view is drawn)
+    from rich.console import JustifyMethod, RenderableType
 
 
 def fmt(v, spec: str, none: str = "-") -> str:
@@ -71,7 +75,7 @@ def graph_renderable(g: dict):
     for i, j in g["edges"]:
         kids.setdefault(j, []).append(i)
     role = {a["id"]: a["role"] for a in g["agents"]}
-    parts = [
+    parts: list[RenderableType] = [
         Text(
             f"run {g['run']}  tick {g['tick']}  t={g['time']:.2f} s  "
             f"agents {len(g['nodes'])} live / {len(g['agents'])}",
@@ -158,7 +162,7 @@ def agents_table(rows: list[dict], compact: bool = False):
     from rich.table import Table
 
     t = Table(box=None if compact else box.SIMPLE_HEAD, header_style="bold", pad_edge=False, show_edge=False)
-    cols = [("id", "right"), ("role", "left")]
+    cols: list[tuple[str, JustifyMethod]] = [("id", "right"), ("role", "left")]
     if not compact:
         cols += [("pid", "right"), ("host", "left")]
     cols += [("alive", "left"), ("out", "right"), ("hops", "right")]
@@ -260,10 +264,11 @@ def watch_frame(snap: dict, ended: bool | str, width: int, height: int):
     target = tuple(info.get("target") or (0.0, 0.0))
     pic = draw_scene(target, bodies_of(snap), pic_w, pic_h).to_rich()
     if side:
-        body = Table.grid(padding=(0, 2))
-        body.add_column(no_wrap=True, width=pic_w)
-        body.add_column(no_wrap=True)
-        body.add_row(pic, table)
+        grid = Table.grid(padding=(0, 2))
+        grid.add_column(no_wrap=True, width=pic_w)
+        grid.add_column(no_wrap=True)
+        grid.add_row(pic, table)
+        body: RenderableType = grid
     else:
         body = Group(pic, table)
     return Group(header(info, ended), body, legend())

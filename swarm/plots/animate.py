@@ -19,7 +19,9 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.animation import PillowWriter
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle
 from matplotlib.transforms import offset_copy
@@ -27,7 +29,7 @@ from PIL import Image
 
 from swarm.plots.context import GROUP_ABOVE, Ctx, make_context
 from swarm.plots.palette import LEADER_MARKER
-from swarm.plots.style import DEAD_COLOUR, EXPECTED_COLOUR, TARGET_COLOUR, size_for
+from swarm.plots.style import DEAD_COLOUR, EXPECTED_COLOUR, TARGET_COLOUR, figure_of, size_for
 from swarm.world.metrics import switch_ticks
 from swarm.world.run_reader import expected_radii, load_run
 
@@ -87,7 +89,7 @@ class _Frames:
             [], [], s=size_for(run.n_agents, 260, 140), facecolors="none", edgecolors="red", linewidths=1.8, zorder=5
         )
         fs = size_for(run.n_agents, 8, 6)
-        beside = offset_copy(ax.transData, fig=ax.figure, x=6, y=4, units="points")
+        beside = offset_copy(ax.transData, fig=figure_of(ax), x=6, y=4, units="points")
         self.labels = (
             [
                 ax.text(
@@ -139,7 +141,7 @@ class _Frames:
         self.edges.set_colors(cols)
         for cols_, sc in self.groups:
             sc.set_offsets(np.column_stack([run.x[k, cols_], run.y[k, cols_]]) if cols_ else np.zeros((0, 2)))
-            sc.set_facecolors([looks.colours[j] if alive[j] else DEAD_COLOUR for j in cols_])
+            sc.set_facecolor([looks.colours[j] if alive[j] else DEAD_COLOUR for j in cols_])
         prev = int(self.rows[max(0, f - SWITCH_HOLD)]) if f else -1
         ring = [j for j in range(run.n_agents) if any(prev < s <= k for s in self.switch_at[j])]
         self.rings.set_offsets(np.column_stack([run.x[k, ring], run.y[k, ring]]) if ring else np.zeros((0, 2)))
@@ -190,17 +192,20 @@ def render_animation(
     )
     frames = _Frames(ax, ctx, rows)
     fig.set_dpi(DPI)
-    fig.get_layout_engine().execute(fig)  # lay out once, not at every frame
+    engine = fig.get_layout_engine()
+    if engine is not None:
+        engine.execute(fig)  # lay out once, not at every frame
     fig.set_layout_engine("none")
     path = run_dir / ANIMATION_FILE
     tmp = path.with_name(f".{path.name}.tmp.gif")
     writer = _BlitWriter(fps=max(1, int(fps)))
     try:
         with writer.saving(fig, tmp, DPI):
-            fig.canvas.draw()  # everything but the frame's own artists (animated: left out)
-            background = fig.canvas.copy_from_bbox(fig.bbox)
+            canvas = agg_canvas(fig)
+            canvas.draw()  # everything but the frame's own artists (animated: left out)
+            background = canvas.copy_from_bbox(fig.bbox)
             for f in range(len(rows)):
-                fig.canvas.restore_region(background)
+                canvas.restore_region(background)
                 for artist in frames(f):
                     ax.draw_artist(artist)
                 writer.grab_frame()
@@ -213,15 +218,23 @@ def render_animation(
     return path
 
 
+def agg_canvas(fig: Figure) -> FigureCanvasAgg:
+    """The figure's canvas, an Agg one (swarm/plots/__init__.py selects the Agg backend)."""
+    canvas = fig.canvas
+    if not isinstance(canvas, FigureCanvasAgg):
+        raise TypeError(f"the animation draws on an Agg canvas, not {type(canvas).__name__}")
+    return canvas
+
+
 class _BlitWriter(PillowWriter):
     """PillowWriter taking each frame from the canvas as drawn (background restored, the
     frame's artists drawn on it) instead of redrawing the whole figure."""
 
     def grab_frame(self, **savefig_kwargs) -> None:
-        canvas = self.fig.canvas
+        canvas = agg_canvas(self.fig)
         w, h = canvas.get_width_height(physical=True)
         image = Image.frombuffer("RGBA", (w, h), bytes(canvas.buffer_rgba()), "raw", "RGBA", 0, 1)
-        self._frames.append(image.convert("RGB"))
+        self._frames.append(image.convert("RGB"))  # type: ignore[attr-defined]  # PillowWriter's list, not in its stubs
 
 
 def gif_frames(path: Path) -> int:

@@ -19,6 +19,7 @@ from matplotlib.transforms import Transform, offset_copy
 
 from swarm.plots.palette import Looks
 from swarm.plots.placement import axes_size_pt, stack_offsets
+from swarm.plots.style import figure_of
 from swarm.world.run_reader import RunData
 
 START_S = 5.0  # "the first seconds": this long, or the first START_FRACTION of a short run
@@ -164,4 +165,4 @@ def _name(ax: Axes, text: str, big: Clip, edge: float, top: bool) -> None:
 
 
 def _offset(ax: Axes, dx_pt: float, dy_pt: float) -> Transform:
-    return offset_copy(ax.transData, fig=ax.figure, x=dx_pt, y=dy_pt, units="points")
+    return offset_copy(ax.transData, fig=figure_of(ax), x=dx_pt, y=dy_pt, units="points")

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.colors import ListedColormap
 from matplotlib.lines import Line2D
 
 from swarm.contracts.orbits import root_of
@@ -27,7 +29,10 @@ NO_TREE = "no leader"
 
 def _reordered(name: str, shades: int) -> list[Any]:
     """The colours of a qualitative map, darkest shade of every hue first, greys dropped."""
-    cols = list(plt.get_cmap(name).colors)
+    cmap = plt.get_cmap(name)
+    if not isinstance(cmap, ListedColormap):
+        raise ValueError(f"{name}: not a qualitative (listed) colour map")
+    cols = [tuple(float(v) for v in c) for c in np.asarray(cmap.colors)]  # RGB tuples, as the map lists them
     hues = len(cols) // shades
     out = [cols[h * shades + s] for s in range(shades) for h in range(hues)]
     return [c for c in out if not (abs(c[0] - c[1]) < 0.02 and abs(c[1] - c[2]) < 0.02)]

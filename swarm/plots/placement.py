@@ -12,6 +12,8 @@ from typing import Any
 import numpy as np
 from matplotlib.axes import Axes
 
+from swarm.plots.style import figure_of
+
 
 def axes_size_pt(ax: Axes) -> tuple[float, float]:
     """(width, height) of the axes in points once the figure's layout engine has run (run
@@ -19,7 +21,7 @@ def axes_size_pt(ax: Axes) -> tuple[float, float]:
     cached = getattr(ax, "_swarm_size_pt", None)
     if cached is not None:
         return cached
-    fig = ax.figure
+    fig = figure_of(ax)
     engine = fig.get_layout_engine()
     if engine is not None:
         engine.execute(fig)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import matplotlib.pyplot as plt
 from matplotlib.figure import Figure
@@ -22,6 +22,9 @@ from swarm.plots.trajectories import figure_size as trajectories_size
 from swarm.plots.trajectories import panel_trajectories
 from swarm.world.run_reader import RunData, load_run
 
+if TYPE_CHECKING:
+    from matplotlib.typing import RcKeyType
+
 #: Files written by `render_plots` (as PNG), in the order they are returned.
 PLOT_FILES = PLOT_NAMES  # the list lives with the rest of a run directory's layout (swarm/offline/results.py)
 
@@ -32,7 +35,7 @@ FORMATS = ("png", "pdf", "svg")
 OVERVIEW = ("graph.png", "trajectories.png", "distance.png", "control.png")
 
 #: PDF: TrueType fonts embedded (editable, accepted by publishers), not Type 3.
-RC = {"pdf.fonttype": 42, "svg.fonttype": "path"}
+RC: dict[RcKeyType, Any] = {"pdf.fonttype": 42, "svg.fonttype": "path"}
 
 
 def title_suffix(run: RunData) -> str:

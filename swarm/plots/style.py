@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
+from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.transforms import offset_copy
 
@@ -34,6 +35,14 @@ DPI = 120
 KEY_DROP_PT = 34.0  # the key legend's top, this far under the axes (below tick labels and x label)
 
 
+def figure_of(ax: Axes) -> Figure:
+    """The figure `ax` is drawn in (these plots make no subfigures: it is the root one)."""
+    fig = ax.get_figure(root=True)
+    if fig is None:
+        raise ValueError("axes that belong to no figure")
+    return fig
+
+
 def size_for(n: int, small: float, large: float) -> float:
     """Interpolate a size from `small` (few agents) to `large` (~50 agents)."""
     f = min(1.0, max(0.0, (n - 6) / 44))
@@ -44,7 +53,7 @@ def key_legend(ax: Axes, handles: list[Line2D], ncol: int | None = None, **kw: A
     """The legend of what the marks mean, under the axes (clear of lines and labels)."""
     if not handles:
         return
-    below = offset_copy(ax.transAxes, fig=ax.figure, y=-KEY_DROP_PT, units="points")  # under the x label
+    below = offset_copy(ax.transAxes, fig=figure_of(ax), y=-KEY_DROP_PT, units="points")  # under the x label
     ax.legend(
         handles=handles,
         fontsize=7,

@@ -14,7 +14,16 @@ from matplotlib.transforms import offset_copy
 from swarm.plots.clipping import ControlRange, control_range, mark_clips
 from swarm.plots.context import Ctx
 from swarm.plots.placement import axes_size_pt, spread_1d, stack_offsets
-from swarm.plots.style import DEAD_COLOUR, EVENT_COLOURS, EXPECTED_COLOUR, envelope, key_legend, size_for, split_alive
+from swarm.plots.style import (
+    DEAD_COLOUR,
+    EVENT_COLOURS,
+    EXPECTED_COLOUR,
+    envelope,
+    figure_of,
+    key_legend,
+    size_for,
+    split_alive,
+)
 from swarm.world.metrics import switch_ticks
 from swarm.world.run_reader import RunEvent, first_alive
 
@@ -41,10 +50,10 @@ def merged(events: list[RunEvent]) -> list[RunEvent]:
         else:
             out.append((ev, [who] if who else []))
     result = []
-    for ev, who in out:
+    for ev, names in out:
         head = ev.label.partition(" ")[0]
-        more = f" +{len(who) - MAX_MERGED}" if len(who) > MAX_MERGED else ""
-        result.append(RunEvent(ev.time, ev.kind, " ".join([head, ", ".join(who[:MAX_MERGED])]).strip() + more))
+        more = f" +{len(names) - MAX_MERGED}" if len(names) > MAX_MERGED else ""
+        result.append(RunEvent(ev.time, ev.kind, " ".join([head, ", ".join(names[:MAX_MERGED])]).strip() + more))
     return result
 
 
@@ -109,7 +118,7 @@ def label_line_ends(ax: Axes, ctx: Ctx, values: np.ndarray, columns: list[int]) 
     # within the axes' height (labels beyond it would make the layout shrink the axes), with
     # a margin for what the layout still takes from the height after this
     got = spread_1d(want, (fs + 3.0) / (0.95 * h_pt), lo=0.0, hi=1.0)
-    text_at = offset_copy(ax.transAxes, fig=ax.figure, x=12.0, units="points")
+    text_at = offset_copy(ax.transAxes, fig=figure_of(ax), x=12.0, units="points")
     for j, w, g in zip(cols, want, got):
         colour = ctx.looks.colours[j] if ctx.run.alive[-1, j] else DEAD_COLOUR
         if abs(g - w) * h_pt > 1.5:  # moved: a leader line, under every label
@@ -185,7 +194,7 @@ def draw_switches(ax: Axes, ctx: Ctx, t: np.ndarray, v: np.ndarray, c: np.ndarra
     off = stack_offsets((t - x0) * w_pt / (x1 - x0), (v - y0) * h_pt / (y1 - y0), sep=4.0, step=7.0)
     for dx, dy in np.unique(off, axis=0):
         sel = (off[:, 0] == dx) & (off[:, 1] == dy)
-        tr = offset_copy(ax.transData, fig=ax.figure, x=float(dx), y=float(dy), units="points")
+        tr = offset_copy(ax.transData, fig=figure_of(ax), x=float(dx), y=float(dy), units="points")
         ax.scatter(
             t[sel],
             v[sel],

@@ -85,7 +85,7 @@ class Forked:
             wait_until(lambda: self.poll() is not None, timeout, 0.01)
             code = self.returncode
         if code is None:
-            raise subprocess.TimeoutExpired(self.args, timeout)
+            raise subprocess.TimeoutExpired(self.args, 0.0 if timeout is None else timeout)
         return code
 
     def _wait(self, flags: int) -> int | None:
@@ -174,12 +174,15 @@ class ForkServer:
                 stderr=err,
                 env=env,
             )
+        if self.proc.stdin is None or self.proc.stdout is None:  # (never: both are pipes)
+            raise ForkError("the agents' fork server has no pipes")
+        self.stdin, self.stdout = self.proc.stdin, self.proc.stdout
         self.broken: str | None = None
         self.ready = False
 
     def _reply(self, timeout: float) -> dict:
-        ready, _, _ = select.select([self.proc.stdout], [], [], timeout)
-        line = self.proc.stdout.readline() if ready else b""
+        ready, _, _ = select.select([self.stdout], [], [], timeout)
+        line = self.stdout.readline() if ready else b""
         return json.loads(line) if line else {"error": "no answer (it ended, or took too long)"}
 
     def spawn(self, argv: list[str], log: Path, extra_env: dict | None = None) -> Forked:
@@ -194,8 +197,8 @@ class ForkServer:
                     raise ForkError(str(reply.get("error", reply)))
                 self.ready = True
             req = {"argv": argv, "log": str(log), "env": extra_env or {}}
-            self.proc.stdin.write(json.dumps(req).encode() + b"\n")
-            self.proc.stdin.flush()
+            self.stdin.write(json.dumps(req).encode() + b"\n")
+            self.stdin.flush()
             reply = self._reply(REPLY_TIMEOUT)
             if "pid" not in reply:
                 raise ForkError(str(reply.get("error", reply)))
@@ -208,7 +211,7 @@ class ForkServer:
         """End the server (the end of its stdin; SIGKILL with `kill`); the group's stop reaps it."""
         if kill and self.proc.poll() is None:
             self.proc.kill()
-        for f in (self.proc.stdin, self.proc.stdout):
+        for f in (self.stdin, self.stdout):
             try:
                 f.close()
             except OSError:

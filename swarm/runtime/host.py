@@ -5,8 +5,8 @@
     agent host:     swarm host (router) <── agents 3, 4, 5 (clients, Unix socket) ─┘
 
 zenoh routes router to router, so agents behind it are the same agents as anywhere else;
-one link crosses the network per host instead of one per agent. docs/protocol.md, section
-13, has the whole story: what goes through, the `host` identity (the hub sees the host
+one link crosses the network per host instead of one per agent. docs/reference/protocol.md#hosts
+has the whole story: what goes through, the `host` identity (the hub sees the host
 router's link, not the agents behind it, so `host` may do what any agent may) and the
 host router's own rules (its agents confined as at the hub; its upstream link, the hub
 known by its zenoh id, let through).
@@ -32,32 +32,20 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+import zenoh
+
 from swarm.contracts import credentials, wire
 from swarm.contracts.identities import agent_user
 from swarm.contracts.laws import ENV_TRUSTED_LAWS, with_trusted_laws
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV, endpoint_refuses, exit_status
 from swarm.contracts.vocabulary import ExitCode, signal_exit
 from swarm.runtime.forks import AgentStarter
-from swarm.runtime.host_setup import HostError, HostSetup
+from swarm.runtime.host_setup import HostConfig, HostError, HostSetup
 from swarm.runtime.procs import Group
 from swarm.runtime.supervision import AgentExitReport, agent_exit
 
 # agent exits: the world vanished, or stopped answering past the grace
 WORLD_GONE_CODES = (ExitCode.WORLD_GONE, ExitCode.WORLD_SILENT)
-
-
-@dataclass
-class HostConfig:
-    connect: str | None = None  # the world's endpoint (default: the credentials')
-    agents: tuple[int, ...] | None = None  # default: the host file's agents, else the scenario's
-    creds_file: Path | None = None  # default: $SWARM_CREDENTIALS, else the local run's own file
-    run: str | None = None
-    name: str | None = None  # default: the host file's name, else this machine's host name
-    listen: str | None = None  # where the agents connect (default: a Unix socket, private dir)
-    logs: Path | None = None  # default runs/<run>-host-<name>
-    world_grace: float = 10.0
-    trust: tuple[str, ...] = ()
-    wait: float = 30.0  # s to wait for the world to answer before giving up
 
 
 def _say(msg: str) -> None:
@@ -68,15 +56,15 @@ def _say(msg: str) -> None:
 class Host(HostSetup):
     cfg: HostConfig
     say: Callable[[str], None] = _say
-    creds: credentials.Credentials | None = None
+    creds: credentials.Credentials = field(init=False)  # (HostSetup.prepare)
     ids: tuple[int, ...] = ()
     name: str = ""
     upstream: str = ""
     local: str = ""  # the router's endpoint for this host's agents
     dir: Path | None = None  # private: the router's socket and the agents' credentials
-    logs: Path | None = None
-    router: object | None = None
-    hub_zid: str | None = None
+    logs: Path = field(init=False)  # (HostSetup.prepare)
+    router: zenoh.Session | None = None
+    hub_zid: str = ""
     group: Group = field(default_factory=Group)
     procs: dict[int, subprocess.Popen] = field(default_factory=dict)
     starter: AgentStarter | None = None
@@ -90,7 +78,7 @@ class Host(HostSetup):
     def agent_file(self, aid: int) -> Path:
         """Agent `aid`'s own identity (nothing else), for dialling this host's router."""
         one = replace(self.creds.export(agent_user(aid)), endpoint=self.local, tls_ca=None)
-        return credentials.write(one, self.dir / f"agent-{aid}.cred")
+        return credentials.write(one, self.private_dir() / f"agent-{aid}.cred")
 
     def start_agent(self, aid: int) -> subprocess.Popen:
         if self.starter is None:  # forked by a fork server where it can (swarm/runtime/forks.py)
@@ -213,7 +201,7 @@ class Host(HostSetup):
         return ExitCode.OK
 
     def summary(self) -> str:
-        by = {}
+        by: dict[str, list[str]] = {}
         for r in sorted(self.exits, key=lambda r: r.agent):
             by.setdefault(exit_status(r.code), []).append(str(r.agent))
         return (

@@ -12,8 +12,10 @@ A mixin of `Host`, whose state it fills in; `HostError` says what is wrong, in o
 from __future__ import annotations
 
 import os
+import queue
 import re
 import socket
+from dataclasses import dataclass
 from pathlib import Path
 
 import zenoh
@@ -27,6 +29,20 @@ from swarm.contracts.vocabulary import ExitCode, signal_exit
 from swarm.runtime.procs import wait_until
 
 
+@dataclass
+class HostConfig:
+    connect: str | None = None  # the world's endpoint (default: the credentials')
+    agents: tuple[int, ...] | None = None  # default: the host file's agents, else the scenario's
+    creds_file: Path | None = None  # default: $SWARM_CREDENTIALS, else the local run's own file
+    run: str | None = None
+    name: str | None = None  # default: the host file's name, else this machine's host name
+    listen: str | None = None  # where the agents connect (default: a Unix socket, private dir)
+    logs: Path | None = None  # default runs/<run>-host-<name>
+    world_grace: float = 10.0
+    trust: tuple[str, ...] = ()
+    wait: float = 30.0  # s to wait for the world to answer before giving up
+
+
 class HostError(Exception):
     """The host cannot start; one line, and the exit code."""
 
@@ -37,6 +53,20 @@ class HostError(Exception):
 
 class HostSetup:
     """What `Host` does before its agents start (a mixin: the state is Host's)."""
+
+    # Host's state (swarm/runtime/host.py) that these steps read or fill in
+    cfg: HostConfig
+    creds: credentials.Credentials  # from prepare() on
+    ids: tuple[int, ...]
+    name: str
+    upstream: str
+    local: str
+    dir: Path | None  # from prepare() on
+    logs: Path  # from prepare() on
+    router: zenoh.Session | None
+    hub_zid: str  # from probe_hub() on
+    stop_signal: int | None
+    events: queue.SimpleQueue
 
     def prepare(self) -> None:
         """Credentials, agent ids, name, endpoints, directories; HostError says what is wrong."""
@@ -113,14 +143,20 @@ class HostSetup:
             )
         return found[0]
 
+    def private_dir(self) -> Path:
+        """The host's private directory (claimed by prepare())."""
+        if self.dir is None:
+            raise HostError("the host has no private directory (prepare() first)")
+        return self.dir
+
     def open_router(self) -> None:
         creds, run = self.creds, self.creds.run
         tls = client_tls(creds) if self.upstream.startswith("tls/") else None
         if creds.hub_is_open:  # the hub checks nothing: nor does its host
             cfg = host_router_config(self.local, self.upstream, run, tls=tls)
-            self.router = _open(zenoh, cfg, self.local)
+            router = _open(cfg, self.local)
         else:
-            users = self.dir / "users"  # read once by zenoh at open, then removed
+            users = self.private_dir() / "users"  # read once by zenoh at open, then removed
             write_private(users, access.host_dictionary(creds.identity(agent_user(a)) for a in self.ids).encode())
             try:
                 cfg = host_router_config(
@@ -132,19 +168,20 @@ class HostSetup:
                     access.host_router_access(run, self.ids, self.hub_zid),
                     tls,
                 )
-                self.router = _open(zenoh, cfg, self.local)
+                router = _open(cfg, self.local)
             finally:
                 users.unlink(missing_ok=True)
+        self.router = router
         put = self.events.put
-        self.router.liveliness().declare_subscriber(
+        router.liveliness().declare_subscriber(
             wire.world_alive_key(run), lambda s: put(("alive", s.kind)), history=True
         )
-        self.router.declare_subscriber(wire.world_control_key(run), lambda s: put(("control", s.payload.to_bytes())))
+        router.declare_subscriber(wire.world_control_key(run), lambda s: put(("control", s.payload.to_bytes())))
 
         def linked() -> bool:
             if self.stop_signal is not None:
                 return True
-            return any(r.ok is not None for r in self.router.liveliness().get(wire.world_alive_key(run), timeout=0.5))
+            return any(r.ok is not None for r in router.liveliness().get(wire.world_alive_key(run), timeout=0.5))
 
         if not wait_until(linked, self.cfg.wait, 0.1):
             raise HostError(
@@ -168,7 +205,7 @@ def _host_name() -> str:
     return name or "host"
 
 
-def _open(zenoh, cfg, local: str):
+def _open(cfg: zenoh.Config, local: str) -> zenoh.Session:
     try:
         return zenoh.open(cfg)
     except Exception as e:

@@ -162,28 +162,30 @@ class Launcher:
         """Wait for the world's own word that it listens (swarm/contracts/startup.py): True.
         False when it exited first (the run loop reports its exit), when the run is stopped,
         or, the last resort, after `timeout` s (then `failure` says what it was still doing)."""
-        w = self.ready_wait
+        w, world = self.ready_wait, self.world
+        if w is None or world is None:  # (start_world first)
+            return False
         if w.wait(timeout, lambda: self.stop_signal is not None):
             return True
         if w.ended:  # it exited (or closed its end and exits): its exit code comes in a moment
             wait_until(lambda: self.world_exit_code() is not None, 5.0, 0.02)
         elif self.stop_signal is None and self.world_exit_code() is None:
             self.failure = (
-                f"the world (pid {self.world.pid}) did not get ready within {timeout:g} s: it was "
+                f"the world (pid {world.pid}) did not get ready within {timeout:g} s: it was "
                 f"still {w.doing()} (see {self.logs / 'world.log'})"
             )
             self.failed = True
         return False
 
-    def start_starter(self) -> None:
+    def start_starter(self) -> AgentStarter:
         """What starts the agents (swarm/runtime/forks.py: a fork server, which imports meanwhile); after
         the world, which leads the group."""
         if self.starter is None:
             self.starter = AgentStarter(self.group, self._env(), self.logs, lambda m: self.say(f"swarm up: {m}"))
+        return self.starter
 
     def start_agent(self, agent_id: int) -> subprocess.Popen:
-        self.start_starter()
-        p = self.starter.start(
+        p = self.start_starter().start(
             [str(agent_id), self.dial, self.cfg.run, "--world-grace", str(self.cfg.world_grace)],
             f"agent-{agent_id}.log",
         )
@@ -369,7 +371,7 @@ class Launcher:
             if kind == "restart":
                 if not running:
                     self.start_agent(aid)
-            elif running and kind in ("kill", "freeze", "thaw"):
+            elif p is not None and running and kind in ("kill", "freeze", "thaw"):
                 sig = {"kill": signal.SIGKILL, "freeze": signal.SIGSTOP, "thaw": signal.SIGCONT}[kind]
                 if kind == "kill":
                     self.scripted.add(p.pid)  # its exit is the fault's, not a crash

@@ -29,12 +29,12 @@ import subprocess
 import threading
 import time
 from collections.abc import Callable, Iterable
-from typing import TypeVar
+from typing import Literal, TypeVar
 
 T = TypeVar("T")
 
 
-def wait_until(cond: Callable[[], T], timeout: float, interval: float = 0.01) -> T | bool:
+def wait_until(cond: Callable[[], T], timeout: float, interval: float = 0.01) -> T | Literal[False]:
     """Poll `cond` every `interval` s until it returns something truthy (returned) or
     `timeout` s have passed (False). It is always called at least once, and last after the
     deadline, so a condition that holds at the deadline counts."""
@@ -111,8 +111,8 @@ class Group:
 
     def signal(self, sig: int) -> bool:
         """Send `sig` to the whole group; False when there is no group (any more) to signal."""
-        if not any(p.returncode is None for p in self.members):  # all reaped: the id is not ours any more
-            return False
+        if self.pgid is None or not any(p.returncode is None for p in self.members):
+            return False  # no group, or all reaped: the id is not ours any more
         try:
             os.killpg(self.pgid, sig)
         except ProcessLookupError:
@@ -146,8 +146,9 @@ class Group:
         leader = self.leader
         if leader is None:
             return
-        if self.exit_code(leader) is not None and self.signal(signal.SIGKILL):
-            wait_until(lambda: not group_runs(self.pgid), timeout, 0.01)
+        pgid = self.pgid  # set with the leader
+        if pgid is not None and self.exit_code(leader) is not None and self.signal(signal.SIGKILL):
+            wait_until(lambda: not group_runs(pgid), timeout, 0.01)
         _wait(leader, timeout)
 
     def kill(self, timeout: float = 5.0) -> None:
@@ -192,9 +193,13 @@ def stop_groups(groups: Iterable[Group], grace: float = 3.0, timeout: float = 5.
             break
         for g in busy:
             g.signal(sig)
-        wait_until(lambda busy=busy: not any(g.running() for g in busy), grace, 0.02)
+        wait_until(_none_running(busy), grace, 0.02)
     for g in groups:
         g.reap(timeout)
+
+
+def _none_running(groups: list[Group]) -> Callable[[], bool]:
+    return lambda: not any(g.running() for g in groups)
 
 
 def group_runs(pgid: int) -> bool | None:

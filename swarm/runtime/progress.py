@@ -84,16 +84,16 @@ def truth_progress(buf: bytes | None, s: Scenario, added: dict[int, AddedSpec] |
     leaders = {i for i, a in spec.items() if a.role == "leader"}
     alive = {int(r["id"]) for r in recs if r["state"] == 0}
     out = {int(r["id"]): (int(r["out"]) if r["out"] >= 0 else None) for r in recs}
-    errs = {}
+    errs: dict[int, float | None] = {}
     for r in recs:
         aid = int(r["id"])
         if aid not in alive:
             continue
         root, _ = root_of(aid, out, leaders & alive)
-        if root is None:
+        L, me = (None, None) if root is None else (spec[root], spec[aid])
+        if L is None or me is None or L.orbit_radius is None:  # no leader (a leader has an orbit radius)
             errs[aid] = None
             continue
-        L, me = spec[root], spec[aid]
         R = expected_radius(me.speed, L.speed, L.orbit_radius)
         errs[aid] = abs(math.hypot(r["x"] - s.target.x, r["y"] - s.target.y) - R) / R
     return {"tick": tick, "time": t, "errors": errs, "dropped": sorted(set(out) - alive)}

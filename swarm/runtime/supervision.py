@@ -40,7 +40,7 @@ from swarm.contracts.vocabulary import ExitCode, signal_exit
 
 LOG_TAIL_LINES = 20  # (wire.EXIT_LOG_LINES at most)
 # Exits that are not the agent's own failure (agents/process.py, agents/world_link.py).
-NOT_A_CRASH = {
+NOT_A_CRASH: dict[int, str] = {
     ExitCode.WORLD_GONE: "the world vanished",
     ExitCode.WORLD_SILENT: "the world did not answer within the grace",
 }
