@@ -156,6 +156,7 @@ class Clock:
             st.event(EventKind.FAULT_SKIPPED, f.agent, f"nobody carried out the {f.kind} (no launcher?)")
             st.not_reproducible(f"the scripted {f.kind} of agent {f.agent} did not land on tick {core.tick}")
             return
+        assert f.agent is not None  # a process fault names its agent (FaultSpec)
         k = core.index[f.agent]
         # Hold the clock until the fault has taken effect, so that it lands on this tick as
         # in `swarm sim`: a killed process is dropped when its socket closes, a frozen one

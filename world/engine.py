@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -29,7 +30,7 @@ from swarm.contracts.scenario import Scenario
 from swarm.contracts.vocabulary import EventKind
 from swarm.world.core import ACTIVE, WorldCore
 from swarm.world.faults import FaultPlan, fault_event
-from swarm.world.recording import Recorder, RunResult, StreamRecorder
+from swarm.world.recording import Recorder, RunResult, StreamRecorder, TickRecorder
 
 # What became of a command (`Engine.command`).
 LATCHED, LOST, REFUSED = "latched", "lost", "refused"
@@ -54,7 +55,9 @@ class Engine:
         self.fault_plan = FaultPlan(scenario.faults, scenario.run.dt, scenario.run.seed)
         self.network = self.fault_plan.affects_network()  # frames and commands go through the fault plan
         self.ticks = ticks
-        self.rec = Recorder(scenario, ticks) if recording is None else StreamRecorder(scenario, ticks, recording)
+        self.rec: TickRecorder = (
+            Recorder(scenario, ticks) if recording is None else StreamRecorder(scenario, ticks, recording)
+        )
         self.events: list[dict] = []
         self.out = np.full(len(scenario.agents), -1, dtype=np.int64)  # chosen out-neighbour ids
         self.hops_sent = self.core.hops.copy()  # hop counts this tick's frames advertise
@@ -75,7 +78,7 @@ class Engine:
         return self.core.scenario
 
     def event(self, kind: str, agent: int | None, reason: str, **more) -> dict:
-        ev = {"tick": self.core.tick, "time": self.core.time}
+        ev: dict[str, Any] = {"tick": self.core.tick, "time": self.core.time}
         if self.wall_clock is not None:
             ev["wall_time"] = self.wall_clock()
         ev.update(agent=agent, kind=kind, reason=reason, **more)

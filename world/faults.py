@@ -69,7 +69,7 @@ class FaultPlan:
         tick, agent = frame.tick, frame.agent
         hist = self.history.setdefault(
             agent,
-            deque(maxlen=1 + max((int(round(f.delay / self.dt)) for f in self.faults if f.kind == "delay"), default=0)),
+            deque(maxlen=1 + max((_ticks(f.delay, self.dt) for f in self.faults if f.kind == "delay"), default=0)),
         )
         hist.append(frame)
         for f in self._active(tick, agent, "delay"):
@@ -109,3 +109,8 @@ class FaultPlan:
 def fault_event(index: int, f: FaultSpec) -> dict:
     """The `fault` event of the summary for fault `index`."""
     return {"index": index, **{k: v for k, v in f.model_dump().items() if v is not None}}
+
+
+def _ticks(seconds: float | None, dt: float) -> int:
+    """A delay fault's delay in ticks (every delay fault has one: FaultSpec)."""
+    return int(round((seconds or 0.0) / dt))

@@ -99,7 +99,7 @@ def _run_world(cfg: WorldConfig, stops: StopSignals, tell: Announcer) -> int:
     try:
         if cfg.foxglove is not None:  # before listening: a port in use stops the run before it starts
             try:
-                live = start_live_view(world.engine.rec.writer, cfg.run, *cfg.foxglove)
+                live = start_live_view(world.rec.writer, cfg.run, *cfg.foxglove)
             except LiveViewError as e:
                 world.discard_recording()
                 print(f"swarm world: {e}", file=sys.stderr)
@@ -137,7 +137,7 @@ def _serve(world: World, cfg: WorldConfig, live, stops: StopSignals, tell: Annou
     try:
         tell.ready()
         if cfg.progress:
-            if live is not None:
+            if live is not None and cfg.foxglove is not None:
                 print(f"[world] {open_hint(*cfg.foxglove)}", file=sys.stderr, flush=True)
             print(f"[world] run {cfg.run} listening on {cfg.listen}", file=sys.stderr, flush=True)
         code = world.run()

@@ -88,13 +88,14 @@ def agent_metrics(
         i = int(i)
         r = np.hypot(x[:, k] - target[0], y[:, k] - target[1])
         root, hops = root_of(i, out, live_leaders) if alive_final[i] else (None, None)
+        expected: float | None = None
+        err: float | None = None
+        settle = None
         if root is not None:
             c = col[root]
             expected = expected_radius(float(speeds[k]), float(speeds[c]), float(orbit_radius[c]))
             err = float(abs(r[-1] - expected))
             settle = settling_time(t, r, expected)
-        else:
-            expected = err = settle = None
         result[str(i)] = {
             "role": str(roles[k]),
             "out_neighbour": out[i],
@@ -103,7 +104,7 @@ def agent_metrics(
             "final_radius": float(r[-1]),
             "expected_radius": expected,
             "radial_error": err,
-            "relative_error": None if err is None else err / expected,
+            "relative_error": None if err is None or expected is None else err / expected,
             "angular_rate": _finite_or_none(angular_rate(t, x[:, k], y[:, k], target, window)),
             "settling_time": settle,
             "alive": alive_final[i],

@@ -19,7 +19,7 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Iterable
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -62,7 +62,7 @@ class World:
             s, self.ticks, joined=False, wall_clock=time.time, on_event=self._announce, recording=recording
         )
         self.rec = DeferredRecorder(self.engine.rec)  # written while the agents think (publish_frames)
-        self.engine.rec = self.rec  # type: ignore[assignment]  # a Recorder's interface, writes deferred
+        self.engine.rec = self.rec
         self.core = self.engine.core
         self.state = RunState(cfg, self.engine, self.ticks)
         self.book = self.state.book
@@ -153,15 +153,15 @@ class World:
         """Send every active agent its frame of this tick (the same numbers as WorldCore.frames)."""
         c = self.core
         if not self.engine.frames_exact():  # through the fault plan: partition, loss, delay, noise
-            frames = self.engine.frames()
+            delivered = self.engine.frames()
             for aid in c.active_ids():
-                if aid not in frames:
+                if aid not in delivered:
                     self.book[aid].missed += 1  # its frame was lost
-            self.frames_sent = {aid: wire.encode_sense(frame) for aid, frame in frames.items()}
+            self.frames_sent = {aid: wire.encode_sense(frame) for aid, frame in delivered.items()}
             for aid, buf in self.frames_sent.items():
                 self.sense_pub[aid].put(buf)
             self.rec.flush()
-            return set(frames)
+            return set(delivered)
         self.engine.mark_frames()  # the same numbers, encoded straight from the arrays
         active = c.active_ids()
         rows = [c.index[aid] for aid in active]
@@ -217,7 +217,9 @@ class World:
         self.truth_sent = now
         try:
             self.truth_pub.put(
-                wire.encode_truth(c.tick, c.time, c.ids, c.x, c.y, c.heading, u, self.engine.out, c.state)
+                wire.encode_truth(
+                    c.tick, c.time, c.ids, c.x, c.y, c.heading, u, self.engine.out, cast("list[str]", c.state)
+                )
             )
         except Exception:  # an observer's problem never stops the world
             pass
@@ -237,7 +239,7 @@ class World:
 
     def discard_recording(self) -> None:
         """The run never started (no endpoint): leave no empty recording behind."""
-        rec = self.engine.rec
+        rec = self.rec
         if getattr(rec, "path", None) is not None and rec.rows == 0:
             try:
                 rec.close()

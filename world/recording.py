@@ -14,6 +14,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -49,6 +50,30 @@ def static_arrays(s: Scenario) -> dict[str, np.ndarray]:
         "target": np.array([s.target.x, s.target.y], dtype=float),
         "dt": np.array(s.run.dt),
     }
+
+
+class TickRecorder(Protocol):
+    """What the engine records a run into (world/engine.py): `Recorder`, `StreamRecorder`,
+    `DeferredRecorder`."""
+
+    @property
+    def rows(self) -> int:
+        """Ticks recorded (the last one + 1)."""
+        ...
+
+    def record(self, tick: int, time: float, x, y, heading, u, out, alive, missed: int = 0) -> None: ...
+
+    def event(self, ev: dict) -> None: ...
+
+    def add_agent(self, scenario: Scenario) -> None: ...
+
+    def arrays(self) -> dict[str, np.ndarray]: ...
+
+
+class HasArrays(Protocol):
+    """What a run's results are computed from (`RunResult`): the arrays of trajectory.npz."""
+
+    def arrays(self) -> dict[str, np.ndarray]: ...
 
 
 class Recorder:
@@ -158,7 +183,7 @@ class DeferredRecorder:
     tick. Everything else (an event, a new agent, reading `rows`, closing) flushes first, so
     what is written, and in what order, is the same as with the recorder it wraps."""
 
-    def __init__(self, inner: Recorder | StreamRecorder):
+    def __init__(self, inner: TickRecorder):
         self.inner = inner
         self.pending: tuple | None = None
 
@@ -181,7 +206,24 @@ class DeferredRecorder:
             self.inner.record(*self.pending)  # Stop) leaves it pending, written again at worst,
             self.pending = None  # and a tick written twice counts once
 
-    def __getattr__(self, name: str):
+    @property
+    def rows(self) -> int:
+        self.flush()
+        return self.inner.rows
+
+    def event(self, ev: dict) -> None:
+        self.flush()
+        self.inner.event(ev)
+
+    def add_agent(self, scenario: Scenario) -> None:
+        self.flush()
+        self.inner.add_agent(scenario)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        self.flush()
+        return self.inner.arrays()
+
+    def __getattr__(self, name: str) -> Any:  # the wrapped recorder's own (path, writer, close, torn)
         self.flush()
         return getattr(self.inner, name)
 
@@ -208,7 +250,7 @@ def recording_arrays(rec: Recording) -> dict[str, np.ndarray]:
         a["t"][r], a["missed"][r] = row["time"], row["missed"]
         m = len(row["ids"])
         if m <= n and all(col.get(int(i)) == j for j, i in enumerate(row["ids"])):
-            cols = slice(0, m)  # the usual case: the scenario's order
+            cols: slice | list[int] = slice(0, m)  # the usual case: the scenario's order
         else:
             cols = [col[int(i)] for i in row["ids"]]
         for key in ("x", "y", "heading", "u", "out", "alive"):
@@ -229,7 +271,7 @@ class _Loaded:
 @dataclass
 class RunResult:
     scenario: Scenario
-    recorder: Recorder
+    recorder: HasArrays
     events: list[dict] = field(default_factory=list)
     extra: dict = field(default_factory=dict)  # engine-specific figures for summary.json
     agent_extra: dict = field(default_factory=dict)  # str(id) -> engine figures per agent
@@ -323,7 +365,7 @@ def write_run(result: RunResult, out_dir: Path) -> dict:
     """Write trajectory.npz and summary.json into out_dir (each atomically); returns the summary."""
     out_dir.mkdir(parents=True, exist_ok=True)
     arrays = result.recorder.arrays()
-    _write_atomic(out_dir / TRAJECTORY_FILE, lambda f: np.savez_compressed(f, **arrays))
+    _write_atomic(out_dir / TRAJECTORY_FILE, lambda f: np.savez_compressed(f, **arrays))  # type: ignore[arg-type]  # numpy's stubs: **kw could be allow_pickle
     summary = result.summary()
     text = (json.dumps(summary, indent=2, default=_json_default) + "\n").encode()
     _write_atomic(out_dir / SUMMARY_FILE, lambda f: f.write(text))

@@ -29,12 +29,13 @@ def run_info(engine: Engine, books: dict, header: dict, sensing: bool = False) -
         b = books[a.id]
         root, hops = root_of(a.id, out, leaders & live) if a.id in live else (None, None)
         dist = math.hypot(c.x[k] - c.target[0], c.y[k] - c.target[1])
+        expected: float | None = None
+        err: float | None = None
         if root is not None:
             L = s.agent(root)
+            assert L.orbit_radius is not None  # a root is a leader, which has one (swarm/contracts/scenario_tables.py)
             expected = expected_radius(a.speed, L.speed, L.orbit_radius)
             err = abs(dist - expected)
-        else:
-            expected = err = None
         agents[str(a.id)] = {
             "id": a.id,
             "role": a.role,
@@ -53,7 +54,7 @@ def run_info(engine: Engine, books: dict, header: dict, sensing: bool = False) -
             "distance": dist,
             "expected_radius": expected,
             "radial_error": err,
-            "relative_error": None if err is None else err / expected,
+            "relative_error": None if err is None or expected is None else err / expected,
             "orbit_radius": a.orbit_radius,
             "last_command_age": (now - b.last_cmd_wall) if b.last_cmd_wall else None,
             "missed": b.missed,

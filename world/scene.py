@@ -74,12 +74,12 @@ class SceneBuilder:
             i = int(i)
             a = spec[i]
             root = rooted[i] if alive[k] else None
+            R: float | None = None
+            err: float | None = None
             if root is not None:
                 L = spec[root]
                 R = expected_radius(a.speed, L.speed, L.orbit_radius)
                 err = abs(math.hypot(float(x[k]) - tx, float(y[k]) - ty) - R)
-            else:
-                R = err = None
             uk = float(u[k])
             rows.append(
                 {
