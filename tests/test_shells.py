@@ -33,7 +33,7 @@ def open_world(scenario: dict = SCENARIO):
 
 
 def test_the_join_reply_is_version_2_only_when_the_run_has_laws_of_its_own():
-    """protocol.md 5.2: an agent that cannot read "law" must refuse a run whose laws it would
+    """docs/reference/protocol.md#join-reply: an agent that cannot read "law" must refuse a run whose laws it would
     otherwise replace with the built-in ones."""
     world, _ = open_world()
     assert claim(world, 2)["v"] == 1
@@ -92,10 +92,10 @@ def test_world_latches_owned_commands_and_counts_the_rest():
     world.inbox.on_cmd(cmd_key, wire.encode_cmd(wire.Command(2, 0, 0.3, 1, "track", 1, key2 ^ 1)), pending)
     assert world.book[2].rogue == 1 and pending == {1, 2}  # not the owner's key: ignored
     world.inbox.on_cmd(cmd_key, b"garbage", pending)
-    world.inbox.on_cmd(
-        cmd_key, wire.encode_cmd(wire.Command(2, 0, 0.3, 2, "track", 1, key2)), pending
-    )  # follows itself
-    # the world's count, and agent 2's: what the world dropped on that agent's keys (README)
+    follows_itself = wire.encode_cmd(wire.Command(2, 0, 0.3, 2, "track", 1, key2))
+    world.inbox.on_cmd(cmd_key, follows_itself, pending)
+    # the world's count, and agent 2's: what the world dropped on that agent's keys
+    # (docs/guides/faults.md#hostile-input)
     assert world.state.garbage == 2 and world.book[2].garbage == 2 and world.book[1].garbage == 0
     world.inbox.on_cmd(cmd_key, wire.encode_cmd(wire.Command(2, 0, 0.3, 1, "track", 1, key2)), pending)
     assert pending == {1} and world.core.u[1] == 0.3 and world.engine.out[1] == 1
@@ -160,7 +160,7 @@ def test_agent_answers_its_frames_with_commands_and_counts_garbage():
     assert (st["out"], st["hops"], st["rooted"], st["commands"]) == (1, 1, True, 1)
 
 
-# -- limits and trust (issue 10) ---------------------------------------------------------------
+# -- limits and trust ---------------------------------------------------------------------------
 NEW = {"role": "follower", "x": 1.0, "y": 1.0, "heading": 0.0, "speed": 1.0}
 
 

@@ -19,6 +19,8 @@ from test_shells import RUN, join, open_world
 
 from swarm.contracts import wire
 from swarm.contracts.lifeline import endpoint_refuses, exit_status
+from swarm.contracts.vocabulary import ExitCode
+from swarm.runtime.procs import wait_until
 from swarm.runtime.supervision import agent_exit, cause_of, is_crash, tail
 
 # -- classifying an exit ----------------------------------------------------------------------------
@@ -27,18 +29,18 @@ from swarm.runtime.supervision import agent_exit, cause_of, is_crash, tail
 @pytest.mark.parametrize(
     "code, crash",
     [
-        (1, True),
-        (3, True),
-        (2, True),
+        (ExitCode.FAILED, True),
+        (ExitCode.REFUSED, True),
+        (ExitCode.USAGE, True),
         (-signal.SIGSEGV, True),
         (-signal.SIGABRT, True),
-        (0, False),
-        (4, False),
-        (5, False),
+        (ExitCode.OK, False),
+        (ExitCode.WORLD_GONE, False),
+        (ExitCode.WORLD_SILENT, False),
         (-signal.SIGKILL, False),
         (-signal.SIGTERM, False),
-        (128 + signal.SIGTERM, False),
-        (128 + signal.SIGINT, False),
+        (ExitCode.TERMINATED, False),
+        (ExitCode.INTERRUPTED, False),
     ],
 )
 def test_which_exits_are_crashes(code, crash):
@@ -279,11 +281,21 @@ def test_agent_exits_4_when_the_world_is_gone(tmp_path):
     link = _link(tmp_path, f"unixsock-stream/{tmp_path}/gone.sock")
     with pytest.raises(AgentExit) as e:
         link.on_delete(0.0)
-    assert e.value.code == 4 and "vanished" in e.value.message
+    assert e.value.code == ExitCode.WORLD_GONE and "vanished" in e.value.message
+
+
+def _exit_of(check):
+    """The AgentExit `check()` raises, or None."""
+    from swarm.agents.joining import AgentExit
+
+    try:
+        check()
+    except AgentExit as e:
+        return e
+    return None
 
 
 def test_agent_waits_for_a_silent_world_then_exits_5(tmp_path):
-    from swarm.agents.joining import AgentExit
     from swarm.agents.world_link import RESUMED, WAITING
 
     path = tmp_path / "w.sock"
@@ -296,15 +308,12 @@ def test_agent_waits_for_a_silent_world_then_exits_5(tmp_path):
         link.check()  # within the grace
         assert link.on_put() == RESUMED and link.lost_at is None
         assert link.on_delete(0.0) == WAITING
-        time.sleep(0.25)
-        with pytest.raises(AgentExit) as e:
-            link.check()
-        assert e.value.code == 5 and "has not answered for 0.2 s" in e.value.message
+        e = wait_until(lambda: _exit_of(link.check), 10.0)  # once the grace (0.2 s) is over
+        assert e and e.code == ExitCode.WORLD_SILENT and "has not answered for 0.2 s" in e.message
         waiting = _link(tmp_path, f"unixsock-stream/{path}", wait_world=True)
         waiting.on_delete(0.0)
-        time.sleep(0.25)
-        waiting.check()  # --wait-world: no exit, the world counts as gone
-        assert waiting.alive is False
+        # --wait-world: no exit once the grace is over, the world counts as gone
+        assert wait_until(lambda: _exit_of(waiting.check) is None and waiting.alive is False, 10.0)
     finally:
         srv.close()
 

@@ -1,5 +1,5 @@
-"""world/memory.py: the world's malloc arenas capped and its free memory trimmed (issue 22,
-item 11; the soak that shows the RSS flat is benchmarks/bench_soak.py)."""
+"""world/memory.py: the world's malloc arenas capped and its free memory trimmed
+(docs/benchmarks.md#recording; the soak that shows the RSS flat is benchmarks/bench_soak.py)."""
 
 from __future__ import annotations
 

@@ -4,8 +4,8 @@ A run with an output directory streams its ticks to recording.mcap as it goes
 (`StreamRecorder`, world/stream.py); one without (studies, tests) keeps them in memory
 (`Recorder`). At the end, or after a crash (`recover_run`), trajectory.npz and
 summary.json are written from the recording, each to a temporary name and renamed, so a
-result file is either whole or absent. The layout is documented in docs/outputs.md ("Outputs
-of a run"); the reader of trajectory.npz is world/run_reader.py.
+result file is either whole or absent. The layout is documented in docs/reference/outputs.md
+(#summary, #trajectory); the reader of trajectory.npz is world/run_reader.py.
 """
 
 from __future__ import annotations

@@ -1,6 +1,7 @@
 """The world's view of a live run, as `world/info` answers it (`swarm agents`, `graph`,
-`watch`; fields in docs/cli.md): per agent its pose, state, process, chosen out-neighbour,
-root, hops, expected radius and errors. Pure: the world process passes in what it holds.
+`watch`; docs/reference/protocol.md#info): per agent its pose, state, process, chosen
+out-neighbour, root, hops, expected radius and errors. Pure: the world process passes in
+what it holds.
 """
 
 from __future__ import annotations

@@ -80,7 +80,7 @@ def admit(core: WorldCore, book: AgentBook, req: dict, now: float) -> int:
 def agent_figures(
     book: AgentBook, ticks: int, realtime: bool, garbage: int = 0, nonfinite: int = 0, **selection
 ) -> dict:
-    """One agent's process figures for summary.json (see docs/outputs.md, "Outputs of a run");
+    """One agent's process figures for summary.json (see docs/reference/outputs.md#summary);
     `garbage`, `nonfinite` and `selection` (losses, loss_switches_max) are what the agent
     counted itself (its status)."""
     n = max(ticks, 1)
