@@ -10,9 +10,14 @@ from fakes import FakeQuery, FakeSession
 
 from swarm.contracts import wire
 from swarm.contracts.scenario import parse_scenario
-from swarm.contracts.vocabulary import ExitCode
+from swarm.contracts.vocabulary import ExitCode, Phase, SwitchReason
+from swarm.world.clock import Clock
 from swarm.world.engine import Engine
+from swarm.world.fairness import FairQueue
+from swarm.world.inbox import Inbox
+from swarm.world.joins import Joins
 from swarm.world.process import World, WorldConfig
+from swarm.world.state import RunState
 
 RUN = "shells"
 SCENARIO = {
@@ -89,20 +94,20 @@ def test_world_latches_owned_commands_and_counts_the_rest():
     frames = {wire.decode_sense(p).agent: wire.decode_sense(p) for k, p in ses.sent if k.endswith("/sense")}
     assert set(frames) == {1, 2} and frames[1].target is not None and frames[2].target is None
     cmd_key = wire.agent_key(RUN, 2, "cmd")
-    world.inbox.on_cmd(cmd_key, wire.encode_cmd(wire.Command(2, 0, 0.3, 1, "track", 1, key2 ^ 1)), pending)
+    world.inbox.on_cmd(cmd_key, wire.encode_cmd(wire.Command(2, 0, 0.3, 1, Phase.TRACK, 1, key2 ^ 1)), pending)
     assert world.book[2].rogue == 1 and pending == {1, 2}  # not the owner's key: ignored
     world.inbox.on_cmd(cmd_key, b"garbage", pending)
-    follows_itself = wire.encode_cmd(wire.Command(2, 0, 0.3, 2, "track", 1, key2))
+    follows_itself = wire.encode_cmd(wire.Command(2, 0, 0.3, 2, Phase.TRACK, 1, key2))
     world.inbox.on_cmd(cmd_key, follows_itself, pending)
     # the world's count, and agent 2's: what the world dropped on that agent's keys
     # (docs/guides/faults.md#hostile-input)
     assert world.state.garbage == 2 and world.book[2].garbage == 2 and world.book[1].garbage == 0
-    world.inbox.on_cmd(cmd_key, wire.encode_cmd(wire.Command(2, 0, 0.3, 1, "track", 1, key2)), pending)
+    world.inbox.on_cmd(cmd_key, wire.encode_cmd(wire.Command(2, 0, 0.3, 1, Phase.TRACK, 1, key2)), pending)
     assert pending == {1} and world.core.u[1] == 0.3 and world.engine.out[1] == 1
     (switch,) = [e for e in world.engine.events if e["kind"] == "switch"]
-    assert (switch["agent"], switch["from"], switch["to"], switch["reason"]) == (2, None, 1, "out-neighbour chosen")
+    assert (switch["agent"], switch["from"], switch["to"], switch["reason"]) == (2, None, 1, SwitchReason.CHOSEN)
     world.inbox.on_cmd(
-        wire.agent_key(RUN, 1, "cmd"), wire.encode_cmd(wire.Command(1, 0, 0.1, None, "orbit", 0, key1)), pending
+        wire.agent_key(RUN, 1, "cmd"), wire.encode_cmd(wire.Command(1, 0, 0.1, None, Phase.ORBIT, 0, key1)), pending
     )
     assert pending == set()
     world.record_and_step()
@@ -125,11 +130,92 @@ def test_world_info_reports_expected_radius_through_the_chosen_graph():
     key2 = join(world, 2)
     join(world, 1)
     world.inbox.on_cmd(
-        wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd(wire.Command(2, 0, 0.0, 1, "track", 1, key2)), None
+        wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd(wire.Command(2, 0, 0.0, 1, Phase.TRACK, 1, key2)), None
     )
     info = wire.decode_info(wire.encode_info(world.info()))
     a2 = info["agents"]["2"]
     assert (a2["root"], a2["hops"], a2["expected_radius"]) == (1, 1, 15.0)  # 1.5 m/s at omega 0.1
+
+
+# -- the world's parts, each without the others' zenoh shell --------------------------------------
+
+
+def parts(scenario: dict = SCENARIO):
+    """The run's state, the queue, the joins and the inbox of a world, made by hand: no
+    World, no session (an added agent's publisher is only noted)."""
+    s = parse_scenario(scenario)
+    state = RunState(
+        WorldConfig(s, RUN, "unixsock-stream//nonexistent", None, progress=False), Engine(s, 100, joined=False), 100
+    )
+    queue = FairQueue(state)
+    added: list[int] = []
+    inbox = Inbox(state, queue, Joins(state, added.append))
+    return state, queue, inbox, added
+
+
+def test_the_inbox_alone_admits_joins_and_latches_commands():
+    state, queue, inbox, _ = parts()
+    q = FakeQuery(wire.encode_join_request(2, 102, "host"), key_expr=wire.agent_key(RUN, 2, "join"))
+    queue.enqueue(("join", q))
+    queue.enqueue(("alive", wire.agent_key(RUN, 2, "alive"), zenoh.SampleKind.PUT), False)
+    while inbox.drain(None, 0):
+        pass
+    key = wire.decode_join_reply(q.replies[0][1])["key"]
+    assert state.core.active_ids() == [2] and [e["kind"] for e in state.engine.events] == ["join"]
+    queue.enqueue(
+        ("cmd", wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd_fields(2, 0, 0.2, None, Phase.LOST, None, key))
+    )
+    pending = {2}
+    assert inbox.drain(pending, 0) and not pending and state.core.u[1] == 0.2 and state.book[2].commands == 1
+
+
+def test_the_joins_alone_add_an_agent_through_the_shells_callback():
+    state, _, inbox, added = parts()
+    q = FakeQuery(wire.encode_join_request(5, 105, "host", NEW), key_expr=wire.agent_key(RUN, 5, "join"))
+    inbox.joins.on_join(q)
+    assert wire.decode_join_reply(q.replies[0][1])["ok"] and added == [5] and 5 in state.book
+    assert [e["kind"] for e in state.engine.events] == ["add"]
+
+
+class _Shell:
+    """The clock's view of a world process: frames to nobody, a step of the engine."""
+
+    def __init__(self, state: RunState):
+        self.state, self.stepped = state, 0
+
+    def publish_frames(self) -> set[int]:
+        self.state.engine.mark_frames()
+        return set(self.state.core.active_ids())
+
+    def resend_frames(self, aids) -> None:
+        pass
+
+    def record_and_step(self) -> None:
+        self.state.engine.end_tick()
+        self.stepped += 1
+
+    def send_control(self, payload: bytes) -> None:
+        pass
+
+
+class _Parts:
+    """What `claim` and `join` above use of a world, from its parts."""
+
+    def __init__(self, state: RunState, inbox: Inbox):
+        self.joins, self.inbox = inbox.joins, inbox
+
+
+def test_the_clock_alone_holds_a_silent_agent_to_the_deadline_and_says_so():
+    state, _, inbox, _ = parts()
+    join(_Parts(state, inbox), 1)
+    shell = _Shell(state)
+    clock = Clock(state, inbox, shell, deadline=0.01)
+    state.started = True
+    clock.lockstep_tick()
+    shell.record_and_step()
+    assert clock.late == {1: 1} and state.book[1].missed == 1 and state.core.tick == 1
+    rep = clock.reproducibility()
+    assert rep["reproducible"] is False and "missed the lockstep deadline (agent 1)" in rep["not_reproducible"][0]
 
 
 # -- the agent -------------------------------------------------------------------------------
@@ -233,10 +319,10 @@ def test_one_keys_flood_costs_no_other_agent_a_command():
     events = []
     world.engine.on_event = events.append
     for _ in range(PER_KEY_MAX + 500):
-        cmd = wire.encode_cmd_fields(2, 0, 0.1, None, "track", None, k2)
+        cmd = wire.encode_cmd_fields(2, 0, 0.1, None, Phase.TRACK, None, k2)
         world.queue.enqueue(("cmd", wire.agent_key(RUN, 2, "cmd"), cmd))
     world.queue.enqueue(
-        ("cmd", wire.agent_key(RUN, 1, "cmd"), wire.encode_cmd_fields(1, 0, 0.1, None, "track", None, k1))
+        ("cmd", wire.agent_key(RUN, 1, "cmd"), wire.encode_cmd_fields(1, 0, 0.1, None, Phase.TRACK, None, k1))
     )
     pending = {1, 2}
     while world.inbox.drain(pending, 0):
@@ -257,10 +343,10 @@ def test_a_rogues_flood_on_an_agents_key_costs_that_agent_nothing():
     k2 = join(world, 2)
     for _ in range(4 * PER_KEY_MAX):
         world.queue.enqueue(
-            ("cmd", wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd_fields(2, 0, 5.0, None, "track", None, k2 ^ 1))
+            ("cmd", wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd_fields(2, 0, 5.0, None, Phase.TRACK, None, k2 ^ 1))
         )
     world.queue.enqueue(
-        ("cmd", wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd_fields(2, 0, 0.1, None, "track", None, k2))
+        ("cmd", wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd_fields(2, 0, 0.1, None, Phase.TRACK, None, k2))
     )
     assert world.queue.qsize() == 1
     pending = {2}
