@@ -20,6 +20,7 @@ test fails, never read for events. Processes are only ever started with subproce
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import shutil
@@ -37,8 +38,14 @@ from pathlib import Path
 import numpy as np
 import psutil
 import pytest
+from typer.testing import CliRunner
 
+from swarm.cli.main import app
+from swarm.contracts import credentials
 from swarm.contracts.scenario import load_scenario
+from swarm.contracts.transport import open_client, socket_path
+from swarm.contracts.vocabulary import EventKind, ExitCode
+from swarm.live.client import LiveRun, NoRun, RunRef
 from swarm.runtime.procs import Group, agent_id_of, wait_until
 
 REPO = Path(__file__).resolve().parents[1]
@@ -322,8 +329,6 @@ class Runtime:
 def run_credentials(endpoint: str, run: str, runtime_dir: str | Path | None = None):
     """The credentials of a local run (from `runtime_dir`, default the one its socket is
     in), or None while the world has not written them."""
-    from swarm.contracts import credentials
-    from swarm.contracts.transport import socket_path
 
     d = Path(runtime_dir) if runtime_dir is not None else socket_path(endpoint).parent
     path = d / f"{run}{credentials.SUFFIX}"
@@ -345,7 +350,6 @@ def open_session(
     """A zenoh client session of this test process on `endpoint` (as `user` with `creds`;
     without, a stranger, which only an open hub lets in), retried until it listens.
     `check()` runs before each try (to fail early, e.g. when the process to listen exited)."""
-    from swarm.contracts.transport import open_client
 
     def attempt():
         if check is not None:
@@ -381,7 +385,6 @@ class Observer:
         check: Callable[[], None] | None = None,
         runtime_dir: str | None = None,
     ):
-        from swarm.live.client import LiveRun, NoRun, RunRef
 
         def attempt():
             if check is not None:
@@ -510,7 +513,7 @@ class UpRun:
     def results(self, timeout: float) -> tuple[dict, dict[str, np.ndarray]]:
         """(summary, trajectory) once the run has ended by itself (exit 0) leaving no process."""
         rc = self.launcher.wait(timeout)
-        assert rc == 0, self.launcher.text()[-3000:] + self.world_text()[-3000:]
+        assert rc == ExitCode.OK, self.launcher.text()[-3000:] + self.world_text()[-3000:]
         self.tracker.assert_none_left(timeout=10)
         return self.summary(), self.trajectory()
 
@@ -540,7 +543,6 @@ def ring_scenario(
 ) -> Path:
     """Write a scenario of `n` agents on a spiral round the target (the first `leaders` of them
     leaders) to `path`: for runs larger than the shipped scenarios."""
-    import math
 
     lines = [
         f'name = "ring{n}"',
@@ -590,7 +592,7 @@ def run_sim(tracker: ProcessTracker, scenario: Path | str, out: Path, *extra, ti
     """`swarm sim` as a process; returns (trajectory arrays, summary)."""
     p = tracker.spawn(swarm_cmd("sim", scenario, "--out", out, "--no-plots", *extra), f"sim-{Path(out).name}")
     rc = p.wait(timeout)
-    assert rc == 0, f"swarm sim exited {rc}:\n{p.text()[-3000:]}"
+    assert rc == ExitCode.OK, f"swarm sim exited {rc}:\n{p.text()[-3000:]}"
     return load_trajectory(out), json.loads((Path(out) / "summary.json").read_text())
 
 
@@ -639,12 +641,12 @@ def replay_events(events: list[dict], ids, rows: int) -> tuple[np.ndarray, np.nd
         while i < len(evs) and evs[i]["tick"] <= t:
             e = evs[i]
             k = col[int(e["agent"])]
-            if e["kind"] in ("join", "rejoin"):
+            if e["kind"] in (EventKind.JOIN, EventKind.REJOIN):
                 cur_alive[k] = True
-            elif e["kind"] == "drop":
+            elif e["kind"] == EventKind.DROP:
                 cur_alive[k] = False
                 cur_out[k] = -1
-            elif e["kind"] == "switch":
+            elif e["kind"] == EventKind.SWITCH:
                 cur_out[k] = -1 if e["to"] is None else int(e["to"])
             i += 1
         out[t] = cur_out
@@ -675,9 +677,6 @@ def live_swarm(base: Path, scenario: Path | str, n: int, *up_args, timeout: floa
     once `swarm runs` shows all `n` live: yields a dict with run, endpoint, runtime dir, the
     up run, the tracker and `extra_pids` ((pid, create time) of agents a test starts outside
     the launcher). At the end: Ctrl-C, exit 130, and no process left, spawned agents included."""
-    from typer.testing import CliRunner
-
-    from swarm.cli.main import app
 
     rt = Runtime(base)
     state = {"runtime": rt.dir, "tracker": rt.tracker, "extra_pids": []}
@@ -691,7 +690,7 @@ def live_swarm(base: Path, scenario: Path | str, n: int, *up_args, timeout: floa
                 if up.launcher.poll() is not None:
                     raise AssertionError(f"swarm up exited {up.launcher.poll()}:\n{up.launcher.text()[-3000:]}")
                 res = CliRunner().invoke(app, ["runs", "--json"])
-                docs = json.loads(res.stdout) if res.exit_code == 0 else []
+                docs = json.loads(res.stdout) if res.exit_code == ExitCode.OK else []
                 ok = len(docs) == 1 and docs[0]["agents_live"] == docs[0]["agents_total"] == n and docs[0]["tick"]
                 return docs[0] if ok else None
 
@@ -710,6 +709,6 @@ def live_swarm(base: Path, scenario: Path | str, n: int, *up_args, timeout: floa
             strays = still_running(state["extra_pids"])
             for proc in strays:
                 proc.kill()
-            assert code == 130, f"swarm up exited {code} on SIGINT:\n{up.launcher.text()[-3000:]}"
+            assert code == ExitCode.INTERRUPTED, f"swarm up exited {code} on SIGINT:\n{up.launcher.text()[-3000:]}"
             assert not left, "processes left alive (now killed):\n  " + "\n  ".join(left)
             assert not strays, f"spawned agents left alive (now killed): {[x.pid for x in strays]}"

@@ -9,10 +9,15 @@ import os
 import stat
 
 import pytest
+from typer.testing import CliRunner
 
+from swarm.cli.main import app
 from swarm.contracts import access
 from swarm.contracts import credentials as C
 from swarm.contracts.laws import LawError, check_trusted, trusted_laws
+from swarm.contracts.scenario import parse_scenario
+from swarm.contracts.vocabulary import ExitCode
+from swarm.world.hub_auth import run_auth
 
 NOBODY = 65534
 
@@ -100,11 +105,13 @@ def test_credentials_readable_by_others_or_foreign_are_refused(rtdir):
         ('{"v": 1, "run": "r", "endpoint": "e", "user": "agent-1", "password": "p", "pid": -1}', "pid:"),
         ('{"v": 1, "run": "r", "endpoint": "e", "user": "agent-1", "password": "p", "open_hub": 1}', "open_hub:"),
         (
-            '{"v": 1, "run": "r", "endpoint": "e", "user": "host", "password": "p", "host": "a/b", "agents": {"1": "p"}}',
+            '{"v": 1, "run": "r", "endpoint": "e", "user": "host", "password": "p", '
+            '"host": "a/b", "agents": {"1": "p"}}',
             "host: host name",
         ),
         (
-            '{"v": 1, "run": "r", "endpoint": "e", "user": "host", "password": "p", "host": "a", "agents": {"01": "p"}}',
+            '{"v": 1, "run": "r", "endpoint": "e", "user": "host", "password": "p", '
+            '"host": "a", "agents": {"01": "p"}}',
             "agents: expected",
         ),
         (
@@ -280,10 +287,6 @@ def test_an_agent_the_hub_does_not_know_is_refused_before_connecting():
 
 
 def _cli(*args):
-    from typer.testing import CliRunner
-
-    from swarm.cli.main import app
-
     return CliRunner().invoke(app, [str(a) for a in args])
 
 
@@ -294,13 +297,13 @@ def test_swarm_credentials_exports_one_identity_or_says_why_not(rtdir, tmp_path,
     )
     out = tmp_path / "a2.cred"
     res = _cli("credentials", "--agent", "2")
-    assert res.exit_code == 2 and "from this machine only: give --endpoint" in res.output
+    assert res.exit_code == ExitCode.USAGE and "from this machine only: give --endpoint" in res.output
     res = _cli("credentials", "--agent", "2", "--endpoint", "tcp/10.0.0.5:7447", "-o", out)
-    assert res.exit_code == 0, res.output
+    assert res.exit_code == ExitCode.OK, res.output
     doc = json.loads(out.read_text())
     assert (doc["user"], doc["endpoint"], "secret" in doc) == ("agent-2", "tcp/10.0.0.5:7447", False)
     assert stat.S_IMODE(out.stat().st_mode) == 0o600
-    assert _cli("credentials", "--agent", "2", "--endpoint", "tcp/h:1", "-o", out).exit_code == 2  # exists
+    assert _cli("credentials", "--agent", "2", "--endpoint", "tcp/h:1", "-o", out).exit_code == ExitCode.USAGE  # exists
     for args, what in [
         ((), "give one of --agent ID, --operator or --host NAME --agents IDS"),
         (("--agent", "1", "--operator"), "give one of"),
@@ -316,11 +319,14 @@ def test_swarm_credentials_exports_one_identity_or_says_why_not(rtdir, tmp_path,
         (("--operator", "--run", "r9"), "no credentials for run r9"),
     ]:
         res = _cli("credentials", *args)
-        assert res.exit_code == 2 and what in res.output and "Traceback" not in res.output, (args, res.output)
+        assert res.exit_code == ExitCode.USAGE and what in res.output and "Traceback" not in res.output, (
+            args,
+            res.output,
+        )
     res = _cli(
         "credentials", "--host", "a", "--agents", "1-2,4", "--endpoint", "tls/10.0.0.5:7447", "-o", tmp_path / "a.cred"
     )
-    assert res.exit_code == 0, res.output
+    assert res.exit_code == ExitCode.OK, res.output
     assert "host a with agents 1, 2, 4 of run r1" in res.output and "swarm host --credentials a.cred" in res.output
     doc = json.loads((tmp_path / "a.cred").read_text())
     assert (doc["user"], doc["host"], sorted(doc["agents"]), "secret" in doc) == ("host", "a", ["1", "2", "4"], False)
@@ -328,15 +334,13 @@ def test_swarm_credentials_exports_one_identity_or_says_why_not(rtdir, tmp_path,
     # $SWARM_CREDENTIALS (an exported file) does not change which file is exported from
     monkeypatch.setenv("SWARM_CREDENTIALS", str(out))
     res = _cli("credentials", "--operator", "--endpoint", "tcp/h:1", "-o", tmp_path / "op.cred")
-    assert res.exit_code == 0, res.output
+    assert res.exit_code == ExitCode.OK, res.output
     assert json.loads((tmp_path / "op.cred").read_text())["user"] == "operator"
 
 
 def test_a_world_that_comes_back_keeps_its_runs_secret(rtdir, monkeypatch):
     """--wait-world: agents of a run whose world was killed get back in with the credentials
     they have; a world of the same run that still lives is not replaced."""
-    from swarm.contracts.scenario import parse_scenario
-    from swarm.world.hub_auth import run_auth
 
     monkeypatch.delenv("SWARM_OPEN_HUB", raising=False)
     s = parse_scenario(

@@ -1,4 +1,4 @@
-"""Strangers at the hub's door (docs/resilience.md): idle connections that never speak must not
+"""Strangers at the hub's door (docs/guides/security.md#door): idle connections that never speak must not
 shut the run's own processes out, and a session the hub did not let in is reported as such
 (one line naming the endpoint), never as "run not found".
 
@@ -20,6 +20,7 @@ from runtime_helpers import REPO, SCENARIOS, live_swarm, swarm_cmd
 
 from swarm.contracts import credentials
 from swarm.contracts.errors import NoRunError
+from swarm.contracts.vocabulary import ExitCode
 from swarm.live.client import open_run_session
 
 
@@ -95,7 +96,9 @@ def test_idle_connections_do_not_lock_the_run_out(tmp_path_factory):
                     text=True,
                     timeout=60,
                 )
-                assert res.returncode == 0, f"swarm agents {' '.join(extra)} exited {res.returncode}: {res.stderr}"
+                assert res.returncode == ExitCode.OK, (
+                    f"swarm agents {' '.join(extra)} exited {res.returncode}: {res.stderr}"
+                )
                 assert state["run"] in res.stdout
                 assert all(re.search(rf"^\s*{i}\s+(leader|follower)\s+\d+", res.stdout, re.M) for i in range(1, 7)), (
                     res.stdout

@@ -23,6 +23,12 @@ from runtime_helpers import live_swarm, reaped, ring_scenario, run_credentials, 
 from typer.testing import CliRunner
 
 from swarm.cli.main import app
+from swarm.contracts import wire
+from swarm.contracts.scenario import load_scenario
+from swarm.contracts.vocabulary import AgentState, ExitCode
+from swarm.live.client import LiveRun, RunRef
+from swarm.live.data import snapshot
+from swarm.runtime.progress import AddedSpec, added_spec, progress_errors, truth_progress
 
 N = 30
 
@@ -43,16 +49,12 @@ def timed(fn, repeat: int = 5) -> tuple[float, float, object]:
 
 # --- offline: the progress line counts agents added at run time ------------------------------------
 def test_progress_line_counts_added_agents(tmp_path):
-    from swarm.contracts import wire
-    from swarm.contracts.scenario import load_scenario
-    from swarm.runtime.progress import AddedSpec, added_spec, progress_errors, truth_progress
-
     s = load_scenario(ring_scenario(tmp_path / "ring.toml", N))
     ids = list(range(1, N + 2))  # agent 31 was added at run time (`swarm spawn`)
     x = np.array([a.speed for a in s.agents] + [20.0])  # every agent on its expected orbit (leader 1: R = v)
     zeros = np.zeros(len(ids))
     out = [-1, -1] + [1] * (N - 2) + [1]
-    buf = wire.encode_truth(100, 5.0, ids, x, zeros, zeros, zeros, out, ["active"] * len(ids))
+    buf = wire.encode_truth(100, 5.0, ids, x, zeros, zeros, zeros, out, [AgentState.ACTIVE] * len(ids))
     before = truth_progress(buf, s)
     assert sorted(before["errors"]) == list(range(1, N + 1)), "an unknown added agent is left out"
     spec = added_spec({"id": 31, "role": "follower", "speed": 20.0, "orbit_radius": None, "x": 1.0})
@@ -61,7 +63,7 @@ def test_progress_line_counts_added_agents(tmp_path):
     p = truth_progress(buf, s, {31: spec})
     assert sorted(p["errors"]) == ids and p["errors"][31] == pytest.approx(0.0, abs=1e-12)
     assert progress_errors(p) == "31 live: 31 settled"
-    buf = wire.encode_truth(101, 5.05, ids, x, zeros, zeros, zeros, out, ["active"] * N + ["gone"])
+    buf = wire.encode_truth(101, 5.05, ids, x, zeros, zeros, zeros, out, [AgentState.ACTIVE] * N + [AgentState.GONE])
     assert progress_errors(truth_progress(buf, s, {31: spec})) == "30 live: 30 settled; dropped 31"
 
 
@@ -75,9 +77,6 @@ def many(tmp_path_factory):
 
 @pytest.mark.slow
 def test_live_commands_at_30_agents(many):
-    from swarm.live.client import LiveRun, RunRef
-    from swarm.live.data import snapshot
-
     with LiveRun(RunRef(many["run"], many["endpoint"], run_credentials(many["endpoint"], many["run"]))) as lv:
         # before: the status query waited for its own timeout (1 s; an agent's final answer comes late)
         old_med, _, old = timed(lambda: lv.statuses(), repeat=2)
@@ -94,8 +93,8 @@ def test_live_commands_at_30_agents(many):
 
     figures = {}
     for args in (["agents", "--json"], ["agents"], ["graph", "--json"], ["runs", "--json"], ["pause"], ["resume"]):
-        med, mx, res = timed(lambda: invoke(*args), repeat=3)
-        assert res.exit_code == 0, res.output
+        med, mx, res = timed(lambda args=args: invoke(*args), repeat=3)
+        assert res.exit_code == ExitCode.OK, res.output
         figures[" ".join(args)] = (med, mx)
     print(
         "[timing] in-process (CliRunner: attaching, queries, output; typer's own setup included): "
@@ -105,12 +104,12 @@ def test_live_commands_at_30_agents(many):
     procs = {}
     for args in (["agents", "--json"], ["pause"], ["resume"]):
         med, _, p = timed(
-            lambda: subprocess.run(
+            lambda args=args: subprocess.run(
                 swarm_cmd(*args), capture_output=True, text=True, timeout=30, stdin=subprocess.DEVNULL
             ),
             repeat=3,
         )
-        assert p.returncode == 0, p.stderr
+        assert p.returncode == ExitCode.OK, p.stderr
         procs[" ".join(args)] = med
     imports, _, _ = timed(lambda: subprocess.run(swarm_cmd("--help"), capture_output=True, timeout=30), repeat=3)
     print(
@@ -142,7 +141,7 @@ def test_progress_line_at_30_agents_counts_spawned_and_killed(many):
 
     # an agent added at run time counts once it is live
     sp = tr.spawn(swarm_cmd("spawn", "--id", N + 1, "--x", 5, "--y", 5, "--heading", 0, "--speed", 20), "spawn-31")
-    assert sp.wait(30) == 0, sp.text()
+    assert sp.wait(30) == ExitCode.OK, sp.text()
     pid31 = int(re.search(r"pid (\d+)", sp.text())[1])
     many["extra_pids"].append((pid31, psutil.Process(pid31).create_time()))
     wait_for(
@@ -155,7 +154,7 @@ def test_progress_line_at_30_agents_counts_spawned_and_killed(many):
     pid5 = {r["id"]: r for r in json.loads(invoke("agents", "--json").stdout)["agents"]}[5]["pid"]
     t0 = time.monotonic()
     res = invoke("kill", 5)
-    assert res.exit_code == 0, res.output
+    assert res.exit_code == ExitCode.OK, res.output
     wait_for(
         lambda: reaped(pid5),
         max(0.0, 1.0 - (time.monotonic() - t0)),
@@ -163,7 +162,7 @@ def test_progress_line_at_30_agents_counts_spawned_and_killed(many):
         interval=0.02,
     )
     print(f"\n[timing] agent 5 killed and reaped {time.monotonic() - t0:.3f} s after `swarm kill` started")
-    assert invoke("kill", N + 1).exit_code == 0
+    assert invoke("kill", N + 1).exit_code == ExitCode.OK
     wait_for(
         lambda: any(ln.endswith(f"; dropped 5, {N + 1}") for ln in _progress_lines(up.launcher.text())),
         10,

@@ -1,4 +1,5 @@
-"""Three machines on one LAN, for real: Linux network namespaces on this machine (issue 12).
+"""Three machines on one LAN, for real: Linux network namespaces on this machine
+(docs/guides/several-machines.md#hosts).
 
 `w` runs the world (`swarm world --listen tls/10.213.0.1:PORT`), `a` and `b` each run
 `swarm host` for half of the agents, with the file `swarm credentials --host` wrote on
@@ -42,6 +43,8 @@ from runtime_helpers import (
     wait_for,
 )
 
+from swarm.contracts.vocabulary import EventKind, ExitCode
+
 pytestmark = pytest.mark.slow
 
 SUBNET = "10.213.0"  # a private /24 that exists only inside the test's namespaces
@@ -69,7 +72,7 @@ class Lan:
     @staticmethod
     def _ip(*args: str) -> None:
         r = subprocess.run(["ip", *args], capture_output=True, text=True, timeout=20)
-        if r.returncode != 0:
+        if r.returncode != ExitCode.OK:
             raise LanError(f"ip {' '.join(args)}: {r.stderr.strip() or f'exit code {r.returncode}'}")
 
     def up(self) -> Lan:
@@ -194,7 +197,7 @@ class Machines:
                 f"credentials-{h}",
                 env=self.env["w"],
             )
-            assert p.wait(30) == 0, p.text()
+            assert p.wait(30) == ExitCode.OK, p.text()
             doc = json.loads(f.read_text())
             assert doc["user"] == "host" and "secret" not in doc and sorted(doc["agents"]) == sorted(map(str, ids))
             assert doc["endpoint"] == self.endpoint
@@ -214,7 +217,7 @@ class Machines:
             text=True,
             timeout=30,
         )
-        return json.loads(r.stdout) if r.returncode == 0 else None
+        return json.loads(r.stdout) if r.returncode == ExitCode.OK else None
 
     def agent_pids(self) -> dict[str, dict[int, int]]:
         return {h: self.rt.tracker.wait_agent_pids(t, len(HOSTS[h]), timeout=30) for h, t in self.hosts.items()}
@@ -248,9 +251,9 @@ def test_lockstep_over_veth_links_equals_sim(machines):
     m.start_hosts()
     pids = m.agent_pids()
     sim, _ = run_sim(m.rt.tracker, SCENARIOS / "case2.toml", m.tmp / "sim", "--duration", "20")
-    assert m.world.wait(120) == 0, m.why()
+    assert m.world.wait(120) == ExitCode.OK, m.why()
     for h, t in m.hosts.items():
-        assert t.wait(30) == 0, m.why()
+        assert t.wait(30) == ExitCode.OK, m.why()
         assert f"host {h}: agents {', '.join(map(str, HOSTS[h]))}: exit code 0" in t.text(), t.text()
     m.rt.tracker.assert_none_left(timeout=15)
     traj = load_trajectory(m.out)
@@ -264,7 +267,7 @@ def test_lockstep_over_veth_links_equals_sim(machines):
         for aid in ids:
             ag = summary["agents"][str(aid)]
             assert (ag["pid"], ag["joins"], ag["commands"]) == (pids[h][aid], 1, summary["ticks"]), (aid, ag)
-    assert events_of(summary, "drop") == []
+    assert events_of(summary, EventKind.DROP) == []
     m.host_dirs_empty()
     print(f"lockstep over the veth links: {summary['ticks_per_second']:.0f} ticks/s")
 
@@ -295,13 +298,13 @@ def test_a_kill_on_one_host_is_noticed_by_the_world(machines):
     )
 
     os.kill(m.world.pid, signal.SIGINT)
-    assert m.world.wait(60) == 130, m.why()
-    for h, t in m.hosts.items():
+    assert m.world.wait(60) == ExitCode.INTERRUPTED, m.why()
+    for t in m.hosts.values():
         code = t.wait(30)
-        assert code == 0, m.why()  # the world's end notice reached every agent still running
+        assert code == ExitCode.OK, m.why()  # the world's end notice reached every agent still running
     m.rt.tracker.assert_none_left(timeout=15)
     summary = json.loads((m.out / "summary.json").read_text())
-    drops = events_of(summary, "drop")
+    drops = events_of(summary, EventKind.DROP)
     assert [e["agent"] for e in drops] == [victim], drops
     assert summary["agents"][str(victim)]["alive"] is False
     m.host_dirs_empty()
@@ -318,7 +321,7 @@ def test_a_host_stopped_and_a_world_killed(machines):
         "every agent live",
     )
     os.kill(m.hosts["a"].pid, signal.SIGINT)  # Ctrl-C on host a
-    assert m.hosts["a"].wait(15) == 130, m.why()
+    assert m.hosts["a"].wait(15) == ExitCode.INTERRUPTED, m.why()
     assert all(not _runs(p) for p in pids["a"].values())
     wait_for(
         lambda: (d := m.agents_json()) is not None and [a["id"] for a in d["agents"] if a["alive"]] == list(HOSTS["b"]),
@@ -326,7 +329,7 @@ def test_a_host_stopped_and_a_world_killed(machines):
         "the world to drop a's agents",
     )
     os.kill(m.world.pid, signal.SIGKILL)
-    assert m.hosts["b"].wait(15) == 1, m.why()  # its agents saw the world gone: exit 4, at once
+    assert m.hosts["b"].wait(15) == ExitCode.FAILED, m.why()  # its agents saw the world gone: exit 4, at once
     text = m.hosts["b"].text()
     assert "is gone" in text and "router closed" in text and "agents 4, 5, 6: exit code 4" in text, text
     m.world.wait(5)

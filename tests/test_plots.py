@@ -2,16 +2,45 @@
 
 from __future__ import annotations
 
+import csv
 import json
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import numpy as np
 import pytest
+from matplotlib.colors import to_rgba
+from typer.testing import CliRunner
 
-from swarm.plots import PLOT_FILES, PlotError, final_graph, load_run, render_plots, switch_count
+from swarm.cli.main import app
+from swarm.contracts.scenario import load_scenario
+from swarm.contracts.vocabulary import EventKind, ExitCode
+from swarm.offline.csv_export import COLUMNS, csv_name, write_agent_csvs
+from swarm.offline.sim import run_sim
+from swarm.plots import (
+    ANIMATION_FILE,
+    PLOT_FILES,
+    PlotError,
+    check_formats,
+    final_graph,
+    load_run,
+    render_animation,
+    render_plots,
+    switch_count,
+)
+from swarm.plots.animate import gif_frames
+from swarm.plots.clipping import clip_text, control_range
+from swarm.plots.context import make_context
+from swarm.plots.graph import panel_graph
+from swarm.plots.palette import agent_looks, palette
+from swarm.plots.placement import spread_1d, stack_offsets
+from swarm.plots.render import figure, save_figure
+from swarm.plots.trajectories import panel_trajectories
+from swarm.world.recording import write_run
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
-# The documented plot files (docs/outputs.md, "Outputs of a run"), in the order render_plots returns them.
+# The documented plot files (docs/reference/outputs.md#plots), in the order render_plots returns them.
 EXPECTED_PNGS = ["trajectories.png", "distance.png", "control.png", "graph.png", "overview.png", "neighbours.png"]
 
 
@@ -69,11 +98,17 @@ def make_run(
         x[tick:, j] = x[tick, j]
         y[tick:, j] = y[tick, j]
         summary_events.append(
-            {"tick": tick, "time": tick * dt, "agent": int(ids[j]), "kind": "drop", "reason": "liveliness token lost"}
+            {
+                "tick": tick,
+                "time": tick * dt,
+                "agent": int(ids[j]),
+                "kind": EventKind.DROP,
+                "reason": "liveliness token lost",
+            }
         )
     if events:
-        summary_events.insert(0, {"tick": 0, "time": 0.0, "agent": 1, "kind": "join"})
-        summary_events.append({"tick": 50, "time": 0.5, "agent": 3, "kind": "switch", "from": 1, "to": 2})
+        summary_events.insert(0, {"tick": 0, "time": 0.0, "agent": 1, "kind": EventKind.JOIN})
+        summary_events.append({"tick": 50, "time": 0.5, "agent": 3, "kind": EventKind.SWITCH, "from": 1, "to": 2})
     np.savez(
         run_dir / "trajectory.npz",
         ids=ids,
@@ -165,8 +200,6 @@ def test_render_decimates_long_run(tmp_path: Path) -> None:
 
 @pytest.mark.slow  # many renders: the long tier
 def test_render_does_not_leak_figures(tmp_path: Path) -> None:
-    import matplotlib.pyplot as plt
-
     run_dir = make_run(tmp_path / "run", ticks=100)
     before = len(plt.get_fignums())
     render_plots(run_dir)
@@ -233,7 +266,6 @@ ALL_FORMATS = ("png", "pdf", "svg")
 
 def assert_valid_figure(path: Path) -> None:
     """A whole file of its format: PNG magic, PDF header and trailer, SVG parsing as XML."""
-    import xml.etree.ElementTree as ET
 
     data = path.read_bytes()
     assert len(data) > 1000, path.name
@@ -262,10 +294,6 @@ def regroup(run_dir: Path, n_leaders: int) -> Path:
 
 
 def test_save_figure_writes_every_format(tmp_path: Path) -> None:
-    import matplotlib.pyplot as plt
-
-    from swarm.plots.render import save_figure
-
     fig, ax = plt.subplots(figsize=(2, 2))
     ax.plot([0, 1], [0, 1], label="L1")
     ax.set_title("tiny")
@@ -278,8 +306,6 @@ def test_save_figure_writes_every_format(tmp_path: Path) -> None:
 
 
 def test_unknown_format_is_refused() -> None:
-    from swarm.plots import check_formats
-
     assert check_formats(["PDF", "png", "pdf"]) == ("pdf", "png")
     with pytest.raises(ValueError, match="'jpg'.*png, pdf, svg"):
         check_formats(["png", "jpg"])
@@ -288,8 +314,6 @@ def test_unknown_format_is_refused() -> None:
 
 
 def test_every_agent_has_its_own_colour_and_leaders_are_marked(tmp_path: Path) -> None:
-    from swarm.plots.palette import agent_looks, palette
-
     for n in (6, 9, 18, 30, 54):
         cols = [tuple(c) for c in palette(n)]
         assert len(set(cols)) == n, n
@@ -307,11 +331,6 @@ def test_every_agent_has_its_own_colour_and_leaders_are_marked(tmp_path: Path) -
 def test_control_range_clips_the_leaders_start_on_case2(tmp_path: Path) -> None:
     """Case 2's leaders start at their 10 rad/s limit; the followers turn at about 1 rad/s.
     The y-range comes from the followers and leaves the spike out, marked as clipped."""
-    from swarm.contracts.scenario import load_scenario
-    from swarm.offline.sim import run_sim
-    from swarm.plots.clipping import clip_text, control_range
-    from swarm.plots.palette import agent_looks
-    from swarm.world.recording import write_run
 
     scenario = load_scenario(Path(__file__).resolve().parent.parent / "scenarios" / "case2.toml")
     write_run(run_sim(scenario, duration=3.0), tmp_path)
@@ -330,8 +349,6 @@ def test_control_range_clips_the_leaders_start_on_case2(tmp_path: Path) -> None:
 
 
 def test_labels_and_markers_are_kept_apart() -> None:
-    from swarm.plots.placement import spread_1d, stack_offsets
-
     want = np.array([0.50, 0.50, 0.51, 0.10, 0.98, 0.99])
     got = spread_1d(want, 0.05, lo=0.0, hi=1.0)
     order = np.argsort(want, kind="stable")
@@ -345,10 +362,6 @@ def test_labels_and_markers_are_kept_apart() -> None:
 
 
 def test_export_csv_matches_the_trajectory(tmp_path: Path) -> None:
-    import csv
-
-    from swarm.offline.csv_export import COLUMNS, csv_name, write_agent_csvs
-
     run_dir = make_run(tmp_path / "run", ticks=40, drop=(1, 20))
     paths = write_agent_csvs(run_dir)
     run = load_run(run_dir)
@@ -369,17 +382,13 @@ def test_export_csv_matches_the_trajectory(tmp_path: Path) -> None:
 
 
 def test_cli_refuses_a_bad_format_and_exports_csv(tmp_path: Path) -> None:
-    from typer.testing import CliRunner
-
-    from swarm.cli.main import app
-
     run_dir = make_run(tmp_path / "run", ticks=20)
     res = CliRunner().invoke(app, ["plot", str(run_dir), "--format", "png,jpg"])
-    assert res.exit_code == 2 and "--format" in res.stderr and "'jpg'" in res.stderr
+    assert res.exit_code == ExitCode.USAGE and "--format" in res.stderr and "'jpg'" in res.stderr
     assert len(res.stderr.strip().splitlines()) == 1 and "Traceback" not in res.output
     assert not list(run_dir.glob("*.png"))  # refused before any work
     res = CliRunner().invoke(app, ["export", str(run_dir), "--csv", "--no-plots"])
-    assert res.exit_code == 0, res.output
+    assert res.exit_code == ExitCode.OK, res.output
     assert len(list((run_dir / "csv").glob("agent-*.csv"))) == 3
 
 
@@ -394,14 +403,6 @@ def test_render_writes_every_format(tmp_path: Path) -> None:
 
 @pytest.mark.slow  # draws two panels of a 30-agent run: the long tier
 def test_a_large_swarm_is_drawn_by_tree_in_the_same_colours(tmp_path: Path) -> None:
-    import matplotlib.pyplot as plt
-    from matplotlib.colors import to_rgba
-
-    from swarm.plots.context import make_context
-    from swarm.plots.graph import panel_graph
-    from swarm.plots.render import figure
-    from swarm.plots.trajectories import panel_trajectories
-
     run_dir = regroup(make_run(tmp_path / "run", ticks=100, n_leaders=3, n_followers=27, drop=None), 3)
     ctx = make_context(load_run(run_dir))
     fig = figure("distance.png", ctx, "")
@@ -421,9 +422,6 @@ def test_a_large_swarm_is_drawn_by_tree_in_the_same_colours(tmp_path: Path) -> N
 
 @pytest.mark.slow  # encodes a GIF: the long tier
 def test_animation_writes_a_gif_of_several_frames(tmp_path: Path) -> None:
-    from swarm.plots import ANIMATION_FILE, render_animation
-    from swarm.plots.animate import gif_frames
-
     run_dir = make_run(tmp_path / "run", ticks=300, drop=(1, 150))  # 3 s
     seen = []
     path = render_animation(run_dir, max_frames=8, progress=lambda i, n: seen.append((i, n)))

@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from swarm.runtime.procs import Group, group_runs, stop_groups, wait_until
+from swarm.runtime.procs import Group, Reaper, group_runs, stop_groups, wait_until
 
 
 def pid_runs(pid: int) -> bool:
@@ -187,7 +187,6 @@ def test_an_empty_group_is_not_alive_and_stops_at_once():
 def test_the_reaper_reaps_members_as_they_exit_but_not_the_leader(groups):
     """A member killed from outside is no zombie while its owner is busy elsewhere (the
     launcher in a zenoh query): the Reaper thread reaps it; the leader waits for `reap()`."""
-    from swarm.runtime.procs import Reaper
 
     g = groups()
     leader = g.start(["sleep", "30"])

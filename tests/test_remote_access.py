@@ -1,6 +1,6 @@
 """An agent on "another machine" (its own empty runtime dir, so nothing local to find)
 joins a run that listens on TLS, with one identity exported by `swarm credentials`:
-the README's recipe, run for real over zenoh (tls/127.0.0.1)."""
+the recipe of docs/guides/several-machines.md#remote-agent, run for real over zenoh (tls/127.0.0.1)."""
 
 from __future__ import annotations
 
@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pytest
 from runtime_helpers import SCENARIOS, agent_info, make_env, start_up, swarm_cmd
+
+from swarm.contracts.vocabulary import ExitCode
 
 pytestmark = pytest.mark.slow
 
@@ -49,7 +51,7 @@ def test_agent_elsewhere_rejoins_over_tls_with_an_exported_identity(rt, tmp_path
     p = rt.tracker.spawn(
         swarm_cmd("credentials", "--agent", "3", "--run", run_id, "--endpoint", endpoint, "-o", cred), "export"
     )
-    assert p.wait(30) == 0, p.text()
+    assert p.wait(30) == ExitCode.OK, p.text()
     assert stat.S_IMODE(cred.stat().st_mode) == 0o600
     doc = json.loads(cred.read_text())
     assert doc["user"] == "agent-3" and "secret" not in doc and doc["tls_ca"].startswith("-----BEGIN CERTIFICATE")
@@ -64,7 +66,7 @@ def test_agent_elsewhere_rejoins_over_tls_with_an_exported_identity(rt, tmp_path
         "agent-4-elsewhere",
         env=elsewhere,
     )
-    assert wrong.wait(30) == 3
+    assert wrong.wait(30) == ExitCode.REFUSED
     assert "are for 'agent-3' of run" in wrong.text() and "not 'agent-4'" in wrong.text()
 
     agent = rt.tracker.spawn(
@@ -76,8 +78,8 @@ def test_agent_elsewhere_rejoins_over_tls_with_an_exported_identity(rt, tmp_path
     assert agent_info(info, 3)["pid"] == agent.pid and agent_info(info, 3)["joins"] == 2
 
     os.kill(up.launcher.pid, signal.SIGINT)
-    assert up.launcher.wait(60) == 130
-    assert agent.wait(30) == 0  # the world's end notice reached it over TLS
+    assert up.launcher.wait(60) == ExitCode.INTERRUPTED
+    assert agent.wait(30) == ExitCode.OK  # the world's end notice reached it over TLS
     rt.tracker.assert_none_left(timeout=15)
     summ = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summ["agents"]["3"]["joins"] == 2 and summ["agents"]["3"]["pid"] == agent.pid

@@ -32,6 +32,7 @@ from runtime_helpers import (
 )
 
 from swarm.contracts.scenario import load_scenario
+from swarm.contracts.vocabulary import EventKind, ExitCode, SwitchReason
 
 pytestmark = pytest.mark.slow
 
@@ -62,7 +63,7 @@ def lockstep_runs(tmp_path_factory, shipped_sim):
             d = EQUIV_DURATION.get(name)
             extra = ("--duration", str(d)) if d else ()
             res, sim_out = shipped_sim(name)
-            assert res.exit_code == 0, res.output[-3000:]
+            assert res.exit_code == ExitCode.OK, res.output[-3000:]
             sim_traj, sim_summary = sim_results(sim_out)
             if d:
                 sim_traj, sim_summary = first_ticks(sim_traj, sim_summary, round(d / load_scenario(scen).run.dt))
@@ -93,7 +94,7 @@ def lockstep_runs(tmp_path_factory, shipped_sim):
 
 
 def switches(events: list[dict]) -> list[tuple]:
-    return [(e["tick"], e["agent"], e["from"], e["to"], e["reason"]) for e in events if e["kind"] == "switch"]
+    return [(e["tick"], e["agent"], e["from"], e["to"], e["reason"]) for e in events if e["kind"] == EventKind.SWITCH]
 
 
 # --- 1. equivalence ---------------------------------------------------------------------------
@@ -140,7 +141,7 @@ def test_lockstep_up_equals_sim_first_20_s(rt, tmp_path, name):
     sim, sim_summ = run_sim(rt.tracker, scen, tmp_path / "sim", "--duration", "20")
     up = start_up(rt.tracker, scen, tmp_path / "up", "--clock", "lockstep", "--duration", "20")
     rc = up.launcher.wait(120)
-    assert rc == 0, up.launcher.text()[-3000:]
+    assert rc == ExitCode.OK, up.launcher.text()[-3000:]
     traj, summ = up.trajectory(), up.summary()
     assert len(traj["t"]) == len(sim["t"]) == round(20 / load_scenario(scen).run.dt) + 1
     for key in ("t", "x", "y", "heading", "u", "out", "alive"):
@@ -162,7 +163,7 @@ def test_case2_chooses_at_runtime_through_up(lockstep_runs):
     summ = res["summary"]
     assert {int(i): a["out_neighbour"] for i, a in summ["agents"].items()} == {1: None, 2: 4, 3: 1, 4: 1, 5: 1, 6: None}
     assert summ["switches"] == 1 and summ["agents"]["2"]["switches"] == 1
-    (sw,) = [e for e in events_of(summ, "switch") if e["from"] is not None]
+    (sw,) = [e for e in events_of(summ, EventKind.SWITCH) if e["from"] is not None]
     assert (sw["tick"], sw["agent"], sw["from"], sw["to"]) == (1, 2, 1, 4)
 
 
@@ -178,10 +179,10 @@ def test_leader_loss_through_up_re_roots_on_the_other_tree(lockstep_runs):
     kill = 6000
     assert sorted(switches(summ["events"])) == sorted(switches(res["sim_summary"]["events"]))
     at_kill = sorted(
-        (e["agent"], e["from"], e["to"], e["reason"]) for e in events_of(summ, "switch") if e["tick"] >= kill
+        (e["agent"], e["from"], e["to"], e["reason"]) for e in events_of(summ, EventKind.SWITCH) if e["tick"] >= kill
     )
-    assert at_kill == [(a, 1, 6, "out-neighbour left the world") for a in (3, 4, 5)]
-    assert all(e["tick"] == kill for e in events_of(summ, "switch") if e["tick"] >= kill)
+    assert at_kill == [(a, 1, 6, SwitchReason.LEFT) for a in (3, 4, 5)]
+    assert all(e["tick"] == kill for e in events_of(summ, EventKind.SWITCH) if e["tick"] >= kill)
     assert summ["converged"] is True and summ["switches"] == 4
     assert {int(i): a["root"] for i, a in summ["agents"].items() if a["alive"]} == {2: 6, 3: 6, 4: 6, 5: 6, 6: 6}
     (fault,) = summ["faults"]
@@ -206,7 +207,7 @@ def test_case2_converges_through_up(lockstep_runs):
         assert a["joins"] == 1 and a["drops"] == 0
         assert a["commands"] == summ["ticks"]
         assert a["alive"] is True
-    assert events_of(summ, "drop") == []
+    assert events_of(summ, EventKind.DROP) == []
 
 
 # --- 5. Ctrl-C / SIGTERM on `swarm up` -------------------------------------------------------------
@@ -320,7 +321,7 @@ def test_world_honours_sigterm_while_publishing(rt, tmp_path):
     if "[test] SIGTERM to myself at tick 0" not in w.text():
         pytest.fail(f"the signal was not sent as planned:\n{w.text()[-2000:]}")
     summ = json.loads((tmp_path / "out" / "summary.json").read_text())
-    assert rc == 143 and summ["stopped_by_signal"] == signal.SIGTERM, (
+    assert rc == ExitCode.TERMINATED and summ["stopped_by_signal"] == signal.SIGTERM, (
         f"world exited {rc} after SIGTERM at tick 0 and ran {summ['ticks']} ticks (completed={summ['completed']})"
     )
 
@@ -345,7 +346,7 @@ def test_two_runs_side_by_side(rt, tmp_path):
     sa, sb = a.summary(), b.summary()
     assert sa["run"] != sb["run"] and sa["endpoint"] != sb["endpoint"]
     for summ, own, other in ((sa, pids_a, pids_b), (sb, pids_b, pids_a)):
-        joins = events_of(summ, "join")
+        joins = events_of(summ, EventKind.JOIN)
         assert sorted(e["agent"] for e in joins) == [1, 2, 3, 4, 5, 6]
         pids = {e["pid"] for e in joins} | {a_["pid"] for a_ in summ["agents"].values()}
         assert pids <= own, f"run {summ['run']} recorded pids {pids - own} that it did not start"
@@ -353,9 +354,9 @@ def test_two_runs_side_by_side(rt, tmp_path):
         for e in summ["events"]:  # every event that names a process names one of this run's
             if e.get("pid") is not None:
                 assert e["pid"] in own, e
-        assert events_of(summ, "drop") == [] and events_of(summ, "rejoin") == []
+        assert events_of(summ, EventKind.DROP) == [] and events_of(summ, EventKind.REJOIN) == []
         assert summ["garbage_messages"] == 0 and summ["completed"] is True
-        for aid, ag in summ["agents"].items():
+        for ag in summ["agents"].values():
             assert ag["joins"] == 1 and ag["commands"] == summ["ticks"]
     for run in (a, b):
         traj = run.trajectory()

@@ -29,6 +29,7 @@ from runtime_helpers import (
     swarm_cmd,
 )
 
+from swarm.contracts.vocabulary import AgentState, EventKind, ExitCode
 from swarm.runtime.procs import wait_until
 
 pytestmark = pytest.mark.slow
@@ -43,8 +44,8 @@ FAULT_DURATION = 60.0  # s: the kills and the rejoin are done in the first few s
 
 @pytest.fixture(scope="module")
 def fault_run(tmp_path_factory):
-    """case2-fixed (the pinned graph) through `swarm up`: SIGKILL follower 4 (5 pins it), then leader 1 (2 and 3 pin it),
-    then start agent 4 again by hand; the run goes on to its end."""
+    """case2-fixed (the pinned graph) through `swarm up`: SIGKILL follower 4 (5 pins it), then
+    leader 1 (2 and 3 pin it), then start agent 4 again by hand; the run goes on to its end."""
     base = tmp_path_factory.mktemp("faults")
     with Runtime(base) as r:
         tr = r.tracker
@@ -91,7 +92,7 @@ def fault_run(tmp_path_factory):
 
 
 def _drop_event(summ: dict, agent: int) -> dict:
-    drops = events_of(summ, "drop", agent)
+    drops = events_of(summ, EventKind.DROP, agent)
     assert len(drops) == 1, f"agent {agent}: drop events {drops}"
     return drops[0]
 
@@ -107,7 +108,7 @@ def _check_followers_switch(res: dict, victim: int, expected_followers: set[int]
     followers = {a for a in ids if traj["out"][k - 1, col[a]] == victim}
     assert expected_followers <= followers, f"followers of {victim} before its drop: {followers}"
     for f in sorted(followers):
-        sw = [e for e in events_of(summ, "switch", f) if e["tick"] >= k]
+        sw = [e for e in events_of(summ, EventKind.SWITCH, f) if e["tick"] >= k]
         assert sw, f"agent {f} never switched away from dropped agent {victim}"
         first = sw[0]
         assert first["tick"] <= k + 1, (
@@ -127,7 +128,7 @@ def test_sigkill_detected_and_replaced(fault_run, victim, followers):
     drop = _drop_event(res["summary"], victim)
     latency = drop["wall_time"] - res["kill_time"][victim]
     print(f"\n[timing] SIGKILL agent {victim} -> drop event {1000 * latency:.1f} ms")
-    assert latency >= 0 and "liveliness" in drop["reason"] and drop["now"] == "gone", drop
+    assert latency >= 0 and "liveliness" in drop["reason"] and drop["now"] == AgentState.GONE, drop
     _check_followers_switch(res, victim, followers)
 
 
@@ -139,8 +140,8 @@ def test_run_completes_after_kills(fault_run):
     assert summ["completed"] is True and summ["ticks"] == ticks
     check_time_column(traj, ticks, 0.01)
     # The events tell the story, with reasons, in order.
-    kinds = [(e["kind"], e["agent"]) for e in summ["events"] if e["kind"] in ("drop", "rejoin")]
-    assert kinds == [("drop", 4), ("drop", 1), ("rejoin", 4)], kinds
+    kinds = [(e["kind"], e["agent"]) for e in summ["events"] if e["kind"] in (EventKind.DROP, EventKind.REJOIN)]
+    assert kinds == [(EventKind.DROP, 4), (EventKind.DROP, 1), (EventKind.REJOIN, 4)], kinds
     # Kills from outside: `swarm sim` cannot do the same, and the summary says so.
     assert summ["reproducible"] is False
     churn = [r.split(" at tick")[0] for r in summ["not_reproducible"] if r.startswith("agent ")]
@@ -152,7 +153,7 @@ def test_run_completes_after_kills(fault_run):
     for aid in ("2", "3", "5", "6"):
         assert summ["agents"][aid]["drops"] == 0 and summ["agents"][aid]["joins"] == 1
     # The world's join events name the processes the launcher started (found with psutil).
-    joins = {e["agent"]: e["pid"] for e in events_of(summ, "join")}
+    joins = {e["agent"]: e["pid"] for e in events_of(summ, EventKind.JOIN)}
     assert joins == res["pids"], (joins, res["pids"])
     # The out and alive columns are exactly what the events say, at every tick.
     rep_out, rep_alive = replay_events(summ["events"], traj["ids"], ticks + 1)
@@ -168,7 +169,7 @@ def test_restarted_agent_rejoins_from_its_drop_pose(fault_run):
     summ, traj = res["summary"], res["traj"]
     col = {int(a): k for k, a in enumerate(traj["ids"])}[4]
     drop = _drop_event(summ, 4)
-    rejoins = events_of(summ, "rejoin", 4)
+    rejoins = events_of(summ, EventKind.REJOIN, 4)
     assert len(rejoins) == 1, rejoins
     rj = rejoins[0]
     assert rj["pid"] == res["again"].pid, f"rejoin names pid {rj['pid']}, restarted pid {res['again'].pid}"
@@ -190,7 +191,7 @@ def test_restarted_agent_rejoins_from_its_drop_pose(fault_run):
     )
     # It is controlled again: commands after the rejoin, and its pinned follower 5 returns to it.
     assert summ["agents"]["4"]["pid"] == res["again"].pid
-    back = [e for e in events_of(summ, "switch", 5) if e["tick"] >= kr and e["to"] == 4]
+    back = [e for e in events_of(summ, EventKind.SWITCH, 5) if e["tick"] >= kr and e["to"] == 4]
     assert back and back[0]["tick"] <= kr + 1, f"follower 5 did not return to 4 after its rejoin: {back}"
     # The restarted process ended with the run.
     assert res["again_rc"] == 0, res["again"].text()
@@ -226,16 +227,16 @@ def test_duplicate_and_unknown_ids_are_refused(rt, tmp_path):
 
     dup = rt.tracker.spawn(agent_cmd(1, ep, run_id), "agent-1-dup")
     rc = dup.wait(20)
-    assert rc == 3, f"second agent 1 exited {rc}: {dup.text()}"
+    assert rc == ExitCode.REFUSED, f"second agent 1 exited {rc}: {dup.text()}"
     assert "already live" in dup.text() and f"pid {first.pid}" in dup.text(), dup.text()
 
     # The same through the CLI, and with the run id looked up on the endpoint.
     dup2 = rt.tracker.spawn(swarm_cmd("agent", "--id", 1, "--connect", ep), "agent-1-dup-cli")
-    assert dup2.wait(20) == 3 and "already live" in dup2.text(), dup2.text()
+    assert dup2.wait(20) == ExitCode.REFUSED and "already live" in dup2.text(), dup2.text()
 
     unknown = rt.tracker.spawn(agent_cmd(99, ep, run_id), "agent-99")
     rc = unknown.wait(20)
-    assert rc == 3, f"agent 99 exited {rc}: {unknown.text()}"
+    assert rc == ExitCode.REFUSED, f"agent 99 exited {rc}: {unknown.text()}"
     assert "not in scenario" in unknown.text(), unknown.text()
 
     # The live agent 1 was not disturbed, and nobody else joined.
@@ -246,13 +247,15 @@ def test_duplicate_and_unknown_ids_are_refused(rt, tmp_path):
     assert [a["id"] for a in info["agents"].values() if a["joins"]] == [1] and "99" not in info["agents"]
 
     w.group.signal(signal.SIGTERM)
-    assert w.wait(20) == 143, w.text()[-2000:]
+    assert w.wait(20) == ExitCode.TERMINATED, w.text()[-2000:]
     rc1 = first.wait(10)
     print(f"\n[info] agent 1 exited {rc1} after the world was stopped with SIGTERM")
     assert rc1 in (0, 4), f"agent 1 exited {rc1} when the world stopped: {first.text()}"
     rt.tracker.assert_none_left(timeout=5)
     summ = json.loads((tmp_path / "world-out" / "summary.json").read_text())
-    assert [e["agent"] for e in events_of(summ, "join")] == [1] and not events_of(summ, "drop", 1), summ["events"]
+    assert [e["agent"] for e in events_of(summ, EventKind.JOIN)] == [1] and not events_of(summ, EventKind.DROP, 1), (
+        summ["events"]
+    )
 
 
 # --- 8. the world vanishes ------------------------------------------------------------------------------
@@ -284,13 +287,13 @@ def test_agents_exit_when_the_world_vanishes(rt, tmp_path):
     assert w.wait(5) == -signal.SIGKILL
     for i, a in agents.items():
         assert i in exits, f"agent {i} still running 10 s after the world died"
-        assert a.poll() == 4, f"agent {i} exited {a.poll()}: {a.text()}"
+        assert a.poll() == ExitCode.WORLD_GONE, f"agent {i} exited {a.poll()}: {a.text()}"
         assert exits[i] < 1.5, f"agent {i} took {exits[i]:.2f} s to notice"
         assert "vanished" in a.text(), a.text()
     rt.tracker.assert_none_left(timeout=5)
 
 
-# --- a frozen world: lockstep stays lockstep (issue 22) ----------------------------------------------
+# --- a frozen world: lockstep stays lockstep (docs/guides/faults.md#lockstep-under-stalls) ---------------
 def test_a_world_stopped_5_s_mid_run_still_equals_sim(rt, tmp_path):
     """SIGSTOP to the world for 5 s mid-run: its stall is not the agents' (no missed tick),
     the tick's frames go again, and the run equals `swarm sim` to the bit, reproducible."""
@@ -325,7 +328,7 @@ def test_frozen_agent_is_dropped(rt, tmp_path):
     finally:
         os.kill(victim, signal.SIGCONT)
     summ, traj = up.results(120)
-    drops = events_of(summ, "drop")
+    drops = events_of(summ, EventKind.DROP)
     assert drops and drops[0]["agent"] == 3, drops
     latency = drops[0]["wall_time"] - t_stop
     print(f"\n[timing] SIGSTOP agent 3 -> drop event {latency:.3f} s (seen live after {t_seen - t_stop:.3f} s)")
@@ -340,11 +343,12 @@ def test_frozen_agent_is_dropped(rt, tmp_path):
     # After SIGCONT the process may come back briefly (its link reconnects and its token
     # reappears: a rejoin and another drop), but it must not outlive the run.
     after = [
-        (e["kind"], e["tick"]) for e in summ["events"] if e["agent"] == 3 and e["tick"] >= k and e["kind"] != "switch"
+        (e["kind"], e["tick"])
+        for e in summ["events"]
+        if e["agent"] == 3 and e["tick"] >= k and e["kind"] != EventKind.SWITCH
     ]
-    print(
-        f"[info] agent 3 after SIGCONT: events {after}, log: {up.out.joinpath('logs', 'agent-3.log').read_text().strip()!r}"
-    )
+    log = up.out.joinpath("logs", "agent-3.log").read_text().strip()
+    print(f"[info] agent 3 after SIGCONT: events {after}, log: {log!r}")
     rep_out, rep_alive = replay_events(summ["events"], traj["ids"], summ["ticks"] + 1)
     np.testing.assert_array_equal(traj["alive"], rep_alive)
     np.testing.assert_array_equal(traj["out"], rep_out)

@@ -8,11 +8,13 @@ import tomllib
 from pathlib import Path
 
 import pytest
+from pydantic import ValidationError
 from typer.testing import CliRunner
 
 from swarm.cli.main import app
 from swarm.contracts import scenario as scenario_module
 from swarm.contracts.scenario import Scenario, ScenarioError, load_scenario, parse_scenario
+from swarm.contracts.vocabulary import ExitCode
 from swarm.contracts.wire import MAX_AGENT_ID, MAX_AGENTS
 
 SCENARIOS = sorted((Path(__file__).resolve().parent.parent / "scenarios").glob("*.toml"))
@@ -137,7 +139,7 @@ BAD = [
     ("negative-seed", _set("run.seed", -1), ["run.seed", "greater than or equal to 0"]),
     ("huge-seed", _set("run.seed", 10**400), ["run.seed", "less than or equal to"]),
     ("relative-law-module", _set("gains.law", ".nowhere:law"), ["gains.law", "cannot import"]),
-    # finite values the engine cannot honour (issue 22, item 6): overflow, no precision left, no end
+    # finite values the engine cannot honour (docs/guides/scenarios.md#checks): overflow, no precision left, no end
     ("huge-x", _set("agents.0.x", 1e308), ["agents[0].x", "less than or equal to 10000000"]),
     ("huge-target", _set("target.y", -1e12), ["target.y", "greater than or equal to -10000000"]),
     ("huge-heading", _set("agents.1.heading", 1e17), ["agents[1].heading", "1000000"]),
@@ -166,7 +168,7 @@ def test_bad_input_rejected_by_cli_check(base, write_toml, mutate, fragments):
     mutate(base)
     path = write_toml(base, "bad.toml")
     res = CliRunner().invoke(app, ["check", str(path)])
-    assert res.exit_code == 2, res.output
+    assert res.exit_code == ExitCode.USAGE, res.output
     assert isinstance(res.exception, SystemExit)
     assert "Traceback" not in res.output
     assert str(path) in res.stderr
@@ -183,7 +185,7 @@ def test_toml_syntax_error_names_file(tmp_path):
     assert str(path) in str(exc.value)
     assert "line 1" in str(exc.value)
     res = CliRunner().invoke(app, ["check", str(path)])
-    assert res.exit_code == 2
+    assert res.exit_code == ExitCode.USAGE
     assert str(path) in res.stderr and "TOML syntax error" in res.stderr
     assert "Traceback" not in res.output
 
@@ -194,7 +196,7 @@ def test_missing_file(tmp_path):
         load_scenario(path)
     assert str(path) in str(exc.value)
     res = CliRunner().invoke(app, ["check", str(path)])
-    assert res.exit_code == 2
+    assert res.exit_code == ExitCode.USAGE
     assert str(path) in res.stderr and "no such file" in res.stderr
     assert "Traceback" not in res.output
 
@@ -203,7 +205,7 @@ def test_directory_instead_of_file(tmp_path):
     with pytest.raises(ScenarioError, match="cannot read"):
         load_scenario(tmp_path)
     res = CliRunner().invoke(app, ["check", str(tmp_path)])
-    assert res.exit_code == 2 and "Traceback" not in res.output
+    assert res.exit_code == ExitCode.USAGE and "Traceback" not in res.output
 
 
 def test_error_message_is_one_line_per_problem(base, write_toml):
@@ -244,9 +246,9 @@ def test_base_loads_with_defaults(base, write_toml):
 
 def test_models_are_frozen(base):
     s = parse_scenario(base)
-    with pytest.raises(Exception):
+    with pytest.raises(ValidationError):
         s.run.dt = 1.0  # type: ignore[misc]
-    with pytest.raises(Exception):
+    with pytest.raises(ValidationError):
         s.agents[0].speed = 3.0  # type: ignore[misc]
 
 

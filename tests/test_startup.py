@@ -1,4 +1,4 @@
-"""Start-up and its files (issue 22, items 5 and 10): a world or an agent stopped in its first
+"""Start-up and its files: a world or an agent stopped in its first
 second exits and leaves nothing behind; `swarm up` waits for the world's own word that it
 listens (swarm/contracts/startup.py), not a fixed time; the files of a killed world are
 swept by the next `swarm runs`; a spawned agent logs into the run's `logs/`.
@@ -9,9 +9,11 @@ generous deadlines (a loaded 2-core machine must pass), never elapsed times.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -24,9 +26,11 @@ import pytest
 from runtime_helpers import SCENARIOS, Runtime, agent_cmd, live_swarm, short_runtime_dir, swarm_cmd, wait_for
 from typer.testing import CliRunner
 
+from swarm.cli.main import app
 from swarm.contracts.runtime_sweep import sweep_stale
 from swarm.contracts.startup import ENV_READY_FD, READY, Announcer, ReadyWait
 from swarm.contracts.stop_signals import StopSignals
+from swarm.contracts.vocabulary import ExitCode
 from swarm.runtime.procs import wait_until
 
 REPO = Path(__file__).resolve().parents[1]
@@ -77,8 +81,6 @@ def _dead_pid() -> int:
 
 
 def test_sweep_removes_only_files_whose_owner_is_gone(tmp_path):
-    import fcntl
-
     d = tmp_path
     dead, alive = _dead_pid(), os.getpid()
     for run, pid in (("dead", dead), ("live", alive)):
@@ -160,11 +162,9 @@ def test_world_stopped_in_its_first_second_exits_and_leaves_no_files(when):
             p.send_signal(signal.SIGTERM)
             code = _exit_of(p)
             assert code is not None, f"the world did not exit within {EXIT_DEADLINE} s of SIGTERM ({when})"
-            assert code in (143, -signal.SIGTERM), code
+            assert code in (ExitCode.TERMINATED, -signal.SIGTERM), code
         assert sorted(os.listdir(rt)) == []
     finally:
-        import shutil
-
         shutil.rmtree(rt, ignore_errors=True)
 
 
@@ -174,7 +174,6 @@ def test_killed_world_files_are_swept_by_swarm_runs(monkeypatch):
     them, and leaves those of a live world alone."""
     rt = short_runtime_dir()
     monkeypatch.setenv("SWARM_RUNTIME_DIR", rt)
-    from swarm.cli.main import app
 
     with world_process(rt, "dead") as (p, wait), world_process(rt, "alive") as (q, qwait):
         assert wait.wait(60) and qwait.wait(60)
@@ -182,11 +181,11 @@ def test_killed_world_files_are_swept_by_swarm_runs(monkeypatch):
         p.wait()
         assert {"dead.cred", "dead.sock", "dead.sock.lock"} <= set(os.listdir(rt))
         res = CliRunner().invoke(app, ["runs", "--json"])
-        assert res.exit_code == 0, res.output
+        assert res.exit_code == ExitCode.OK, res.output
         assert [d["run"] for d in json.loads(res.stdout)] == ["alive"]
         assert sorted(os.listdir(rt)) == ["alive.cred", "alive.sock", "alive.sock.lock"]
         q.send_signal(signal.SIGTERM)
-        assert _exit_of(q) == 143
+        assert _exit_of(q) == ExitCode.TERMINATED
     assert os.listdir(rt) == []
 
 
@@ -215,16 +214,14 @@ def test_agent_stopped_in_its_first_second_exits():
                     a.send_signal(signal.SIGTERM)
                     code = _exit_of(a)
                     assert code is not None, f"agent did not exit within {EXIT_DEADLINE} s of SIGTERM at {delay} s"
-                    assert code in (143, -signal.SIGTERM, 0), code
+                    assert code in (ExitCode.TERMINATED, -signal.SIGTERM, ExitCode.OK), code
                 finally:
                     if a.poll() is None:
                         os.killpg(a.pid, signal.SIGKILL)
                         a.wait()
             w.send_signal(signal.SIGTERM)
-            assert _exit_of(w) == 143
+            assert _exit_of(w) == ExitCode.TERMINATED
     finally:
-        import shutil
-
         shutil.rmtree(rt, ignore_errors=True)
 
 
@@ -266,7 +263,7 @@ def test_up_waits_for_a_slow_world(tmp_path):
             env=env,
         )
         code = up.wait(240)
-        assert code == 0, up.text()[-3000:]
+        assert code == ExitCode.OK, up.text()[-3000:]
         assert "cannot reach" not in up.text() and (tmp_path / "run" / "summary.json").exists()
 
 
@@ -282,7 +279,7 @@ def test_spawned_agent_logs_in_the_runs_logs(tmp_path):
             ),
             "spawn-7",
         )
-        assert sp.wait(60) == 0, sp.text()
+        assert sp.wait(60) == ExitCode.OK, sp.text()
         m = re.search(r"agent 7 is live: pid (\d+) \(log (.+)\)", sp.text())
         assert m, sp.text()
         pid = int(m[1])
@@ -291,6 +288,6 @@ def test_spawned_agent_logs_in_the_runs_logs(tmp_path):
         assert Path(m[2]) == log and log.exists()
         assert not (Path(state["runtime"]) / "logs").exists()
         again = tr.spawn(swarm_cmd("spawn", "--id", "3"), "spawn-3")
-        assert again.wait(60) == 1
+        assert again.wait(60) == ExitCode.FAILED
         lines = again.text().strip().splitlines()
         assert len(lines) == 1 and "agent 3 is already live" in lines[0], lines

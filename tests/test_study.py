@@ -1,4 +1,4 @@
-"""`swarm study swarms|gains` (issue 8, part 4): rows, tables, plots, bad options, and
+"""`swarm study swarms|gains` (docs/design/studies.md): rows, tables, plots, bad options, and
 Ctrl-C keeping every finished row with no worker left behind."""
 
 from __future__ import annotations
@@ -15,9 +15,11 @@ import pytest
 from typer.testing import CliRunner
 
 from swarm.cli.main import app
+from swarm.contracts.vocabulary import ExitCode
 from swarm.runtime.procs import Group, wait_until
+from swarm.study.batch import gain_chunks, run_gain_chunk
 from swarm.study.gains import GainJob, run_gain
-from swarm.study.swarms import SwarmSetting, cut_off_at_start, random_swarm, summarise_swarms
+from swarm.study.swarms import SwarmSetting, cut_off_at_start, random_swarm, run_swarm, summarise_swarms
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -49,7 +51,7 @@ def test_swarms_study_compares_rules_on_the_same_swarms(tmp_path):
         "--out",
         tmp_path / "s",
     )
-    assert res.exit_code == 0, res.output
+    assert res.exit_code == ExitCode.OK, res.output
     runs = rows(tmp_path / "s" / "runs.csv")
     assert len(runs) == 4
     assert {(r["selection"], r["seed"]) for r in runs} == {(a, b) for a in ("sticky", "nearest") for b in "01"}
@@ -63,7 +65,6 @@ def test_swarms_study_compares_rules_on_the_same_swarms(tmp_path):
 @pytest.mark.slow  # a whole run in-process: the long tier
 def test_on_a_known_swarm_sticky_settles_where_rooted_chatters_and_nearest_cycles():
     # seed 0 of the default setting (10 agents, 2 leaders, unlimited sensing), 120 s
-    from swarm.study.swarms import run_swarm
 
     base = dict(n=10, leaders=2, duration=120.0)
     sticky, rooted, nearest = (
@@ -107,7 +108,7 @@ def test_every_run_counts_and_cut_off_swarms_are_also_shown_apart():
 
 @pytest.mark.slow  # a whole run in-process
 def test_gain_map_finds_where_the_law_settles():
-    # docs/scenarios.md, "Which gains converge": C2 = omega/2 settles a follower twice as fast as its
+    # docs/design/studies.md#gains: C2 = omega/2 settles a follower twice as fast as its
     # leader; C2 = 3 omega makes it oscillate about its orbit for ever.
     good = run_gain(GainJob(1.0, 0.5, 2.0, 0, duration=200.0))
     bad = run_gain(GainJob(1.0, 3.0, 2.0, 0, duration=200.0))
@@ -117,8 +118,6 @@ def test_gain_map_finds_where_the_law_settles():
 
 @pytest.mark.slow  # a whole run in-process
 def test_gain_map_batches_give_the_per_agent_rows():
-    from swarm.study.batch import gain_chunks, run_gain_chunk
-
     jobs = [GainJob(1.0, c2, q, k, duration=40.0) for c2 in (0.5, 3.0) for q in (0.6, 2.0) for k in range(2)]
     chunks = gain_chunks(jobs, workers=1)
     assert [len(c) for c in chunks] == [2, 2, 2, 2]  # four chunks per worker
@@ -151,7 +150,7 @@ def test_gains_study_table_and_plot(tmp_path):
         "--out",
         tmp_path / "g",
     )
-    assert res.exit_code == 0, res.output
+    assert res.exit_code == ExitCode.OK, res.output
     summary = {(float(r["c2"])): r["worst_settling_s"] for r in rows(tmp_path / "g" / "summary.csv")}
     assert math.isfinite(float(summary[0.5])) and math.isnan(float(summary[3.0]))
     assert (tmp_path / "g" / "gains.png").stat().st_size > 1000
@@ -169,7 +168,7 @@ def test_gains_study_table_and_plot(tmp_path):
 )
 def test_bad_options_name_the_option(tmp_path, args, message):
     res = invoke("study", *args, "--out", tmp_path / "x")
-    assert res.exit_code == 2
+    assert res.exit_code == ExitCode.USAGE
     assert message in res.output
     assert not (tmp_path / "x").exists()
 
@@ -218,7 +217,7 @@ def test_ctrl_c_keeps_finished_rows_and_leaves_no_worker(tmp_path, engine):
         output, _ = proc.communicate(timeout=60)
     finally:
         group.kill()
-    assert proc.returncode == 130, output
+    assert proc.returncode == ExitCode.INTERRUPTED, output
     assert "stopped:" in output and "Traceback" not in output
     finished = rows(out / "runs.csv")
     assert 2 <= len(finished) < 60

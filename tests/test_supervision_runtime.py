@@ -30,6 +30,8 @@ from runtime_helpers import (
     swarm_cmd,
 )
 
+from swarm.contracts.vocabulary import EventKind, ExitCode
+
 pytestmark = pytest.mark.slow
 
 # Followers that call their law RAISE_AFTER times, returning NaN on a few calls first.
@@ -75,9 +77,9 @@ def test_raising_law_is_a_crash_event_and_exit_4(rt, tmp_path, base):
     rc = up.launcher.wait(120)
     rt.tracker.assert_none_left(timeout=10)
     text = up.launcher.text()
-    assert rc == 4, text[-3000:] + up.world_text()[-3000:]
+    assert rc == ExitCode.AGENT_FAILED, text[-3000:] + up.world_text()[-3000:]
     summ = up.summary()
-    crashes = events_of(summ, "crash")
+    crashes = events_of(summ, EventKind.CRASH)
     assert sorted(e["agent"] for e in crashes) == [2, 3], summ["events"]
     for e in crashes:
         assert e["cause"] == "RuntimeError: the law gave up after 40 calls", e
@@ -99,13 +101,13 @@ def test_hand_killed_agents_are_exit_events_and_a_deserted_run_ends(rt, tmp_path
         os.kill(pid, signal.SIGKILL)
     rc = up.launcher.wait(60)
     rt.tracker.assert_none_left(timeout=10)
-    assert rc == 5, up.launcher.text()[-3000:]
+    assert rc == ExitCode.DESERTED, up.launcher.text()[-3000:]
     summ = up.summary()
     assert summ["completed"] is False and summ["ticks"] < 15000
-    (end,) = events_of(summ, "deserted")
+    (end,) = events_of(summ, EventKind.DESERTED)
     assert end["agent"] is None and "no agent process" in end["reason"]
-    exits = {e["agent"]: e for e in events_of(summ, "exit")}
-    assert sorted(exits) == sorted(pids) and not events_of(summ, "crash"), summ["events"]
+    exits = {e["agent"]: e for e in events_of(summ, EventKind.EXIT)}
+    assert sorted(exits) == sorted(pids) and not events_of(summ, EventKind.CRASH), summ["events"]
     assert all(e["code"] == -signal.SIGKILL and "killed by SIGKILL" in e["reason"] for e in exits.values())
     assert "the run ended early: no agent process was left" in up.launcher.text()
 
@@ -136,7 +138,9 @@ def test_world_stopped_for_5_s_the_run_goes_on(rt, tmp_path):
     assert {int(a) for a in summ["agents"]} == set(pids)
     for aid, a in summ["agents"].items():
         assert a["alive"] and a["joins"] == 1 and a["drops"] == 0, (aid, a)
-    assert not [e for e in summ["events"] if e["kind"] in ("drop", "rejoin", "crash", "exit")], summ["events"]
+    assert not [
+        e for e in summ["events"] if e["kind"] in (EventKind.DROP, EventKind.REJOIN, EventKind.CRASH, EventKind.EXIT)
+    ], summ["events"]
     assert traj["alive"][-1].all()
     for aid in pids:
         log = (up.out / "logs" / f"agent-{aid}.log").read_text()
@@ -207,7 +211,10 @@ def test_bad_endpoint_is_one_line(rt, tmp_path):
     rc = up.launcher.wait(60)
     rt.tracker.assert_none_left(timeout=10)
     text = up.launcher.text().strip()
-    assert rc == 2 and text == "--listen: not an endpoint: 'tcp/127.0.0.1:99999' (port 99999 is not in 0..65535)", text
+    assert (
+        rc == ExitCode.USAGE
+        and text == "--listen: not an endpoint: 'tcp/127.0.0.1:99999' (port 99999 is not in 0..65535)"
+    ), text
 
 
 def test_port_in_use_is_one_line(rt, tmp_path):
@@ -219,7 +226,7 @@ def test_port_in_use_is_one_line(rt, tmp_path):
         rc, line = _one_line_failure(rt, tmp_path, "--listen", f"tcp/127.0.0.1:{port}")
     finally:
         s.close()
-    assert rc == 1 and "Address already in use" in line and f"127.0.0.1:{port}" in line, line
+    assert rc == ExitCode.FAILED and "Address already in use" in line and f"127.0.0.1:{port}" in line, line
 
 
 def test_law_agents_cannot_import_is_one_line(rt, tmp_path, base):
@@ -229,6 +236,6 @@ def test_law_agents_cannot_import_is_one_line(rt, tmp_path, base):
     rc = up.launcher.wait(60)
     rt.tracker.assert_none_left(timeout=10)
     lines = [ln for ln in up.launcher.text().splitlines() if ln.startswith("swarm up:")]
-    assert rc == 4 and len(lines) == 1, up.launcher.text()
+    assert rc == ExitCode.AGENT_FAILED and len(lines) == 1, up.launcher.text()
     assert "could not start (exit code 3)" in lines[0] and "this law cannot be loaded in an agent" in lines[0], lines
     print(f"\n[timing] unloadable law -> swarm up exit: {time.monotonic() - t0:.2f} s")

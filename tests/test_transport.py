@@ -7,9 +7,11 @@ from __future__ import annotations
 import queue
 
 import pytest
+import zenoh
 
 from swarm.contracts import wire
 from swarm.contracts.transport import open_client, open_hub, query_statuses
+from swarm.contracts.vocabulary import Phase
 from swarm.runtime.procs import wait_until
 
 RUN = "two-sessions"
@@ -42,7 +44,7 @@ def test_a_command_put_by_the_client_reaches_the_hub(sessions):
         wire.agent_key(RUN, "*", "cmd"), lambda s: got.put((str(s.key_expr), s.payload.to_bytes()))
     )
     try:
-        cmd = wire.Command(4, 17, -0.25, 2, "track", 3, 77)
+        cmd = wire.Command(4, 17, -0.25, 2, Phase.TRACK, 3, 77)
 
         def delivered():  # put again until the subscription has reached the client
             client.put(wire.agent_key(RUN, 4, "cmd"), wire.encode_cmd(cmd))
@@ -63,7 +65,6 @@ def test_a_command_put_by_the_client_reaches_the_hub(sessions):
 def test_liveliness_token_appears_and_goes(sessions):
     hub, client = sessions
     seen: queue.Queue = queue.Queue()
-    import zenoh
 
     sub = hub.liveliness().declare_subscriber(
         wire.agent_key(RUN, "*", "alive"),

@@ -4,8 +4,10 @@ another exception or a message. Milliseconds, no network."""
 
 from __future__ import annotations
 
+import json
 import random
 
+import numpy as np
 import pytest
 from malformed import (
     ADMIN_BAD,
@@ -24,6 +26,8 @@ from malformed import (
 
 from swarm.contracts import wire
 from swarm.contracts.frames import Contact, SensorFrame
+from swarm.contracts.vocabulary import EventKind, Phase
+from swarm.world.sensing import build_frames, encode_frames_pairwise, sensing_matrix
 
 # -- round trips ---------------------------------------------------------------------------
 
@@ -31,7 +35,7 @@ from swarm.contracts.frames import Contact, SensorFrame
 def test_frame_and_command_round_trip():
     f = SensorFrame(7, 0.07, 3, 0.5, (Contact(1, 0.1, 0.2, 5.0, 0), Contact(6, -1.0, 2.0, 9.5, -1)), (1.0, -2.0))
     assert wire.decode_sense(wire.encode_sense(f)) == f
-    c = wire.Command(3, 7, 0.25, 1, "track", 2, 2**64 - 1)
+    c = wire.Command(3, 7, 0.25, 1, Phase.TRACK, 2, 2**64 - 1)
     assert wire.decode_cmd(wire.encode_cmd(c)) == c
 
 
@@ -39,9 +43,6 @@ def test_frames_encoded_all_at_once_are_the_frames_built_one_by_one():
     """The world's fast path (encode_sense_rows) sends the bytes of encode_sense for the
     frames world/sensing.py builds: leaders with the target, followers without, an agent
     that senses nobody, range-limited sensing."""
-    import numpy as np
-
-    from swarm.world.sensing import build_frames, sensing_matrix
 
     rng = np.random.default_rng(5)
     n = 9
@@ -68,9 +69,6 @@ def test_frames_built_pair_by_pair_are_the_matrix_frames(sense_range, fov):
     """A small swarm's frames (world/sensing.encode_frames_pairwise, on Python floats) are
     the bytes of the matrix path (sensing_matrix + encode_sense_rows): ranges, bearings
     and the field of view to the bit, absent agents, an agent that senses nobody."""
-    import numpy as np
-
-    from swarm.world.sensing import encode_frames_pairwise, sensing_matrix
 
     for seed in range(40):
         rng = np.random.default_rng(seed)
@@ -102,7 +100,6 @@ def test_a_join_reply_naming_laws_of_its_own_is_version_2():
     """An agent of a build that does not read the brain's "law" refuses such a reply (its
     strict version check) instead of flying the built-in laws in their place; this build
     reads both versions; every other message stays version 1."""
-    import json
 
     plain = wire.encode_join_reply(True, run="r", agent=4, key=99, brain={"dt": 0.01})
     own = wire.encode_join_reply(True, run="r", agent=4, key=99, brain={"dt": 0.01}, own_laws=True)
@@ -123,7 +120,7 @@ def test_admin_ctl_control_event_round_trip():
     assert wire.decode_control(wire.encode_end(42)) == 42
     n = wire.decode_control(wire.encode_fault_notice(2, 3000, {"index": 2, "kind": "freeze", "agent": 5, "at": 30.0}))
     assert (n.index, n.tick, n.kind, n.agent, n.fault["at"]) == (2, 3000, "freeze", 5, 30.0)
-    ev = {"tick": 1, "time": 0.01, "agent": 2, "kind": "switch", "reason": "x", "from": None, "to": 4}
+    ev = {"tick": 1, "time": 0.01, "agent": 2, "kind": EventKind.SWITCH, "reason": "x", "from": None, "to": 4}
     assert wire.decode_event(wire.encode_event(ev)) == ev
     info = {"run": "r", "tick": 3, "agents": {"1": {"id": 1}}}
     assert wire.decode_info(wire.encode_info(info))["agents"] == info["agents"]

@@ -1,6 +1,6 @@
 """Law names, as a scenario gives them: a registered name or "package.module:function".
 Resolving a name imports the module it points to, by name, so this contract depends on
-no agent code; the laws themselves live in agents/ (docs/scenarios.md, "Writing a law").
+no agent code; the laws themselves live in agents/ (docs/guides/writing-a-law.md).
 
 Three places name a law, each with its signature, checked when a scenario is loaded:
 
@@ -156,7 +156,7 @@ def check_law(name: str, kind: str = GAINS, dirs: Iterable = ()) -> Law:
             f"{_what(kind)} {name!r} is {_kind_of(law)}, not a Python function (a law is a "
             "`def` taking "
             + ("(g_i, g_j, lambda_ij, c1, c2)" if kind == GAINS else "obs")
-            + ', see docs/scenarios.md, "Writing a law")'
+            + ', see docs/guides/writing-a-law.md)'
         )
     if kind == GAINS:
         if not _binds(law, 0.0, 0.0, 0.0, 1.0, 1.0):
@@ -170,6 +170,6 @@ def check_law(name: str, kind: str = GAINS, dirs: Iterable = ()) -> Law:
         )
         raise LawError(
             f"{_what(kind)} {name!r} does not take one argument (obs: an Observation, "
-            f'see docs/scenarios.md, "Writing a law"){hint}'
+            f"see docs/guides/writing-a-law.md){hint}"
         )
     return law

@@ -13,7 +13,7 @@ and how an agent tells a world that is gone from one that has stopped answering.
   (SIGSTOP) or cut-off world still accepts connections in the kernel or does not answer
   at all, which is not a refusal.
 
-Standard library only; imported by the world and the agents (docs/protocol.md, section 6).
+Standard library only; imported by the world and the agents (docs/reference/protocol.md#world-gone, #launcher-gone).
 """
 
 from __future__ import annotations

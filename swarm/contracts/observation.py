@@ -1,5 +1,5 @@
 """What a guidance law is given at one tick: `Observation`, one named tuple for followers
-and leaders alike (docs/scenarios.md, "Writing a law").
+and leaders alike (docs/guides/writing-a-law.md#observation).
 
 A law is a function of one argument,
 

@@ -133,7 +133,7 @@ class GainsSpec(Strict):
 
 
 class LawSpec(Strict):
-    """[law]: the guidance laws, each law(obs) -> u (docs/scenarios.md, "Writing a law"), and their
+    """[law]: the guidance laws, each law(obs) -> u (docs/guides/writing-a-law.md), and their
     parameters."""
 
     follower: str = Field(default="bearing", description="follower law: 'bearing' (the paper's) or 'module:function'")

@@ -42,7 +42,7 @@ ROUTER_QUEUE = {
 }
 
 
-# The door (docs/resilience.md, "Strangers at the door"): zenoh gives a connection that has
+# The door (docs/guides/security.md#door): zenoh gives a connection that has
 # not finished its handshake one of `accept_pending` places (default 100) for up to
 # `accept_timeout` (default 10 s) and closes any that comes while they are all taken. 300 idle
 # TCP connections from a stranger (reopened as soon as closed) kept every place taken: the
@@ -57,7 +57,7 @@ ACCEPT_TIMEOUT_MS = 2000
 # (eclipse-zenoh/zenoh#2685; not configurable in 1.10): with the default 10 s handshake limit
 # 300 idle connections failed 30 handshakes a second, which kept it asleep. Idle strangers
 # that are left waiting fail none; those that give up still cost 100 ms each (measured:
-# docs/resilience.md).
+# docs/guides/security.md#door).
 TLS_HANDSHAKE_TIMEOUT_MS = 600_000
 DOOR = {
     "transport/unicast/accept_pending": ACCEPT_PENDING,
@@ -94,7 +94,7 @@ def _config(settings: dict):
 
 
 # For benchmarks and debugging only: a hub that accepts anyone and checks nothing
-# (docs/protocol.md, threat model). Clients with credentials still connect to it.
+# (docs/reference/protocol.md#security). Clients with credentials still connect to it.
 ENV_OPEN_HUB = "SWARM_OPEN_HUB"
 
 
@@ -211,7 +211,7 @@ def door_of(connect: str, creds: Credentials | None) -> str | None:
 def local_door(run: str) -> str:
     """The run's door on its own machine: a Unix socket in the (private) runtime dir that the hub
     of a run on tcp/ or tls/ listens on too, with the same checks, so that the commands and
-    agents started there never queue behind strangers at the network port (docs/resilience.md)."""
+    agents started there never queue behind strangers at the network port (docs/guides/security.md#door)."""
     return f"unixsock-stream/{runtime_dir() / (run + '.door.sock')}"
 
 

@@ -1,5 +1,5 @@
 """The wire format of a run: key expressions, payloads, units, versions. Nothing else
-in the project builds a key or packs a payload; docs/protocol.md describes the same.
+in the project builds a key or packs a payload; docs/reference/protocol.md describes the same.
 
 Keys (every key of a run starts with `swarm/<run>`, so runs never hear each other):
 
@@ -141,7 +141,7 @@ TRUTH_FIELDS = [
 # the order is the wire code (a command's phase byte, the truth record's state byte)
 PHASES = (Phase.TRACK, Phase.LOST, Phase.ARC1, Phase.ARC2, Phase.ORBIT, Phase.SHADOW, Phase.SEARCH)
 # what an agent counts itself and reports in its status (non-negative integers; the world
-# copies them into the run's summary): see docs/outputs.md, "Outputs of a run"
+# copies them into the run's summary): see docs/reference/outputs.md#summary
 STATUS_COUNTERS = ("garbage", "nonfinite", "losses", "loss_switches_max")
 STATES = (AgentState.ACTIVE, AgentState.COASTING, AgentState.GONE)
 
@@ -415,7 +415,7 @@ def decode_join_request(buf: bytes) -> dict:
 
 
 # --- every cold-path message: one encode/decode pair each ----------------------------------
-# Nothing outside this module builds or checks these payloads (docs/protocol.md, section 5).
+# Nothing outside this module builds or checks these payloads (docs/reference/protocol.md#json).
 
 
 def encode_join_request(agent: int, pid: int, host: str, spec: dict | None = None) -> bytes:
@@ -453,7 +453,7 @@ def encode_status(status: dict) -> bytes:
 
 
 def encode_info(info: dict) -> bytes:
-    """world -> world/info query: the run and every agent (docs/cli.md)."""
+    """world -> world/info query: the run and every agent (docs/reference/protocol.md#info)."""
     return encode_json(info)
 
 

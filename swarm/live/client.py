@@ -11,7 +11,7 @@ $SWARM_CONNECT (swarm/cli/live.py), so a user with several runs can export one.
 A local run on tcp/ or tls/ is dialled at its local door (a Unix socket of its hub in the
 runtime dir: strangers at the network port do not hold it) unless --connect names an
 endpoint. A session the hub did not let in is said as such, naming the endpoint
-(`door_message`), never as a run not found (docs/resilience.md, "Strangers at the door").
+(`door_message`), never as a run not found (docs/guides/security.md#door).
 
 Queries end as soon as what was asked for has answered (the world's one reply; every live
 agent's status), never waiting for the query's timeout: a queryable's final answer can
@@ -91,7 +91,7 @@ def _socket_answers(path) -> bool:
         s.close()
 
 
-OPEN_TIMEOUT_S = 3.0  # for a session to a listening hub (it takes ms; strangers at the door: docs/resilience.md)
+OPEN_TIMEOUT_S = 3.0  # for a session to a listening hub (it takes ms; strangers at the door: docs/guides/security.md#door)
 
 
 def _closes_at_once(endpoint: str, wait: float = 0.3) -> bool:

@@ -87,7 +87,7 @@ def snapshot(live, sensing: bool = False) -> dict:
 
 
 def graph_of(snap: dict, sensing: bool = False) -> dict:
-    """The communication graph (see docs/cli.md, `swarm graph --json`)."""
+    """The communication graph (docs/reference/cli.md#graph, `swarm graph --json`)."""
     info, rows = snap["info"], snap["agents"]
     out = {r["id"]: r["out"] for r in rows}
     leaders = {r["id"] for r in rows if r["role"] == "leader"}
