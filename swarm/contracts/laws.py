@@ -156,7 +156,7 @@ def check_law(name: str, kind: str = GAINS, dirs: Iterable = ()) -> Law:
             f"{_what(kind)} {name!r} is {_kind_of(law)}, not a Python function (a law is a "
             "`def` taking "
             + ("(g_i, g_j, lambda_ij, c1, c2)" if kind == GAINS else "obs")
-            + ', see docs/guides/writing-a-law.md)'
+            + ", see docs/guides/writing-a-law.md)"
         )
     if kind == GAINS:
         if not _binds(law, 0.0, 0.0, 0.0, 1.0, 1.0):

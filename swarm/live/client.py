@@ -91,7 +91,8 @@ def _socket_answers(path) -> bool:
         s.close()
 
 
-OPEN_TIMEOUT_S = 3.0  # for a session to a listening hub (it takes ms; strangers at the door: docs/guides/security.md#door)
+# for a session to a listening hub (it takes ms; strangers at the door: docs/guides/security.md#door)
+OPEN_TIMEOUT_S = 3.0
 
 
 def _closes_at_once(endpoint: str, wait: float = 0.3) -> bool:

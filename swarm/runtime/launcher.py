@@ -359,7 +359,7 @@ class Launcher:
                     continue  # the end of the run: the world process exits by itself
                 if msg.agent not in self.cfg.scenario.ids:
                     raise wire.WireError(f"control: fault for agent {msg.agent}, not in the scenario")
-            except wire.WireError as e:  # malformed (or forged) notice: dropped, as docs/reference/protocol.md#versioning says
+            except wire.WireError as e:  # malformed (or forged): dropped (docs/reference/protocol.md#versioning)
                 self.dropped_notices += 1
                 if time.monotonic() - self.dropped_noted > 1.0:  # at most one line a second
                     self.dropped_noted = time.monotonic()
