@@ -26,14 +26,16 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from swarm.contracts import credentials, wire  # noqa: E402
+from swarm.contracts.transport import open_client  # noqa: E402
+from swarm.contracts.vocabulary import ExitCode  # noqa: E402
+
 TICK = struct.Struct("<q")  # tick
 ACK = struct.Struct("<iq")  # client index, tick
 
 
 def _key(run: str, index: int | str | None, leaf: str, swarm_keys: bool = False) -> str:
     if swarm_keys:
-        from swarm.contracts import wire
-
         if leaf == "end":
             return wire.world_control_key(run)
         return wire.agent_key(run, index, {"tick": "sense", "ack": "cmd"}.get(leaf, leaf))
@@ -61,9 +63,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--creds", help="a run's credentials file: connect as agent-INDEX on swarm's keys")
     a = ap.parse_args(argv)
 
-    from swarm.contracts import credentials
-    from swarm.contracts.transport import open_client
-
     deadline = time.monotonic() + a.timeout
     inbox: queue.SimpleQueue = queue.SimpleQueue()
     put = inbox.put
@@ -88,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
                     break
                 (tick,) = unpack(buf)
                 ack.put(pack(me, tick))
-            return 0
+            return ExitCode.OK
         if a.handler == "direct":
             done = queue.SimpleQueue()
 
@@ -108,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
                 done.get(timeout=max(0.0, deadline - time.monotonic()))
             except queue.Empty:
                 pass
-            return 0
+            return ExitCode.OK
         subs = [  # noqa: F841 (kept alive until close)
             session.declare_subscriber(key(a.run, a.index, "tick"), lambda s: put(s.payload.to_bytes())),
             session.declare_subscriber(key(a.run, None, "end"), lambda s: put(None)),
@@ -125,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
             ack.put(pack(me, tick))
     finally:
         session.close()
-    return 0
+    return ExitCode.OK
 
 
 if __name__ == "__main__":

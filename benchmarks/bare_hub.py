@@ -29,9 +29,16 @@ import sys
 import time
 from pathlib import Path
 
+import zenoh
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bare_client import ACK, TICK, _key  # noqa: E402
+from swarm.contracts import credentials  # noqa: E402
+from swarm.contracts.transport import HubAuth, open_hub  # noqa: E402
+from swarm.contracts.vocabulary import ExitCode  # noqa: E402
+
+CLIENTS_LATE = 2  # this bare hub's own exit code: clients did not join, or answer, in time
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -60,11 +67,6 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--creds", help="the run's credentials file: check clients as a world does")
     a = ap.parse_args(argv)
-
-    import zenoh
-
-    from swarm.contracts import credentials
-    from swarm.contracts.transport import HubAuth, open_hub
 
     auth = HubAuth(credentials.read(Path(a.creds)), tuple(range(a.n))) if a.creds else None
 
@@ -105,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
             left = t_end - time.monotonic()
             if left <= 0:
                 result["error"] = f"only {len(alive)} of {a.n} clients joined within {a.join_timeout} s"
-                return 2
+                return CLIENTS_LATE
             try:
                 k, put = joins.get(timeout=left)
             except queue.Empty:
@@ -134,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
                 left = deadline - time.monotonic()
                 if left <= 0:
                     result["error"] = f"tick {tick}: {pending} of {n} clients did not answer within {a.tick_timeout} s"
-                    return 2
+                    return CLIENTS_LATE
                 try:
                     buf = next_ack(left)
                 except queue.Empty:
@@ -161,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
             p.put(b"e")
         end.put(b"end")
         time.sleep(0.05)  # let the end message leave before the socket closes
-        return 0
+        return ExitCode.OK
     finally:
         session.close()
         if not Path(a.result).exists():

@@ -36,6 +36,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench_runtime import base_ticks, best, fmt, log, run_baseline, run_swarm, wait_quiet  # noqa: E402
 
+from swarm.contracts.vocabulary import ExitCode  # noqa: E402
+
 ABLATION = Path(__file__).resolve().parent / "ablation"
 MODES = ("swarm", "recording", "world", "agents", "both")
 
@@ -92,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     print(report(results))
     if a.json:
         a.json.write_text(json.dumps(results, indent=2) + "\n")
-    return 0
+    return ExitCode.OK
 
 
 def report(results: dict) -> str:

@@ -11,7 +11,7 @@ then closes them all; the run is watched --after s more. Throughout, in a loop: 
 --run RUN` and `swarm spawn --run RUN --id K --x .. --speed ..` (K = 7, 8, ... 30: added ids, then
 7 again, a dropped id rejoining; each is killed again, untimed, with `swarm kill`, so the load
 stays that of case2), and `swarm agents --run RUN --connect KIND/127.0.0.1:PORT` ("agents-net":
-through the network port, not the run's local door: docs/resilience.md). Each call is a
+through the network port, not the run's local door: docs/guides/security.md#door). Each call is a
 fresh process, timed from start to exit (Python's start-up included). Printed per phase
 (before / attack / after): calls, successes, within 2 s, median and max seconds, and the
 first failure's message. Only processes started here are signalled (by process group).
@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import selectors
 import shutil
 import signal
@@ -33,6 +34,10 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+
+import psutil
+
+from swarm.contracts.vocabulary import ExitCode
 
 REPO = Path(__file__).resolve().parents[1]
 OK_S = 2.0
@@ -96,7 +101,6 @@ class Attacker(threading.Thread):
 
 def hub_rss(root: int, port: int) -> str:
     """RSS of the process (under `root`) that listens on `port`."""
-    import psutil
 
     for p in psutil.Process(root).children(recursive=True):
         try:
@@ -111,7 +115,7 @@ def timed(cmd: list[str], env: dict, timeout: float = 60.0) -> tuple[bool, float
     t0 = time.monotonic()
     try:
         p = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout, cwd=REPO)
-        ok, msg = p.returncode == 0, (p.stderr.strip().splitlines() or [""])[-1]
+        ok, msg = p.returncode == ExitCode.OK, (p.stderr.strip().splitlines() or [""])[-1]
     except subprocess.TimeoutExpired:
         ok, msg = False, f"timed out after {timeout} s"
     return ok, time.monotonic() - t0, msg
@@ -123,7 +127,7 @@ def wait_run(env: dict, up: subprocess.Popen, deadline: float = 90.0) -> str:
         if up.poll() is not None:
             raise SystemExit(f"swarm up exited {up.returncode}")
         p = subprocess.run(swarm("runs", "--json"), env=env, capture_output=True, text=True, cwd=REPO)
-        if p.returncode == 0:
+        if p.returncode == ExitCode.OK:
             docs = json.loads(p.stdout)
             if len(docs) == 1 and docs[0]["agents_live"] == docs[0]["agents_total"] == 6:
                 return docs[0]["run"]
@@ -246,7 +250,6 @@ def main() -> None:
     ap.add_argument("--after", type=float, default=15.0, help="seconds watched after the attacker stops")
     ap.add_argument("--before", type=float, default=4.0, help="seconds watched before the attack")
     a = ap.parse_args()
-    import resource
 
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     resource.setrlimit(resource.RLIMIT_NOFILE, (min(hard, max(soft, a.conns + 256)), hard))

@@ -1,4 +1,4 @@
-"""Two fault-pass experiments of issue 22, each a real `swarm up` on case 2, printing figures:
+"""Two fault experiments (docs/benchmarks.md#fairness, #stalls), each a real `swarm up` on case 2, printing figures:
 
 - `flap`: realtime, 40 s; agent 3 is SIGKILLed mid-run, then a session holding agent 3's
   identity declares and undeclares its liveliness token --toggles times as fast as it can.
@@ -29,6 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
+from swarm.contracts import credentials, wire
+from swarm.contracts.transport import open_client
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -46,7 +49,6 @@ def _start(src: Path, rt: Path, out: Path, *args: str) -> subprocess.Popen:
 
 
 def _credentials(rt: Path, up: subprocess.Popen):
-    from swarm.contracts import credentials
 
     t_end = time.monotonic() + 120
     while time.monotonic() < t_end and up.poll() is None:
@@ -58,7 +60,6 @@ def _credentials(rt: Path, up: subprocess.Popen):
 
 
 def _info(session, run: str) -> dict | None:
-    from swarm.contracts import wire
 
     for r in session.get(wire.world_info_key(run), timeout=2.0):
         if r.ok:
@@ -67,8 +68,6 @@ def _info(session, run: str) -> dict | None:
 
 
 def flap(src: Path, toggles: int, tmp: Path) -> None:
-    from swarm.contracts import wire
-    from swarm.contracts.transport import open_client
 
     rt, out = tmp / "rt", tmp / "flap"
     rt.mkdir(mode=0o700)

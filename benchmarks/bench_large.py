@@ -35,9 +35,14 @@ import psutil
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+import os
+
+import numpy as np
 from bench_runtime import PY, MemSampler, Tracked, is_agent, is_world, log, scenario_toml, world_started  # noqa: E402
 
-from swarm.contracts.vocabulary import EventKind  # noqa: E402
+from swarm.contracts.scenario import parse_scenario  # noqa: E402
+from swarm.contracts.vocabulary import EventKind, ExitCode  # noqa: E402
+from swarm.offline.batch import run_batch  # noqa: E402
 from swarm.runtime.procs import wait_until  # noqa: E402
 
 
@@ -51,13 +56,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", type=Path, help="write the figures to this JSON file")
     ap.add_argument("--keep", action="store_true", help="keep the work directory")
     a = ap.parse_args(argv)
-
-    import os
-
-    import numpy as np
-
-    from swarm.contracts.scenario import parse_scenario
-    from swarm.offline.batch import run_batch
 
     rt = tempfile.mkdtemp(prefix="sw", dir="/tmp")
     work = Path(tempfile.mkdtemp(prefix="swarm-large-"))
@@ -135,13 +133,13 @@ def main(argv: list[str] | None = None) -> int:
         res["max_diff_to_batch_m"] = float(max(np.max(np.abs(z["x"] - ref["x"])), np.max(np.abs(z["y"] - ref["y"]))))
     if a.json:
         a.json.write_text(json.dumps(res, indent=2) + "\n")
-    if not a.keep and res["exit_code"] == 0:
+    if not a.keep and res["exit_code"] == ExitCode.OK:
         shutil.rmtree(work, ignore_errors=True)
     shutil.rmtree(rt, ignore_errors=True)
-    if res["exit_code"] != 0 or res["startup_s"] is None:
+    if res["exit_code"] != ExitCode.OK or res["startup_s"] is None:
         print(f"swarm up exited {res['exit_code']}; see {work}")
         print(json.dumps(res, indent=2))
-        return 1
+        return ExitCode.FAILED
     r = res["rss_mb"]
     print(
         f"{a.n} agent processes ({a.leaders} leaders), {a.duration:g} s simulated at dt {a.dt:g}, "
@@ -164,7 +162,7 @@ def main(argv: list[str] | None = None) -> int:
         f"  swarm up exit code {res['exit_code']}; processes of its run left afterwards: {len(res['left_after_exit'])} "
         f"(of {res['processes_seen']} seen)"
     )
-    return 0
+    return ExitCode.OK
 
 
 if __name__ == "__main__":

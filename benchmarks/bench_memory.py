@@ -1,5 +1,5 @@
-"""World memory as a run grows and as agents are added (issue 9: "memory of the world stays
-flat; less than 100 KB per added agent").
+"""World memory as a run grows and as agents are added (docs/benchmarks.md#recording): it
+should stay flat, less than 100 KB per added agent.
 
 Starts `swarm up scenarios/case2.toml` on the realtime clock, measures the world's RSS once
 it ticks, again after it has run a while (growth with time), then adds N agents at run
@@ -28,11 +28,11 @@ import psutil
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from swarm.contracts import (
-    credentials,  # noqa: E402
-    wire,  # noqa: E402
-)
+from up_banner import wait_banner  # noqa: E402
+
+from swarm.contracts import credentials, wire  # noqa: E402
 from swarm.contracts.transport import open_client  # noqa: E402
+from swarm.contracts.vocabulary import ExitCode  # noqa: E402
 from swarm.runtime.procs import Group, wait_until  # noqa: E402
 
 
@@ -54,7 +54,7 @@ def main() -> int:
         (ROOT / "scenarios" / "case2.toml").read_text().replace("[run]\n", f"[run]\nmax_added_agents = {a.add}\n", 1)
     )
     group = Group(session=True)
-    up = group.start(
+    group.start(
         [
             sys.executable,
             "-m",
@@ -74,25 +74,15 @@ def main() -> int:
         stderr=open(work / "up.err", "wb"),
     )
     try:
-        endpoint = run = None
-
-        def banner():
-            text = (work / "up.log").read_text(errors="replace")
-            for line in text.splitlines():
-                if line.startswith("run ") and "endpoint" in line:
-                    parts = line.split()
-                    return parts[1], parts[3]
-            return None
-
-        got = wait_until(banner, 30, 0.1)
+        got = wait_banner(work / "up.log", 30)
         if not got:
             print("swarm up printed no banner; see", work / "up.log")
-            return 1
+            return ExitCode.FAILED
         run, endpoint = got
         cred_file = work / "rt" / f"{run}{credentials.SUFFIX}"  # written by the world as it starts
         if not wait_until(cred_file.exists, 30, 0.1):
             print("the world wrote no credentials; see", work / "up.log")
-            return 1
+            return ExitCode.FAILED
         creds = credentials.read(cred_file)
         ses = open_client(endpoint, timeout_ms=5000, creds=creds)
 
@@ -105,7 +95,7 @@ def main() -> int:
         first = wait_until(lambda: (i := info()) and i.get("started") and i, 60, 0.2)
         if not first:
             print("the run did not start")
-            return 1
+            return ExitCode.FAILED
         pid = first["pid"]
         time.sleep(2.0)
         m0, t0 = rss_mb(pid), info()["time"]
@@ -141,7 +131,7 @@ def main() -> int:
         rec = out / "recording.mcap"
         print(f"recording.mcap: {rec.stat().st_size / 2**20:.1f} MB on disk")
         ses.close()
-        return 0
+        return ExitCode.OK
     finally:
         group.signal(signal.SIGINT)
         group.stop(grace=20.0)

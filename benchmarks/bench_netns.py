@@ -41,6 +41,7 @@ sys.path[:0] = [str(REPO), str(BENCH), str(REPO / "tests")]
 from bench_runtime import Tracked, log, scenario_toml, wait_quiet  # noqa: E402
 from test_multihost import Lan, LanError, why_no_lan  # noqa: E402
 
+from swarm.contracts.vocabulary import ExitCode  # noqa: E402
 from swarm.runtime.procs import wait_until  # noqa: E402
 
 PY = sys.executable
@@ -73,7 +74,7 @@ def run_up(scen: Path, work: Path, tag: str, timeout: float) -> dict:
         p = tr.spawn(
             swarm("up", scen, "--out", out, "--no-plots", "--clock", "lockstep"), work / f"up-{tag}.log", env_for(rt)
         )
-        if not wait_until(lambda: p.poll() is not None, timeout, 0.1) or p.returncode != 0:
+        if not wait_until(lambda: p.poll() is not None, timeout, 0.1) or p.returncode != ExitCode.OK:
             raise RuntimeError(f"swarm up exited {p.poll()}; see {work / f'up-{tag}.log'}")
         s = summary_of(out)
         return {
@@ -123,7 +124,7 @@ def run_hosts(scen: Path, n: int, work: Path, tag: str, timeout: float, lan: Lan
                     work / f"credentials-{tag}.log",
                     env_for(dirs["w"]),
                 )
-                if p.wait(30) != 0:
+                if p.wait(30) != ExitCode.OK:
                     raise RuntimeError(f"swarm credentials failed; see {work / f'credentials-{tag}.log'}")
                 args = swarm("host", "--credentials", f, "--logs", work / f"logs-{h}-{tag}")
                 env = env_for(dirs[h])
@@ -230,7 +231,7 @@ def main(argv: list[str] | None = None) -> int:
     print(report({v: r for v, r in results.items() if r}, a.n))
     if a.json is not None:
         a.json.write_text(json.dumps({"n": a.n, "seconds": a.seconds, "results": results}, indent=1))
-    return 0
+    return ExitCode.OK
 
 
 if __name__ == "__main__":

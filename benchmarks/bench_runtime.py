@@ -50,17 +50,23 @@ import subprocess
 import sys
 import tempfile
 import time
+import tomllib
 from collections import Counter, defaultdict
 from collections.abc import Callable
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
+import numpy as np
 import psutil
+import zenoh
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO))  # the repository's swarm, not an installed copy
 
-# (the repository, not an installed copy)
-from swarm.contracts.vocabulary import EventKind  # noqa: E402
+from swarm.contracts import credentials  # noqa: E402
+from swarm.contracts.scenario import parse_scenario  # noqa: E402
+from swarm.contracts.vocabulary import EventKind, ExitCode  # noqa: E402
+from swarm.offline.batch import run_batch  # noqa: E402
 from swarm.runtime.procs import Group, agent_id_of, stop_groups, wait_until  # noqa: E402
 
 BENCH = Path(__file__).resolve().parent
@@ -305,8 +311,6 @@ def run_baseline(n: int, ticks: int, warmup: int, work: Path, env: dict, tag: st
     run = f"b{tag}"
     creds = []
     if auth:
-        from swarm.contracts import credentials
-
         creds = ["--creds", str(credentials.write(credentials.new_credentials(run, endpoint), d / "run.cred"))]
     tr = Tracked()
     mem = MemSampler()
@@ -399,10 +403,6 @@ def sensing_range(n: int, neighbours: int | None, ticks: int = 1500) -> float | 
         return None
     if (n, neighbours, ticks) in _RANGES:
         return _RANGES[(n, neighbours, ticks)]
-    import tomllib
-
-    from swarm.contracts.scenario import parse_scenario
-    from swarm.offline.batch import run_batch
 
     r = 2 * RING_M * math.sin(math.pi * ((neighbours + 1) // 2 + 0.5) / n)  # that many at the start
     for _ in range(8):
@@ -502,7 +502,6 @@ def world_started(out: Path) -> bool:
 def mean_contacts(out: Path, sr: float | None) -> float:
     """Mean number of others each live agent sensed per tick over the run (trajectory.npz),
     with sensing range `sr` (None: unlimited)."""
-    import numpy as np
 
     with np.load(out / "trajectory.npz") as z:
         return mean_sensed(z["x"], z["y"], z["alive"], sr)
@@ -511,7 +510,6 @@ def mean_contacts(out: Path, sr: float | None) -> float:
 def mean_sensed(x, y, alive, sr: float | None) -> float:
     """Mean number of others each live agent senses per tick, over about 200 of the rows of
     recorded (ticks, N) arrays, with sensing range `sr` (None: unlimited)."""
-    import numpy as np
 
     total = count = 0
     for k in range(0, len(x), max(1, len(x) // 200)):
@@ -921,7 +919,7 @@ def report(results: dict) -> str:
         f"{'swarm: world':>12} {'agents':>7} {'launcher':>8} {'machine':>8} {'others':>7}",
         100,
     )
-    for n, r, b, s in by_size(results):
+    for n, _r, b, s in by_size(results):
 
         def per_tick(run, group):
             c = run and run.get("cpu")
@@ -1023,8 +1021,6 @@ def main(argv: list[str] | None = None) -> int:
     def quiet() -> dict:
         return wait_quiet(0.5, qwait) if qwait > 0 else {}
 
-    import zenoh
-
     rt = tempfile.mkdtemp(prefix="sw", dir="/tmp")  # short: Unix socket paths are limited to 108 bytes
     work = Path(tempfile.mkdtemp(prefix="swarm-bench-"))
     env = {**os.environ, "SWARM_RUNTIME_DIR": rt, "PYTHONUNBUFFERED": "1", "BENCH_CLIENT_HANDLER": a.floor_handler}
@@ -1112,11 +1108,10 @@ def main(argv: list[str] | None = None) -> int:
     print(text)
     if a.json:
         a.json.write_text(json.dumps(results, indent=2) + "\n")
-    return 0
+    return ExitCode.OK
 
 
 def _dist_version(name: str) -> str | None:
-    from importlib.metadata import PackageNotFoundError, version
 
     try:
         return version(name)

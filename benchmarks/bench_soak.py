@@ -1,12 +1,12 @@
-"""Soak: a long realtime run with agents killed and brought back over and over (issue 22,
-item 11: "world RSS rose steadily").
+"""Soak: a long realtime run with agents killed and brought back over and over: the world's RSS
+must not rise steadily (docs/benchmarks.md#soak).
 
 Starts `swarm up` on a shipped scenario on the realtime clock, long enough for --minutes
 of wall time, and every 60 / --cycles-per-minute s SIGKILLs one agent (`swarm kill ID`,
 which waits until the world drops it) and brings it back (`swarm spawn --id ID`: a
-dropped id rejoins from the pose it had, docs/resilience.md), taking the agents in turn.
+dropped id rejoins from the pose it had, docs/reference/protocol.md#drop-rejoin), taking the agents in turn.
 Meanwhile it samples the world process's RSS every --sample s. When the run has ended by
-itself it reads the results (docs/outputs.md): every tick must be a row of
+itself it reads the results (docs/reference/outputs.md): every tick must be a row of
 trajectory.npz (ticks + 1 rows, consecutive times).
 
     python benchmarks/bench_soak.py --minutes 9 --cycles-per-minute 5
@@ -37,11 +37,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from swarm.contracts import credentials, wire
-from swarm.contracts.scenario import load_scenario
-from swarm.contracts.transport import open_client
-from swarm.contracts.vocabulary import EventKind
-from swarm.runtime.procs import Group, wait_until
+from up_banner import wait_banner  # noqa: E402
+
+from swarm.contracts import credentials, wire  # noqa: E402
+from swarm.contracts.scenario import load_scenario  # noqa: E402
+from swarm.contracts.transport import open_client  # noqa: E402
+from swarm.contracts.vocabulary import EventKind, ExitCode  # noqa: E402
+from swarm.runtime.procs import Group, wait_until  # noqa: E402
 
 
 def rss_kb(pid: int) -> int:
@@ -138,24 +140,16 @@ def main() -> int:
     cycles = failed = 0
     stop = threading.Event()
     try:
-
-        def banner():
-            for line in up_log.read_text(errors="replace").splitlines():
-                if line.startswith("run ") and "endpoint" in line:
-                    parts = line.split()
-                    return parts[1], parts[3]
-            return None
-
-        got = wait_until(banner, 60, 0.1)
+        got = wait_banner(up_log, 60)
         if not got:
             print("swarm up printed no banner; see", up_log)
-            return 1
+            return ExitCode.FAILED
         run, endpoint = got
         env["SWARM_RUN"] = run
         cred_file = work / "rt" / f"{run}{credentials.SUFFIX}"
         if not wait_until(cred_file.exists, 30, 0.1):
             print("the world wrote no credentials; see", up_log)
-            return 1
+            return ExitCode.FAILED
         ses = open_client(endpoint, timeout_ms=5000, creds=credentials.read(cred_file))
         try:
 
@@ -170,7 +164,7 @@ def main() -> int:
             ses.close()  # one query, then no session of ours on the hub: the soak measures the run's own
         if not first:
             print("the run did not start; see", up_log)
-            return 1
+            return ExitCode.FAILED
         pid = first["pid"]
         t0 = time.monotonic()
         end = t0 + a.minutes * 60.0
@@ -201,12 +195,12 @@ def main() -> int:
                 timeout=60,
                 check=False,
             )
-            if p.returncode != 0:
+            if p.returncode != ExitCode.OK:
                 print(
                     f"  swarm {' '.join(args)}: exit {p.returncode}: {(p.stderr or p.stdout).strip()[-300:]}",
                     flush=True,
                 )
-            return p.returncode == 0
+            return p.returncode == ExitCode.OK
 
         period = 60.0 / a.cycles_per_minute if a.cycles_per_minute > 0 else None
         next_at = t0 + (period or 0.0)
@@ -303,8 +297,8 @@ def main() -> int:
         )
     except OSError:
         pass
-    ok = rows == ticks + 1 and gaps == 0 and up_code == 0
-    return 0 if ok else 1
+    ok = rows == ticks + 1 and gaps == 0 and up_code == ExitCode.OK
+    return ExitCode.OK if ok else ExitCode.FAILED
 
 
 if __name__ == "__main__":

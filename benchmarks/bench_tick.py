@@ -33,6 +33,7 @@ from bench_runtime import scenario_toml  # noqa: E402
 from swarm.agents.brain import AgentBrain  # noqa: E402
 from swarm.contracts import wire  # noqa: E402
 from swarm.contracts.scenario import parse_scenario  # noqa: E402
+from swarm.contracts.vocabulary import ExitCode  # noqa: E402
 from swarm.world.engine import Engine  # noqa: E402
 
 
@@ -101,7 +102,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"{n:>4} | {'unlimited' if nb is None else f'~{nb} others':>9} | {r['contacts']:8.1f} | "
                 f"{r['world_ms']:13.3f} | {r['agent_us']:17.1f}"
             )
-    return 0
+    return ExitCode.OK
 
 
 if __name__ == "__main__":

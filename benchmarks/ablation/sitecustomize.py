@@ -32,6 +32,7 @@ TICK_AT = struct.calcsize("<BBBBi")  # where a frame's tick is (wire.SENSE_HEAD:
 
 
 def _null_agents() -> None:
+    # lazy: this file runs at every Python start-up here; swarm only once an ablation is asked for
     from swarm.agents.node import AgentNode
     from swarm.contracts import wire
     from swarm.contracts.vocabulary import Phase
@@ -52,7 +53,7 @@ def _null_agents() -> None:
 
 
 def _frozen_world() -> None:
-    from swarm.world.process import World
+    from swarm.world.process import World  # lazy: (as in _null_agents)
 
     patch = struct.Struct("<qd").pack_into
     real_publish = World.publish_frames
@@ -93,7 +94,7 @@ class _Capture:
 
 
 def _no_recording() -> None:
-    from swarm.world.recording import DeferredRecorder
+    from swarm.world.recording import DeferredRecorder  # lazy: (as in _null_agents)
 
     DeferredRecorder.record = lambda self, *args, **kwargs: None
 
