@@ -56,13 +56,13 @@ def _say(msg: str) -> None:
 class Host(HostSetup):
     cfg: HostConfig
     say: Callable[[str], None] = _say
-    creds: credentials.Credentials = field(init=False)  # (HostSetup.prepare)
+    creds: credentials.Credentials = field(init=False, repr=False)  # (HostSetup.prepare)
     ids: tuple[int, ...] = ()
     name: str = ""
     upstream: str = ""
     local: str = ""  # the router's endpoint for this host's agents
     dir: Path | None = None  # private: the router's socket and the agents' credentials
-    logs: Path = field(init=False)  # (HostSetup.prepare)
+    logs: Path = field(init=False, repr=False)  # (HostSetup.prepare)
     router: zenoh.Session | None = None
     hub_zid: str = ""
     group: Group = field(default_factory=Group)
