@@ -1,6 +1,5 @@
-"""Two real zenoh sessions in one process on a Unix socket in the test's tmp dir (the
-zenoh-python tests/test_session.py pattern): the hub and client settings of
-swarm/contracts/transport.py carry the protocol's puts, liveliness and queries."""
+"""Two real zenoh sessions in one process on a Unix socket in the test's tmp dir: the hub and
+client settings of swarm/contracts/transport.py carry the protocol's puts, liveliness and queries."""
 
 from __future__ import annotations
 

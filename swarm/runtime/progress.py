@@ -24,11 +24,12 @@ import zenoh
 
 from swarm.contracts import wire
 from swarm.contracts.orbits import expected_radius, root_of
-from swarm.contracts.vocabulary import EventKind
+from swarm.contracts.vocabulary import AgentState, EventKind
 
 if TYPE_CHECKING:  # annotations only: `swarm up` imports this module for every command's app
     from swarm.contracts.scenario import Scenario
 
+ACTIVE = wire.STATES.index(AgentState.ACTIVE)  # the state byte of a live agent in a truth record
 PROGRESS_AGENTS = 12  # more agents than this: the progress line sums them up
 WORST_SHOWN = 3  # unsettled agents named on a summed-up line
 
@@ -82,7 +83,7 @@ def truth_progress(buf: bytes | None, s: Scenario, added: dict[int, AddedSpec] |
     spec = {a.id: a for a in s.agents} | dict(added or {})
     recs = [r for r in recs if int(r["id"]) in spec]
     leaders = {i for i, a in spec.items() if a.role == "leader"}
-    alive = {int(r["id"]) for r in recs if r["state"] == 0}
+    alive = {int(r["id"]) for r in recs if r["state"] == ACTIVE}
     out = {int(r["id"]): (int(r["out"]) if r["out"] >= 0 else None) for r in recs}
     errs: dict[int, float | None] = {}
     for r in recs:
