@@ -31,6 +31,8 @@ from swarm.agents import batch_maths as bm
 from swarm.agents.batch_leader import BatchLeaders
 from swarm.agents.batch_select import NONE, select
 from swarm.agents.batch_sticky import BatchSticky
+from swarm.agents.laws import bearing_law, loiter_rate
+from swarm.contracts.vocabulary import Phase
 
 
 @dataclass
@@ -70,6 +72,8 @@ class BatchBrains:
         self.feasible = np.full(shape, NONE, dtype=np.int64)  # rooted rule
         self.unrooted = np.zeros(shape, dtype=np.int64)
         self.nonfinite = np.zeros(shape, dtype=np.int64)
+        self.rooted = np.ones(shape, dtype=bool)  # last tick: Choice.rooted (the phases)
+        self.searching = np.zeros(shape, dtype=bool)  # last tick: flying a search circle
 
     # -- selection ------------------------------------------------------------------------------
     def _choose(self, frames) -> tuple[np.ndarray, np.ndarray]:
@@ -104,6 +108,21 @@ class BatchBrains:
         more = {} if self.sticky is None else self.sticky.stats(b, i)
         return {"nonfinite": int(self.nonfinite[b, i]), **more}
 
+    def phases(self) -> list[list[Phase]]:
+        """Decision.phase of every agent (B lists of N) at the last tick decided."""
+        lead = dict(zip(zip(self.leaders.b.tolist(), self.leaders.i.tolist()), self.leaders.phases()))
+        return [
+            [
+                lead[b, i]
+                if (b, i) in lead
+                else (Phase.SEARCH if searching else Phase.LOST)
+                if out < 0
+                else (Phase.TRACK if rooted else Phase.SHADOW)
+                for i, (out, rooted, searching) in enumerate(zip(*row))
+            ]
+            for b, row in enumerate(zip(self.out.tolist(), self.rooted.tolist(), self.searching.tolist()))
+        ]
+
     # -- one tick -------------------------------------------------------------------------------
     def decide(self, tick: int, frames) -> BatchDecision:
         """AgentBrain.decide for every agent of every member on this tick's frames."""
@@ -111,24 +130,23 @@ class BatchBrains:
         if self.sticky is not None:
             kept = self.sticky.keep(frames, self.follower)
             choice = np.where(kept, self.sticky.out, NONE)
-            rooted = kept
+            rooted = kept.copy()
         else:
             choice, rooted = self._choose(frames)
             choice = np.where(self.follower, choice, NONE)
         track = choice >= 0
-        # the law on every follower with an out-neighbour (bearing_law, term for term)
-        g_i, g_j = heading, bm.take(heading, choice)
+        # the law on every follower with an out-neighbour: laws.bearing_law itself, on arrays
         lam = frames.bearing_pairs(choice)
-        u = self.c1 * bm.wrap(g_j - g_i) + self.c2 * np.sin(lam - g_i)
-        # nobody (rooted) in sight: loiter the way it last turned
-        lost = np.copysign(self.c2, np.where(self.last_u == 0.0, 1.0, self.last_u))
-        u = np.where(track, u, lost)
+        u = bearing_law(heading, bm.take(heading, choice), lam, self.c1, self.c2, ops=bm.ARRAY)
+        # nobody (rooted) in sight: loiter the way it last turned (laws.loiter's rate)
+        u = np.where(track, u, loiter_rate(self.c2, self.last_u, ops=bm.ARRAY))
         h_j = bm.take(hops_in, choice)
         hops = np.where(track & rooted & (h_j >= 0) & (h_j < self.max_hops), h_j + 1, NONE)
         if self.sticky is not None:
             self.sticky.sight(tick, frames, kept, lam)
             # everybody who did not simply keep: one by one, written into choice, u, hops
-            self.sticky.rest(tick, frames, self.follower & ~kept, self.last_u, choice, u, hops)
+            self.searching = np.zeros(u.shape, dtype=bool)
+            self.sticky.rest(tick, frames, self.follower & ~kept, self.last_u, choice, u, hops, rooted, self.searching)
         bad = self.follower & ~np.isfinite(u)
         if bad.any():  # a NaN or inf turn rate: counted, the last one held
             self.nonfinite += bad
@@ -142,6 +160,7 @@ class BatchBrains:
             hops[lb, li] = 0
         self.out = choice
         self.last_u = u
+        self.rooted = rooted
         if self.mode == "rooted":  # what AgentBrain._below reads (only the rooted rule does)
             rooted_now = hops >= 0
             self.feasible = np.where(rooted_now, hops, self.feasible)

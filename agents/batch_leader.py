@@ -3,9 +3,10 @@
 Each leader plans its circle-circle path with swarm.agents.cc_plan.plan_cc at its first frame,
 exactly as AgentBrain does (the same call, the same arguments: one plan per leader),
 then every tick commands the path's turn rate averaged over the tick until the path
-ends, and swarm.agents.leader.on_orbit_command after. Both are written here over arrays of
-leaders with the same operations in the same order, the `math` functions per element
-(agents/batch_maths.py), so the turn rates equal the per-agent brain's to the bit (with
+ends (swarm.agents.leader.arc_rate), and the orbit hold after (leader.orbit_hold, as
+on_orbit_command does): the very functions the per-agent brain runs, here on arrays of
+leaders (ops = batch_maths.ARRAY, the `math` functions per element where numpy could
+round differently), so the turn rates equal the per-agent brain's to the bit (with
 SCALAR_MAX leaders or fewer on their orbits, on_orbit_command itself is called: quicker).
 Pure: no I/O.
 """
@@ -18,7 +19,8 @@ import numpy as np
 
 from swarm.agents import batch_maths as bm
 from swarm.agents.cc_plan import plan_cc
-from swarm.agents.leader import _HOLD_DEADBAND, K_HEADING, K_RADIAL, on_orbit_command
+from swarm.agents.leader import arc_rate, leader_phase, on_orbit_command, orbit_hold
+from swarm.contracts.vocabulary import Phase
 
 SCALAR_MAX = 8  # leaders on their orbits: up to this many, one on_orbit_command call each
 
@@ -41,6 +43,7 @@ class BatchLeaders:
         self.dt = dt
         self.planned = False
         self.path_tick = 0
+        self.a = 0.0  # path time of the last tick decided (s)
         self.t1 = self.t2 = self.u1 = self.u2 = np.zeros(len(lead))
 
     def plan(self, tick: int, px: np.ndarray, py: np.ndarray, heading: np.ndarray) -> None:
@@ -62,20 +65,13 @@ class BatchLeaders:
         if not self.planned:
             self.plan(tick, px, py, heading)
         dt = self.dt
-        a = (tick - self.path_tick) * dt
-        b = a + dt
-        t12 = self.t1 + self.t2
-        orbit = a >= t12
+        a = self.a = (tick - self.path_tick) * dt
+        orbit = a >= self.t1 + self.t2  # leader_phase's test
         u = np.empty(len(self.v))
         arc = ~orbit
         if arc.any():
-            t1, t12a = self.t1[arc], t12[arc]
             u_orbit = self.sign[arc] * self.v[arc] / self.radius[arc]
-            u[arc] = (
-                self.u1[arc] * _overlap(a, b, 0.0, t1)
-                + self.u2[arc] * _overlap(a, b, t1, t12a)
-                + u_orbit * _overlap(a, b, t12a, math.inf)
-            ) / dt
+            u[arc] = arc_rate(a, dt, self.t1[arc], self.t2[arc], self.u1[arc], self.u2[arc], u_orbit, ops=bm.ARRAY)
         k = np.flatnonzero(orbit)
         if 0 < len(k) <= SCALAR_MAX:  # a few leaders: the brain's own function is quicker
             for j, x, y, g in zip(k.tolist(), px[k].tolist(), py[k].tolist(), heading[k].tolist()):
@@ -85,19 +81,11 @@ class BatchLeaders:
             u[k] = on_orbit(px[k], py[k], heading[k], self.v[k], self.radius[k], self.sign[k], self.limit[k])
         return bm.saturate(u, self.limit)
 
-
-def _overlap(a, b, lo, hi):
-    return np.maximum(0.0, np.minimum(b, hi) - np.maximum(a, lo))
+    def phases(self) -> list[Phase]:
+        """The phase (leader.leader_phase) of every leader at the last tick decided."""
+        return [leader_phase(self.a, t1, t2) for t1, t2 in zip(self.t1.tolist(), self.t2.tolist())]
 
 
 def on_orbit(x, y, heading, v, radius, s, limit) -> np.ndarray:
     """swarm.agents.leader.on_orbit_command over arrays of leaders (inputs already checked)."""
-    r = bm.hypot(x, y)
-    theta = bm.atan2(y, x)
-    e = (r - radius) / radius
-    g_d = theta + s * (0.5 * math.pi + bm.atan(K_RADIAL * e))
-    err = bm.wrap(g_d - heading)
-    w0 = v / radius
-    hold = (np.abs(e) <= _HOLD_DEADBAND) & (np.abs(err) <= _HOLD_DEADBAND)
-    u = np.where(hold, s * w0, s * w0 + K_HEADING * w0 * err)
-    return bm.saturate(u, limit)
+    return bm.saturate(orbit_hold(x, y, heading, v, radius, s, ops=bm.ARRAY), limit)

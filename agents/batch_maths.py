@@ -1,4 +1,5 @@
-"""Array versions of the scalar helpers the brain uses, equal to them to the bit.
+"""Array versions of the scalar helpers the brain uses, equal to them to the bit, and
+`ARRAY`: the operations of agents/ops.py on arrays (the shared laws' array set).
 
 The per-agent brain computes with `math` on Python floats; the batch brains
 (agents/batch.py) compute with numpy on (B, N) arrays. Where the two libraries round
@@ -20,7 +21,8 @@ import math
 
 import numpy as np
 
-from swarm.contracts.orbits import wrap_array as wrap  # noqa: F401  (the batch brains' wrap)
+from swarm.agents.ops import Ops
+from swarm.contracts.orbits import wrap_array as wrap
 
 _hypot = np.frompyfunc(math.hypot, 2, 1)
 _atan2 = np.frompyfunc(math.atan2, 2, 1)
@@ -47,3 +49,18 @@ def atan(x) -> np.ndarray:
 def take(a: np.ndarray, j: np.ndarray) -> np.ndarray:
     """a[b, j[b, i]] for (B, N) arrays a and column indices j (clipped: mask the -1s)."""
     return a[np.arange(a.shape[0])[:, None], np.maximum(j, 0)]
+
+
+#: agents/ops.py's operations on arrays, elementwise (with `math` per element where numpy's
+#: rounding could differ): the shared laws' array set
+ARRAY = Ops(
+    hypot=hypot,
+    atan2=atan2,
+    atan=atan,
+    sin=np.sin,
+    wrap=wrap,
+    copysign=np.copysign,
+    maximum=np.maximum,
+    minimum=np.minimum,
+    where=np.where,
+)

@@ -7,7 +7,7 @@ here makes the same choice, tie for tie, as its scalar original:
 
 - `nearest`: the smallest range, ties to the lowest id (selection.nearest);
 - `select`: selection.select's hysteresis (keep the current one unless the nearest is
-  closer than (1 - h) times its range);
+  closer than (1 - h) times its range: selection.keeps_current itself, on arrays);
 
 selection.Sticky itself is batched in agents/batch_sticky.py.
 
@@ -17,6 +17,8 @@ Pure: arrays in, arrays out; no I/O.
 from __future__ import annotations
 
 import numpy as np
+
+from swarm.agents.selection import keeps_current
 
 NONE = -1  # no out-neighbour / no hop count / no feasible count
 
@@ -46,5 +48,5 @@ def select(cand: np.ndarray, rng: np.ndarray, ids, current: np.ndarray, hysteres
     cur_cand = (current >= 0) & np.take_along_axis(cand, c[..., None], axis=-1)[..., 0]
     r_best = np.take_along_axis(rng, np.maximum(best, 0)[..., None], axis=-1)[..., 0]
     r_cur = np.take_along_axis(rng, c[..., None], axis=-1)[..., 0]
-    hold = (h > 0.0) & (best >= 0) & (current != best) & cur_cand & (r_best > (1.0 - h) * r_cur)
+    hold = (h > 0.0) & (best >= 0) & (current != best) & cur_cand & keeps_current(r_best, r_cur, h)
     return np.where(hold, current, best)

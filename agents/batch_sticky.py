@@ -15,14 +15,12 @@ Pure: no I/O.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from swarm.agents import batch_maths as bm
 from swarm.agents.batch_select import NONE
 from swarm.agents.coast import Sighting
-from swarm.agents.laws import bearing_law
+from swarm.agents.laws import bearing_law, loiter_rate
 from swarm.agents.leader import on_orbit_command
 from swarm.agents.sticky_follower import StickyFollower
 
@@ -93,9 +91,11 @@ class BatchSticky:
         choice: np.ndarray,
         u: np.ndarray,
         hops: np.ndarray,
+        rooted: np.ndarray,
+        searching: np.ndarray,
     ) -> None:
         """StickyFollower.step and the law for the followers `need`, written into choice, u,
-        hops (B, N) in place."""
+        hops, rooted (Choice.rooted) and searching (a search circle to fly) (B, N) in place."""
         if not need.any():
             return
         time = tick * self.dt
@@ -113,10 +113,11 @@ class BatchSticky:
                 )
                 self._store(f, b, i, col)
                 c, g = ch.contact, self.gains[b]
+                rooted[b, i], searching[b, i] = ch.rooted, search is not None
                 if c is None:
                     spec = self.specs[b][i]
                     u[b, i] = (
-                        math.copysign(g.c2, float(last_u[b, i]) or 1.0)
+                        loiter_rate(g.c2, float(last_u[b, i]))
                         if search is None
                         else on_orbit_command(
                             -search.x,
@@ -172,8 +173,8 @@ class _Sightings:
         self.valid = np.zeros(shape, dtype=bool)
         self.col = np.full(shape, NONE, dtype=np.int64)
         self.hops = np.full(shape, NONE, dtype=np.int64)
-        for name in self.FIELDS:
-            setattr(self, name, np.zeros(shape))
+        # Sighting's float fields (FIELDS), each (B, N)
+        self.time, self.range, self.bearing, self.heading, self.own = (np.zeros(shape) for _ in self.FIELDS)
 
     def put(self, where, col, time, rng, bearing, heading, hops, own) -> None:
         self.valid |= where

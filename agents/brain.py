@@ -19,8 +19,9 @@ from swarm.agents.selection import select
 from swarm.agents.sticky_follower import StickyFollower
 from swarm.contracts.frames import SensorFrame
 from swarm.contracts.observation import Observation
+from swarm.contracts.vocabulary import Phase
 
-LEADER_PHASES = ("arc1", "arc2", "orbit")
+LEADER_PHASES = (Phase.ARC1, Phase.ARC2, Phase.ORBIT)
 _new = tuple.__new__
 
 
@@ -30,9 +31,9 @@ class Decision(NamedTuple):
     tick: int
     u: float  # commanded turn rate over [t_k, t_k + dt) (rad/s)
     out: int | None  # chosen out-neighbour (None for leaders and lost followers)
-    phase: str  # leaders: "arc1" | "arc2" | "orbit"; followers: "track" (advertising a path through
-    # out), "shadow" (steering by out without a path), "search" (sticky: nobody to steer by, flying
-    # the search pattern), "lost" (other rules: nobody to steer by, loitering)
+    phase: str  # a Phase: leaders ARC1 | ARC2 | ORBIT; followers TRACK (advertising a path through
+    # out), SHADOW (steering by out without a path), SEARCH (sticky: nobody to steer by, flying
+    # the search pattern), LOST (other rules: nobody to steer by, loitering)
     fallback: bool = False  # pinned out-neighbour not sensed, nearest used instead
     hops: int | None = None  # hops to a leader it advertises (leaders 0; None: no path known)
 
@@ -114,8 +115,8 @@ class AgentBrain:
         if frame.target is None:
             raise ValueError(f"leader {self.spec.id}: sensor frame has no target information")
         u = self._command(frame, None)
-        phase = self.state.get("phase", "orbit")
-        return Decision(frame.tick, u, None, phase if phase in LEADER_PHASES else "orbit", False, 0)
+        phase = self.state.get("phase", Phase.ORBIT)
+        return Decision(frame.tick, u, None, phase if phase in LEADER_PHASES else Phase.ORBIT, False, 0)
 
     # -- followers -----------------------------------------------------------------
     def _follower(self, frame: SensorFrame) -> Decision:
@@ -135,9 +136,9 @@ class AgentBrain:
         c = choice.contact
         u = self._command(frame, c, search)
         if c is None:  # nobody (rooted) in sight: the law searches (sticky) or loiters
-            return Decision(frame.tick, u, None, "lost" if search is None else "search", choice.fallback)
+            return Decision(frame.tick, u, None, Phase.LOST if search is None else Phase.SEARCH, choice.fallback)
         hops = c.hops + 1 if choice.rooted and 0 <= c.hops < self.max_hops else None
-        return Decision(frame.tick, u, c.id, "track" if choice.rooted else "shadow", choice.fallback, hops)
+        return Decision(frame.tick, u, c.id, Phase.TRACK if choice.rooted else Phase.SHADOW, choice.fallback, hops)
 
     def _below(self) -> int | None:
         """Rooted rule: the hop count a new out-neighbour must beat (None: anyone rooted).

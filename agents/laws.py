@@ -24,22 +24,30 @@ from collections.abc import Callable
 from types import MappingProxyType
 
 from swarm.agents.leader import on_orbit_command
+from swarm.agents.ops import SCALAR, Num, Ops
 from swarm.contracts.laws import FOLLOWER, GAINS, LEADER, LawError, follower_law_name, resolve_law
 from swarm.contracts.observation import Observation
-from swarm.contracts.orbits import wrap
 
 Law = Callable[[Observation], float]
 
 
-def bearing_law(g_i: float, g_j: float, lambda_ij: float, c1: float, c2: float) -> float:
-    """The paper's law (Theorem 1): u_i = C1 wrap(g_j - g_i) + C2 sin(lambda_ij - g_i)."""
-    return c1 * wrap(g_j - g_i) + c2 * math.sin(lambda_ij - g_i)
+def bearing_law(g_i: Num, g_j: Num, lambda_ij: Num, c1: Num, c2: Num, *, ops: Ops = SCALAR) -> Num:
+    """The paper's law (Theorem 1): u_i = C1 wrap(g_j - g_i) + C2 sin(lambda_ij - g_i).
+
+    On floats; with ops=swarm.agents.batch_maths.ARRAY, on arrays of followers (the batch
+    brains): the same operations in the same order, so the same bits."""
+    return c1 * ops.wrap(g_j - g_i) + c2 * ops.sin(lambda_ij - g_i)
+
+
+def loiter_rate(c2: Num, last_u: Num, *, ops: Ops = SCALAR) -> Num:
+    """`loiter`'s turn rate: +-C2, the sign of the last turn rate (+ after none: 0.0 or -0.0)."""
+    return ops.copysign(c2, ops.where(last_u == 0.0, 1.0, last_u))
 
 
 def loiter(obs: Observation) -> float:
     """A circle of radius v / C2 where it is, turning the way it last turned: neither a spin
     nor bolting off in a line (what `search` does without a search circle)."""
-    return math.copysign(obs.c2, obs.last_u or 1.0)
+    return loiter_rate(obs.c2, obs.last_u)
 
 
 def search(obs: Observation) -> float:

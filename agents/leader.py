@@ -9,7 +9,9 @@ Rao 2024), and then holds that orbit with :func:`on_orbit_command`, here.  `cc_l
 the path on its first call and keeps it in `obs.state`.
 
 Pure functions on plain floats, standard library only: no numpy, so that a leader
-process is as light as a follower's; no I/O, no middleware.
+process is as light as a follower's; no I/O, no middleware. The orbit hold and the arcs'
+turn rates (`orbit_hold`, `arc_rate`) are written over the operations of agents/ops.py:
+the batch brains (agents/batch_leader.py) run the same code on arrays of leaders.
 """
 
 from __future__ import annotations
@@ -17,8 +19,9 @@ from __future__ import annotations
 import math
 
 from swarm.agents.cc_plan import check_inputs, plan_cc
+from swarm.agents.ops import SCALAR, Num, Ops
 from swarm.contracts.observation import Observation
-from swarm.contracts.orbits import wrap
+from swarm.contracts.vocabulary import Phase
 
 #: Orbit-hold gains (dimensionless): desired heading leans atan(K_RADIAL (r - R)/R)
 #: towards the orbit; heading error feedback gain is K_HEADING * v / R (1/s).  The
@@ -46,23 +49,51 @@ def on_orbit_command(
     without overshoot.  Saturated at +-max_turn_rate when given.
     """
     s = check_inputs(v, radius, direction, max_turn_rate)
-    r = math.hypot(x, y)
-    theta = math.atan2(y, x)
-    e = (r - radius) / radius
-    g_d = theta + s * (0.5 * math.pi + math.atan(K_RADIAL * e))
-    err = wrap(g_d - heading)
-    w0 = v / radius
-    if abs(e) <= _HOLD_DEADBAND and abs(err) <= _HOLD_DEADBAND:
-        u = s * w0
-    else:
-        u = s * w0 + K_HEADING * w0 * err
+    u = orbit_hold(x, y, heading, v, radius, s)
     if max_turn_rate is not None:
         u = max(-max_turn_rate, min(max_turn_rate, u))
     return u
 
 
-def _overlap(a: float, b: float, lo: float, hi: float) -> float:
-    return max(0.0, min(b, hi) - max(a, lo))
+def orbit_hold(x: Num, y: Num, heading: Num, v: Num, radius: Num, s: Num, *, ops: Ops = SCALAR) -> Num:
+    """on_orbit_command's turn rate before saturation, inputs already checked (s: +1 / -1).
+
+    On floats; with ops=swarm.agents.batch_maths.ARRAY, on arrays of leaders (the batch
+    brains): the same operations in the same order, so the same bits."""
+    r = ops.hypot(x, y)
+    theta = ops.atan2(y, x)
+    e = (r - radius) / radius
+    g_d = theta + s * (0.5 * math.pi + ops.atan(K_RADIAL * e))
+    err = ops.wrap(g_d - heading)
+    w0 = v / radius
+    hold = (abs(e) <= _HOLD_DEADBAND) & (abs(err) <= _HOLD_DEADBAND)
+    return ops.where(hold, s * w0, s * w0 + K_HEADING * w0 * err)
+
+
+def _overlap(a: float, b: float, lo: Num | float, hi: Num | float, ops: Ops) -> Num:
+    return ops.maximum(0.0, ops.minimum(b, hi) - ops.maximum(a, lo))
+
+
+def arc_rate(a: float, dt: float, t1: Num, t2: Num, u1: Num, u2: Num, u_orbit: Num, *, ops: Ops = SCALAR) -> Num:
+    """The CC path's turn rate averaged over the tick [a, a + dt) of path time (a < t1 + t2:
+    the path has not ended): arc 1 (u1) until t1, arc 2 (u2) until t1 + t2, the orbit's
+    u_orbit after. The tick on which an arc ends gets the time-weighted average: the switch
+    between arcs rarely falls on a tick. On floats, or on arrays of leaders with
+    ops=swarm.agents.batch_maths.ARRAY (the same bits)."""
+    b = a + dt
+    t12 = t1 + t2
+    return (
+        u1 * _overlap(a, b, 0.0, t1, ops)
+        + u2 * _overlap(a, b, t1, t12, ops)
+        + u_orbit * _overlap(a, b, t12, math.inf, ops)
+    ) / dt
+
+
+def leader_phase(a: float, t1: float, t2: float) -> Phase:
+    """The phase of a leader at path time a on a CC path of arcs t1, t2 (s)."""
+    if a >= t1 + t2:
+        return Phase.ORBIT
+    return Phase.ARC1 if a < t1 else Phase.ARC2
 
 
 def cc_law(obs: Observation) -> float:
@@ -75,20 +106,17 @@ def cc_law(obs: Observation) -> float:
     the switch between arcs rarely falls on a tick.
     """
     st = obs.state
-    px, py = -obs.target[0], -obs.target[1]  # own position relative to the target
+    target, radius = obs.target, obs.orbit_radius
+    if target is None or radius is None:
+        raise ValueError("the 'cc' leader law needs the target and an orbit radius (a leader's observation)")
+    px, py = -target[0], -target[1]  # own position relative to the target
     sign = obs.direction
     p = st.get("cc_path")
     if p is None:
-        p = st["cc_path"] = plan_cc(px, py, obs.heading, obs.speed, obs.orbit_radius, sign, obs.max_turn_rate)
+        p = st["cc_path"] = plan_cc(px, py, obs.heading, obs.speed, radius, sign, obs.max_turn_rate)
         st["path_tick"] = obs.tick
     a = (obs.tick - st["path_tick"]) * obs.dt
-    b = a + obs.dt
-    t12 = p.t1 + p.t2
-    if a >= t12:
-        st["phase"] = "orbit"
-        return on_orbit_command(px, py, obs.heading, obs.speed, obs.orbit_radius, sign, obs.max_turn_rate)
-    u_orbit = sign * obs.speed / obs.orbit_radius
-    st["phase"] = "arc1" if a < p.t1 else "arc2"
-    return (
-        p.u1 * _overlap(a, b, 0.0, p.t1) + p.u2 * _overlap(a, b, p.t1, t12) + u_orbit * _overlap(a, b, t12, math.inf)
-    ) / obs.dt
+    phase = st["phase"] = leader_phase(a, p.t1, p.t2)
+    if phase is Phase.ORBIT:
+        return on_orbit_command(px, py, obs.heading, obs.speed, radius, sign, obs.max_turn_rate)
+    return arc_rate(a, obs.dt, p.t1, p.t2, p.u1, p.u2, sign * obs.speed / radius)

@@ -24,6 +24,7 @@ import math
 from collections.abc import Callable
 from typing import NamedTuple
 
+from swarm.agents.ops import Num
 from swarm.contracts.frames import Contact
 from swarm.contracts.orbits import wrap
 
@@ -59,6 +60,13 @@ def nearest(contacts: tuple[Contact, ...]) -> Contact | None:
     return best
 
 
+def keeps_current(r_best: Num, r_current: Num, hysteresis: Num) -> Num:
+    """Hysteresis h: the current out-neighbour (range r_current) stays unless the nearest
+    candidate (r_best) is closer than (1 - h) times its range. On floats, or on arrays of
+    followers (agents/batch_select.py): the same test."""
+    return r_best > (1.0 - hysteresis) * r_current
+
+
 def select(
     contacts: tuple[Contact, ...],
     *,
@@ -90,7 +98,7 @@ def select(
         return Choice(None, None, fallback)
     if hysteresis > 0.0 and current is not None and current != best.id:
         for c in contacts:
-            if c.id == current and best.range > (1.0 - hysteresis) * c.range:
+            if c.id == current and keeps_current(best.range, c.range, hysteresis):
                 return Choice(c.id, c, fallback)
     return Choice(best.id, best, fallback)
 
