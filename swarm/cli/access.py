@@ -12,6 +12,7 @@ runs; swarm/runtime/host.py). Copy it over a channel you trust (scp), then on th
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -19,6 +20,8 @@ import typer
 
 from swarm.cli.errors import fail
 from swarm.cli.options import RunOpt
+from swarm.contracts import credentials as C
+from swarm.contracts.identities import OPERATOR, CredentialsError, agent_user
 from swarm.contracts.vocabulary import ExitCode
 from swarm.contracts.wire import MAX_AGENT_ID
 
@@ -79,11 +82,6 @@ def credentials(
     Example: swarm credentials --agent 3 --endpoint tcp/10.0.0.5:7447 -o agent-3.cred
     (an agent host: swarm credentials --host a --agents 3-5 --endpoint tls/10.0.0.5:7447 -o host-a.cred)
     """
-    from dataclasses import replace
-
-    from swarm.contracts import credentials as C
-    from swarm.contracts.identities import OPERATOR, CredentialsError, agent_user
-
     if sum((agent is not None, operator, host is not None)) != 1:
         raise fail("give one of --agent ID, --operator or --host NAME --agents IDS", ExitCode.USAGE)
     if (host is None) != (agents is None):
@@ -92,6 +90,7 @@ def credentials(
     try:
         own = C.find_local(run)  # the run's own file ($SWARM_CREDENTIALS is for connecting, not this)
         if host is not None:
+            assert agents is not None  # (--host goes with --agents: checked above)
             exported = own.export_host(host, C.parse_ids(agents))
         else:
             if agent is not None:
@@ -114,8 +113,8 @@ def credentials(
     try:
         C.write(exported, path)
     except OSError as e:
-        raise fail(f"cannot write {path}: {e.strerror or e}", 1) from None
-    what = user if host is None else f"host {host} with agents {', '.join(map(str, exported.host_agents()))}"
+        raise fail(f"cannot write {path}: {e.strerror or e}", ExitCode.FAILED) from None
+    what = user if host is None else f"host {host} with agents {', '.join(map(str, exported.host_agents() or ()))}"
     typer.echo(f"wrote {path} ({what} of run {own.run}, endpoint {exported.endpoint}, mode 0600)")
     if host is not None:
         typer.echo(f"on the other machine: swarm host --credentials {path.name}")

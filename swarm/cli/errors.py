@@ -2,7 +2,8 @@
 code: swarm/cli/main.py wraps every command with `mapped`, so a command calls the API and lets
 what it raises go. The project's own errors carry their exit code (swarm/contracts/errors.py); so do
 those of the layers below (scenarios, run directories, recordings, endpoints): every one
-subclasses `Coded` (swarm/contracts/vocabulary.py) and names its code in its class. Anything else is a bug and keeps its traceback.
+subclasses `Coded` (swarm/contracts/vocabulary.py) and names its code in its class. Anything
+else is a bug and keeps its traceback.
 
 Two kinds of bad input are caught here for every command, before the command runs:
 
@@ -20,16 +21,17 @@ from __future__ import annotations
 import functools
 
 import typer
+from typer._click.exceptions import BadParameter, MissingParameter, NoArgsIsHelpError, UsageError
 from typer.core import TyperGroup
 
 from swarm.contracts.errors import SwarmError, one_line
-from swarm.contracts.vocabulary import Coded
+from swarm.contracts.vocabulary import Coded, ExitCode
 
 # parameters that are endpoints, checked before any command runs: name -> option, listening
 ENDPOINT_PARAMS = {"connect": ("--connect", False), "listen": ("--listen", True), "endpoint": ("--endpoint", False)}
 
 
-def fail(message: str, code: int = 1) -> typer.Exit:
+def fail(message: str, code: int = ExitCode.FAILED) -> typer.Exit:
     """Print `message` on stderr (red on a terminal); the Exit to raise with `code`."""
     typer.secho(message, err=True, fg=typer.colors.RED)
     return typer.Exit(code)
@@ -42,6 +44,7 @@ def exit_code(e: BaseException) -> int | None:
 
 def check_endpoints(params: dict) -> None:
     """EndpointError for the first endpoint parameter (ENDPOINT_PARAMS) that is not one."""
+    # lazy: only a command given an endpoint needs swarm.contracts.endpoints; `swarm --help` starts without it
     from swarm.contracts.endpoints import check_endpoint
 
     for name, (option, listen) in ENDPOINT_PARAMS.items():
@@ -72,7 +75,8 @@ def map_app(app: typer.Typer) -> None:
     for info in app.registered_commands:
         info.callback = mapped(info.callback)
     for group in app.registered_groups:
-        map_app(group.typer_instance)
+        if group.typer_instance is not None:  # (always set by add_typer)
+            map_app(group.typer_instance)
 
 
 def _value_of(e) -> str | None:
@@ -89,8 +93,6 @@ def usage_line(e) -> str:
     """One line for a usage error of typer's: the option and value, and what is wrong with it
     ("--duration -5: should be greater than or equal to 0"), or typer's own sentence for an
     unknown or missing option, with where to look."""
-    from typer._click.exceptions import BadParameter, MissingParameter
-
     ctx = e.ctx
     path = " ".join(["swarm", *ctx.command_path.split()[1:]]) if ctx is not None else "swarm"  # (any prog name)
     where = f"; see {path} --help"
@@ -111,8 +113,6 @@ class OneLineErrors(TyperGroup):
     line on stderr and exit 2, not typer's box (usage, hint and a framed message)."""
 
     def invoke(self, ctx):
-        from typer._click.exceptions import NoArgsIsHelpError, UsageError
-
         try:
             return super().invoke(ctx)
         except NoArgsIsHelpError:

@@ -1,5 +1,5 @@
 """`swarm host`: run some agents of a run on this machine, behind a zenoh router of its own
-connected to the run's world (swarm/runtime/host.py; docs/resilience.md, "Several machines")."""
+connected to the run's world (swarm/runtime/host.py; docs/guides/several-machines.md#hosts)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,9 @@ import typer
 
 from swarm.cli.errors import fail
 from swarm.cli.options import CredentialsOpt, RunOpt, TrustLawOpt
+from swarm.contracts.credentials import parse_ids
+from swarm.contracts.identities import CredentialsError
+from swarm.contracts.vocabulary import ExitCode
 
 
 def host(
@@ -66,14 +69,13 @@ def host(
     Example: swarm host --credentials host-a.cred (a file written on the world's machine by
     `swarm credentials --host a --agents 3-5 --endpoint tls/10.0.0.5:7447 -o host-a.cred`)
     """
-    from swarm.contracts.credentials import parse_ids
-    from swarm.contracts.identities import CredentialsError
+    # lazy: the agent host's modules (router, forks, supervision: ~10 ms), which `swarm --help` must not pay
     from swarm.runtime.host import HostConfig, run_host
 
     try:
         ids = parse_ids(agents) if agents is not None else None
     except CredentialsError as e:
-        raise fail(str(e), 2) from None
+        raise fail(str(e), ExitCode.USAGE) from None
     raise typer.Exit(
         run_host(
             HostConfig(

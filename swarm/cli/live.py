@@ -1,14 +1,14 @@
-"""Read-only live commands (`swarm runs / agents / graph`; `swarm watch` is swarm/cli/watch.py's),
-and what every live command shares: the --connect/--run/--json options (defaults:
-$SWARM_CONNECT, $SWARM_RUN) and the console.
+"""Read-only live commands (`swarm runs / agents / graph`; `swarm watch` is swarm/cli/watch.py's).
+The options every live command shares (--connect, --run, --json; defaults $SWARM_CONNECT,
+$SWARM_RUN) and the console are swarm/cli/options.py's.
 
 Each command parses its options, calls the Python API (`swarm.connect`, `swarm.runs`:
 swarm/api/live.py) and renders what it returns; the API's errors (no run, the world ended
 mid-command...) become one line on stderr and exit 1 in swarm/cli/errors.py. Everything goes
 over zenoh, so it works the same from another terminal or another machine (`--connect
-tcp/HOST:PORT`). The JSON shapes printed with `--json` are documented in docs/cli.md; keep
-them stable. Their looks are in `swarm.live.views`; the commands that act on a run (kill,
-spawn, pause, resume) in `swarm.cli.control`.
+tcp/HOST:PORT`). The JSON shapes printed with `--json` are documented in
+docs/reference/cli.md#live; keep them stable. Their looks are in `swarm.live.views`; the
+commands that act on a run (kill, spawn, pause, resume) in `swarm.cli.control`.
 """
 
 from __future__ import annotations
@@ -21,9 +21,12 @@ from typing import Annotated
 import typer
 
 from swarm.api.live import connect as connect_run
+from swarm.api.live import runs as live_runs
 from swarm.cli.errors import fail
 from swarm.cli.options import ConnectOpt, CredentialsOpt, JsonOpt, LiveRunOpt, console
+from swarm.contracts.errors import NoRunError, StoppedAnswering
 from swarm.contracts.vocabulary import ExitCode
+from swarm.live.client import where_looked
 from swarm.live.data import graph_key
 from swarm.live.views import agents_table, graph_dot, graph_renderable, header, runs_table
 
@@ -45,9 +48,6 @@ def runs(
 
     Example: swarm runs --connect tcp/10.0.0.5:7447 --json
     """
-    from swarm.api.live import runs as live_runs
-    from swarm.live.client import where_looked
-
     docs = live_runs(run, connect, credentials)
     if as_json:
         typer.echo(_dumps(docs))
@@ -142,7 +142,6 @@ def graph(
         if not watch:
             show(g, True)
             return
-        from swarm.contracts.errors import NoRunError, StoppedAnswering
 
         def again(g: dict) -> dict:  # the graph now, or the last one while the world does not answer
             return live.again(lambda: live.graph(sensing), g)
@@ -151,7 +150,7 @@ def graph(
         key = None
         try:
             if tty:
-                from rich.live import Live
+                from rich.live import Live  # lazy: rich (~15 ms), for a terminal only
 
                 with Live(graph_renderable(g), console=console(), auto_refresh=False) as view:
                     key = graph_key(g)
@@ -170,13 +169,13 @@ def graph(
                 time.sleep(0.25)
                 g = again(g)
         except KeyboardInterrupt:
-            raise typer.Exit(0) from None
+            raise typer.Exit(ExitCode.OK) from None
         except StoppedAnswering as e:
             typer.secho(str(e), err=True)
-            raise typer.Exit(1) from None
+            raise typer.Exit(ExitCode.FAILED) from None
         except NoRunError:
             typer.secho(f"the world of run {live.run} ended", err=True)
-            raise typer.Exit(0) from None
+            raise typer.Exit(ExitCode.OK) from None
 
 
 def register(app: typer.Typer) -> None:

@@ -27,6 +27,11 @@ from __future__ import annotations
 import sys
 from importlib import import_module
 
+import typer
+
+from swarm import __version__
+from swarm.cli.errors import OneLineErrors, map_app
+
 GROUPS = ("up", "run", "offline", "plot", "live", "watch", "control", "access", "host")
 # command -> the group modules that are enough to run it (several commands in all: a typer app
 # of one command would run it without its name)
@@ -42,20 +47,12 @@ LAZY = {
 
 def _print_version(value: bool) -> None:
     if value:
-        import typer
-
-        from swarm import __version__
-
         typer.echo(f"swarm {__version__}")
         raise typer.Exit()
 
 
 def build(groups=GROUPS, study: bool = True):
     """The typer app of these command groups (and `swarm study`), every command's errors mapped."""
-    import typer
-
-    from swarm.cli.errors import OneLineErrors, map_app
-
     app = typer.Typer(
         cls=OneLineErrors,  # typer's usage errors (a bad option value...) as one line (swarm/cli/errors.py)
         help="swarm: an agent-per-process runtime for bearing-based circumnavigation over zenoh.",
@@ -75,6 +72,7 @@ def build(groups=GROUPS, study: bool = True):
     for group in groups:
         import_module(f"swarm.cli.{group}").register(app)
     if study:
+        # lazy: a live command's process builds its own group only (LAZY), without `swarm study`
         from swarm.cli.study import study_app
 
         app.add_typer(study_app, name="study")

@@ -1,6 +1,5 @@
 """Commands that need no running swarm (`swarm check / schema`; `plot / export` live in
-plot_cli.py), and the small helpers every scenario command shares (the scenario argument,
-reading it, failing, the plots)."""
+swarm/cli/plot.py). The scenario argument and reading it are swarm/cli/options.py's."""
 
 from __future__ import annotations
 
@@ -10,6 +9,7 @@ from typing import TYPE_CHECKING
 import typer
 
 from swarm.cli.options import ScenarioArg, read_scenario
+from swarm.contracts.graph import analyse
 
 if TYPE_CHECKING:  # the scenario model (pydantic) is imported by the commands that read one:
     from swarm.contracts.scenario import Scenario  # live commands start without it (~0.13 s)
@@ -29,6 +29,7 @@ def check(scenario: ScenarioArg) -> None:
     )
     typer.echo(f"  added agents: up to {len(s.added_id_range)} ({s.added_ids_text()})")
     typer.echo(f"  target: ({s.target.x}, {s.target.y}) m; gains: c1={s.gains.c1}, c2={s.gains.c2}")
+    # lazy: loaded with the scenario by now; `swarm --help` starts without it
     from swarm.contracts.laws import follower_law_name
 
     follower = follower_law_name(s.gains.law, s.law.follower)[1]
@@ -66,8 +67,8 @@ def check(scenario: ScenarioArg) -> None:
 
 def _warn_nearest_graph(s: Scenario) -> None:
     """Warn (exit 0) when the paper's nearest choice at t = 0 breaks Assumption 1."""
+    # lazy: the world's core (numpy, the scenario model: ~0.12 s) and the agents' selection, not for `swarm --help`
     from swarm.agents.selection import nearest
-    from swarm.contracts.graph import analyse
     from swarm.world.core import WorldCore
 
     leaders = {a.id for a in s.agents if a.role == "leader"}
@@ -102,7 +103,7 @@ def schema() -> None:
 
     Example: swarm schema > scenario.schema.json
     """
-    from swarm.contracts.scenario import scenario_json_schema
+    from swarm.contracts.scenario import scenario_json_schema  # lazy: pydantic (~90 ms), not for `swarm --help`
 
     typer.echo(json.dumps(scenario_json_schema(), indent=2))
 

@@ -4,6 +4,8 @@ these; they never import each other."""
 
 from __future__ import annotations
 
+import secrets
+import socket
 import sys
 import time
 from pathlib import Path
@@ -13,6 +15,9 @@ import typer
 
 from swarm.api.live import ENV_CONNECT, ENV_RUN
 from swarm.cli.errors import fail
+from swarm.contracts.identities import CredentialsError
+from swarm.contracts.runtime_dir import runtime_dir
+from swarm.contracts.vocabulary import ExitCode
 
 if TYPE_CHECKING:  # the scenario model (pydantic) is imported by the commands that read one:
     from swarm.contracts.scenario import Scenario  # live commands start without it (~0.13 s)
@@ -65,6 +70,7 @@ TrustLawOpt = Annotated[
 
 
 def console(err: bool = False):
+    # lazy: rich costs ~14 ms; a live command that prints JSON or finds no run needs none
     from rich.console import Console
 
     stream = sys.stderr if err else sys.stdout
@@ -78,7 +84,7 @@ ScenarioArg = Annotated[
 
 def read_scenario(path: Path) -> Scenario:
     """`swarm.load(path)`: a bad file raises ScenarioError, its message and exit 2 (swarm/cli/errors.py)."""
-    from swarm.api.scenario import load
+    from swarm.api.scenario import load  # lazy: the scenario model (pydantic, ~90 ms): live commands import this module
 
     return load(path)
 
@@ -126,18 +132,17 @@ FoxgloveHostOpt = Annotated[
 
 def default_out(scenario_path: Path, kind: str) -> Path:
     """A new directory under runs/: the time and a random part, so two runs never share one."""
-    import secrets
-
     return Path("runs") / f"{scenario_path.stem}-{kind}-{time.strftime('%Y%m%d-%H%M%S')}-{secrets.token_hex(3)}"
 
 
 def claim_out(out: Path, force: bool) -> None:
+    # lazy: swarm.offline.results brings numpy and the recording (~0.14 s): live commands import this module
     from swarm.offline.results import OutDirError, claim_out_dir
 
     try:
         claim_out_dir(out, force)
     except OutDirError as e:
-        raise fail(str(e), 2) from None
+        raise fail(str(e), ExitCode.USAGE) from None
 
 
 def check_duration(s, duration: float | None, path: Path) -> None:
@@ -146,6 +151,7 @@ def check_duration(s, duration: float | None, path: Path) -> None:
     typer's range errors are said (swarm/cli/errors.py), exit 2."""
     if duration is None:
         return
+    # lazy: the scenario model (pydantic, ~90 ms): live commands import this module
     from swarm.contracts.scenario import ScenarioError, parse_scenario
 
     try:
@@ -158,34 +164,29 @@ def check_duration(s, duration: float | None, path: Path) -> None:
         for line in str(e).splitlines()[1:]:
             line = line.strip().removeprefix("run.duration: ")
             why.append(line[len("Input ") :] if line.startswith("Input should be ") else line)
-        raise fail(f"--duration {duration:g}: {'; '.join(why)} ({path})", 2) from None
+        raise fail(f"--duration {duration:g}: {'; '.join(why)} ({path})", ExitCode.USAGE) from None
 
 
 def check_runtime_dir() -> None:
     """The runtime dir (sockets, credentials) must be the user's own: one line, exit 2."""
-    from swarm.contracts.identities import CredentialsError
-    from swarm.contracts.runtime_dir import runtime_dir
-
     try:
         runtime_dir()
     except CredentialsError as e:
-        raise fail(f"swarm: {e}", 2) from None
+        raise fail(f"swarm: {e}", ExitCode.USAGE) from None
 
 
 def check_clock(clock: str | None) -> None:
     if clock is not None and clock not in ("lockstep", "realtime"):
-        raise fail(f"--clock must be lockstep or realtime, not {clock!r}", 2)
+        raise fail(f"--clock must be lockstep or realtime, not {clock!r}", ExitCode.USAGE)
 
 
 def check_foxglove(host: str, port: int) -> None:
     """The --foxglove port must be free to bind: one line naming the option, exit 2 (the
     world checks again when it binds, world/live_view.py)."""
-    import socket
-
     try:
         infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
         with socket.socket(infos[0][0], socket.SOCK_STREAM) as so:
             so.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             so.bind(infos[0][4])
     except OSError as e:
-        raise fail(f"--foxglove: cannot serve on {host}:{port}: {e.strerror or e}", 2) from None
+        raise fail(f"--foxglove: cannot serve on {host}:{port}: {e.strerror or e}", ExitCode.USAGE) from None

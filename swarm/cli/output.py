@@ -8,16 +8,17 @@ from pathlib import Path
 import typer
 
 from swarm.cli.errors import fail
+from swarm.contracts.vocabulary import ExitCode
 
 
 def render_run_plots(out: Path, formats: tuple[str, ...] = ("png",)) -> None:
     """The figures of the run in `out` in `formats`, their names printed; a plotting failure exits 1."""
-    from swarm.plots import PlotError, render_plots
+    from swarm.plots import PlotError, render_plots  # lazy: matplotlib (~0.3 s), which `swarm --help` must not pay
 
     try:
         files = render_plots(out, formats=formats)
     except PlotError as e:
-        raise fail(str(e), 1) from None
+        raise fail(str(e), ExitCode.FAILED) from None
     say_plots(files)
 
 
@@ -26,6 +27,7 @@ def say_plots(files: list[Path]) -> None:
 
 
 def _progress_bar(label: str):
+    # lazy: rich.progress (~20 ms with rich), only while a run goes
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
     return Progress(

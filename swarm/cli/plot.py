@@ -13,6 +13,7 @@ import typer
 
 from swarm.cli.errors import fail
 from swarm.cli.output import say_plots
+from swarm.contracts.vocabulary import ExitCode
 
 RunDirArg = Annotated[Path, typer.Argument(help="a run directory written by swarm sim / swarm up")]
 FORMAT_HELP = "figure format: png, pdf or svg; repeat it or give a comma list (-f png,pdf)"
@@ -20,22 +21,22 @@ FORMAT_HELP = "figure format: png, pdf or svg; repeat it or give a comma list (-
 
 def plot_formats(values: Optional[list[str]]) -> tuple[str, ...]:
     """The formats of --format (repeated and/or comma lists); exit 2 naming a bad one."""
-    from swarm.plots import check_formats
+    from swarm.plots import check_formats  # lazy: matplotlib (~0.3 s), which `swarm --help` must not pay
 
     try:
         return check_formats([f for v in (values or ["png"]) for f in v.split(",") if f.strip()])
     except ValueError as e:
-        raise fail(f"--format: {e}", 2) from None
+        raise fail(f"--format: {e}", ExitCode.USAGE) from None
 
 
 def _run_dir(run_dir: Path) -> None:
     if not run_dir.is_dir():
-        raise fail(f"{run_dir}: not a directory", 2)
+        raise fail(f"{run_dir}: not a directory", ExitCode.USAGE)
 
 
 def open_results(run_dir: Path):
     """`swarm.open_run(run_dir)`, saying what was rebuilt from the recording (if anything)."""
-    from swarm.api.runs import open_run
+    from swarm.api.runs import open_run  # lazy: numpy and the recording (~0.15 s), not for `swarm --help`
 
     results = open_run(run_dir)
     if results.recovered is not None:
@@ -45,10 +46,11 @@ def open_results(run_dir: Path):
 
 def render_animation_cli(run_dir: Path, frames: int) -> None:
     """animation.gif with a progress bar (on a terminal); a read failure exits 1."""
-    from rich.progress import BarColumn, Progress, TextColumn
+    from rich.progress import BarColumn, Progress, TextColumn  # lazy: rich.progress, not for `swarm --help`
 
+    # lazy: matplotlib (~0.3 s), which `swarm --help` must not pay
     from swarm.plots import PlotError, render_animation
-    from swarm.plots.animate import FPS
+    from swarm.plots.animate import FPS, gif_frames
 
     try:
         with Progress(
@@ -63,9 +65,7 @@ def render_animation_cli(run_dir: Path, frames: int) -> None:
                 run_dir, max_frames=frames, progress=lambda i, n: bar.update(task, completed=i, total=n)
             )
     except PlotError as e:
-        raise fail(str(e), 1) from None
-    from swarm.plots.animate import gif_frames
-
+        raise fail(str(e), ExitCode.FAILED) from None
     n = gif_frames(path)
     typer.echo(f"animation: {path.name} ({n} frames, {n / FPS:.1f} s at {FPS} frames/s)")
 
@@ -87,7 +87,7 @@ def plot(
     """
     formats = plot_formats(format)
     if frames < 2:
-        raise fail(f"--frames: {frames} is too few (at least 2)", 2)
+        raise fail(f"--frames: {frames} is too few (at least 2)", ExitCode.USAGE)
     _run_dir(run_dir)
     say_plots(open_results(run_dir).plot(formats=formats))
     if animate:
@@ -96,12 +96,12 @@ def plot(
 
 def write_csvs(results) -> None:
     """csv/agent-<id>.csv for every agent of `results` (a read failure: RunReadError, exit 1)."""
-    from swarm.offline.csv_export import CSV_DIR
+    from swarm.offline.csv_export import CSV_DIR  # lazy: numpy and the recording (~0.14 s), not for `swarm --help`
 
     try:
         paths = results.write_csv()
     except OSError as e:
-        raise fail(f"{results.run_dir / CSV_DIR}: {e.strerror or e}", 1) from None
+        raise fail(f"{results.run_dir / CSV_DIR}: {e.strerror or e}", ExitCode.FAILED) from None
     typer.echo(f"csv: {len(paths)} files in {CSV_DIR}/ ({paths[0].name} ... {paths[-1].name})")
 
 
@@ -124,8 +124,8 @@ def export(
     second at most) becomes a valid run directory; the summary says "complete": false.
 
     Example: swarm export runs/case2-1a2b3c --csv
-    """
-    from swarm.offline.results import needs_export
+    """  # noqa: E501 (the help text as it was: typer keeps its line breaks)
+    from swarm.offline.results import needs_export  # lazy: numpy and the recording (~0.14 s), not for `swarm --help`
 
     _run_dir(run_dir)
     recover = needs_export(run_dir)
@@ -133,7 +133,7 @@ def export(
         if (run_dir / "recording.mcap").is_file():
             typer.echo(f"{run_dir}: trajectory.npz and summary.json are already there; nothing to recover")
         elif not csv:
-            raise fail(f"{run_dir}: no recording.mcap to export from", 1)
+            raise fail(f"{run_dir}: no recording.mcap to export from", ExitCode.FAILED)
     if not (recover or csv or plots):
         return
     results = open_results(run_dir)

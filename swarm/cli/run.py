@@ -3,6 +3,7 @@ swarm/cli/up.py): the options they share are declared once, below, as `Annotated
 
 from __future__ import annotations
 
+import json
 import os
 from typing import Annotated, Optional
 
@@ -32,8 +33,12 @@ from swarm.cli.options import (
     read_scenario,
 )
 from swarm.cli.output import _progress_bar, print_summary, render_run_plots
+from swarm.contracts import credentials as C
+from swarm.contracts.identities import CredentialsError
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV
-from swarm.contracts.wire import MAX_AGENT_ID
+from swarm.contracts.transport import default_endpoint
+from swarm.contracts.vocabulary import EventKind, ExitCode
+from swarm.contracts.wire import MAX_AGENT_ID, WireError, check_run_id
 
 
 def sim(
@@ -60,17 +65,18 @@ def sim(
 
     Example: swarm sim scenarios/case2.toml --out runs/case2
     """
+    # lazy: the engine's modules (numpy, the scenario model, the recording: ~0.3 s), not for `swarm --help`
     from swarm.api.runs import simulate
-    from swarm.world.recording import EXIT_NO_SPACE, RecordingError
+    from swarm.world.recording import RecordingError
 
     s = read_scenario(scenario)
     check_duration(s, duration, scenario)
     if batch:
-        from swarm.offline.batch import refusal
+        from swarm.offline.batch import refusal  # lazy: the batch engine's modules (~16 ms), for --batch only
 
         why = refusal(s)
         if why is not None:
-            raise fail(f"swarm sim --batch: {scenario}: {why}; run it without --batch", 2)
+            raise fail(f"swarm sim --batch: {scenario}: {why}; run it without --batch", ExitCode.USAGE)
     out = out or default_out(scenario, "sim")
     total = int(round((duration or s.run.duration) / s.run.dt))
     try:
@@ -80,21 +86,19 @@ def sim(
                 s, duration, out, force=force, batch=batch, progress=lambda k, n: prog.update(task, completed=k)
             )
     except RecordingError as e:
-        raise fail(f"swarm sim: {e}", EXIT_NO_SPACE) from None
+        raise fail(f"swarm sim: {e}", ExitCode.NO_SPACE) from None
     summary, wall = results.summary.to_dict(), results.summary["wall_time"]
     print_summary(summary, out)
     typer.echo(f"speed: {total * s.run.dt / wall:.1f} simulated s per wall s ({total / wall:.0f} ticks/s)")
     if plots:
         render_run_plots(out)
-    crashes = [e for e in summary["events"] if e["kind"] == "crash"]
+    crashes = [ev for ev in summary["events"] if ev["kind"] == EventKind.CRASH]
     if crashes:  # as swarm up: results written, one line, exit 4
-        from swarm.api.launch import EXIT_AGENT_FAILED
-
-        e = crashes[0]
+        first = crashes[0]
         raise fail(
-            f"swarm sim: {len(crashes)} agent(s) failed: agent {e['agent']} at t = {e['time']:g} s: "
-            f"its law raised {e['cause']} (results in {out})",
-            EXIT_AGENT_FAILED,
+            f"swarm sim: {len(crashes)} agent(s) failed: agent {first['agent']} at t = {first['time']:g} s: "
+            f"its law raised {first['cause']} (results in {out})",
+            ExitCode.AGENT_FAILED,
         )
 
 
@@ -129,9 +133,7 @@ def world(
 
     Example: swarm world scenarios/case2.toml --listen tcp/0.0.0.0:7447 --out runs/case2
     """
-    from swarm.contracts.transport import default_endpoint
-    from swarm.contracts.wire import WireError, check_run_id
-    from swarm.world.clock import EXIT_DESERTED
+    # lazy: the world process's modules (numpy, the scenario model, the engine: ~0.3 s), not for `swarm --help`
     from swarm.world.main import run_world
     from swarm.world.process import WorldConfig
 
@@ -139,19 +141,21 @@ def world(
     check_duration(s, duration, scenario)
     check_runtime_dir()
     if not run:
-        from swarm.api.launch import new_run_id
+        from swarm.api.launch import new_run_id  # lazy: the API's run modules, only when no --run is given
 
         run = new_run_id(scenario)
     try:
         check_run_id(run)
     except WireError as e:
-        raise fail(str(e), 2) from None
+        raise fail(str(e), ExitCode.USAGE) from None
     clock = clock or s.run.clock
     check_clock(clock)
     listen = listen or default_endpoint(run)
     if foxglove:
         if out is None:
-            raise fail("--foxglove needs --out: the live view serves the run's recording as it is written", 2)
+            raise fail(
+                "--foxglove needs --out: the live view serves the run's recording as it is written", ExitCode.USAGE
+            )
         check_foxglove(foxglove_host, foxglove_port)
     if out is not None:
         claim_out(out, force)
@@ -173,11 +177,10 @@ def world(
     # the table `swarm up` prints; not when the launcher runs us (it prints its own, and reads a
     # world's failure from the last line of its log)
     launched = bool(os.environ.get(LAUNCHER_PID_ENV))
-    if summary is not None and not launched and code in (0, 130, 143, EXIT_DESERTED) and summary.exists():
-        import json
-
+    ended = (ExitCode.OK, ExitCode.INTERRUPTED, ExitCode.TERMINATED)
+    if summary is not None and not launched and code in (*ended, ExitCode.DESERTED) and summary.exists():
         print_summary(json.loads(summary.read_text()), out)  # the table `swarm up` prints
-    if plots and out is not None and code in (0, 130, 143) and (out / "trajectory.npz").exists():
+    if plots and out is not None and code in ended and (out / "trajectory.npz").exists():
         render_run_plots(out)
     raise typer.Exit(code)
 
@@ -220,16 +223,13 @@ def agent(
 
     Example: swarm agent --id 3 --connect tcp/10.0.0.5:7447 --credentials agent-3.cred
     """
-    from swarm.agents.process import run_agent
+    from swarm.agents.process import run_agent  # lazy: the agent process's modules (~6 ms), not for `swarm --help`
 
     if credentials is not None:  # a file that cannot be used: said now, not after waiting for the world
-        from swarm.contracts import credentials as C
-        from swarm.contracts.identities import CredentialsError
-
         try:
             C.read(credentials)
         except CredentialsError as e:
-            raise fail(f"swarm agent {id}: {e}", 3) from None
+            raise fail(f"swarm agent {id}: {e}", ExitCode.REFUSED) from None
     wait = connect_timeout if world_wait is None else world_wait
     raise typer.Exit(
         run_agent(

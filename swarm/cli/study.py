@@ -10,9 +10,11 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Any, Optional
 
 import typer
+
+from swarm.contracts.vocabulary import ExitCode
 
 study_app = typer.Typer(
     help="Batch studies with the in-process engine: does the law converge for my kind of swarm?",
@@ -22,7 +24,7 @@ study_app = typer.Typer(
 )
 
 
-def _fail(message: str, code: int = 2) -> typer.Exit:
+def _fail(message: str, code: int = ExitCode.USAGE) -> typer.Exit:
     typer.secho(message, err=True, fg=typer.colors.RED)
     return typer.Exit(code)
 
@@ -63,9 +65,10 @@ def _run(
 ) -> tuple[list[dict], bool]:
     """Run jobs (`total` runs: a job may be a batch of them) with a progress bar, streaming
     rows to csv_path; (rows, interrupted)."""
+    # lazy: rich.progress (~20 ms with rich), which `swarm --help` must not pay
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-    from swarm.study.pool import CsvSink, run_rows
+    from swarm.study.pool import CsvSink, run_rows  # lazy: the worker pool (multiprocessing), not for `swarm --help`
 
     rows: list[dict] = []
     sink = CsvSink(csv_path, columns)
@@ -110,7 +113,7 @@ def _study(
 ) -> tuple[Path, list[dict], list[dict], bool]:
     """Run a study's jobs (`total` runs) into out/runs.csv and its summary into
     out/summary.csv; (out, rows, summary, interrupted)."""
-    from swarm.study.pool import write_csv
+    from swarm.study.pool import write_csv  # lazy: the worker pool (multiprocessing), not for `swarm --help`
 
     out = out or Path("runs") / f"study-{kind}-{time.strftime('%Y%m%d-%H%M%S')}"
     typer.echo(f"{what} on {jobs or os.cpu_count()} process(es); rows -> {out / 'runs.csv'}")
@@ -126,7 +129,7 @@ def _done(out: Path, stopped: bool) -> None:
     """The last line; exit 130 when Ctrl-C cut the study short."""
     typer.echo(f"results: {out}")
     if stopped:
-        raise typer.Exit(130)
+        raise typer.Exit(ExitCode.INTERRUPTED)
 
 
 def _table(rows: list[dict], columns: list[tuple[str, str, Callable]]) -> None:
@@ -194,6 +197,7 @@ def swarms(
 
     Example: swarm study swarms --selection sticky,rooted,nearest --seeds 200
     """
+    # lazy: numpy and the scenario model (~0.18 s), not for `swarm --help`
     from swarm.study.swarms import SwarmSetting, run_swarm, summarise_swarms, swarm_columns, swarm_jobs
 
     rules = [r.strip() for r in selection.split(",")]
@@ -229,8 +233,10 @@ def swarms(
     if not settings:
         raise _fail("--leaders: every setting has as many leaders as agents; a swarm needs a follower")
     runs = len(settings) * seeds
+    worker: Callable[[Any], Any]  # a run, or a batch of runs (the batch engine)
+    job_list: list[Any]
     if batch:
-        from swarm.study.batch import run_swarm_chunk, swarm_chunks
+        from swarm.study.batch import run_swarm_chunk, swarm_chunks  # lazy: as swarm.study.swarms
 
         worker, job_list = run_swarm_chunk, swarm_chunks(settings, range(seeds), jobs or os.cpu_count() or 1)
     else:
@@ -271,7 +277,7 @@ def swarms(
         "the mean per follower); per loss: the most switches one loss of an out-neighbour cost"
     )
     if plot and summary:
-        from swarm.study.figures import plot_swarms
+        from swarm.study.figures import plot_swarms  # lazy: matplotlib (~0.3 s), for the figure only
 
         typer.echo(f"plot: {plot_swarms(summary, rows, out / 'study.png')}")
     _done(out, stopped)
@@ -300,11 +306,14 @@ def gains(
 
     Example: swarm study gains --c1 0.5,1,2 --c2 0.2,0.5,1 --starts 3
     """
+    # lazy: numpy and the scenario model (~0.18 s), not for `swarm --help`
     from swarm.study.gains import gain_columns, gain_jobs, run_gain, summarise_gains
 
     runs = gain_jobs(_floats("--c1", c1), _floats("--c2", c2), _floats("--ratios", ratios), starts, duration, dt)
+    worker: Callable[[Any], Any]  # a run, or a batch of runs (the batch engine)
+    job_list: list[Any]
     if batch:
-        from swarm.study.batch import gain_chunks, run_gain_chunk
+        from swarm.study.batch import gain_chunks, run_gain_chunk  # lazy: as swarm.study.gains
 
         worker, job_list = run_gain_chunk, gain_chunks(runs, jobs or os.cpu_count() or 1)
     else:
@@ -322,7 +331,7 @@ def gains(
     )
     _gain_table(summary)
     if plot and summary:
-        from swarm.study.figures import plot_gains
+        from swarm.study.figures import plot_gains  # lazy: matplotlib (~0.3 s), for the figure only
 
         typer.echo(f"plot: {plot_gains(summary, out / 'gains.png', duration)}")
     _done(out, stopped)

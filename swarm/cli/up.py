@@ -8,7 +8,8 @@ shares with the other run commands are swarm/cli/run.py's."""
 from __future__ import annotations
 
 import sys
-from typing import Annotated, Optional
+from pathlib import Path
+from typing import Annotated, Any, Optional
 
 import typer
 
@@ -26,15 +27,21 @@ from swarm.cli.options import (
     check_duration,
     check_foxglove,
     check_runtime_dir,
-    out_option,
     read_scenario,
 )
 from swarm.cli.output import print_summary, render_run_plots
+from swarm.contracts import credentials
 from swarm.runtime.progress import Paused, ProgressLine
+from swarm.world.live_view import open_hint
 
-UpOutOpt = out_option(
-    "output directory (default runs/<run id>); one that already holds results is refused unless --force"
-)
+UpOutOpt = Annotated[  # (options.out_option's shape, written out: mypy takes no call for a type)
+    Optional[Path],
+    typer.Option(
+        "--out",
+        "-o",
+        help="output directory (default runs/<run id>); one that already holds results is refused unless --force",
+    ),
+]
 
 
 def up(
@@ -67,6 +74,7 @@ def up(
 
     Example: swarm up scenarios/case2.toml --out runs/case2
     """
+    # lazy: the launcher and the API's run modules (numpy, the scenario model: ~0.17 s), not for `swarm --help`
     from swarm.api.launch import launch
 
     s = read_scenario(scenario)
@@ -85,8 +93,6 @@ def up(
         for line in attach_hints(run.run_id, run.dial, s):
             typer.echo(line)
         if live is not None:
-            from swarm.world.live_view import open_hint
-
             typer.echo(open_hint(*live))
 
     line, paused = ProgressLine(sys.stdout.isatty()), Paused()
@@ -108,7 +114,7 @@ def up(
         on_start=started,
     )  # SIGINT/TERM: stop
     line.end()
-    err = dict(err=True, fg=typer.colors.RED)
+    err: dict[str, Any] = dict(err=True, fg=typer.colors.RED)
     if o.words is not None:
         typer.secho(o.words, **(err if o.failed else {}))
     if o.recovered is not None:  # a world that died before writing its results: rebuilt from its recording
@@ -127,10 +133,8 @@ def up(
 def attach_hints(run_id: str, dial: str, s) -> list[str]:
     """What to type in another terminal: watch the run (with --run when other runs are up,
     so the command cannot pick the wrong one), and add an agent by hand."""
-    from swarm.contracts.credentials import local_runs
-
     try:
-        others = any(c.run != run_id for c in local_runs())
+        others = any(c.run != run_id for c in credentials.local_runs())
     except Exception:  # an unreadable runtime dir: swarm up says so itself
         others = True
     pick = f" --run {run_id}" if others else ""

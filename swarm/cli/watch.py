@@ -13,10 +13,12 @@ from typing import Annotated
 import typer
 
 from swarm.api.live import connect as connect_run
+from swarm.cli.errors import fail
 from swarm.cli.options import ConnectOpt, CredentialsOpt, LiveRunOpt, console
 from swarm.contracts.errors import NoRunError, StoppedAnswering
+from swarm.contracts.vocabulary import ExitCode
 from swarm.live.views import watch_frame
-from swarm.world.live_view import DEFAULT_HOST, DEFAULT_PORT
+from swarm.world.live_view import DEFAULT_HOST, DEFAULT_PORT, LiveViewError
 
 WORLD_GONE_EXIT = 3.0  # s: `watch` without a terminal exits this long after the world ended
 
@@ -97,7 +99,7 @@ def watch(
 
         try:
             if tty:
-                from rich.live import Live
+                from rich.live import Live  # lazy: rich (~15 ms), for a terminal only
 
                 def frame():
                     w, h = con.size
@@ -123,16 +125,14 @@ def watch(
             pass
         if silent is not None:
             typer.secho(str(silent), err=True)
-            raise typer.Exit(1)
-        raise typer.Exit(0)
+            raise typer.Exit(ExitCode.FAILED)
+        raise typer.Exit(ExitCode.OK)
 
 
 def watch_foxglove(connect, run, credentials, host: str, port: int) -> int:
     """`swarm watch --foxglove`: serve the run until it ends (0), stops answering (StoppedAnswering,
     1) or Ctrl-C (130)."""
-    from swarm.cli.errors import fail
-    from swarm.live.foxglove import serve_run
-    from swarm.world.live_view import LiveViewError
+    from swarm.live.foxglove import serve_run  # lazy: numpy and the scene (~45 ms), for --foxglove only
 
     def say(line: str) -> None:
         print(line, flush=True)
@@ -140,12 +140,12 @@ def watch_foxglove(connect, run, credentials, host: str, port: int) -> int:
     try:
         with connect_run(run, connect, credentials) as live:
             serve_run(live, host, port, say)
-            return 0
+            return ExitCode.OK
     except LiveViewError as e:
-        raise fail(str(e), 2) from None
+        raise fail(str(e), ExitCode.USAGE) from None
     except KeyboardInterrupt:
         say("stopped (Ctrl-C); the live view is closed")
-        return 130
+        return ExitCode.INTERRUPTED
 
 
 def register(app: typer.Typer) -> None:
