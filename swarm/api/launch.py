@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import re
+import secrets
 import shutil
 import signal
 import tempfile
@@ -33,11 +34,12 @@ from typing import Any
 from swarm.api.runs import Results, Summary, open_run
 from swarm.api.scenario import as_scenario, source_of, to_toml, with_duration
 from swarm.contracts.errors import UsageError
-from swarm.offline.results import Recovery
+from swarm.contracts.vocabulary import ExitCode, signal_exit
+from swarm.offline.results import Recovery, claim_out_dir, recover
+from swarm.runtime.launcher import Launcher, UpConfig
+from swarm.world.stream import RecordingError
 
 __all__ = ["Launch", "UpOutcome", "launch"]
-
-EXIT_AGENT_FAILED = 4  # swarm up's exit codes: README, "What `swarm up` watches" (5: the world's own)
 
 
 @dataclass
@@ -74,8 +76,6 @@ def name_stem(scenario: Any, s) -> str:
 
 def new_run_id(scenario: Any, s=None) -> str:
     """A new run id: the scenario's name stem and 6 random hex digits (`case2-734b0c`)."""
-    import secrets
-
     return f"{name_stem(scenario, s) or 'run'}-{secrets.token_hex(3)}"
 
 
@@ -114,9 +114,6 @@ class Launch:
         world_grace: float = 10.0,
         say: Callable[[str], None] | None = None,
     ):
-        from swarm.offline.results import claim_out_dir
-        from swarm.runtime.launcher import Launcher, UpConfig
-
         s = as_scenario(scenario)
         with_duration(s, duration, source_of(scenario))
         check_clock(clock)
@@ -169,12 +166,12 @@ class Launch:
     def outcome(self, code: int) -> UpOutcome:
         """How the run ended (the launcher's state and the world's exit `code`), its results
         rebuilt if the world died first, its summary read."""
-        from swarm.offline.results import recover
-        from swarm.world.stream import RecordingError
-
         la, out = self.launcher, self.out
+        exit_code, words, failed = ending(la, code, out)
         o = UpOutcome(
-            *ending(la, code, out),
+            int(exit_code),  # a plain int, as it always was (ExitCode's aliases would name it oddly)
+            words,
+            failed,
             self.run_id,
             out,
             exits=list(la.exits),
@@ -237,24 +234,26 @@ class stop_on_signals:
 
 def ending(launcher, code: int, out: Path) -> tuple[int, str | None, bool]:
     """swarm up's exit code, the line saying how the run ended (None: it went well), and
-    whether that is a failure, from the launcher's state and the world's exit `code`."""
-    from swarm.world.clock import EXIT_DESERTED
-
+    whether that is a failure, from the launcher's state and the world's exit `code`
+    (docs/reference/exit-codes.md#swarm-up)."""
     if launcher.stop_signal is not None:
-        return 128 + launcher.stop_signal, f"stopped by signal {launcher.stop_signal}; partial results in {out}", False
-    if launcher.failure is not None:  # an agent could not start (said live), or no world to reach
-        return EXIT_AGENT_FAILED if launcher.exits else 1, f"swarm up: {launcher.failure}; the run is stopped", True
-    if code not in (0, EXIT_DESERTED):
-        from swarm.world.recording import EXIT_NO_SPACE
-
         return (
-            EXIT_NO_SPACE if code == EXIT_NO_SPACE else 1,
+            signal_exit(launcher.stop_signal),
+            f"stopped by signal {launcher.stop_signal}; partial results in {out}",
+            False,
+        )
+    if launcher.failure is not None:  # an agent could not start (said live), or no world to reach
+        failed = ExitCode.AGENT_FAILED if launcher.exits else ExitCode.FAILED
+        return failed, f"swarm up: {launcher.failure}; the run is stopped", True
+    if code not in (ExitCode.OK, ExitCode.DESERTED):
+        return (
+            ExitCode.NO_SPACE if code == ExitCode.NO_SPACE else ExitCode.FAILED,
             f"swarm up: {launcher.world_failure()} (see {out / 'logs' / 'world.log'})",
             True,
         )
     crashed = launcher.crashed()
     if crashed:
-        return EXIT_AGENT_FAILED, f"swarm up: {len(crashed)} agent process(es) failed: {crashed[0].line()}", True
-    if code == EXIT_DESERTED:
-        return EXIT_DESERTED, "swarm up: the run ended early: no agent process was left", True
-    return 0, None, False
+        return ExitCode.AGENT_FAILED, f"swarm up: {len(crashed)} agent process(es) failed: {crashed[0].line()}", True
+    if code == ExitCode.DESERTED:
+        return ExitCode.DESERTED, "swarm up: the run ended early: no agent process was left", True
+    return ExitCode.OK, None, False

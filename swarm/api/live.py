@@ -1,6 +1,6 @@
 """`swarm.connect(...)` and `swarm.runs(...)`: a live run from Python, as the live commands
 see it (`swarm agents / graph / pause / resume / kill / spawn / runs / watch` are made of
-these; docs/cli.md has the shapes of what they return).
+these; docs/reference/cli.md#live has the shapes of what they return).
 
     with swarm.connect() as live:               # the only local run (or run=ID, connect=EP, credentials=FILE)
         rows = live.agents()                    # `swarm agents --json`'s rows
@@ -19,10 +19,11 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 from swarm.api.record import Record
 from swarm.contracts.errors import NoRunError, StoppedAnswering, UsageError
-from swarm.live.client import talking
+from swarm.live.client import ENDED_SILENT_S, LiveRun, Patience, find_runs, open_run_session, talking
 
 __all__ = ["Live", "LiveState", "connect", "runs"]
 
@@ -37,6 +38,7 @@ def _env(value: str | None, name: str) -> str | None:
 
 def _endpoint(value: str | None) -> str | None:
     """`connect=` (else $SWARM_CONNECT), checked: UsageError "not an endpoint: ..." (one line)."""
+    # lazy: every command imports this module (swarm/cli/options.py); `swarm --help` starts without this one
     from swarm.contracts.endpoints import EndpointError, check_endpoint
 
     ep = _env(value, ENV_CONNECT)
@@ -104,6 +106,7 @@ class Live:
 
     def snapshot(self, sensing: bool = False) -> dict:
         """{"info": the world's info, "agents": the merged rows}, read now (swarm/live/data.py)."""
+        # lazy: swarm.live.data (with contracts.graph) is for reading: `swarm pause` / `kill` start without it
         from swarm.live.data import snapshot
 
         with talking():
@@ -115,13 +118,13 @@ class Live:
 
     def graph(self, sensing: bool = False) -> dict:
         """The communication graph: `swarm graph --json`'s document."""
-        from swarm.live.data import graph_of
+        from swarm.live.data import graph_of  # lazy: as in `snapshot`
 
         return graph_of(self.snapshot(sensing), sensing)
 
     def state(self) -> LiveState:
         """The live run now, as a `LiveState` (agents, poses, graph)."""
-        from swarm.live.data import graph_of
+        from swarm.live.data import graph_of  # lazy: as in `snapshot`
 
         snap = self.snapshot()
         info = snap["info"]
@@ -144,8 +147,6 @@ class Live:
         (its end notice, its endpoint refusing connections), StoppedAnswering (a NoRunError)
         after several failed reads over several seconds of a world that has not ended
         (`swarm.live.client.Patience`)."""
-        from swarm.live.client import ENDED_SILENT_S, Patience
-
         if self._patience is None:
             self._patience = Patience(self._lr)
         try:
@@ -168,25 +169,25 @@ class Live:
         with talking():
             return self._lr.admin(cmd, by=by)
 
-    def pause(self) -> int:
+    def pause(self) -> int | None:
         """Hold the world's clock; the tick it stopped at (no error if paused already)."""
         return self.admin("pause").get("tick")
 
-    def resume(self) -> int:
+    def resume(self) -> int | None:
         """Restart the world's clock; the tick it goes on from (no error if it runs)."""
         return self.admin("resume").get("tick")
 
     def signal(self, agent_id: int, signal: str = "KILL"):
         """Send `signal` (KILL, TERM, STOP, CONT) to agent `agent_id`'s process, without
         waiting: a `swarm.live.control.Signalled` (`drops`: whether the world is to drop it)."""
-        from swarm.live.control import signal_agent
+        from swarm.live.control import signal_agent  # lazy: swarm.runtime.procs (~4 ms), as in `spawn`
 
         with talking():
             return signal_agent(self._lr, agent_id, signal)
 
     def wait_dropped(self, done, timeout: float | None = None) -> int:
         """The tick the world dropped the agent `done` (from `signal`) at; LiveError after `timeout` s."""
-        from swarm.live.control import DROP_DEADLINE, wait_dropped
+        from swarm.live.control import DROP_DEADLINE, wait_dropped  # lazy: swarm.runtime.procs, as in `spawn`
 
         with talking():
             return wait_dropped(self._lr, done, DROP_DEADLINE if timeout is None else timeout)
@@ -200,6 +201,7 @@ class Live:
         """Start agent `agent_id` on this machine and wait until it is live: a dropped id
         rejoins; a new one needs x, y, heading, speed (role, orbit_radius, direction, follow,
         max_turn_rate optional). A `swarm.live.control.Spawned` (pid, log)."""
+        # lazy: swarm.live.control brings swarm.runtime.procs (~4 ms), and every command imports this module
         from swarm.live.control import spawn_agent
 
         with talking():
@@ -211,8 +213,6 @@ def connect(run: str | None = None, connect: str | None = None, credentials: str
     (default $SWARM_CONNECT, else the local runs), with `credentials` (default
     $SWARM_CREDENTIALS, else the local runs' own files); NoRunError with one line if there
     is no such run, or several."""
-    from swarm.live.client import open_run_session
-
     with talking():
         return Live(
             open_run_session(_endpoint(connect), _env(run, ENV_RUN), None if credentials is None else Path(credentials))
@@ -222,14 +222,12 @@ def connect(run: str | None = None, connect: str | None = None, credentials: str
 def runs(run: str | None = None, connect: str | None = None, credentials: str | Path | None = None) -> list[dict]:
     """The live runs reachable (`swarm runs --json`'s documents, sorted as found); [] if none.
     A run that ends while it is asked is listed with what is known (its other fields None)."""
-    from swarm.live.client import LiveRun, find_runs
-
     creds = None if credentials is None else Path(credentials)
     with talking():
         found = find_runs(_endpoint(connect), creds, _env(run, ENV_RUN))
     docs = []
     for ref in found:
-        doc = {
+        doc: dict[str, Any] = {
             "run": ref.run,
             "endpoint": ref.endpoint,
             "scenario": None,

@@ -31,20 +31,22 @@ import numpy as np
 
 from swarm.api.record import Record
 from swarm.api.scenario import Builder, Scenario, ScenarioError, as_scenario, source_of, with_duration
-from swarm.offline.results import OutDirError, Recovery
-from swarm.world.recording import RECORDING_FILE, SUMMARY_FILE, TRAJECTORY_FILE
-from swarm.world.run_reader import RunReadError
+from swarm.offline.csv_export import write_agent_csvs
+from swarm.offline.results import OutDirError, Recovery, claim_out_dir
+from swarm.offline.results import recover as rebuild
+from swarm.world.recording import RECORDING_FILE, SUMMARY_FILE, TRAJECTORY_FILE, write_run
+from swarm.world.run_reader import RunReadError, load_run
 
 __all__ = ["AgentTrack", "Record", "Results", "RunReadError", "Summary", "open_run", "simulate"]
 
-#: Per-tick arrays of trajectory.npz (docs/outputs.md, "Outputs of a run").
+#: Per-tick arrays of trajectory.npz (docs/reference/outputs.md#trajectory).
 TICK_ARRAYS = ("t", "x", "y", "heading", "u", "out", "alive", "missed")
 #: Per-agent and per-run constants.
 STATIC_ARRAYS = ("ids", "role", "speed", "orbit_radius", "target", "dt")
 
 
 class Summary(Record):
-    """summary.json (docs/outputs.md, "Outputs of a run") with attribute access; `agents` is keyed
+    """summary.json (docs/reference/outputs.md#summary) with attribute access; `agents` is keyed
     by int id, `events` is a list of Records (`ev["from"]` for a switch's `from`)."""
 
     @property
@@ -81,6 +83,22 @@ class Results:
     `run_dir` (None for a run kept in memory), and `recovered` (a `swarm.offline.results.Recovery`
     when `open_run` rebuilt them from the recording of a world that died, else None)."""
 
+    # trajectory.npz's arrays (TICK_ARRAYS, STATIC_ARRAYS), set from `arrays`; the optional ones None when absent
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    u: np.ndarray
+    out: np.ndarray
+    alive: np.ndarray
+    ids: np.ndarray
+    role: np.ndarray
+    target: np.ndarray
+    heading: np.ndarray | None
+    missed: np.ndarray | None
+    speed: np.ndarray | None
+    orbit_radius: np.ndarray | None
+    dt: np.ndarray | None
+
     def __init__(
         self,
         arrays: dict[str, np.ndarray],
@@ -116,18 +134,17 @@ class Results:
     def agent(self, agent_id: int) -> AgentTrack:
         """Agent `agent_id`'s columns (views, not copies) and summary entry."""
         j = self.column(agent_id)
-        col = lambda a: None if a is None else a[:, j]  # noqa: E731
         return AgentTrack(
             int(agent_id),
             str(self.role[j]),
             None if self.speed is None else float(self.speed[j]),
             self.t,
-            col(self.x),
-            col(self.y),
-            col(self.heading),
-            col(self.u),
-            col(self.out),
-            col(self.alive),
+            self.x[:, j],
+            self.y[:, j],
+            None if self.heading is None else self.heading[:, j],
+            self.u[:, j],
+            self.out[:, j],
+            self.alive[:, j],
             self.summary.agents.get(int(agent_id)),
         )
 
@@ -139,11 +156,10 @@ class Results:
     def save(self, out_dir: str | Path, force: bool = False) -> Path:
         """Write trajectory.npz and summary.json into `out_dir` (refused, OutDirError, if it
         holds another run's results, unless `force`); this becomes the run directory."""
-        from swarm.offline.results import claim_out_dir
-
         out = Path(out_dir)
         claim_out_dir(out, force)
-        _write_atomic(out / TRAJECTORY_FILE, lambda f: np.savez_compressed(f, **self.arrays))
+        # (numpy's stub types **kwds as if they could be its allow_pickle: they are arrays, by name)
+        _write_atomic(out / TRAJECTORY_FILE, lambda f: np.savez_compressed(f, **self.arrays))  # type: ignore[arg-type]
         text = json.dumps(self.summary.to_dict(), indent=2, default=_plain) + "\n"
         _write_atomic(out / SUMMARY_FILE, lambda f: f.write(text.encode()))
         self.run_dir = out
@@ -153,7 +169,7 @@ class Results:
         """Draw the run's figures (swarm/plots: the ones `swarm plot` draws) into `out_dir`,
         default the run directory; in-memory results are saved there first (`save`).
         `formats`: e.g. ("png", "pdf") where swarm/plots offers them. Returns the files."""
-        from swarm.plots import render_plots
+        from swarm.plots import render_plots  # lazy: matplotlib (~0.3 s), which reading a run must not pay
 
         target = self._saved_in(out_dir, "the figures")
         return render_plots(target) if formats is None else render_plots(target, formats=tuple(formats))
@@ -162,8 +178,6 @@ class Results:
         """Write csv/agent-<id>.csv, one per agent (swarm/offline/csv_export.py: `swarm export --csv`), into
         `out_dir`, default the run directory (in-memory results are saved there first).
         Returns the files in scenario order."""
-        from swarm.offline.csv_export import write_agent_csvs
-
         return write_agent_csvs(self._saved_in(out_dir, "the CSV files"))
 
     def _saved_in(self, out_dir: str | Path | None, what: str) -> Path:
@@ -209,6 +223,7 @@ def simulate(
     s = as_scenario(scenario)
     with_duration(s, duration, source_of(scenario))
     if batch:
+        # lazy: the engines (agents' laws, the world's engine: ~16 ms each), which reading a run does not need
         from swarm.offline.batch import refusal, run_batch
 
         why = refusal(s)
@@ -216,12 +231,10 @@ def simulate(
             raise ValueError(f"the batch engine does not run this scenario: {why}")
         engine = lambda rec: run_batch([s], duration, progress, rec)[0]  # noqa: E731
     else:
-        from swarm.offline.sim import run_sim
+        from swarm.offline.sim import run_sim  # lazy: as swarm.offline.batch above
 
         engine = lambda rec: run_sim(s, duration, progress, rec)  # noqa: E731
     if out is not None:
-        from swarm.offline.results import claim_out_dir
-
         out = Path(out)
         claim_out_dir(out, force)
     t0 = time.perf_counter()
@@ -233,8 +246,6 @@ def simulate(
     if out is None:
         summary = result.summary()
     else:
-        from swarm.world.recording import write_run
-
         summary = write_run(result, out)
     # the summary as summary.json holds it (plain JSON values), whether written or not
     summary = json.loads(json.dumps(summary, default=_plain))
@@ -247,9 +258,6 @@ def open_run(run_dir: str | Path, recover: bool = True) -> Results:
     `complete: False`, and `Results.recovered` what was rebuilt). RunReadError, naming the
     file, for anything unreadable; swarm.world.stream.RecordingError if the rebuilt files cannot
     be written."""
-    from swarm.offline.results import recover as rebuild
-    from swarm.world.run_reader import load_run
-
     d = Path(run_dir)
     if not d.is_dir():
         raise RunReadError(f"{d}: not a directory")

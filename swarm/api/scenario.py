@@ -20,15 +20,19 @@ from __future__ import annotations
 import json
 import math
 import re
+import tomllib
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from swarm.contracts.scenario import Scenario, ScenarioError, load_scenario, parse_scenario
 from swarm.contracts.scenario_tables import GainsSpec, RunSpec, SensingSpec
 
+if TYPE_CHECKING:
+    from pydantic import BaseModel
+
 __all__ = ["Builder", "Scenario", "ScenarioError", "as_scenario", "from_dict", "load", "to_toml", "with_duration"]
 
-_TABLES = {"run": RunSpec, "gains": GainsSpec, "sensing": SensingSpec}
+_TABLES: dict[str, type[BaseModel]] = {"run": RunSpec, "gains": GainsSpec, "sensing": SensingSpec}
 
 
 def load(path: str | Path) -> Scenario:
@@ -187,8 +191,6 @@ def to_toml(scenario: Scenario) -> str:
     lines: list[str] = []
     _table("", scenario.model_dump(exclude_defaults=True, exclude_none=True), lines)
     text = "\n".join(lines) + "\n"
-    import tomllib
-
     back = parse_scenario(tomllib.loads(text), "<to_toml>")
     if back != scenario:  # a value TOML cannot carry as it is: never hand a process another scenario
         raise ValueError("to_toml: the scenario does not survive a round trip through TOML")

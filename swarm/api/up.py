@@ -34,10 +34,15 @@ from pathlib import Path
 from typing import Any
 
 from swarm.api.launch import check_clock, name_stem, scenario_file
-from swarm.api.live import LiveState
+from swarm.api.live import Live, LiveState
 from swarm.api.runs import Results, open_run
 from swarm.api.scenario import Builder, Scenario, as_scenario, source_of, with_duration
-from swarm.contracts.errors import UpError
+from swarm.contracts import credentials
+from swarm.contracts.errors import NoRunError, UpError
+from swarm.contracts.laws import ENV_LAW_PATH, with_law_path
+from swarm.contracts.lifeline import LAUNCHER_PID_ENV
+from swarm.live.client import LiveRun, NoRun, RunRef
+from swarm.offline.results import OutDirError, results_in
 from swarm.runtime.procs import Group, wait_until
 
 __all__ = ["UpError", "UpRun", "LiveState"]
@@ -72,8 +77,6 @@ class UpRun:
         world_grace: float | None = None,
         env: dict | None = None,
     ):
-        from swarm.offline.results import OutDirError, results_in
-
         s = as_scenario(scenario)  # bad scenarios and options fail here, before any process
         with_duration(s, duration, source_of(scenario))
         check_clock(clock)
@@ -101,15 +104,11 @@ class UpRun:
                 args += [flag, str(value)]
         if force:
             args.append("--force")
-        from swarm.contracts.lifeline import LAUNCHER_PID_ENV
-
         env = {**(os.environ if env is None else env), "PYTHONUNBUFFERED": "1", LAUNCHER_PID_ENV: str(os.getpid())}
         if self._tmp is not None:  # the file is in a temporary dir: its laws resolve as they did here
-            from swarm.contracts.laws import ENV_LAW_PATH, with_law_path
-
             env[ENV_LAW_PATH] = with_law_path([p for p in sys.path if p and os.path.isdir(p)])
         self._lines: list[str] = []
-        self._live = None  # a swarm.api.live.Live, opened by the first state()
+        self._live: Live | None = None  # opened by the first state()
         self._group = Group(session=True)  # no terminal's Ctrl-C reaches it: stop() does
         self.process = self._group.start(
             args, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env
@@ -120,9 +119,11 @@ class UpRun:
 
     # -- the launcher ---------------------------------------------------------------------
     def _read(self) -> None:
-        for raw in self.process.stdout:
+        stdout = self.process.stdout
+        assert stdout is not None  # (started with stdout=PIPE)
+        for raw in stdout:
             self._lines.append(raw.decode("utf-8", "replace").rstrip("\r\n").split("\r")[-1])
-        self.process.stdout.close()
+        stdout.close()
 
     @property
     def pid(self) -> int:
@@ -135,7 +136,7 @@ class UpRun:
 
     @property
     def returncode(self) -> int | None:
-        """`swarm up`'s exit code (README, "What `swarm up` watches"), None while it runs."""
+        """`swarm up`'s exit code (docs/reference/exit-codes.md#swarm-up), None while it runs."""
         return self.process.poll()
 
     def running(self) -> bool:
@@ -211,14 +212,10 @@ class UpRun:
             raise self._why(f"no results in {self.out}: {e}") from None
 
     # -- live state -----------------------------------------------------------------------
-    def live(self, timeout: float = 30.0):
+    def live(self, timeout: float = 30.0) -> Live:
         """A new session to the running world: what `swarm.connect(...)` returns (a
         `swarm.api.live.Live`: agents(), graph(), info(), pause(), kill(...)...); close it,
         or use it in a `with` block."""
-        from swarm.api.live import Live
-        from swarm.contracts import credentials
-        from swarm.live.client import LiveRun, NoRun, RunRef
-
         run, _ = self.banner(timeout)
 
         def attempt():
@@ -237,8 +234,6 @@ class UpRun:
 
     def state(self, timeout: float = 30.0) -> LiveState:
         """The live run now, as a `LiveState` (agents, poses, graph); UpError once it has ended."""
-        from swarm.contracts.errors import NoRunError
-
         if self._live is None:
             self._live = self.live(timeout)
         deadline = time.monotonic() + timeout
