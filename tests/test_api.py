@@ -117,7 +117,7 @@ def test_simulate_equals_run_sim(base):
     with pytest.raises(KeyError, match="no agent 9"):
         res.agent(9)
     with pytest.raises(AttributeError, match="no field 'nope'"):
-        res.summary.nope
+        _ = res.summary.nope
 
 
 def test_simulate_checks_the_duration_as_the_cli_does(base):
@@ -178,7 +178,7 @@ def test_importing_the_contracts_stays_cheap():
     subprocess.run([sys.executable, "-c", code], check=True, cwd=REPO)
     assert swarm.simulate is sys.modules["swarm.api.runs"].simulate  # loaded on first use
     with pytest.raises(AttributeError, match="no attribute 'nope'"):
-        swarm.nope
+        _ = swarm.nope
 
 
 # -- the slow tier: figures, the example, the distributed runtime ---------------------------

@@ -72,7 +72,8 @@ def test_open_run_says_what_it_recovered(base, tmp_path):
 
 
 @pytest.mark.slow
-def test_launch_in_lockstep_equals_simulate_and_leaves_nothing(private_runtime, tmp_path):
+@pytest.mark.usefixtures("private_runtime")
+def test_launch_in_lockstep_equals_simulate_and_leaves_nothing(tmp_path):
     scenario, duration = SCENARIOS / "case2.toml", 5.0
     seen, lines, started = Descendants(os.getpid()), [], []
     figures = []
@@ -105,7 +106,8 @@ def long_run() -> dict:
 
 
 @pytest.mark.slow
-def test_stop_from_another_thread_ends_the_run_with_the_signals_code(private_runtime, tmp_path):
+@pytest.mark.usefixtures("private_runtime")
+def test_stop_from_another_thread_ends_the_run_with_the_signals_code(tmp_path):
     handle, going = [], threading.Event()
 
     def progress(f):
@@ -128,7 +130,8 @@ def test_stop_from_another_thread_ends_the_run_with_the_signals_code(private_run
 
 
 @pytest.mark.slow
-def test_launch_off_the_main_thread_leaves_the_signal_handlers_alone(private_runtime, tmp_path):
+@pytest.mark.usefixtures("private_runtime")
+def test_launch_off_the_main_thread_leaves_the_signal_handlers_alone(tmp_path):
     handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     handle, outcome = [], []
     seen = Descendants(os.getpid())

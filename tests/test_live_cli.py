@@ -419,7 +419,7 @@ def test_runs_and_agents(live):
 
 @pytest.mark.slow
 def test_graph_matches_the_agents(live):
-    for attempt in range(5):  # the graph may change between the reads: retry
+    for _ in range(5):  # the graph may change between the reads: retry
         before, _ = _statuses(live)
         g = _json("graph", "--json")
         after, _ = _statuses(live)
