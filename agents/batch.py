@@ -1,9 +1,13 @@
 """Many AgentBrains at once: B members (scenarios) x N agents as (B, N) arrays.
 
 `BatchBrains.decide` is AgentBrain.decide for every agent of every member in one call,
-with the same state and the same arithmetic (agents/batch_select.py for the selection
-rules, agents/batch_leader.py for the leaders, agents/batch_maths.py for the bit-exact
-helpers): a batch run equals the per-agent run (tests/test_batch.py).
+with the same state and the same arithmetic: the follower law (laws.bearing_law,
+laws.loiter_rate), the leaders' orbit hold and arcs (agents/batch_leader.py) and the
+hysteresis test are the per-agent brain's own functions, run on arrays (agents/ops.py);
+what has an array form of its own (the choice of out-neighbour, agents/batch_select.py;
+the rooted rule's filter and hop counts, here; the sticky rule's keep,
+agents/batch_sticky.py) is compared with AgentBrain decision by decision on random swarms
+(tests/test_batch_decisions.py). A batch run equals the per-agent run (tests/test_batch.py).
 
 What a tick's frames hold, batched (`frames` below, built by the world's batch engine,
 world/batch.py; this package never imports it):

@@ -1,7 +1,7 @@
 """A fork server for agent processes: one process that has imported everything an agent
 needs forks every agent of a run, so N agents pay for the interpreter's start and the
 imports once instead of N times (an agent's CPU until it has joined: 0.11 s exec'd; see
-docs/performance.md for what forking saves).
+docs/benchmarks.md, "Forked agents", for what forking saves).
 
 `swarm up` starts it (`python -m swarm.agents.forkserver`) in the run's process group, with the
 agents' environment, once it has made itself a child subreaper (swarm/runtime/forks.py). One JSON
@@ -40,6 +40,7 @@ import swarm.agents.brain  # noqa: F401  (imported here so that no agent has to)
 import swarm.agents.laws  # noqa: F401
 import swarm.agents.leader  # noqa: F401
 import swarm.agents.process
+from swarm.contracts.vocabulary import ExitCode
 
 REPARENT_WAIT = 5.0  # s an agent waits to be re-parented (its middle process exits at once)
 
@@ -54,6 +55,7 @@ def serve(stdin=None, stdout=None) -> int:
     gc.freeze()
     os.write(out, b'{"ready": true}\n')  # imported: requests are answered in milliseconds from now on
     for line in iter(stdin.readline, b""):
+        reply: dict[str, str | int]
         try:
             req = json.loads(line)
             argv, log = [str(a) for a in req["argv"]], str(req["log"])
@@ -66,7 +68,7 @@ def serve(stdin=None, stdout=None) -> int:
             except OSError as e:
                 reply = {"error": f"cannot fork agent: {e}"}
         os.write(out, json.dumps(reply).encode() + b"\n")
-    return 0
+    return ExitCode.OK
 
 
 def fork_agent(argv: list[str], log: str, env: dict[str, str] | None = None) -> int:
@@ -84,7 +86,7 @@ def fork_agent(argv: list[str], log: str, env: dict[str, str] | None = None) -> 
                 _become_agent(argv, log, env or {}, me)  # never returns
             os.write(w, str(pid).encode())
         finally:
-            os._exit(0)
+            os._exit(ExitCode.OK)
     os.close(w)
     try:
         got = b""
@@ -113,7 +115,7 @@ def reparented(middle: int, timeout: float) -> bool:
 def _become_agent(argv: list[str], log: str, env: dict[str, str], middle: int) -> None:
     """In the forked agent: wait to be the launcher's, take the agent's title, output and
     default signals, run it, exit with its code."""
-    code = 1
+    code: int = ExitCode.FAILED
     try:
         reparented(middle, REPARENT_WAIT)
         os.environ.update(env)
@@ -137,11 +139,11 @@ def _become_agent(argv: list[str], log: str, env: dict[str, str], middle: int) -
         sys.argv = [swarm.agents.process.__file__, *argv]
         try:
             swarm.agents.process.main(argv)
-            code = 0
+            code = ExitCode.OK
         except SystemExit as e:
-            code = e.code if isinstance(e.code, int) else (0 if e.code is None else 1)
-    except BaseException:  # noqa: BLE001: whatever it is, the log says it and the agent exits 1
-        import traceback
+            code = e.code if isinstance(e.code, int) else (ExitCode.OK if e.code is None else ExitCode.FAILED)
+    except BaseException:  # noqa: BLE001 (whatever it is, the log says it and the agent exits 1)
+        import traceback  # lazy: only an agent that crashes needs it (the server imports little)
 
         traceback.print_exc()
     finally:
@@ -154,7 +156,7 @@ def _become_agent(argv: list[str], log: str, env: dict[str, str], middle: int) -
 
 def _set_title(argv: list[str]) -> None:
     try:
-        import setproctitle
+        import setproctitle  # lazy: optional (a convenience); loaded once, in the forked agent
     except ImportError:  # the title is a convenience: without it, `ps` shows the fork server's
         return
     setproctitle.setproctitle(" ".join(argv))

@@ -8,9 +8,7 @@ import socket
 import sys
 
 from swarm.contracts import wire
-
-EXIT_REFUSED = 3
-EXIT_NO_WORLD = 6  # no world to join: nothing listens on the endpoint, or no world of the run answers
+from swarm.contracts.vocabulary import ExitCode
 
 
 class AgentExit(BaseException):  # also raised by signal handlers: never swallowed by `except Exception`
@@ -34,8 +32,9 @@ def claim(session, run: str, agent_id: int, timeout: float = 5.0, spec: dict | N
         try:
             rep = wire.decode_join_reply(r.ok.payload.to_bytes())
         except wire.WireError as e:
-            raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: bad join reply: {e}") from None
+            raise AgentExit(ExitCode.REFUSED, f"agent {agent_id}: bad join reply: {e}") from None
         if not rep["ok"]:
-            raise AgentExit(EXIT_REFUSED, f"agent {agent_id} refused: {rep['error']}")
+            raise AgentExit(ExitCode.REFUSED, f"agent {agent_id} refused: {rep['error']}")
         return rep
-    raise AgentExit(EXIT_NO_WORLD, f"agent {agent_id}: no world of run {run!r} answered its join query")
+    # no world to join: nothing listens on the endpoint, or no world of the run answers
+    raise AgentExit(ExitCode.NO_WORLD, f"agent {agent_id}: no world of run {run!r} answered its join query")

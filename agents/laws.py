@@ -1,4 +1,4 @@
-"""Follower guidance laws, and how an agent gets the law it runs (docs/scenarios.md, "Writing a law").
+"""Follower guidance laws, and how an agent gets the law it runs (docs/guides/writing-a-law.md).
 
 A law is a function of one Observation (swarm/contracts/observation.py):
 

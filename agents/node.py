@@ -27,18 +27,20 @@ import socket
 import threading
 import time
 
-from swarm.agents.joining import EXIT_REFUSED, AgentExit, claim
+from swarm.agents.brain import AgentBrain, Decision
+from swarm.agents.joining import AgentExit, claim
 from swarm.agents.joining import log as _log
 from swarm.agents.world_link import NEW_WORLD, WorldLink
 from swarm.contracts import wire
+from swarm.contracts.brain_config import BrainConf
 from swarm.contracts.laws import LawError, check_trusted, trusted_laws
 from swarm.contracts.transport import answer
+from swarm.contracts.vocabulary import ExitCode
 
 STATUS_PERIOD = 0.2  # s of wall time between periodic status messages
 STATUS_MIN_GAP = 0.05  # s: a change is published at once, but not more often than this (the
 # rest wait for the next periodic one): a follower switching every tick sent one per tick
 NONFINITE_NOTE_S = 5.0  # at most one log line per this many s about non-finite law outputs
-EXIT_OK = 0  # the run ended (agents/process.py has the other exit codes)
 
 
 class AgentNode:
@@ -55,9 +57,7 @@ class AgentNode:
         world_grace: float = 0.0,
         trusted: set[str] | None = None,
     ):
-        import zenoh
-
-        from swarm.contracts.brain_config import BrainConf
+        import zenoh  # lazy: only a process that opens a session loads zenoh's native library (not the fork server)
 
         self.zenoh = zenoh
         self.session = session
@@ -65,30 +65,31 @@ class AgentNode:
         self.id = agent_id
         self.wait_world = wait_world
         try:
-            self.conf = BrainConf.from_json(reply.get("brain"))
+            brain = reply.get("brain")
+            if not isinstance(brain, dict):
+                raise TypeError("brain: expected an object")
+            self.conf = BrainConf.from_json(brain)
             if self.conf.agent.id != agent_id:
                 raise ValueError(f"agent.id: {self.conf.agent.id}, asked for {agent_id}")
         except (ValueError, AttributeError, TypeError) as e:
-            raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: unusable join reply: {e}") from None
+            raise AgentExit(ExitCode.REFUSED, f"agent {agent_id}: unusable join reply: {e}") from None
         try:
             for name in self.conf.law_names():
                 check_trusted(name, trusted_laws() if trusted is None else trusted)
         except LawError as e:
-            raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: {e}") from None
+            raise AgentExit(ExitCode.REFUSED, f"agent {agent_id}: {e}") from None
         try:
             self.brain = self.new_brain()
         except (ValueError, AttributeError, TypeError) as e:
-            raise AgentExit(EXIT_REFUSED, f"agent {agent_id}: unusable join reply: {e}") from None
+            raise AgentExit(ExitCode.REFUSED, f"agent {agent_id}: unusable join reply: {e}") from None
         self.spec = self.conf.agent
         self.key = reply["key"]  # checked by wire.decode_join_reply
-        if self.brain.is_leader:
-            import swarm.agents.leader  # noqa: F401  (load the planner before the first frame)
         self.inbox: queue.SimpleQueue = queue.SimpleQueue()
         self.commands = 0
         self.garbage = 0
         self.last_tick = -1
         self.last_cmd: bytes | None = None  # the command answering frame `last_tick`
-        self.last = None  # last Decision
+        self.last: Decision | None = None
         self.link = WorldLink(session, run, agent_id, endpoint, world_grace, wait_world)
         self.nonfinite_before = 0  # non-finite law outputs of earlier brains (a new world)
         self.nonfinite_noted = 0.0
@@ -98,9 +99,7 @@ class AgentNode:
         self.lock = threading.Lock()  # the brain and its counters: frames are answered in zenoh's thread
         self.answering = True  # False while (re)claiming the id of a new world, and after a crash
 
-    def new_brain(self):
-        from swarm.agents.brain import AgentBrain
-
+    def new_brain(self) -> AgentBrain:
         c = self.conf
         return AgentBrain(c.agent, c.gains, c.sensing, c.dt, c.n_agents, c.law)
 
@@ -298,7 +297,7 @@ class AgentNode:
                     if isinstance(msg, int):  # the end of the run (fault notices are the launcher's)
                         with self.lock:
                             self.answering = False
-                        return EXIT_OK
+                        return ExitCode.OK  # the run ended
             self.link.check()  # raises AgentExit past the grace
             with self.lock:
                 self.maybe_publish_status()

@@ -15,35 +15,35 @@ on stderr (a signal while it connects included), never a traceback.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
-from swarm.agents.joining import EXIT_NO_WORLD, EXIT_REFUSED, AgentExit, claim
+from swarm.agents.joining import AgentExit, claim
 from swarm.agents.joining import log as _log
 from swarm.agents.node import AgentNode
-from swarm.agents.world_link import EXIT_WORLD_SILENT
 from swarm.contracts import credentials
 from swarm.contracts.identities import CredentialsError, agent_user
 from swarm.contracts.laws import trusted_laws
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV, endpoint_refuses, tie_to_launcher
 from swarm.contracts.stop_signals import StopSignals
 from swarm.contracts.transport import CONNECT_TIMEOUT_MS, open_client
+from swarm.contracts.vocabulary import ExitCode, signal_exit
 
 WORLD_GRACE = 10.0  # s an agent waits for a world that stopped answering (--world-grace)
 # Started by `swarm up`, an agent waits longer for its connection: hundreds of agents starting
 # at once on two cores (and the world admitting them) took more than the 10 s of a lone one.
 LAUNCHED_CONNECT_TIMEOUT_MS = 60_000
-EXIT_CRASH = 1  # and EXIT_OK = 0 (agents/node.py), EXIT_REFUSED = 3 and EXIT_NO_WORLD = 6 (agents/joining.py),
-# 4 and 5 (world_link.py)
 _RUST_SOURCE = re.compile(r"\s+at /\S+?\.rs:\d+\.?")  # zenoh errors name their source line: not for users
 
 
 def _stopped(signum: int) -> AgentExit:
-    return AgentExit(128 + signum, "")
+    return AgentExit(signal_exit(signum), "")
 
 
 def run_agent(
@@ -63,7 +63,8 @@ def run_agent(
     # SIGTERM/SIGINT raise AgentExit, held back while the session opens: once open, it is
     # closed however the agent ends (an open one hangs the exit: swarm/contracts/stop_signals.py)
     stops = StopSignals(_stopped).install()
-    session, code = None, EXIT_CRASH
+    session = None
+    code: int = ExitCode.FAILED  # a crash, unless it ends otherwise
     try:
         try:
             tie_to_launcher()  # started by `swarm up`: SIGTERM when the launcher dies
@@ -87,7 +88,7 @@ def run_agent(
             _log(f"swarm agent: {e.message}")
         code = e.code
     except Exception:  # a bug, or an exception in a follower law: the traceback ends the log
-        import traceback
+        import traceback  # lazy: only a crash needs it (an agent process imports little)
 
         traceback.print_exc()
     finally:
@@ -101,8 +102,8 @@ def _connect(
     agent_id: int, connect: str, run: str | None, creds_file: Path | None, world_wait: float, stops: StopSignals
 ):
     """(session, credentials) of agent `agent_id` on `connect`, or the exit code, said in one
-    line: EXIT_NO_WORLD when nothing listens there (started before its world, which it waits
-    for as long as a connection may take), EXIT_REFUSED when there are no usable credentials
+    line: ExitCode.NO_WORLD when nothing listens there (started before its world, which it waits
+    for as long as a connection may take), ExitCode.REFUSED when there are no usable credentials
     or what listens there refuses the session. Called with the stop signals held: a signal
     while it waits for a world ends the wait at once, one in the open as the open ends."""
     t_end = time.monotonic() + world_wait  # a world starting meanwhile is waited for
@@ -113,7 +114,7 @@ def _connect(
                 f"swarm agent {agent_id}: no world at {connect}: nothing listened there for "
                 f"{world_wait:g} s (start the run first: swarm up, or swarm world)"
             )
-            return EXIT_NO_WORLD
+            return ExitCode.NO_WORLD
         time.sleep(0.1)
     user = agent_user(agent_id)
     try:
@@ -122,7 +123,7 @@ def _connect(
         creds.identity(user)
     except CredentialsError as e:
         _log(f"swarm agent {agent_id}: {e}")
-        return EXIT_REFUSED
+        return ExitCode.REFUSED
     launched = bool(os.environ.get(LAUNCHER_PID_ENV))
     try:
         # a stop while it connects is raised as the open returns or fails (zenoh.open runs to
@@ -140,21 +141,20 @@ def _connect(
             f"swarm agent {agent_id}: cannot connect to {connect} as {user} of run {creds.run}: {why} "
             "(something listens there, but it refused these credentials or is not this run's world)"
         )
-        return EXIT_REFUSED
+        return ExitCode.REFUSED
     return session, creds
 
 
 def _close(session, code: int) -> None:
     """Close the session, but exit with `code` anyway if that takes more than a moment: with a
     silent hub, zenoh's close waits for its reconnection attempt (up to ~10 s)."""
-    import threading
 
     def force():
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(code)
 
-    t = threading.Timer(1.0 if code == EXIT_WORLD_SILENT else 3.0, force)
+    t = threading.Timer(1.0 if code == ExitCode.WORLD_SILENT else 3.0, force)
     t.daemon = True
     t.start()
     session.close()
@@ -164,8 +164,6 @@ def _close(session, code: int) -> None:
 def main(argv: list[str] | None = None) -> None:
     """Lean entry for launchers (no typer/rich):
     `python -m swarm.agents.process ID ENDPOINT [RUN [SPEC_JSON]] [--world-grace S]`."""
-    import json
-
     args = list(sys.argv[1:] if argv is None else argv)
     grace = WORLD_GRACE
     if "--world-grace" in args:

@@ -181,7 +181,7 @@ class Sticky:
     it closes in on until it is in reach, and takes as soon as it is feasible, which any
     rooted agent is once the follower has been silent for drain_ticks ticks. So a rooted
     swarm circling a fixed target at such radii is found in finite time (the studies in
-    docs/selection.md measure the rest: every run of every setting converged).
+    docs/design/selection.md measure the rest: every run of every setting converged).
 
     Bound: the first commit comes after at most 1 + wait_ticks provisional choices and
     any number of shadows and searches. After that, each loss of the out-neighbour

@@ -51,10 +51,11 @@ from swarm.contracts.observation import Observation
 
 def spl_circle(obs: Observation) -> float:
     """u_k (rad/s) of the circular control law with phase coupling (module docstring)."""
-    if obs.target is None:
+    radius = obs.orbit_radius
+    if obs.target is None or radius is None:
         raise ValueError("swarm.agents.spl_circle:spl_circle needs the target: name it as a leader law ([law] leader)")
-    w0 = obs.direction * obs.speed / obs.orbit_radius
-    kappa = obs.params.get("kappa", 1.0 / obs.orbit_radius)
+    w0 = obs.direction * obs.speed / radius
+    kappa = obs.params.get("kappa", 1.0 / radius)
     k_phase = obs.params.get("k_phase", 0.5 * abs(w0))
     th = obs.heading
     x, y = -obs.target[0], -obs.target[1]  # r~_k: own position relative to the target

@@ -13,7 +13,7 @@ The world's liveliness token vanishing (a DELETE at the agent) means one of thre
   joined afresh. After the grace the agent exits 5 (or waits on with --wait-world).
 
 zenoh notices a silent world after the world's link lease (1 s), so the agent exits
-about 1 s + grace after the world stopped. See docs/protocol.md, section 6.5.
+about 1 s + grace after the world stopped. See docs/reference/protocol.md, section 6.5.
 """
 
 from __future__ import annotations
@@ -23,10 +23,10 @@ import time
 from swarm.agents.joining import AgentExit, log
 from swarm.contracts import wire
 from swarm.contracts.lifeline import endpoint_refuses
+from swarm.contracts.vocabulary import ExitCode
 
 HERE, WAITING, GONE = "here", "waiting", "gone"  # what a DELETE turned out to be
 RESUMED, NEW_WORLD, NOTHING = "resumed", "new world", "nothing"  # what a PUT means
-EXIT_WORLD_GONE, EXIT_WORLD_SILENT = 4, 5
 
 
 class WorldLink:
@@ -83,7 +83,7 @@ class WorldLink:
         self.alive = False
         if not self.wait_world:
             raise AgentExit(
-                EXIT_WORLD_GONE,
+                ExitCode.WORLD_GONE,
                 f"agent {self.agent}: the world of run {self.run} vanished; exiting (use --wait-world to wait for it)",
             )
         log(f"[agent {self.agent}] the world vanished; waiting for it to come back")
@@ -114,7 +114,7 @@ class WorldLink:
             return
         if not self.wait_world:
             raise AgentExit(
-                EXIT_WORLD_SILENT,
+                ExitCode.WORLD_SILENT,
                 f"agent {self.agent}: the world of run {self.run} has not "
                 f"answered for {self.grace:g} s (--world-grace); exiting",
             )

@@ -1,9 +1,9 @@
-"""Test-only reference: the numpy planner as of issue 12, kept to check the pure-Python port.
+"""Test-only reference: the numpy planner as it was before the port, kept to check the pure-Python port.
 
 This is a frozen copy of agents/leader.py's circle-circle planner (`plan_cc` with its
 helpers `_best_cc`, `_snap`, `_single_arc_phi`, `_orbit_path`, input checks and tuning
 constants) as it stood when the planner was still vectorised with numpy, before the
-port to plain Python that keeps leader processes numpy-free (issue 12).  It is used only
+port to plain Python that keeps leader processes numpy-free.  It is used only
 by tests/test_leader.py to check that the port plans the same paths; nothing in the
 runtime imports it.  Do not "fix" it: it is the yardstick, not a second implementation.
 Only `CCPath` (the result record), `wrap` and `TAU` are shared with the live code.

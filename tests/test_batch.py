@@ -1,4 +1,4 @@
-"""The batch engine (issue 12, part 3: swarm/offline/batch.py, world/batch.py, agents/batch*.py):
+"""The batch engine (swarm/offline/batch.py, world/batch.py, agents/batch*.py):
 equal to `swarm sim`'s per-agent engine within 1e-9 m over whole runs (to the bit on this
 project's machines), with the same switch events and summaries; many seeds in one batch
 equal each seed run alone; `swarm sim --batch` and `swarm study --batch` write what the

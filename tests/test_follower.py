@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import helpers_law
 import numpy as np
 import pytest
 
@@ -21,10 +22,8 @@ TESTS = Path(__file__).resolve().parent
 
 @pytest.fixture
 def law_module(monkeypatch):
-    """Make tests/helpers_law.py importable as `helpers_law`."""
+    """tests/helpers_law.py, importable as `helpers_law` (its laws resolve by name)."""
     monkeypatch.syspath_prepend(str(TESTS))
-    import helpers_law
-
     return helpers_law
 
 

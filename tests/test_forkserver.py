@@ -21,6 +21,7 @@ import psutil
 import pytest
 from runtime_helpers import SCENARIOS, events_of, start_up
 
+from swarm.agents.forkserver import REPARENT_WAIT, reparented
 from swarm.runtime.forks import Forked
 from swarm.runtime.procs import agent_id_of, command_words
 
@@ -75,8 +76,6 @@ def test_forked_kill_is_a_negative_code_and_a_timeout_raises():
 
 
 def test_an_agent_waits_only_while_its_parent_is_the_middle_process():
-    from swarm.agents.forkserver import reparented
-
     assert reparented(os.getppid() + 10**6, timeout=5.0)  # another pid than the parent: at once
     assert not reparented(os.getppid(), timeout=0.05)  # still the middle's: gives up at the timeout
 
@@ -122,8 +121,6 @@ def test_agents_are_forked_and_a_dead_fork_server_falls_back_to_exec(rt, tmp_pat
 
     summ, _ = up.results(120)
     assert summ["completed"] is True
-    from swarm.agents.forkserver import REPARENT_WAIT
-
     (start,) = events_of(summ, "start")  # no agent waited out its re-parenting (a bug once did)
     assert start["startup_s"] < REPARENT_WAIT, start
     (rejoin,) = events_of(summ, "rejoin", 4)

@@ -1,4 +1,4 @@
-"""The law API (docs/scenarios.md, "Writing a law"): one Observation in, a turn rate out, for
+"""The law API (docs/guides/writing-a-law.md): one Observation in, a turn rate out, for
 followers and leaders; laws named in [law] and checked at load; the scenario's directory
 on the import path; the join reply's `law`; the batch engine's refusal."""
 
@@ -9,24 +9,37 @@ import json
 import math
 import sys
 import uuid
+from pathlib import Path
 from types import MappingProxyType
 
+import helpers_law
 import numpy as np
 import pytest
-from test_follower import law_module  # noqa: F401  (fixture: tests/helpers_law.py importable)
+from fakes import FakeSession
+from test_shells import RUN, claim, open_world
 from typer.testing import CliRunner
 
 from swarm.agents.brain import AgentBrain
+from swarm.agents.joining import AgentExit
 from swarm.agents.laws import bearing, bearing_law, loiter, search
 from swarm.agents.leader import on_orbit_command
+from swarm.agents.node import AgentNode
 from swarm.cli.main import app
 from swarm.contracts.brain_config import BrainConf
 from swarm.contracts.laws import ENV_LAW_PATH, law_dirs, with_law_path
 from swarm.contracts.observation import Observation, Search
 from swarm.contracts.scenario import ScenarioError, load_scenario, parse_scenario
+from swarm.contracts.vocabulary import ExitCode
 from swarm.offline.batch import refusal
 from swarm.offline.sim import run_sim
 from swarm.world.sensing import Contact, SensorFrame
+
+
+@pytest.fixture
+def law_module(monkeypatch):
+    """tests/helpers_law.py, importable as `helpers_law` (its laws resolve by name)."""
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parent))
+    return helpers_law
 
 
 def _brain(base, aid, law):
@@ -185,7 +198,7 @@ def test_check_and_sim_import_a_law_next_to_the_scenario(tmp_path, write_toml, b
 
 def test_a_raising_law_under_swarm_sim_is_a_crash_event_and_exit_4(tmp_path, write_toml, base, monkeypatch):
     """As under swarm up (tests/test_supervision_runtime.py): no traceback, a crash event with
-    its cause, the agent dropped, the results written, one line, exit 4 (issue 22, item 7)."""
+    its cause, the agent dropped, the results written, one line, exit 4."""
     monkeypatch.setattr(sys, "path", list(sys.path))
     source = "def law(obs):\n    if obs.tick >= 3:\n        raise RuntimeError('gave up')\n    return 0.1\n"
     path, _ = _law_next_to_scenario(tmp_path, write_toml, base, source, "follower")
@@ -232,12 +245,6 @@ def test_the_join_reply_carries_the_laws(base, law_module):
 
 
 def test_an_untrusted_leader_law_is_refused_without_importing_it(tmp_path, monkeypatch):
-    from fakes import FakeSession
-    from test_shells import RUN, claim, open_world
-
-    from swarm.agents.joining import EXIT_REFUSED, AgentExit
-    from swarm.agents.node import AgentNode
-
     (tmp_path / "evil_leader.py").write_text("def law(obs):\n    return 0.0\n")
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.delenv("SWARM_TRUSTED_LAWS", raising=False)
@@ -247,7 +254,7 @@ def test_an_untrusted_leader_law_is_refused_without_importing_it(tmp_path, monke
     brain["law"]["leader"] = "evil_leader:law"
     with pytest.raises(AgentExit) as exc:
         AgentNode(FakeSession(), RUN, 1, {**reply, "brain": brain}, wait_world=False)
-    assert exc.value.code == EXIT_REFUSED and "--trust-law evil_leader:law" in exc.value.message
+    assert exc.value.code == ExitCode.REFUSED and "--trust-law evil_leader:law" in exc.value.message
     assert "evil_leader" not in sys.modules
     node = AgentNode(FakeSession(), RUN, 1, {**reply, "brain": brain}, wait_world=False, trusted={"evil_leader:law"})
     assert node.brain.law is sys.modules["evil_leader"].law

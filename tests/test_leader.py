@@ -239,7 +239,7 @@ def test_plan_cc_one_arc_when_circle_touches_orbit():
     assert path.length < 0.5 * math.pi * radius
 
 
-# --- the pure-Python planner against the numpy one it replaced (issue 12) -----------------
+# --- the pure-Python planner against the numpy one it replaced ------------------------------
 
 
 def _port_cases(n, seed):

@@ -41,7 +41,7 @@ def test_dead_reckoning_carries_a_point_within_a_fraction_of_a_metre():
     poses = _fly(0.0, 0.0, 0.3, 20.0, us)
     home = (40.0, -25.0)  # a fixed point, relative to the start
     hx, hy = home
-    for (x0, y0, g0), (x1, y1, g1) in zip(poses, poses[1:]):
+    for (_, _, g0), (_, _, g1) in zip(poses, poses[1:]):
         hx, hy = drift(hx, hy, g0, g1, 20.0, DT)
     x, y, _ = poses[-1]
     assert math.hypot(hx - (home[0] - x), hy - (home[1] - y)) < 0.5  # 200 m flown
@@ -78,7 +78,7 @@ def _orbit_contacts(follower_poses, t0, r=30.0, w=1.0):
     """Contacts of an agent on a circle of radius r about the origin at w rad/s, as seen
     from the follower's poses, one per tick from time t0."""
     out = []
-    for k, (x, y, g) in enumerate(follower_poses):
+    for k, (x, y, _) in enumerate(follower_poses):
         th = w * (t0 + k * DT)
         ax, ay = r * math.cos(th), r * math.sin(th)
         out.append(
@@ -130,7 +130,7 @@ def test_no_coasting_on_an_agent_that_vanished_mid_range():
 
 @pytest.mark.slow  # three whole runs, in one batch
 def test_swarms_that_used_to_stay_lost_now_converge():
-    """The README's failed seeds at 60 m (a follower loitered far from everyone for the
+    """Seeds that once failed at 60 m (a follower loitered far from everyone for the
     whole run): every run converges, every loss under the bound, nobody left without an
     out-neighbour."""
     setting = SwarmSetting(range=60.0)
@@ -140,7 +140,7 @@ def test_swarms_that_used_to_stay_lost_now_converge():
         assert summ["converged"], s.name
         a = res.recorder.arrays()
         assert (a["out"][-1][a["role"] == "follower"] >= 0).all()
-        for aid, agent in summ["agents"].items():
+        for agent in summ["agents"].values():
             if agent["role"] == "follower":
                 assert agent["loss_switches_max"] <= LOSS_CHANGES
         counts = [len(k) for k, r in zip(switch_ticks(a["out"], a["alive"]), a["role"]) if r == "follower"]

@@ -1,4 +1,4 @@
-"""The sticky selection rule (issue 8): its state machine, and its guarantees as properties.
+"""The sticky selection rule (agents/selection.Sticky): its state machine, and its guarantees as properties.
 
 Pure tier: `Sticky` fed scripted contacts, and a whole swarm of `Sticky` selectors on
 random, changing sensing graphs with agents dropping out (hypothesis), with no physics:
@@ -19,6 +19,7 @@ from swarm.agents.brain import AgentBrain
 from swarm.agents.selection import HOLD_TICKS, LOSS_CHANGES, Sticky
 from swarm.contracts.frames import Contact, SensorFrame
 from swarm.contracts.graph import analyse
+from swarm.contracts.scenario import parse_scenario
 from swarm.offline.sim import run_sim
 from swarm.study.swarms import SwarmSetting, random_swarm
 from swarm.world.metrics import switch_ticks
@@ -146,8 +147,6 @@ def test_feasible_follows_the_fewest_hops_advertised():
 
 
 def test_nobody_to_steer_by_searches_then_the_brain_tracks():
-    from swarm.contracts.scenario import parse_scenario
-
     sc = parse_scenario(
         {
             "gains": {"c1": 1.0, "c2": 0.5},
@@ -226,7 +225,7 @@ def _abstract_run(
             for c in contacts:
                 seen_hops[(i, c.id)] = c.hops
 
-            def predict(j, i=i):
+            def predict(j, i=i, dist=dist):
                 if rng.random() < 0.5 or (i, j) not in seen_hops:
                     return None
                 return Contact(j, 0.0, 0.0, float(dist[i, j]), seen_hops[(i, j)])
@@ -252,7 +251,7 @@ def _abstract_run(
 def test_no_follower_only_cycle_is_ever_formed(seed, n, leaders, p_sense, p_drop, hold, coast, reach):
     """Every out edge counts: committed, held, coasted, provisional and shadow edges."""
     leaders = min(leaders, n - 1)
-    for k, out, alive in _abstract_run(seed, n, leaders, 80, p_sense, p_drop, hold, coast, reach):
+    for k, out, _alive in _abstract_run(seed, n, leaders, 80, p_sense, p_drop, hold, coast, reach):
         g = analyse(out, set(range(leaders)))
         assert g["cycles"] == [], (k, out)
 
@@ -338,7 +337,7 @@ def test_random_swarm_is_the_same_for_every_rule_and_range():
 
 
 def test_a_first_choice_after_joining_is_never_a_switch():
-    """(issue 22, item 8) Ticks without an out-neighbour before the first choice, and the
+    """Ticks without an out-neighbour before the first choice, and the
     first choice itself, are not switches; nor is the first choice after a rejoin. Later
     changes, to or from none, are."""
     out = np.array([[-1, -1], [-1, 3], [2, 3], [2, -1], [5, -1], [5, -1], [-1, -1], [-1, 4], [6, 4]])
