@@ -33,7 +33,6 @@ from swarm.world.state import RunState
 DESERTED_GRACE = 5.0  # s of wall time a started run may go on with no agent at all
 STALL_GRACE = 3.0  # s the agents get to answer after a stall of the world (their links come back in ~0.5 s)
 RESEND_S = 0.25  # s between resends of a tick's frames after a stall of the world
-EXIT_DESERTED = ExitCode.DESERTED  # (kept for swarm/api/launch.py and swarm/cli/run.py)
 
 ACTIVE = AgentState.ACTIVE
 

@@ -19,16 +19,14 @@ from typing import Any, Protocol
 import numpy as np
 
 from swarm.contracts.scenario import Scenario
-from swarm.contracts.vocabulary import EventKind, ExitCode
+from swarm.contracts.vocabulary import EventKind
 from swarm.world.metrics import agent_metrics, converged, recovery, relative_errors, switch_ticks
 from swarm.world.stream import RECORDING_FILE, Recording, RecordingError, StreamWriter, read_recording
 
 TRAJECTORY_FILE = "trajectory.npz"
 SUMMARY_FILE = "summary.json"
 RESULT_FILES = (RECORDING_FILE, TRAJECTORY_FILE, SUMMARY_FILE)
-EXIT_NO_SPACE = ExitCode.NO_SPACE  # (kept for swarm/api/launch.py and swarm/cli/run.py)
 __all__ = [
-    "EXIT_NO_SPACE",
     "RECORDING_FILE",
     "RESULT_FILES",
     "RecordingError",
