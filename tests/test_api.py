@@ -1,4 +1,4 @@
-"""The Python API (swarm/api/runs.py, api_scenario.py, api_up.py; README "Python API"):
+"""The Python API (swarm/api/runs.py, scenario.py, up.py; docs/reference/api.md):
 scenarios from files, dicts and the builder with the files' errors; `simulate` equal to
 `run_sim`; `open_run` round trips; `swarm.up` equal to `simulate` with no process left;
 the example notebook; and `import swarm` staying free for the agent processes."""

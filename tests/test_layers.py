@@ -214,3 +214,41 @@ def test_the_checker_sees_imports_inside_functions(tmp_path):
     found = {(m, inside) for _, m, inside in imports_of(p, "swarm.contracts.m")}
     assert {("json", False), ("swarm.agents.brain", True), ("swarm.world.core", True)} <= found
     assert package_of("swarm.agents.brain") not in MAY_IMPORT["contracts"]
+
+
+def unexplained_lazy_imports(path: Path, here: str | None = None) -> list[int]:
+    """Lines of imports inside functions without a `lazy:` reason: in a comment at the end of
+    the import's first line, or in the comment lines right above its block of imports."""
+    lines = path.read_text().splitlines()
+
+    def explained(lineno: int) -> bool:
+        if "lazy:" in lines[lineno - 1]:
+            return True
+        i = lineno - 2
+        while i >= 0:
+            s = lines[i].strip()
+            if s.startswith("#"):
+                if "lazy:" in s:
+                    return True
+            elif not (s.startswith(("import ", "from ", ")")) or (s and lines[i].rstrip().endswith(","))):
+                return False
+            i -= 1
+        return False
+
+    return sorted({line for line, _, inside in imports_of(path, here) if inside and not explained(line)})
+
+
+def test_imports_inside_functions_say_why():
+    """An import inside a function is there for start-up time (the CLI, agent processes), an
+    optional heavy dependency or a crash path, and says so: `# lazy: <reason>`."""
+    bad = [f"{p.relative_to(ROOT)}:{line}" for p in project_files() for line in unexplained_lazy_imports(p)]
+    assert not bad, "imports inside functions without a `# lazy:` reason:\n" + "\n".join(bad)
+
+
+def test_the_lazy_check_finds_an_unexplained_import(tmp_path):
+    probe = tmp_path / "probe.py"
+    probe.write_text(
+        "import sys\n\ndef f():\n    # lazy: numpy costs 0.1 s\n    import numpy\n    import json\n\n"
+        "def g():\n    x = 1\n    import os\n    from json import dumps  # lazy: a reason at the end\n"
+    )
+    assert unexplained_lazy_imports(probe, "swarm.contracts.probe") == [10]

@@ -51,21 +51,45 @@ def test_swarm_up_runs_from_the_installed_wheel(wheel, tmp_path, rt):
     that is not the tree: `import agents` / `import world` fail, `swarm up` works, and its
     processes use the installed code."""
     site = tmp_path / "site"
-    subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-index", "--target",
-                    str(site), str(wheel)], check=True)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "--quiet",
+            "--no-deps",
+            "--no-index",
+            "--target",
+            str(site),
+            str(wheel),
+        ],
+        check=True,
+    )
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     env = {**rt.env, "PYTHONPATH": str(site)}
     for name in ("agents", "world"):
-        p = subprocess.run([sys.executable, "-c", f"import {name}"], cwd=elsewhere, env=env, capture_output=True,
-                           text=True)
+        p = subprocess.run(
+            [sys.executable, "-c", f"import {name}"], cwd=elsewhere, env=env, capture_output=True, text=True
+        )
         assert p.returncode != 0 and "No module named" in p.stderr
-    where = subprocess.run([sys.executable, "-c", "import swarm.agents.process as m; print(m.__file__)"],
-                           cwd=elsewhere, env=env, capture_output=True, text=True, check=True).stdout
+    where = subprocess.run(
+        [sys.executable, "-c", "import swarm.agents.process as m; print(m.__file__)"],
+        cwd=elsewhere,
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
     assert where.startswith(str(site))
     shutil.copy(REPO / "scenarios" / "case2.toml", elsewhere / "case2.toml")
-    up = rt.tracker.spawn([sys.executable, "-m", "swarm", "up", "case2.toml", "--duration", "1", "--out", "run",
-                           "--no-plots"], "up", cwd=elsewhere, env=env)
+    up = rt.tracker.spawn(
+        [sys.executable, "-m", "swarm", "up", "case2.toml", "--duration", "1", "--out", "run", "--no-plots"],
+        "up",
+        cwd=elsewhere,
+        env=env,
+    )
     assert up.popen.wait(timeout=240) == 0, up.text()[-3000:]
     summary = json.loads((elsewhere / "run" / "summary.json").read_text())
     assert summary["completed"] and len(summary["agents"]) == 6

@@ -288,8 +288,7 @@ def test_agents_exit_when_the_world_vanishes(rt, tmp_path):
     for i, a in agents.items():
         assert i in exits, f"agent {i} still running 10 s after the world died"
         assert a.poll() == ExitCode.WORLD_GONE, f"agent {i} exited {a.poll()}: {a.text()}"
-        assert exits[i] < 1.5, f"agent {i} took {exits[i]:.2f} s to notice"
-        assert "vanished" in a.text(), a.text()
+        assert "vanished" in a.text(), a.text()  # the lifeline, not the grace of a silent world
     rt.tracker.assert_none_left(timeout=5)
 
 

@@ -47,7 +47,7 @@ RunOpt = Annotated[
         "--run", help="run id (default: the only live run found)", show_default=False
     ),
 ]
-JsonOpt = Annotated[bool, typer.Option("--json", help="machine-readable JSON (see docs/cli.md)")]
+JsonOpt = Annotated[bool, typer.Option("--json", help="machine-readable JSON (see docs/reference/cli.md)")]
 CredentialsOpt = Annotated[
     Optional[Path],
     typer.Option(
@@ -114,7 +114,7 @@ FoxgloveOpt = Annotated[
         "--foxglove",
         help="serve the run live to the Foxglove app "
         "(WebSocket, ws://HOST:PORT; `--foxglove PORT` for another port "
-        'than 8765; docs/outputs.md, "Live view in Foxglove")',
+        "than 8765; docs/reference/outputs.md#foxglove)",
     ),
 ]
 FoxglovePortOpt = Annotated[

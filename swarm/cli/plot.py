@@ -113,7 +113,7 @@ def export(
         typer.Option(
             "--csv",
             help="also write csv/agent-<id>.csv: one CSV per agent, a row per "
-            "tick (columns: docs/outputs.md, 'Outputs of a run')",
+            "tick (columns: docs/reference/outputs.md#csv)",
         ),
     ] = False,
 ) -> None:

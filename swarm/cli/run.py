@@ -213,8 +213,8 @@ def agent(
 
     It connects as agent-ID with the run's credentials: --credentials FILE, else
     $SWARM_CREDENTIALS, else the local run's file in the runtime directory. On another
-    machine, use a file from `swarm credentials --agent ID` (see docs/resilience.md, "Agents on other
-    machines").
+    machine, use a file from `swarm credentials --agent ID` (see
+    docs/guides/several-machines.md#remote-agent).
 
     Exit codes: 0 the run ended, 1 crashed (e.g. an exception in its law), 3 refused,
     4 the world vanished (unless --wait-world), 5 the world did not answer within

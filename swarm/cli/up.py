@@ -151,7 +151,7 @@ def attach_hints(run_id: str, dial: str, s) -> list[str]:
     if not dial.startswith("unixsock"):
         lines.append(
             f"from another machine: swarm credentials --agent N{pick}, there swarm agent --id N "
-            f'--connect {dial} --credentials FILE (docs/resilience.md, "Agents on other machines")'
+            f"--connect {dial} --credentials FILE (docs/guides/several-machines.md#remote-agent)"
         )
     return lines
 

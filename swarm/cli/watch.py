@@ -28,7 +28,7 @@ WatchFoxgloveOpt = Annotated[
         "--foxglove",
         help=f"instead of the terminal view, serve the run to the Foxglove app over its WebSocket "
         f"protocol, the topics of `swarm up --foxglove` (ws://{DEFAULT_HOST}:{DEFAULT_PORT}; `--foxglove PORT` for "
-        'another port; docs/outputs.md, "Live view in Foxglove"); Ctrl-C exits 130',
+        "another port; docs/reference/outputs.md#foxglove); Ctrl-C exits 130",
     ),
 ]
 WatchFoxglovePortOpt = Annotated[
