@@ -8,6 +8,8 @@ statement, at module level or inside functions:
     offline    swarm sim, the batch engine, a run's output directory, CSV export
     plots      a run's figures
     live       a live run seen from a terminal: client, data, control, views, watch, Foxglove
+    ros2       the rmw_zenoh protocol (keys, liveliness tokens, attachments, CDR): ROS 2 without ROS
+    robots     real robots: the world's plant made of ROS 2 robots, the robots file, a simulated fleet
     study      batch studies
     api        the Python API (`import swarm`)
     cli        the command line
@@ -31,12 +33,14 @@ MAY_IMPORT = {
     "world": {"world", "contracts"},
     "agents": {"agents", "contracts"},
     "runtime": {"runtime", "contracts", "world"},
-    "offline": {"offline"} | BELOW_THE_SHELLS,
+    "offline": {"offline", "ros2"} | BELOW_THE_SHELLS,
     "plots": {"plots", "offline"} | BELOW_THE_SHELLS,
     "live": {"live", "runtime"} | BELOW_THE_SHELLS,
     "study": {"study", "offline"} | BELOW_THE_SHELLS,
-    "api": {"api", "runtime", "offline", "plots", "live"} | BELOW_THE_SHELLS,
-    "cli": {"cli", "root", "api", "runtime", "offline", "plots", "live", "study"} | BELOW_THE_SHELLS,
+    "ros2": {"ros2", "contracts"},  # the rmw_zenoh protocol: keys, tokens, attachments, CDR
+    "robots": {"robots", "ros2", "runtime"} | BELOW_THE_SHELLS,
+    "api": {"api", "runtime", "offline", "plots", "live", "robots"} | BELOW_THE_SHELLS,
+    "cli": {"cli", "root", "api", "runtime", "offline", "plots", "live", "study", "robots", "ros2"} | BELOW_THE_SHELLS,
     "root": {"root", "cli", "api", "contracts"},  # swarm/__init__.py (its exports), swarm/__main__.py
 }
 PACKAGES = set(MAY_IMPORT) - {"root"}

@@ -203,8 +203,8 @@ def _loc(loc: tuple) -> str:
     return out
 
 
-def format_validation_error(source: str, err: ValidationError) -> str:
-    lines = [f"{source}: invalid scenario"]
+def format_validation_error(source: str, err: ValidationError, what: str = "scenario") -> str:
+    lines = [f"{source}: invalid {what}"]
     for e in err.errors():
         where = _loc(tuple(p for p in e["loc"] if p not in ("function-after",)))
         msg = e["msg"]

@@ -65,6 +65,8 @@ class EventKind(StrEnum):
     EXIT = "exit"
     LIMIT = "limit"
     DESERTED = "deserted"
+    STALE = "stale"  # robots: an agent's robot's pose is older than the robots file's stale_after (zero twist)
+    FRESH = "fresh"  # robots: its poses come again
 
 
 class SwitchReason(StrEnum):

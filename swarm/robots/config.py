@@ -1,0 +1,154 @@
+"""The robots file (`swarm up SCENARIO --robots FILE`, `swarm robots sim SCENARIO --robots
+FILE`): which ROS 2 robot each agent drives, where its pose comes from, where its command
+goes, and its limits. Validated like a scenario: a bad file raises `RobotsError` naming the
+file and the field (exit 2).
+
+    [ros2]
+    connect = "tcp/192.168.1.10:7447"  # the robots' zenoh router (rmw_zenohd); client mode
+    domain = 0                         # ROS_DOMAIN_ID
+    distro = "jazzy"                   # jazzy (RIHS01 type hashes) | humble (TypeHashNotSupported)
+    stale_after = 0.5                  # s: a robot whose last pose is older gets a zero twist
+
+    [[robots]]
+    agent = 1                # the scenario's agent id
+    namespace = "/tb3_0"     # the robot's ROS namespace ("" for none)
+    pose = "odom"            # odom: nav_msgs/Odometry, relative to the agent's start pose in the
+                             # scenario; mocap: geometry_msgs/PoseStamped in the world frame
+    pose_topic = "odom"      # relative to the namespace (default: "odom", or "pose" for mocap)
+    cmd_topic = "cmd_vel"    # relative to the namespace
+    cmd_type = "auto"        # auto (the type the robot's own subscription announces) | Twist | TwistStamped
+    max_linear = 0.22        # m/s (TurtleBot3 Burger)
+    max_angular = 2.84       # rad/s
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from swarm.contracts.scenario import Scenario, format_validation_error
+from swarm.contracts.vocabulary import Coded, ExitCode
+
+MAX_ROBOTS_BYTES = 1 << 20
+TURTLEBOT3_BURGER = (0.22, 2.84)  # max linear m/s, max angular rad/s
+
+
+class RobotsError(Coded):
+    """A robots file that cannot be used; the message names the file and the field."""
+
+    exit_code = ExitCode.USAGE
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Ros2Spec(_Strict):
+    connect: str = Field(default="tcp/127.0.0.1:7447", description="the robots' zenoh router (client mode)")
+    domain: int = Field(default=0, ge=0, le=232, description="ROS_DOMAIN_ID")
+    distro: Literal["jazzy", "humble"] = "jazzy"
+    stale_after: float = Field(default=0.5, gt=0.0, le=60.0, description="s; an older pose stops the robot")
+
+
+class RobotSpec(_Strict):
+    agent: int = Field(ge=0)
+    namespace: str = ""
+    pose: Literal["odom", "mocap"] = "odom"
+    pose_topic: str | None = None
+    cmd_topic: str = "cmd_vel"
+    cmd_type: Literal["auto", "Twist", "TwistStamped"] = "auto"
+    max_linear: float = Field(default=TURTLEBOT3_BURGER[0], gt=0.0)
+    max_angular: float = Field(default=TURTLEBOT3_BURGER[1], gt=0.0)
+
+    @model_validator(mode="after")
+    def _names(self) -> RobotSpec:
+        for field, value in (("namespace", self.namespace), ("cmd_topic", self.cmd_topic)):
+            if any(c.isspace() for c in value) or "//" in value:
+                raise ValueError(f"{field}: not a ROS name: {value!r}")
+        return self
+
+    @property
+    def pose_topic_name(self) -> str:
+        return self.pose_topic or ("odom" if self.pose == "odom" else "pose")
+
+    def topic(self, name: str) -> str:
+        """`name` under this robot's namespace, fully qualified ("/tb3_0/cmd_vel")."""
+        if name.startswith("/"):
+            return name
+        ns = self.namespace.strip("/")
+        return f"/{ns}/{name}" if ns else f"/{name}"
+
+
+class RobotsFile(_Strict):
+    ros2: Ros2Spec = Ros2Spec()
+    robots: list[RobotSpec] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _unique(self) -> RobotsFile:
+        seen: set[int] = set()
+        for r in self.robots:
+            if r.agent in seen:
+                raise ValueError(f"agent {r.agent} has two robots")
+            seen.add(r.agent)
+        return self
+
+    def robot(self, agent: int) -> RobotSpec | None:
+        return next((r for r in self.robots if r.agent == agent), None)
+
+
+def parse_robots(data: dict, source: str = "<robots>") -> RobotsFile:
+    try:
+        return RobotsFile.model_validate(data)
+    except ValidationError as e:
+        raise RobotsError(format_validation_error(source, e, "robots file")) from None
+
+
+def load_robots(path: str | Path) -> RobotsFile:
+    """Read and validate a robots file; RobotsError naming the file and the field."""
+    p = Path(path)
+    try:
+        with open(p, "rb") as f:
+            raw = f.read(MAX_ROBOTS_BYTES + 1)
+    except FileNotFoundError:
+        raise RobotsError(f"{p}: no such file") from None
+    except (OSError, ValueError) as e:
+        raise RobotsError(f"{p}: cannot read: {getattr(e, 'strerror', None) or e}") from None
+    if len(raw) > MAX_ROBOTS_BYTES:
+        raise RobotsError(f"{p}: larger than 1 MiB; not a robots file")
+    try:
+        data = tomllib.loads(raw.decode("utf-8-sig"))
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError, ValueError) as e:
+        raise RobotsError(f"{p}: cannot parse: {e}") from None
+    return parse_robots(data, str(p))
+
+
+def check_against(robots: RobotsFile, scenario: Scenario, source: str) -> list[str]:
+    """RobotsError when the file and the scenario disagree (a robot for an agent the scenario
+    does not have, an agent without a robot); the warnings (one line each) when an agent asks
+    for more than its robot can do (a constant speed above max_linear: the law's assumption of
+    a constant speed breaks; a turn-rate limit above max_angular)."""
+    ids = {a.id for a in scenario.agents}
+    extra = sorted({r.agent for r in robots.robots} - ids)
+    if extra:
+        raise RobotsError(f"{source}: robots.agent {extra[0]}: the scenario has no agent {extra[0]}")
+    missing = sorted(ids - {r.agent for r in robots.robots})
+    if missing:
+        raise RobotsError(f"{source}: no robot for agent {missing[0]} (every agent of the scenario needs one)")
+    warnings = []
+    for a in scenario.agents:
+        r = robots.robot(a.id)
+        assert r is not None
+        if a.speed > r.max_linear:
+            warnings.append(
+                f"agent {a.id}: speed {a.speed:g} m/s is above its robot's max_linear {r.max_linear:g} m/s "
+                "(the robot will be saturated and the law's constant speed will not hold)"
+            )
+        if a.max_turn_rate is None or a.max_turn_rate > r.max_angular:
+            warnings.append(
+                f"agent {a.id}: turn rates are saturated at its robot's max_angular {r.max_angular:g} rad/s "
+                f"(the scenario's max_turn_rate is {a.max_turn_rate if a.max_turn_rate is not None else 'unset'})"
+            )
+    return warnings
