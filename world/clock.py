@@ -138,6 +138,7 @@ class Clock:
         if f.kind not in ("kill", "restart", "freeze", "thaw"):
             return
         t_hold = time.monotonic()
+        self.state.engine.hold_plant()  # robots stand still while the clock holds
         self.state.carrying = f.agent  # its drop or join is the fault's (RunState.unscripted)
         try:
             self._carry_out(index, f)
@@ -261,6 +262,7 @@ class Clock:
         last_note = time.monotonic()
         t0_ticks = time.monotonic()
         self.wait_for_agents()
+        st.engine.start_plant()  # robots (world/plant.py): the poses of tick 0
         st.event(
             EventKind.START,
             None,
@@ -287,6 +289,7 @@ class Clock:
                 continue
             self.answer_pause_waiters()  # a pause (and a resume) asked during the last tick
             if st.paused:
+                st.engine.hold_plant()  # robots stand still while the clock holds
                 t_pause = time.monotonic()
                 while st.paused:
                     inbox.drain(None, 0.1)

@@ -12,12 +12,17 @@ it keeps one of three states:
 
 Commands are sanitised here, where physics is: a non-finite turn rate is never
 integrated (the last good one is held), and one above the agent's limit is saturated.
+
+With a plant (world/plant.py: real robots), the plant is the physics: `step` hands it the
+turn rates `applied` gives and it sets x, y and heading from its poses; nothing is
+integrated here.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import Protocol
 
 import numpy as np
 
@@ -31,9 +36,18 @@ ACTIVE, COASTING, GONE = AgentState.ACTIVE, AgentState.COASTING, AgentState.GONE
 STEP_ONE_BY_ONE = 32  # agents: up to this many, `step` goes agent by agent (world/kinematics.py)
 
 
+class Physics(Protocol):
+    """What the core asks of a plant (world/plant.py `Plant`, which imports this module)."""
+
+    def step(self, core: WorldCore, u: np.ndarray) -> None: ...
+
+
 class WorldCore:
-    def __init__(self, scenario: Scenario, *, joined: bool = True):
+    def __init__(self, scenario: Scenario, *, joined: bool = True, plant: Physics | None = None):
+        """joined: the agents start in the world; plant: moves the agents instead of the
+        kinematics (world/plant.py), None for the simulated unicycles."""
         self.scenario = scenario
+        self.plant = plant
         agents = scenario.agents
         self.ids = np.array([a.id for a in agents], dtype=np.int64)
         self.index = {a.id: k for k, a in enumerate(agents)}
@@ -120,8 +134,13 @@ class WorldCore:
 
     def step(self) -> None:
         """Advance every agent in the world by one dt with the latched commands (agent by
-        agent in a small swarm, where that is faster; the same bits either way)."""
+        agent in a small swarm, where that is faster; the same bits either way), or let the
+        plant move them (it sends `applied()` and reads the poses back)."""
         self._sensing = None
+        if self.plant is not None:
+            self.plant.step(self, self.applied())
+            self.tick += 1
+            return
         if len(self.ids) <= STEP_ONE_BY_ONE:
             self._step_one_by_one()
             return

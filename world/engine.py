@@ -15,6 +15,10 @@ thaw) are due here; carrying them out is the shell's job, and both end in `drop`
 `join`: a kill or a freeze drops the agent at the fault's tick (a frozen process is
 dropped when its link lease runs out, and the lockstep clock holds until it is), a
 restart or a thaw brings it back (a restart with a fresh brain, a thaw with the one it had).
+
+A plant (world/plant.py: real robots) replaces the integration of step 6; the world
+process starts it before tick 0 (`start_plant`) and stops it however the run ends
+(`stop_plant`). Without one nothing differs.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from swarm.contracts.scenario import Scenario
 from swarm.contracts.vocabulary import EventKind
 from swarm.world.core import ACTIVE, WorldCore
 from swarm.world.faults import FaultPlan, fault_event
+from swarm.world.plant import Plant
 from swarm.world.recording import Recorder, RunResult, StreamRecorder, TickRecorder
 
 # What became of a command (`Engine.command`).
@@ -46,12 +51,16 @@ class Engine:
         wall_clock: Callable[[], float] | None = None,
         on_event: Callable[[dict], None] | None = None,
         recording: Path | None = None,
+        plant: Plant | None = None,
     ):
         """ticks: steps to record; joined: agents start in the world (sim) or join later
         (the world process); wall_clock: stamps events with `wall_time`; on_event: told of
         every event as it happens (the world publishes and prints them); recording: the
-        recording.mcap to stream ticks and events to (None: keep them in memory)."""
-        self.core = WorldCore(scenario, joined=joined)
+        recording.mcap to stream ticks and events to (None: keep them in memory); plant:
+        what moves the agents instead of the kinematics (world/plant.py)."""
+        self.core = WorldCore(scenario, joined=joined, plant=plant)
+        self.plant = plant
+        self.plant_stopped = False
         self.fault_plan = FaultPlan(scenario.faults, scenario.run.dt, scenario.run.seed)
         self.network = self.fault_plan.affects_network()  # frames and commands go through the fault plan
         self.ticks = ticks
@@ -87,6 +96,23 @@ class Engine:
         if self.on_event is not None:
             self.on_event(ev)
         return ev
+
+    # -- the plant -----------------------------------------------------------------------------
+    def start_plant(self) -> None:
+        """Before tick 0: the plant sets the poses the first frames are built from."""
+        if self.plant is not None:
+            self.plant.start(self.core, self.event)
+
+    def hold_plant(self) -> None:
+        """The clock holds (a pause, a scripted fault carried out): the plant stands still."""
+        if self.plant is not None and not self.plant_stopped:
+            self.plant.hold()
+
+    def stop_plant(self) -> None:
+        """However the run ends: the plant stops what it moves (once; later calls do nothing)."""
+        if self.plant is not None and not self.plant_stopped:
+            self.plant_stopped = True
+            self.plant.stop()
 
     # -- 1. faults due -------------------------------------------------------------------------
     def due(self) -> list:

@@ -8,7 +8,9 @@ ends; a stale Unix socket of a crashed run is removed (a live one belongs to ano
 refused); the `World` (world/process.py) listens, says `ready` to the launcher (a pipe,
 swarm/contracts/startup.py, with each step before), runs its ticks and writes its
 results, which are written even when it is stopped, after a disk-full error or a bug, so
-nothing recorded is lost.
+nothing recorded is lost. A world with a plant (world/plant.py: robots) prepares it before
+it listens (a plant that cannot be used ends the world with its error's exit code before
+any agent is started) and stops it on every way out, first thing after the last tick.
 Exit codes (swarm/contracts/vocabulary.py, `ExitCode`): OK the run completed, 128+signal
 stopped, USAGE cannot listen (the endpoint in use or unusable, or the --foxglove port in
 use) or write the credentials, JOIN_TIMEOUT agents did not join in time, FAILED an
@@ -26,7 +28,7 @@ from swarm.contracts.runtime_sweep import sweep_stale, unix_socket_answers
 from swarm.contracts.startup import Announcer
 from swarm.contracts.stop_signals import StopSignals
 from swarm.contracts.transport import runtime_dir, socket_path
-from swarm.contracts.vocabulary import ExitCode, signal_exit
+from swarm.contracts.vocabulary import Coded, ExitCode, signal_exit
 from swarm.world.hub_auth import forget_run, run_auth
 from swarm.world.live_view import LiveViewError, open_hint, start_live_view
 from swarm.world.memory import limit_arenas
@@ -104,6 +106,11 @@ def _run_world(cfg: WorldConfig, stops: StopSignals, tell: Announcer) -> int:
                 world.discard_recording()
                 print(f"swarm world: {e}", file=sys.stderr)
                 return ExitCode.USAGE
+        if cfg.plant is not None:
+            tell.say("robots")
+            code = _prepare_plant(world, cfg, stops)
+            if code is not None:
+                return code
         tell.say("listening")
         try:
             # a stop comes once the session is the world's, to be closed (the hub opens in
@@ -125,10 +132,45 @@ def _run_world(cfg: WorldConfig, stops: StopSignals, tell: Announcer) -> int:
             stops.ignore()
             world._close()
     finally:
+        stops.ignore()  # the world ends: nothing may interrupt stopping the robots
+        _stop_plant(world)  # (done already unless the run never got to its ticks)
         if live is not None:
             live.stop()
         if sock is not None:
             sock.unlink(missing_ok=True)
+
+
+def _prepare_plant(world: World, cfg: WorldConfig, stops: StopSignals) -> int | None:
+    """Get the plant ready before the world listens (robots: reached, their command types
+    known, their first poses in); None when it is, else the world's exit code, said in one
+    line. Stopped meanwhile (SIGINT/SIGTERM, `Stop`): 128 + signal."""
+    assert cfg.plant is not None
+    try:
+        cfg.plant.prepare()
+        return None
+    except Stop as s:
+        code = signal_exit(s.signum)
+    except Coded as e:  # the plant's own words: the robot and the topic
+        print(f"swarm world: {e}", file=sys.stderr)
+        code = e.exit_code
+    except Exception:
+        traceback.print_exc()
+        print("swarm world: internal error while preparing the robots", file=sys.stderr)
+        code = ExitCode.FAILED
+    stops.ignore()  # the world ends here: nothing may interrupt stopping the robots
+    _stop_plant(world)
+    world.discard_recording()
+    return code
+
+
+def _stop_plant(world: World) -> None:
+    """Stop the plant (once: later calls do nothing); its own error is said, not raised, so
+    that the results are still written and the session closed."""
+    try:
+        world.engine.stop_plant()
+    except Exception:
+        traceback.print_exc()
+        print("swarm world: internal error while stopping the robots", file=sys.stderr)
 
 
 def _serve(world: World, cfg: WorldConfig, live, stops: StopSignals, tell: Announcer) -> int:
@@ -156,8 +198,10 @@ def _serve(world: World, cfg: WorldConfig, live, stops: StopSignals, tell: Annou
         print("swarm world: internal error; results so far are written", file=sys.stderr)
         world.stopped_by = -1
         code = ExitCode.FAILED
-    # Results are written even when stopped: nothing recorded is lost.
+    # The robots stop first (a Stop while stopping them is ignored from here on), then the
+    # results are written, even when stopped: nothing recorded is lost.
     stops.ignore()
+    _stop_plant(world)
     try:
         world.finish()
     except RecordingError as e:

@@ -58,8 +58,16 @@ class World:
             except OSError as e:
                 raise RecordingError(f"cannot create {cfg.out_dir}: {e.strerror or e}") from None
             recording = cfg.out_dir / RECORDING_FILE
+        if cfg.plant is not None and cfg.clock != "realtime":
+            raise ValueError(f"a world with a plant (robots) runs the realtime clock only, not {cfg.clock}")
         self.engine = Engine(
-            s, self.ticks, joined=False, wall_clock=time.time, on_event=self._announce, recording=recording
+            s,
+            self.ticks,
+            joined=False,
+            wall_clock=time.time,
+            on_event=self._announce,
+            recording=recording,
+            plant=cfg.plant,
         )
         self.rec = DeferredRecorder(self.engine.rec)  # written while the agents think (publish_frames)
         self.engine.rec = self.rec
@@ -262,6 +270,7 @@ class World:
         }
         st, clock = self.state, self.clock
         wall = clock.wall_ticks
+        plant = {} if self.cfg.plant is None else {"robots": self.cfg.plant.figures()}
         result = self.engine.result(
             {
                 "engine": "up",
@@ -279,6 +288,7 @@ class World:
                 "ticks_per_second": (c.tick / wall) if wall else None,
                 "deadline_restarts": clock.restarts,
                 **clock.reproducibility(),
+                **plant,
             },
             agent_extra,
         )

@@ -19,6 +19,7 @@ from swarm.contracts.transport import HubAuth
 from swarm.contracts.vocabulary import EventKind
 from swarm.world.core import WorldCore
 from swarm.world.engine import Engine
+from swarm.world.plant import Plant
 from swarm.world.roster import AgentBook
 
 MAX_REASONS = 20  # reasons kept for `not_reproducible`
@@ -38,6 +39,7 @@ class WorldConfig:
     progress: bool = True
     auth: HubAuth | None = None  # who may connect and do what (None: an open hub)
     foxglove: tuple[str, int] | None = None  # (host, port) to serve the live view on (world/live_view.py)
+    plant: Plant | None = None  # what moves the agents instead of the kinematics (world/plant.py); realtime only
 
 
 @dataclass
