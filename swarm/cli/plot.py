@@ -13,7 +13,7 @@ import typer
 
 from swarm.cli.errors import fail
 from swarm.cli.output import say_plots
-from swarm.contracts.vocabulary import ExitCode
+from swarm.contracts.vocabulary import Coded, ExitCode
 
 RunDirArg = Annotated[Path, typer.Argument(help="a run directory written by swarm sim / swarm up")]
 FORMAT_HELP = "figure format: png, pdf or svg; repeat it or give a comma list (-f png,pdf)"
@@ -116,9 +116,18 @@ def export(
             "tick (columns: docs/reference/outputs.md#csv)",
         ),
     ] = False,
+    ros2: Annotated[
+        bool,
+        typer.Option(
+            "--ros2",
+            help="also write ros2/ (replacing one there): a rosbag2 (MCAP, ROS 2 types) with per agent "
+            "/agent_<id>/pose (PoseStamped), /agent_<id>/odom (Odometry) and /agent_<id>/cmd_vel (Twist), "
+            "for ros2 bag and Foxglove; needs rosbags (the ros2 extra)",
+        ),
+    ] = False,
 ) -> None:
     """Rebuild trajectory.npz and summary.json of a run from its recording.mcap; with --csv,
-    write its trajectory as one CSV per agent.
+    write its trajectory as one CSV per agent; with --ros2, as a rosbag2 with ROS 2 types.
 
     Results already written are kept. For a run whose world was killed: everything that reached the disk (all but the last
     second at most) becomes a valid run directory; the summary says "complete": false.
@@ -128,19 +137,43 @@ def export(
     from swarm.offline.results import needs_export  # lazy: numpy and the recording (~0.14 s), not for `swarm --help`
 
     _run_dir(run_dir)
+    if ros2:
+        check_rosbags()
     recover = needs_export(run_dir)
     if not recover:
         if (run_dir / "recording.mcap").is_file():
             typer.echo(f"{run_dir}: trajectory.npz and summary.json are already there; nothing to recover")
-        elif not csv:
+        elif not (csv or ros2):
             raise fail(f"{run_dir}: no recording.mcap to export from", ExitCode.FAILED)
-    if not (recover or csv or plots):
+    if not (recover or csv or ros2 or plots):
         return
     results = open_results(run_dir)
     if csv:
         write_csvs(results)
+    if ros2:
+        write_ros2_bag(results)
     if plots:
         say_plots(results.plot())
+
+
+def check_rosbags() -> None:
+    """Exit 2 with how to install it when rosbags (the `ros2` extra) is missing."""
+    # lazy: numpy (~0.1 s), which the export loads anyway but `swarm --help` must not pay
+    from swarm.offline.ros2_export import INSTALL_HINT, rosbags_available
+
+    if not rosbags_available():
+        raise fail(INSTALL_HINT, ExitCode.USAGE)
+
+
+def write_ros2_bag(results) -> None:
+    """ros2/ (a rosbag2 with ROS 2 types) from `results` (a read failure: exit 1)."""
+    from swarm.offline.ros2_export import write_ros2  # lazy: numpy (~0.1 s), not for `swarm --help`
+
+    try:
+        bag = write_ros2(results.run_dir, results.arrays, results.summary)
+    except Coded as e:
+        raise fail(str(e), e.exit_code) from None
+    typer.echo(bag.line())
 
 
 def register(app: typer.Typer) -> None:
