@@ -1,0 +1,444 @@
+"""The robots' plant (world/plant.py `Plant`): a world whose physics is ROS 2 robots reached
+through rmw_zenoh, `swarm up SCENARIO --robots FILE` / `swarm world SCENARIO --robots FILE`
+(docs/guides/robots.md).
+
+The agent processes are unchanged: the world builds their frames from the robots' poses and
+sends each agent's turn rate to its robot. Per robot of the robots file (swarm/robots/config.py):
+
+- poses: nav_msgs/Odometry (`pose = "odom"`: the odom frame starts where the agent starts in
+  the scenario, so world pose = start pose composed with the odometry pose) or
+  geometry_msgs/PoseStamped (`pose = "mocap"`: already in the world frame);
+- commands: Twist or TwistStamped (`cmd_type`; "auto": the type the robot's own subscription
+  token announces) with linear.x = the agent's constant speed saturated at max_linear and
+  angular.z = its turn rate saturated at max_angular.
+
+Safety: a robot gets a zero twist when its agent is gone (not when it coasts: that is straight
+on at its speed, as on_dropout = "coast" says), when its latest pose is older than
+`[ros2] stale_after` (a `stale` event, `fresh` when poses come again), while the world's clock
+holds (a pause, a scripted fault) and at the end, however the world ends (`stop`). A world
+killed with SIGKILL sends nothing: the robot side must stop a robot whose commands stop
+(docs/guides/robots.md). Pose ages (since each pose was received, in the run's seconds: wall
+seconds times the time scale) are measured at every tick: their maximum and median per agent
+are in summary.json's `robots` section.
+
+Everything that talks to the robots goes through swarm.ros2's `Ros2Node`; the decisions
+(`odom_to_world`, `twist_for`, `cmd_type_from`, `PoseAges`) are pure functions and classes.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from swarm.contracts.orbits import wrap
+from swarm.contracts.scenario import Scenario
+from swarm.contracts.transport import client_config
+from swarm.contracts.vocabulary import EventKind
+from swarm.robots.config import RobotsError, RobotsFile, RobotSpec
+from swarm.ros2 import cdr
+from swarm.ros2.keys import EntityInfo
+from swarm.ros2.types import ODOMETRY, POSE_STAMPED, TWIST, TWIST_STAMPED, RosType
+from swarm.world.core import WorldCore
+from swarm.world.plant import EventSink
+
+NODE_NAME = "swarm_world"  # our node, in the root namespace ("ros2 node list" shows /swarm_world)
+CMD_WAIT = 5.0  # s to wait for a robot's subscription token (cmd_type = "auto")
+POSE_WAIT = 10.0  # s to wait for every robot's first pose
+DISCOVERY_POLL = 0.25  # s between looks at the robots' tokens
+STOP_REPEAT = 3  # zero twists sent to each robot at the end (reliable, but a robot must not miss it)
+STOP_GAP = 0.02  # s between them
+Pose = tuple[float, float, float]  # x (m), y (m), yaw (rad)
+
+
+# -- the pure parts -------------------------------------------------------------------------------
+def odom_to_world(start: Pose, odom: Pose) -> Pose:
+    """A pose in the odom frame of a robot whose odom frame starts at `start` (its start pose in
+    the scenario: the frame's origin and x axis) as a pose in the world frame, yaw in (-pi, pi]."""
+    x0, y0, h0 = start
+    c, s = math.cos(h0), math.sin(h0)
+    return x0 + c * odom[0] - s * odom[1], y0 + s * odom[0] + c * odom[1], float(wrap(h0 + odom[2]))
+
+
+def saturate(value: float, limit: float) -> float:
+    return max(-limit, min(limit, value))
+
+
+def twist_for(speed: float, u: float, max_linear: float, max_angular: float) -> tuple[float, float]:
+    """(linear.x, angular.z) for an agent of constant `speed` turning at `u` (`WorldCore.applied`:
+    NaN when the agent is not in the world, which stops its robot), saturated at the robot's limits."""
+    if not math.isfinite(u):
+        return 0.0, 0.0
+    return saturate(speed, max_linear), saturate(u, max_angular)
+
+
+def label(spec: RobotSpec) -> str:
+    """How errors and events name a robot: "agent 1's robot /tb3_0"."""
+    return f"agent {spec.agent}'s robot {spec.namespace or '/'}"
+
+
+def cmd_type_from(spec: RobotSpec, entities: Sequence[EntityInfo], distro: str, source: str) -> RosType | None:
+    """The command type of `spec`'s robot from the subscription tokens seen on its command topic
+    (`entities`: anyone's; only subscriptions on that topic count): None while there is none;
+    RobotsError (one line naming the robot and the topic) when the robot takes neither Twist nor
+    TwistStamped, both, or the type hash of another ROS distribution than [ros2] distro."""
+    topic = spec.topic(spec.cmd_topic)
+    subs = [e for e in entities if e.kind == "MS" and e.topic == topic]
+    if not subs:
+        return None
+    fits = {e.dds_type for e in subs} & {TWIST.dds, TWIST_STAMPED.dds}
+    if not fits:
+        other = ", ".join(sorted({e.dds_type for e in subs}))
+        raise RobotsError(f"{source}: {label(spec)}: {topic} takes {other}, neither Twist nor TwistStamped")
+    if len(fits) > 1:
+        raise RobotsError(
+            f"{source}: {label(spec)}: {topic} has subscriptions of both Twist and TwistStamped; "
+            'set its cmd_type ("Twist" or "TwistStamped")'
+        )
+    rtype = TWIST if fits == {TWIST.dds} else TWIST_STAMPED
+    ours = rtype.hash_for(distro)
+    theirs = {e.type_hash for e in subs if e.dds_type == rtype.dds}
+    if ours not in theirs:
+        other_distro = "humble" if distro != "humble" else "jazzy"
+        hint = (
+            f'; set [ros2] distro = "{other_distro}"'
+            if rtype.hash_for(other_distro) in theirs
+            else " (another version of the type)"
+        )
+        raise RobotsError(
+            f"{source}: {label(spec)}: {topic} takes {rtype.short} with type hash {sorted(theirs)[0]}, "
+            f'not {ours} as [ros2] distro = "{distro}" writes it{hint}'
+        )
+    return rtype
+
+
+@dataclass
+class PoseAges:
+    """The age of a robot's latest pose at each tick (s), and its stale spells."""
+
+    ages: list[float] = field(default_factory=list)
+    stale: bool = False
+    stale_ticks: int = 0
+    stale_spells: int = 0
+
+    def tick(self, age: float, stale_after: float) -> str | None:
+        """Note this tick's age; EventKind.STALE when the pose has just gone stale (older than
+        `stale_after`), EventKind.FRESH when it has just come back, else None."""
+        self.ages.append(age)
+        was, self.stale = self.stale, age > stale_after
+        if self.stale:
+            self.stale_ticks += 1
+        if self.stale and not was:
+            self.stale_spells += 1
+            return EventKind.STALE
+        if was and not self.stale:
+            return EventKind.FRESH
+        return None
+
+    def figures(self) -> dict[str, Any]:
+        """max and median age (s; None before any tick or pose), ticks stale, stale spells."""
+        seen = [a for a in self.ages if math.isfinite(a)]
+        return {
+            "pose_age_max": max(seen) if seen else None,
+            "pose_age_p50": float(np.median(seen)) if seen else None,
+            "ticks_without_pose": len(self.ages) - len(seen),
+            "stale_ticks": self.stale_ticks,
+            "stale_spells": self.stale_spells,
+        }
+
+
+# -- what the plant asks of swarm.ros2 (Ros2Node; tests give it a fake) ---------------------------
+class Publisher(Protocol):
+    def put(self, payload: bytes) -> None: ...
+
+
+class Node(Protocol):
+    def publisher(self, topic: str, rtype: RosType) -> Any: ...
+
+    def subscriber(self, topic: str, rtype: RosType, on_sample: Callable[[bytes], None]) -> Any: ...
+
+    def remote_entities(
+        self, topic: str | None = None, kind: str | None = None, timeout: float = 1.0
+    ) -> list[EntityInfo]: ...
+
+    def close(self) -> None: ...
+
+
+def open_robots_session(connect: str) -> Any:
+    """A zenoh session in client mode on the robots' router (rmw_zenohd forwards only to clients)."""
+    import zenoh  # lazy: zenoh's native library, for a world that drives robots only
+
+    return zenoh.open(client_config(connect))
+
+
+def ros2_node(session: Any, robots: RobotsFile) -> Node:
+    from swarm.ros2.node import Ros2Node  # lazy: node.py imports zenoh; the pure parts above do not need it
+
+    return Ros2Node(session, NODE_NAME, domain=robots.ros2.domain, distro=robots.ros2.distro)
+
+
+class Robot:
+    """One robot as the plant sees it: its spec, start pose, command type and publisher, and its
+    latest pose (written by the subscription's callback, in zenoh's thread)."""
+
+    def __init__(self, spec: RobotSpec, start: Pose, source: str):
+        self.spec = spec
+        self.start = start
+        self.source = source
+        self.cmd_type: RosType | None = (
+            None if spec.cmd_type == "auto" else (TWIST if spec.cmd_type == "Twist" else TWIST_STAMPED)
+        )
+        self.pose_type = ODOMETRY if spec.pose == "odom" else POSE_STAMPED
+        self.cmd_topic = spec.topic(spec.cmd_topic)
+        self.pose_topic = spec.topic(spec.pose_topic_name)
+        self.publisher: Any = None
+        self.latest: tuple[float, Pose] | None = None  # (monotonic s received, world pose)
+        self.poses = 0  # received
+        self.malformed = 0  # payloads that were no pose of the type
+        self.twists = 0  # sent
+        self.ages = PoseAges()
+        self._lock = threading.Lock()
+
+    def world_pose(self, pose: cdr.Pose2D) -> Pose:
+        if self.spec.pose == "odom":
+            return odom_to_world(self.start, (pose.x, pose.y, pose.yaw))
+        return pose.x, pose.y, float(wrap(pose.yaw))
+
+    def on_pose(self, payload: bytes, now: float) -> None:
+        decode = cdr.decode_odometry if self.spec.pose == "odom" else cdr.decode_pose_stamped
+        try:
+            pose = self.world_pose(decode(payload))
+        except cdr.CdrError:
+            with self._lock:
+                self.malformed += 1
+            return
+        if not all(math.isfinite(v) for v in pose):
+            with self._lock:
+                self.malformed += 1
+            return
+        with self._lock:
+            self.latest = (now, pose)
+            self.poses += 1
+
+    def send(self, vx: float, wz: float) -> None:
+        if self.publisher is None or self.cmd_type is None:
+            return
+        if self.cmd_type == TWIST_STAMPED:
+            payload = cdr.encode_twist_stamped(time.time_ns(), "", vx, wz)
+        else:
+            payload = cdr.encode_twist(vx, wz)
+        self.publisher.put(payload)
+        self.twists += 1
+
+    def figures(self) -> dict[str, Any]:
+        return {
+            "namespace": self.spec.namespace,
+            "pose": self.spec.pose,
+            "pose_topic": self.pose_topic,
+            "cmd_topic": self.cmd_topic,
+            "cmd_type": self.cmd_type.short if self.cmd_type is not None else None,
+            "poses": self.poses,
+            "malformed_poses": self.malformed,
+            "twists": self.twists,
+            **self.ages.figures(),
+        }
+
+
+class RobotPlant:
+    """The robots of `robots` as the world's plant for `scenario` (whose agents each have a robot:
+    swarm/robots/config.py `check_against`). `source` names the robots file in errors.
+    `open_session(connect)` and `make_node(session)` reach the robots (tests pass their own);
+    `clock` is monotonic seconds; `time_scale` the run's (ages are in the run's seconds)."""
+
+    def __init__(
+        self,
+        robots: RobotsFile,
+        scenario: Scenario,
+        source: str = "<robots>",
+        *,
+        time_scale: float = 1.0,
+        open_session: Callable[[str], Any] = open_robots_session,
+        make_node: Callable[[Any], Node] | None = None,
+        clock: Callable[[], float] = time.monotonic,
+        cmd_wait: float = CMD_WAIT,
+        pose_wait: float = POSE_WAIT,
+        say: Callable[[str], None] | None = None,
+    ):
+        self.file = robots
+        self.source = source
+        self.stale_after = robots.ros2.stale_after
+        self.time_scale = time_scale
+        self.open_session = open_session
+        self.make_node = make_node or (lambda session: ros2_node(session, robots))
+        self.clock = clock
+        self.cmd_wait, self.pose_wait = cmd_wait, pose_wait
+        self.say = say or (lambda line: None)
+        self.robots: dict[int, Robot] = {}
+        for a in scenario.agents:
+            spec = robots.robot(a.id)
+            if spec is not None:
+                self.robots[a.id] = Robot(spec, (a.x, a.y, a.heading), source)
+        self.session: Any = None
+        self.node: Node | None = None
+        self.event: EventSink | None = None
+        self.stopped = False
+
+    # -- prepare: before the world listens ---------------------------------------------------------
+    def prepare(self) -> None:
+        """Reach the robots' router, learn each robot's command type, declare our publishers and
+        subscriptions, stop every robot, wait for every robot's first pose; RobotsError (one line:
+        the robot, the topic) when something is missing."""
+        connect = self.file.ros2.connect
+        try:
+            self.session = self.open_session(connect)
+        except Exception as e:  # zenoh.ZError: nothing answers there
+            raise RobotsError(
+                f"{self.source}: cannot reach the robots' zenoh router at {connect} ([ros2] connect): {e}"
+            ) from None
+        self.node = self.make_node(self.session)
+        self._learn_cmd_types()
+        node = self.node
+        for r in self.robots.values():
+            assert r.cmd_type is not None
+            r.publisher = node.publisher(r.cmd_topic, r.cmd_type)
+            node.subscriber(r.pose_topic, r.pose_type, self._receiver(r))
+        for r in self.robots.values():
+            r.send(0.0, 0.0)  # standing still until the first tick
+        self._wait_for_poses()
+        for aid, r in self.robots.items():
+            assert r.cmd_type is not None
+            self.say(
+                f"robot {aid}: {r.spec.namespace or '/'} {r.spec.pose} on {r.pose_topic} -> "
+                f"{r.cmd_topic} {r.cmd_type.short}"
+            )
+
+    def _receiver(self, r: Robot) -> Callable[[bytes], None]:
+        """The subscription's callback for robot `r` (zenoh's thread): its pose, stamped now."""
+        return lambda payload: r.on_pose(payload, self.clock())
+
+    def _learn_cmd_types(self) -> None:
+        """cmd_type = "auto": the type of the robot's own subscription on its command topic."""
+        assert self.node is not None
+        waiting = [r for r in self.robots.values() if r.cmd_type is None]
+        t_end = self.clock() + self.cmd_wait
+        while waiting:
+            seen = self.node.remote_entities(kind="MS", timeout=min(1.0, max(self.cmd_wait, 0.05)))
+            for r in waiting:
+                r.cmd_type = cmd_type_from(r.spec, seen, self.file.ros2.distro, self.source)
+            waiting = [r for r in waiting if r.cmd_type is None]
+            if waiting and self.clock() >= t_end:
+                r = waiting[0]
+                raise RobotsError(
+                    f"{self.source}: {label(r.spec)}: nobody subscribes to {r.cmd_topic} (waited {self.cmd_wait:g} s "
+                    f"for its token to learn its command type): is the robot up, in namespace "
+                    f"{r.spec.namespace or '/'}, on ROS_DOMAIN_ID {self.file.ros2.domain}, behind "
+                    f"{self.file.ros2.connect}? (or set its cmd_type)"
+                )
+            if waiting:
+                time.sleep(DISCOVERY_POLL)
+
+    def _wait_for_poses(self) -> None:
+        t_end = self.clock() + self.pose_wait
+        while True:
+            missing = [r for r in self.robots.values() if r.latest is None]
+            if not missing:
+                return
+            if self.clock() >= t_end:
+                r = missing[0]
+                raise RobotsError(
+                    f"{self.source}: {label(r.spec)}: no {r.pose_type.short} on {r.pose_topic} within "
+                    f"{self.pose_wait:g} s" + (f" ({r.malformed} malformed)" if r.malformed else "")
+                )
+            time.sleep(0.02)
+
+    # -- the run ------------------------------------------------------------------------------------
+    def start(self, core: WorldCore, event: EventSink) -> None:
+        """Before tick 0: the poses of tick 0 are the robots' latest."""
+        self.event = event
+        self._read_poses(core)
+
+    def step(self, core: WorldCore, u: np.ndarray) -> None:
+        """This tick's commands out (zero for an agent gone or a stale robot), then the latest
+        poses in."""
+        now = self.clock()
+        for aid, r in self.robots.items():
+            k = core.index.get(aid)
+            if k is None:
+                continue
+            latest = r.latest
+            age = (now - latest[0]) * self.time_scale if latest is not None else math.inf
+            change = r.ages.tick(age, self.stale_after)
+            if change is not None and self.event is not None:
+                self._announce(change, aid, r, age)
+            if r.ages.stale:
+                r.send(0.0, 0.0)
+            else:
+                r.send(*twist_for(float(core.speed[k]), float(u[k]), r.spec.max_linear, r.spec.max_angular))
+        self._read_poses(core)
+
+    def _announce(self, change: str, aid: int, r: Robot, age: float) -> None:
+        assert self.event is not None
+        if change == EventKind.STALE:
+            self.event(
+                EventKind.STALE,
+                aid,
+                f"no pose on {r.pose_topic} for {age:.2f} s (stale_after {self.stale_after:g} s): zero twist",
+                age=age if math.isfinite(age) else None,
+                topic=r.pose_topic,
+            )
+        else:
+            self.event(
+                EventKind.FRESH, aid, f"poses on {r.pose_topic} again ({age:.2f} s old)", age=age, topic=r.pose_topic
+            )
+
+    def _read_poses(self, core: WorldCore) -> None:
+        x, y, g = core.x.copy(), core.y.copy(), core.heading.copy()
+        for aid, r in self.robots.items():
+            k = core.index.get(aid)
+            latest = r.latest
+            if k is not None and latest is not None:
+                x[k], y[k], g[k] = latest[1]
+        core.x, core.y, core.heading = x, y, g
+
+    def hold(self) -> None:
+        """The clock holds: every robot stands still until the next step."""
+        for r in self.robots.values():
+            self._quietly(r.send, 0.0, 0.0)
+
+    def stop(self) -> None:
+        """Every robot stopped (zero twists, STOP_REPEAT times), then our node and session closed;
+        whatever state prepare() got to. A second call does nothing."""
+        if self.stopped:
+            return
+        self.stopped = True
+        for i in range(STOP_REPEAT):
+            for r in self.robots.values():
+                self._quietly(r.send, 0.0, 0.0)
+            if i < STOP_REPEAT - 1 and any(r.publisher is not None for r in self.robots.values()):
+                time.sleep(STOP_GAP)
+        if self.node is not None:
+            self._quietly(self.node.close)
+        if self.session is not None:
+            self._quietly(self.session.close)
+
+    @staticmethod
+    def _quietly(fn: Callable[..., Any], *args: Any) -> None:
+        try:
+            fn(*args)
+        except Exception:  # one robot's (or a closed session's) error must not keep the others going
+            pass
+
+    def figures(self) -> dict[str, Any]:
+        """summary.json's `robots`: the router, stale_after, and per agent its robot's figures."""
+        return {
+            "connect": self.file.ros2.connect,
+            "domain": self.file.ros2.domain,
+            "distro": self.file.ros2.distro,
+            "stale_after": self.stale_after,
+            "agents": {str(aid): r.figures() for aid, r in self.robots.items()},
+        }
