@@ -36,6 +36,7 @@ from swarm.api.scenario import as_scenario, source_of, to_toml, with_duration
 from swarm.contracts.errors import UsageError
 from swarm.contracts.vocabulary import ExitCode, signal_exit
 from swarm.offline.results import Recovery, claim_out_dir, recover
+from swarm.robots.config import check_against, load_robots
 from swarm.runtime.launcher import Launcher, UpConfig
 from swarm.world.stream import RecordingError
 
@@ -95,6 +96,18 @@ def check_clock(clock: str | None) -> None:
         raise UsageError(f"clock must be 'lockstep' or 'realtime', not {clock!r}")
 
 
+def check_robots(robots: str | Path, s, clock: str | None) -> list[str]:
+    """A robots file for scenario `s`: RobotsError (exit 2) when it cannot be read or does not fit
+    the scenario, UsageError with the lockstep clock (robots run the realtime clock only); the
+    warnings of the file against the scenario (swarm/robots/config.py `check_against`)."""
+    if clock == "lockstep":
+        raise UsageError(
+            "robots run the realtime clock only (robots do not wait for a lockstep tick): "
+            "clock 'lockstep' cannot drive them"
+        )
+    return check_against(load_robots(robots), s, str(robots))
+
+
 class Launch:
     """A run of `scenario` checked and ready (nothing started yet): `run_id`, `out`,
     `endpoint` (where the world listens), `dial` (where its clients connect), `scenario`;
@@ -113,10 +126,15 @@ class Launch:
         foxglove: tuple[str, int] | None = None,
         world_grace: float = 10.0,
         say: Callable[[str], None] | None = None,
+        robots: str | Path | None = None,
     ):
         s = as_scenario(scenario)
         with_duration(s, duration, source_of(scenario))
         check_clock(clock)
+        self.warnings: list[str] = []  # the robots file's, against the scenario (said once, here)
+        if robots is not None:
+            self.warnings = check_robots(robots, s, clock)
+            clock = "realtime"
         self.scenario = s
         self.run_id = new_run_id(scenario, s)
         self.out = Path(out) if out is not None else Path("runs") / self.run_id
@@ -136,9 +154,12 @@ class Launch:
             time_scale,
             world_grace=world_grace,
             foxglove=foxglove,
+            robots=Path(robots) if robots is not None else None,
         )
         self.launcher = Launcher(cfg) if say is None else Launcher(cfg, say)
         self.endpoint, self.dial = self.launcher.endpoint, self.launcher.dial
+        for w in self.warnings:
+            self.launcher.say(f"warning: robots: {w}")
 
     def stop(self, signum: int = signal.SIGTERM) -> None:
         """Stop the run as signal `signum` does (exit code 128 + signum, results written).
@@ -201,7 +222,9 @@ def launch(
     process, until it ends; its `UpOutcome`. Options (`Launch`): out (default
     runs/<run id>; one holding results is refused unless force=True), force, duration (s),
     clock ("lockstep" | "realtime"), time_scale, listen (endpoint), foxglove ((host, port):
-    serve the live view), world_grace (s), say (the launcher's live lines; default: printed).
+    serve the live view), world_grace (s), say (the launcher's live lines; default: printed),
+    robots (a robots file: the world drives ROS 2 robots, docs/guides/robots.md; the realtime
+    clock, whatever the scenario says; RobotsError for a file that does not fit the scenario).
     A scenario that is not a file is written to a temporary one: a law of its own is found
     on $SWARM_LAW_PATH only (pass its file to have its directory searched)."""
     run = Launch(scenario, out, **options)

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import os
+import sys
+from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
@@ -39,6 +41,16 @@ from swarm.contracts.lifeline import LAUNCHER_PID_ENV
 from swarm.contracts.transport import default_endpoint
 from swarm.contracts.vocabulary import EventKind, ExitCode
 from swarm.contracts.wire import MAX_AGENT_ID, WireError, check_run_id
+
+ROBOTS_LOCKSTEP = "--robots runs the realtime clock only (robots do not wait for a lockstep): drop --clock lockstep"
+RobotsOpt = Annotated[
+    Optional[Path],
+    typer.Option(
+        "--robots",
+        help="drive ROS 2 robots through rmw_zenoh instead of simulating the agents: the robots file "
+        "(which robot each agent drives; docs/guides/robots.md); realtime clock only",
+    ),
+]
 
 
 def sim(
@@ -125,11 +137,13 @@ def world(
     foxglove: FoxgloveOpt = False,
     foxglove_port: FoxglovePortOpt = 8765,
     foxglove_host: FoxgloveHostOpt = "127.0.0.1",
+    robots: RobotsOpt = None,
 ) -> None:
     """Run the world of a scenario by hand: the hub, physics, sensors and the recording.
 
     Agents join with `swarm agent --id N --connect ENDPOINT` from any terminal or machine.
-    With --out, the end prints the summary table `swarm up` prints.
+    With --out, the end prints the summary table `swarm up` prints. With --robots FILE the
+    agents drive ROS 2 robots (their poses make the frames, their commands go to the robots).
 
     Example: swarm world scenarios/case2.toml --listen tcp/0.0.0.0:7447 --out runs/case2
     """
@@ -148,8 +162,12 @@ def world(
         check_run_id(run)
     except WireError as e:
         raise fail(str(e), ExitCode.USAGE) from None
-    clock = clock or s.run.clock
     check_clock(clock)
+    launched = bool(os.environ.get(LAUNCHER_PID_ENV))  # started by `swarm up`, which said what is to say
+    plant = None
+    if robots is not None:
+        s, plant = _robot_world(s, robots, clock, time_scale, launched)
+    clock = clock or s.run.clock
     listen = listen or default_endpoint(run)
     if foxglove:
         if out is None:
@@ -171,18 +189,47 @@ def world(
             duration,
             join_timeout,
             foxglove=(foxglove_host, foxglove_port) if foxglove else None,
+            plant=plant,
         )
     )
     summary = out / "summary.json" if out is not None else None
     # the table `swarm up` prints; not when the launcher runs us (it prints its own, and reads a
     # world's failure from the last line of its log)
-    launched = bool(os.environ.get(LAUNCHER_PID_ENV))
     ended = (ExitCode.OK, ExitCode.INTERRUPTED, ExitCode.TERMINATED)
     if summary is not None and not launched and code in (*ended, ExitCode.DESERTED) and summary.exists():
         print_summary(json.loads(summary.read_text()), out)  # the table `swarm up` prints
     if plots and out is not None and code in ended and (out / "trajectory.npz").exists():
         render_run_plots(out)
     raise typer.Exit(code)
+
+
+def _robot_world(s, robots: Path, clock: str | None, time_scale: float, launched: bool):
+    """The scenario as the robot world runs it (realtime, no agent added) and its plant
+    (swarm/robots/plant.py); one line and exit 2 for a robots file that does not fit the
+    scenario or an explicit lockstep clock. The warnings of the robots file are printed here
+    unless `swarm up` started us (it printed them)."""
+    # lazy: the robots' plant (swarm.ros2, the robots file model), for --robots only
+    from swarm.robots.config import RobotsError, check_against, load_robots
+    from swarm.robots.plant import RobotPlant, robot_scenario
+
+    if clock == "lockstep":
+        raise fail(f"swarm world: {ROBOTS_LOCKSTEP}", ExitCode.USAGE)
+    try:
+        file = load_robots(robots)
+        warnings = check_against(file, s, str(robots))
+    except RobotsError as e:
+        raise fail(f"swarm world: {e}", e.exit_code) from None
+    if not launched:
+        if s.run.clock != "realtime" and clock is None:
+            typer.echo(f"robots: the realtime clock (the scenario says {s.run.clock})", err=True)
+        for w in warnings:
+            typer.echo(f"warning: robots: {w}", err=True)
+
+    def say(line: str) -> None:
+        print(f"[world] {line}", file=sys.stderr, flush=True)
+
+    s = robot_scenario(s)
+    return s, RobotPlant(file, s, str(robots), time_scale=time_scale, say=say)
 
 
 def agent(

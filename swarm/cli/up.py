@@ -13,6 +13,7 @@ from typing import Annotated, Any, Optional
 
 import typer
 
+from swarm.cli.errors import fail
 from swarm.cli.options import (
     ClockOpt,
     DurationOpt,
@@ -30,7 +31,9 @@ from swarm.cli.options import (
     read_scenario,
 )
 from swarm.cli.output import print_summary, render_run_plots
+from swarm.cli.run import ROBOTS_LOCKSTEP, RobotsOpt
 from swarm.contracts import credentials
+from swarm.contracts.vocabulary import ExitCode
 from swarm.runtime.progress import Paused, ProgressLine
 from swarm.world.live_view import open_hint
 
@@ -65,20 +68,27 @@ def up(
     foxglove: FoxgloveOpt = False,
     foxglove_port: FoxglovePortOpt = 8765,
     foxglove_host: FoxgloveHostOpt = "127.0.0.1",
+    robots: RobotsOpt = None,
 ) -> None:
     """Run a scenario as a distributed system: a world process and one OS process per agent.
 
     Prints the endpoint and run id (so another terminal can attach), live progress, and a
     summary; writes summary.json, trajectory.npz, plots and logs/ into --out. Ctrl-C stops
-    cleanly: results written, no process left behind, exit 130 (143 for SIGTERM).
+    cleanly: results written, no process left behind, exit 130 (143 for SIGTERM). With
+    --robots FILE the agents drive ROS 2 robots (docs/guides/robots.md), on the realtime clock.
 
     Example: swarm up scenarios/case2.toml --out runs/case2
     """
     # lazy: the launcher and the API's run modules (numpy, the scenario model: ~0.17 s), not for `swarm --help`
     from swarm.api.launch import launch
+    from swarm.robots.config import RobotsError
 
     s = read_scenario(scenario)
     check_clock(clock)
+    if robots is not None:
+        if clock == "lockstep":
+            raise fail(f"swarm up: {ROBOTS_LOCKSTEP}", ExitCode.USAGE)
+        clock = "realtime"
     check_duration(s, duration, scenario)
     check_runtime_dir()
     live = (foxglove_host, foxglove_port) if foxglove else None
@@ -100,19 +110,23 @@ def up(
     def progress(p: dict) -> None:  # "paused" from the world's pause/resume events the launcher heard
         line.show({**p, "paused": paused(launched[0].launcher.events) if launched else False})
 
-    o = launch(
-        scenario,
-        out,
-        force=force,
-        duration=duration,
-        clock=clock,
-        time_scale=time_scale,
-        listen=listen,
-        foxglove=live,
-        world_grace=world_grace,
-        progress=progress,
-        on_start=started,
-    )  # SIGINT/TERM: stop
+    try:
+        o = launch(
+            scenario,
+            out,
+            force=force,
+            duration=duration,
+            clock=clock,
+            time_scale=time_scale,
+            listen=listen,
+            foxglove=live,
+            world_grace=world_grace,
+            robots=robots,
+            progress=progress,
+            on_start=started,
+        )  # SIGINT/TERM: stop
+    except RobotsError as e:  # checked before anything starts
+        raise fail(f"swarm up: {e}", e.exit_code) from None
     line.end()
     err: dict[str, Any] = dict(err=True, fg=typer.colors.RED)
     if o.words is not None:

@@ -56,6 +56,16 @@ STOP_GAP = 0.02  # s between them
 Pose = tuple[float, float, float]  # x (m), y (m), yaw (rad)
 
 
+ROBOTS_CLOCK = "realtime"
+
+
+def robot_scenario(scenario: Scenario) -> Scenario:
+    """`scenario` as the robot world runs it: the realtime clock, and no agent added while it
+    runs (`swarm spawn`: every agent needs a robot of the robots file)."""
+    run = scenario.run.model_copy(update={"clock": ROBOTS_CLOCK, "max_added_agents": 0})
+    return scenario.model_copy(update={"run": run})
+
+
 # -- the pure parts -------------------------------------------------------------------------------
 def odom_to_world(start: Pose, odom: Pose) -> Pose:
     """A pose in the odom frame of a robot whose odom frame starts at `start` (its start pose in
@@ -296,9 +306,10 @@ class RobotPlant:
         connect = self.file.ros2.connect
         try:
             self.session = self.open_session(connect)
-        except Exception as e:  # zenoh.ZError: nothing answers there
+        except Exception as e:  # zenoh.ZError: nothing answers there (its text ends with a source path)
+            why = str(e).split(" at /", 1)[0]
             raise RobotsError(
-                f"{self.source}: cannot reach the robots' zenoh router at {connect} ([ros2] connect): {e}"
+                f"{self.source}: cannot reach the robots' zenoh router at {connect} ([ros2] connect): {why}"
             ) from None
         self.node = self.make_node(self.session)
         self._learn_cmd_types()

@@ -70,6 +70,7 @@ class UpConfig:
     join_timeout: float = 60.0
     world_grace: float = 10.0  # s agents wait for a world that stopped answering
     foxglove: tuple[str, int] | None = None  # (host, port): the world serves a live view (--foxglove)
+    robots: Path | None = None  # the robots file: the world drives ROS 2 robots (--robots, realtime only)
 
 
 class Launcher:
@@ -143,6 +144,8 @@ class Launcher:
             args += ["--clock", c.clock]
         if c.foxglove is not None:
             args += ["--foxglove", "--foxglove-host", c.foxglove[0], "--foxglove-port", str(c.foxglove[1])]
+        if c.robots is not None:
+            args += ["--robots", str(c.robots.resolve())]
         # the world says on this pipe what it is doing, and `ready` once it listens (wait_ready)
         r, w = os.pipe()
         try:
