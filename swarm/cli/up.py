@@ -89,6 +89,9 @@ def up(
         if clock == "lockstep":
             raise fail(f"swarm up: {ROBOTS_LOCKSTEP}", ExitCode.USAGE)
         clock = "realtime"
+        from swarm.robots.plant import robot_scenario  # lazy: the robots' plant (swarm.ros2), for --robots only
+
+        s = robot_scenario(s)  # as its world runs it (no agent added: the attach hints say so)
     check_duration(s, duration, scenario)
     check_runtime_dir()
     live = (foxglove_host, foxglove_port) if foxglove else None

@@ -19,7 +19,8 @@ holds (a pause, a scripted fault) and at the end, however the world ends (`stop`
 killed with SIGKILL sends nothing: the robot side must stop a robot whose commands stop
 (docs/guides/robots.md). Pose ages (since each pose was received, in the run's seconds: wall
 seconds times the time scale) are measured at every tick: their maximum and median per agent
-are in summary.json's `robots` section.
+are in summary.json's `robots` section, with the delays from the poses' stamps to their
+reception (which include any offset between the robot's clock and ours).
 
 Everything that talks to the robots goes through swarm.ros2's `Ros2Node`; the decisions
 (`odom_to_world`, `twist_for`, `cmd_type_from`, `PoseAges`) are pure functions and classes.
@@ -211,6 +212,7 @@ class Robot:
         self.poses = 0  # received
         self.malformed = 0  # payloads that were no pose of the type
         self.twists = 0  # sent
+        self.delays: list[float] = []  # s from each pose's stamp to its reception (wall clocks)
         self.ages = PoseAges()
         self._lock = threading.Lock()
 
@@ -222,7 +224,8 @@ class Robot:
     def on_pose(self, payload: bytes, now: float) -> None:
         decode = cdr.decode_odometry if self.spec.pose == "odom" else cdr.decode_pose_stamped
         try:
-            pose = self.world_pose(decode(payload))
+            msg = decode(payload)
+            pose = self.world_pose(msg)
         except cdr.CdrError:
             with self._lock:
                 self.malformed += 1
@@ -234,6 +237,8 @@ class Robot:
         with self._lock:
             self.latest = (now, pose)
             self.poses += 1
+            if msg.stamp_ns > 0:
+                self.delays.append((time.time_ns() - msg.stamp_ns) / 1e9)
 
     def send(self, vx: float, wz: float) -> None:
         if self.publisher is None or self.cmd_type is None:
@@ -256,6 +261,10 @@ class Robot:
             "malformed_poses": self.malformed,
             "twists": self.twists,
             **self.ages.figures(),
+            # from the poses' stamps to their reception: the transport's latency, plus any offset
+            # between the robot's clock and this machine's
+            "pose_delay_max": max(self.delays) if self.delays else None,
+            "pose_delay_p50": float(np.median(self.delays)) if self.delays else None,
         }
 
 
