@@ -4,16 +4,44 @@ zenoh, as `swarm robots sim` runs it."""
 
 from __future__ import annotations
 
+import json
 import math
+import signal
+import socket
 import statistics
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
 
 import pytest
+import zenoh
+from runtime_helpers import SCENARIOS, swarm_cmd, wait_for
 
 from swarm.contracts.orbits import wrap
-from swarm.robots.fleet import Delayed, FleetOptions, PoseNoise, Unicycle, odom_pose, saturate, world_pose
+from swarm.contracts.scenario import load_scenario
+from swarm.contracts.vocabulary import ExitCode
+from swarm.robots.config import parse_robots
+from swarm.robots.fleet import (
+    Delayed,
+    Fleet,
+    FleetError,
+    FleetOptions,
+    PoseNoise,
+    Unicycle,
+    odom_pose,
+    router_config,
+    saturate,
+    world_pose,
+)
+from swarm.ros2 import cdr
+from swarm.ros2.attachment import parse_attachment
+from swarm.ros2.node import Ros2Node
+from swarm.ros2.types import ODOMETRY, POSE_STAMPED, TWIST, TWIST_STAMPED
 from swarm.world.kinematics import step_one
 
 BURGER = (0.22, 2.84)
+TURTLEBOT = SCENARIOS / "turtlebot.toml"
 
 
 def close(a, b, tol=1e-12):
@@ -132,3 +160,263 @@ def test_delayed_items_come_out_in_order_at_their_time():
     none: Delayed[int] = Delayed(0.0)
     none.push(5.0, 1)
     assert none.due(5.0) == [1]
+
+
+# -- the fleet's loop, stepped by hand (no session) ---------------------------------------------------------
+def robots_file(endpoint: str = "tcp/127.0.0.1:7447", **robot) -> dict:
+    """The turtlebot scenario's two robots; `robot` overrides fields of agent 2's."""
+    return {
+        "ros2": {"connect": endpoint},
+        "robots": [{"agent": 1, "namespace": "/tb3_0"}, {"agent": 2, "namespace": "/tb3_1", **robot}],
+    }
+
+
+def test_poses_are_published_their_latency_after_they_were_measured():
+    lines: list[str] = []
+    fleet = Fleet(
+        parse_robots(robots_file()), load_scenario(TURTLEBOT), FleetOptions(latency=0.03, rate=10), lines.append
+    )
+    r = fleet.robots[0]
+    assert fleet.step(0.0) == pytest.approx(0.03)  # measured now, out at 0.03
+    assert r.published == 0 and len(r.poses) == 1
+    fleet.step(0.029)
+    assert r.published == 0
+    assert fleet.step(0.03) == pytest.approx(0.1)  # out; the next measurement at 0.1
+    assert r.published == 1 and len(r.poses) == 0
+    fleet.step(0.25)  # late: one measurement (no burst), the next one at the next multiple of the period
+    assert len(r.poses) == 1 and r.next_pose == pytest.approx(0.3)
+    assert lines == []
+
+
+def test_a_robot_told_to_stop_its_poses_stops_them_and_says_so():
+    lines: list[str] = []
+    options = FleetOptions(rate=10, stop_poses={2: 0.5})
+    fleet = Fleet(parse_robots(robots_file()), load_scenario(TURTLEBOT), options, lines.append)
+    one, two = fleet.robots
+    for k in range(11):
+        fleet.step(k * fleet.period)
+    assert one.published == two.published == 11  # no motion yet: the run has not started
+    two.inbox.append((1.0, 0.0, 0.0))  # a zero twist (the world stopping every robot before its start)
+    one.inbox.append((1.05, 0.1, 0.0))  # the run's first motion command: 0.5 s from then
+    for k in range(11, 21):
+        fleet.step(k * fleet.period)
+    assert one.published == 21 and two.published == 16
+    assert lines == ["robot 2: poses stopped at t=1.600 s (--stop-poses)"]
+    with pytest.raises(FleetError, match="agent 7"):
+        Fleet(parse_robots(robots_file()), load_scenario(TURTLEBOT), FleetOptions(stop_poses={7: 1.0}))
+
+
+def test_commands_move_the_body_and_the_report_says_how_it_was_left():
+    fleet = Fleet(parse_robots(robots_file()), load_scenario(TURTLEBOT), FleetOptions(rate=10, cmd_timeout=5.0))
+    one, two = fleet.robots
+    assert one.describe() == "robot 1: /tb3_0 odom -> cmd_vel Twist"
+    one.inbox.append((0.0, 1.0, 0.0))  # saturated at 0.22
+    fleet.step(0.0)
+    fleet.step(1.0)
+    assert close(odom_pose(one.start, one.body.pose()), (0.22, 0.0, 0.0), 1e-12)
+    one.inbox.append((1.0, 0.0, 0.0))
+    fleet.step(2.0)
+    assert close(odom_pose(one.start, one.body.pose()), (0.22, 0.0, 0.0), 1e-12)
+    assert one.report().endswith("last command linear 0, angular 0; stopped by a zero twist at t=1.000 s")
+    two.inbox.append((2.0, 0.1, 0.0))
+    fleet.step(2.1)
+    assert two.report().endswith("NO zero twist after its last motion command")
+
+
+# -- the fleet over zenoh -----------------------------------------------------------------------------------
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def client(endpoint: str) -> zenoh.Session:
+    cfg = zenoh.Config()
+    cfg.insert_json5("mode", json.dumps("client"))
+    cfg.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    cfg.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(cfg)
+
+
+@contextmanager
+def running_fleet(data: dict, options: FleetOptions) -> Iterator[tuple[Fleet, zenoh.Session]]:
+    """A fleet in a thread of this process, on its own router; (the fleet, a client session to it)."""
+    router = zenoh.open(router_config(data["ros2"]["connect"]))
+    fleet = Fleet(parse_robots(data), load_scenario(TURTLEBOT), options, out=lambda _line: None)
+    fleet.open(router)
+    stop = threading.Event()
+    loop = threading.Thread(target=fleet.run, args=(stop,), daemon=True)
+    loop.start()
+    session = client(data["ros2"]["connect"])
+    try:
+        yield fleet, session
+    finally:
+        session.close()
+        stop.set()
+        loop.join(10)
+        fleet.close()
+        router.close()
+
+
+class Samples:
+    """What a subscriber received, kept for waits and checks."""
+
+    def __init__(self, decode):
+        self.decode, self.items, self.lock = decode, [], threading.Lock()
+
+    def __call__(self, payload: bytes) -> None:
+        with self.lock:
+            self.items.append(self.decode(payload))
+
+    def __len__(self) -> int:
+        with self.lock:
+            return len(self.items)
+
+    def last(self):
+        with self.lock:
+            return self.items[-1]
+
+    def since(self, k: int) -> list:
+        with self.lock:
+            return self.items[k:]
+
+
+def test_the_fleet_speaks_ros2_and_its_robots_follow_their_twists():
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    data = robots_file(endpoint, cmd_type="TwistStamped", pose="mocap")
+    with running_fleet(data, FleetOptions(rate=50)) as (fleet, session), Ros2Node(session, "tester") as node:
+        # the graph: each robot's subscription and publisher, in its namespace, of its types
+        ents = wait_for(lambda: len(node.remote_entities(kind="MS")) == 2 and node.remote_entities(), 10, "the tokens")
+        seen = {(e.kind, e.namespace, e.node, e.topic, e.dds_type) for e in ents if e.kind in ("MP", "MS")}
+        assert seen == {
+            ("MS", "/tb3_0", "sim_robot", "/tb3_0/cmd_vel", TWIST.dds),
+            ("MP", "/tb3_0", "sim_robot", "/tb3_0/odom", ODOMETRY.dds),
+            ("MS", "/tb3_1", "sim_robot", "/tb3_1/cmd_vel", TWIST_STAMPED.dds),
+            ("MP", "/tb3_1", "sim_robot", "/tb3_1/pose", POSE_STAMPED.dds),
+        }
+        assert all(e.qos_text == "::,10:,:,:,," for e in ents if e.kind in ("MP", "MS"))
+        # poses: odometry from the start pose's origin; mocap in the world frame
+        odom, mocap = Samples(cdr.decode_odometry), Samples(cdr.decode_pose_stamped)
+        node.subscriber("/tb3_0/odom", ODOMETRY, odom)
+        node.subscriber("/tb3_1/pose", POSE_STAMPED, mocap)
+        wait_for(lambda: len(odom) and len(mocap), 10, "the first poses")
+        first = odom.last()
+        assert (first.frame_id, first.x, first.y, first.yaw) == ("odom", 0.0, 0.0, 0.0)
+        agent2 = load_scenario(TURTLEBOT).agents[1]
+        p = mocap.last()
+        assert p.frame_id == "world" and close((p.x, p.y, p.yaw), (agent2.x, agent2.y, agent2.heading), 1e-9)
+        # commands: robot 1 drives straight on at its limit, robot 2 stays (a Twist on its
+        # TwistStamped topic is not for it); then a zero twist stops robot 1 where it is
+        cmd1 = node.publisher("/tb3_0/cmd_vel", TWIST)
+        wrong = node.publisher("/tb3_1/cmd_vel", TWIST)
+        cmd2 = node.publisher("/tb3_1/cmd_vel", TWIST_STAMPED)
+
+        def drive_until_moved() -> bool:
+            cmd1.put(cdr.encode_twist(0.5, 0.0))
+            wrong.put(cdr.encode_twist(0.5, 0.0))
+            return odom.last().x > 0.05
+
+        wait_for(drive_until_moved, 10, "robot 1 to move", interval=0.05)
+        p = mocap.last()
+        assert close((p.x, p.y), (agent2.x, agent2.y), 1e-9)
+        cmd1.put(cdr.encode_twist(0.0, 0.0))
+        wait_for(lambda: fleet.robots[0].stopped_at is not None, 10, "robot 1 to take its zero twist")
+        k = len(odom)
+        wait_for(lambda: len(odom) > k + 5, 10, "more poses")
+        after = odom.since(k)
+        assert all(q.x == after[0].x for q in after) and after[0].x > 0.05
+        cmd2.put(cdr.encode_twist_stamped(1, "", 0.1, 0.0))
+        wait_for(lambda: fleet.robots[1].commands == 1, 10, "robot 2's command")
+    one, two = fleet.robots
+    assert one.body.v == 0.0 and one.malformed == 0 and two.commands == 1
+    assert two.last_command == (0.1, 0.0)
+
+
+def test_the_fleet_saturates_what_it_is_told():
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with running_fleet(robots_file(endpoint), FleetOptions(rate=50, cmd_timeout=5.0)) as (fleet, session):
+        with Ros2Node(session, "tester") as node:
+            odom = Samples(cdr.decode_odometry)
+            node.subscriber("/tb3_0/odom", ODOMETRY, odom)
+            cmd = node.publisher("/tb3_0/cmd_vel", TWIST)
+            wait_for(lambda: cmd.has_subscribers and len(odom), 10, "the robot's subscription and odometry")
+            cmd.put(cdr.encode_twist(3.0, -9.0))
+            cmd.put(b"\x00\x01\x00\x00 not a twist")
+            wait_for(lambda: fleet.robots[0].commands == 1 and fleet.robots[0].malformed == 1, 10, "both samples")
+            wait_for(lambda: odom.last().x != 0.0, 10, "robot 1 to move")
+    assert fleet.robots[0].body.twist() == (0.22, -2.84)
+
+
+def test_the_odometry_carries_rmw_zenohs_attachment():
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with running_fleet(robots_file(endpoint), FleetOptions(rate=50)) as (_fleet, session):
+        attachments = Samples(parse_attachment)
+        key = "0/tb3_0/odom/" + ODOMETRY.dds + "/" + ODOMETRY.hash_for("jazzy")
+        sub = session.declare_subscriber(key, lambda s: attachments(s.attachment.to_bytes()))
+        wait_for(lambda: len(attachments) >= 3, 10, "three odometry samples")
+        sub.undeclare()
+        seqs = [a[0] for a in attachments.since(0)]
+        assert seqs == list(range(seqs[0], seqs[0] + len(seqs))) and len({a[2] for a in attachments.since(0)}) == 1
+
+
+# -- `swarm robots sim` ---------------------------------------------------------------------------------------
+def write_robots(path: Path, data: dict) -> Path:
+    lines = ["[ros2]"] + [f"{k} = {json.dumps(v)}" for k, v in data["ros2"].items()]
+    for r in data["robots"]:
+        lines += ["[[robots]]"] + [f"{k} = {json.dumps(v)}" for k, v in r.items()]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_swarm_robots_sim_runs_until_ctrl_c(rt, tmp_path):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    robots = write_robots(tmp_path / "robots.toml", robots_file(endpoint, cmd_type="TwistStamped"))
+    fleet = rt.tracker.spawn(
+        swarm_cmd("robots", "sim", TURTLEBOT, "--robots", robots, "--latency", "0.03", "--pose-noise", "0.01"), "fleet"
+    )
+    wait_for(lambda: fleet.check_running("its banner") or "fleet ready" in fleet.text(), 30, "the fleet to be ready")
+    text = fleet.text()
+    assert "robot 1: /tb3_0 odom -> cmd_vel Twist\n" in text
+    assert "robot 2: /tb3_1 odom -> cmd_vel TwistStamped\n" in text
+    assert f"router on {endpoint}" in text and "latency 0.03 s, noise 0.01 m / 0.05 rad" in text
+    session = client(endpoint)
+    try:
+        with Ros2Node(session, "tester") as node:
+            odom = Samples(cdr.decode_odometry)
+            node.subscriber("/tb3_1/odom", ODOMETRY, odom)
+            wait_for(lambda: len(odom) >= 3, 10, "odometry")
+            assert all(p.frame_id == "odom" for p in odom.since(0))
+            assert any(p.x != 0.0 for p in odom.since(0))  # the noise
+    finally:
+        session.close()
+    fleet.popen.send_signal(signal.SIGINT)
+    assert fleet.wait(30) == ExitCode.INTERRUPTED
+    assert "robot 1: 0 commands (0 malformed)" in fleet.text()
+
+
+def test_swarm_robots_sim_ends_after_its_duration_and_refuses_what_it_cannot_do(rt, tmp_path):
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen()
+    try:
+        taken = f"tcp/127.0.0.1:{busy.getsockname()[1]}"
+        robots = write_robots(tmp_path / "robots.toml", robots_file(taken))
+        refused = rt.tracker.spawn(swarm_cmd("robots", "sim", TURTLEBOT, "--robots", robots), "taken")
+        assert refused.wait(30) == ExitCode.USAGE
+        assert f"cannot listen on {taken}" in refused.text()
+    finally:
+        busy.close()
+    bad = write_robots(tmp_path / "bad.toml", robots_file(cmd_type="Twisty"))
+    wrong = rt.tracker.spawn(swarm_cmd("robots", "sim", TURTLEBOT, "--robots", bad), "bad")
+    assert wrong.wait(30) == ExitCode.USAGE and "cmd_type" in wrong.text()
+    stops = rt.tracker.spawn(swarm_cmd("robots", "sim", TURTLEBOT, "--robots", robots, "--stop-poses", "2"), "stops")
+    assert stops.wait(30) == ExitCode.USAGE and "--stop-poses 2: give AGENT:SECONDS" in stops.text()
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    timed = rt.tracker.spawn(
+        swarm_cmd(
+            "robots", "sim", TURTLEBOT, "--robots", robots, "--listen", endpoint, "--duration", "2", "--time-scale", "4"
+        ),
+        "timed",
+    )
+    assert timed.wait(60) == ExitCode.OK
+    assert f"router on {endpoint}" in timed.text() and "robot 2: 0 commands" in timed.text()

@@ -32,7 +32,7 @@ import typer
 from swarm import __version__
 from swarm.cli.errors import OneLineErrors, map_app
 
-GROUPS = ("up", "run", "offline", "plot", "live", "watch", "control", "access", "host")
+GROUPS = ("up", "run", "offline", "plot", "live", "watch", "control", "access", "host", "robots")
 # command -> the group modules that are enough to run it (several commands in all: a typer app
 # of one command would run it without its name)
 LAZY = {

@@ -19,9 +19,9 @@ kinematics, world/kinematics.py), the command saturated at the robot's max_linea
 max_angular. A command older than `cmd_timeout` stops the robot: what a robot-side watchdog
 does. Poses are measured at `rate` Hz, get Gaussian noise (`pose_noise` m on x and y,
 `yaw_noise` rad on the yaw) and are published `latency` s after they were measured (their
-stamp is the time of measurement). `time_scale` runs the fleet's clock that many times
-faster than the wall's (for `swarm up --time-scale`): every duration here (rate, latency,
-command timeout, stamps) is in the fleet's time.
+stamp is the wall-clock time of measurement, as a robot's is). `time_scale` runs the fleet's
+clock that many times faster than the wall's (for `swarm up --time-scale`): the rate, the
+latency and the command timeout are in the fleet's time, the stamps stay wall-clock.
 
 The pure parts (`Unicycle`, `Delayed`, `PoseNoise`, `odom_pose`) take times as arguments;
 `Fleet` adds the clock and the protocol.
@@ -29,14 +29,27 @@ The pure parts (`Unicycle`, `Delayed`, `PoseNoise`, `odom_pose`) take times as a
 
 from __future__ import annotations
 
+import json
 import math
 import random
+import signal
+import threading
+import time
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Generic, TypeVar
 
+import zenoh
+
 from swarm.contracts.orbits import wrap
+from swarm.contracts.scenario import Scenario
+from swarm.contracts.transport import ROUTER_QUEUE
+from swarm.contracts.vocabulary import Coded, ExitCode, signal_exit
+from swarm.robots.config import RobotsFile, RobotSpec
+from swarm.ros2 import cdr
+from swarm.ros2.node import Ros2Node, Ros2Publisher, Ros2Subscriber
+from swarm.ros2.types import ODOMETRY, POSE_STAMPED, TWIST, TWIST_STAMPED
 from swarm.world.kinematics import step_one
 
 DEFAULT_RATE = 30.0  # Hz: the TurtleBot3's odometry rate is about that
@@ -59,7 +72,9 @@ class FleetOptions:
     cmd_timeout: float = DEFAULT_CMD_TIMEOUT  # s: an older command stops the robot
     time_scale: float = 1.0  # fleet seconds per wall second
     seed: int = 0
-    stop_poses: Mapping[int, float] = field(default_factory=dict)  # agent -> fleet s it stops publishing poses
+    # agent -> fleet s after the fleet's first motion command (the run's start) when that robot
+    # stops publishing its poses (to rehearse stale poses)
+    stop_poses: Mapping[int, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         for name in ("latency", "pose_noise", "cmd_timeout"):
@@ -183,3 +198,251 @@ class Delayed(Generic[T]):
 
     def __len__(self) -> int:
         return len(self._queue)
+
+
+# -- the fleet over zenoh ------------------------------------------------------------------------------
+class FleetError(Coded):
+    """The fleet cannot start (its router cannot listen, a bad option); exit 2."""
+
+    exit_code = ExitCode.USAGE
+
+
+def router_config(listen: str) -> zenoh.Config:
+    """A zenoh router listening on `listen`, the stand-in for the robots' rmw_zenohd."""
+    settings: dict[str, object] = {
+        "mode": "router",
+        "listen/endpoints": [listen],
+        "scouting/multicast/enabled": False,
+        "transport/shared_memory/enabled": False,
+        **ROUTER_QUEUE,
+    }
+    cfg = zenoh.Config()
+    for key, value in settings.items():
+        cfg.insert_json5(key, json.dumps(value))
+    return cfg
+
+
+@dataclass
+class SimRobot:
+    """One robot of the fleet: its body, its node, and what it saw."""
+
+    spec: RobotSpec
+    start: tuple[float, float, float]  # the agent's start pose in the scenario (world frame)
+    body: Unicycle
+    poses: Delayed[bytes]
+    stop_poses_after: float = math.inf  # fleet s after the first motion command
+    node: Ros2Node | None = None
+    pose_pub: Ros2Publisher | None = None
+    cmd_sub: Ros2Subscriber | None = None
+    inbox: deque[tuple[float, float, float]] = field(default_factory=deque)  # (t, vx, wz) from zenoh's thread
+    next_pose: float = 0.0  # fleet time of the next measurement: ticks * period
+    ticks: int = 0
+    commands: int = 0
+    malformed: int = 0
+    published: int = 0
+    poses_stopped: bool = False
+    last_command: tuple[float, float] | None = None
+    last_moving_at: float | None = None  # fleet time of the last nonzero command
+    stopped_at: float | None = None  # fleet time of the first zero command after it
+
+    @property
+    def cmd_type(self) -> str:
+        return "TwistStamped" if self.spec.cmd_type == "TwistStamped" else "Twist"
+
+    def describe(self) -> str:
+        """ "robot 1: /tb3_0 odom -> cmd_vel TwistStamped" """
+        ns = self.spec.namespace or "/"
+        return f"robot {self.spec.agent}: {ns} {self.spec.pose_topic_name} -> {self.spec.cmd_topic} {self.cmd_type}"
+
+    def take(self, t: float, vx: float, wz: float) -> None:
+        """A command that arrived at fleet time `t` (in the main loop, in arrival order)."""
+        self.body.command(t, vx, wz)
+        self.commands += 1
+        self.last_command = (vx, wz)
+        if vx != 0.0 or wz != 0.0:
+            self.last_moving_at, self.stopped_at = t, None
+        elif self.stopped_at is None:
+            self.stopped_at = t
+
+    def report(self) -> str:
+        """One line at the end: what the robot received and sent, and how it was left."""
+        last = "none" if self.last_command is None else "linear {:g}, angular {:g}".format(*self.last_command)
+        line = (
+            f"robot {self.spec.agent}: {self.commands} commands ({self.malformed} malformed), "
+            f"{self.published} poses; last command {last}"
+        )
+        if self.last_moving_at is not None and self.stopped_at is not None:
+            line += f"; stopped by a zero twist at t={self.stopped_at:.3f} s"
+        elif self.last_moving_at is not None:
+            line += "; NO zero twist after its last motion command"
+        return line
+
+
+class Fleet:
+    """The robots of a robots file, at their agents' start poses in `scenario`, driven by
+    `step(now)` (fleet seconds); `open(session)` declares their nodes, `close()` undeclares
+    them. `run` is the loop of `swarm robots sim`."""
+
+    def __init__(
+        self,
+        robots: RobotsFile,
+        scenario: Scenario,
+        options: FleetOptions | None = None,
+        out: Callable[[str], None] = print,
+    ):
+        self.file, self.options, self.out = robots, options or FleetOptions(), out
+        self.noise = PoseNoise(self.options.pose_noise, self.options.yaw_sigma, self.options.seed)
+        starts = {a.id: (a.x, a.y, a.heading) for a in scenario.agents}
+        unknown = sorted(set(self.options.stop_poses) - {r.agent for r in robots.robots})
+        if unknown:
+            raise FleetError(f"--stop-poses: no robot for agent {unknown[0]} in the robots file")
+        self.robots = []
+        for spec in robots.robots:
+            if spec.agent not in starts:
+                raise FleetError(f"robots.agent {spec.agent}: the scenario has no agent {spec.agent}")
+            start = starts[spec.agent]
+            body = Unicycle(*start, spec.max_linear, spec.max_angular, self.options.cmd_timeout)
+            self.robots.append(
+                SimRobot(
+                    spec,
+                    start,
+                    body,
+                    Delayed(self.options.latency),
+                    stop_poses_after=self.options.stop_poses.get(spec.agent, math.inf),
+                )
+            )
+        self.period = 1.0 / self.options.rate
+        self.first_motion_at: float | None = None  # fleet time of the first nonzero command to any robot
+        self.epoch_ns = time.time_ns()  # the stamps: this + the wall time since then
+        self._t0 = time.monotonic()
+
+    # the fleet's clock: seconds since it was made, time_scale times faster than the wall's
+    def now(self) -> float:
+        return (time.monotonic() - self._t0) * self.options.time_scale
+
+    def open(self, session: zenoh.Session) -> None:
+        ros2 = self.file.ros2
+        for r in self.robots:
+            r.node = Ros2Node(session, ROBOT_NODE, r.spec.namespace, ros2.domain, ros2.distro)
+            pose_type = ODOMETRY if r.spec.pose == "odom" else POSE_STAMPED
+            r.pose_pub = r.node.publisher(r.spec.topic(r.spec.pose_topic_name), pose_type)
+            cmd_type = TWIST_STAMPED if r.cmd_type == "TwistStamped" else TWIST
+            r.cmd_sub = r.node.subscriber(r.spec.topic(r.spec.cmd_topic), cmd_type, self._on_command(r))
+
+    def _on_command(self, r: SimRobot) -> Callable[[bytes], None]:
+        stamped = r.cmd_type == "TwistStamped"
+
+        def on_sample(payload: bytes) -> None:  # zenoh's thread: decode and queue
+            t = self.now()
+            try:
+                vx, wz = cdr.decode_twist_stamped(payload)[2:] if stamped else cdr.decode_twist(payload)
+            except cdr.CdrError:
+                r.malformed += 1
+                return
+            r.inbox.append((t, vx, wz))
+
+        return on_sample
+
+    def measure(self, r: SimRobot, t: float) -> bytes:
+        """The robot's pose message at fleet time `t` (noise added; the odom frame for odom)."""
+        stamp = self.epoch_ns + round(t / self.options.time_scale * 1e9)  # the wall clock then
+        if r.spec.pose == "odom":
+            x, y, yaw = self.noise.apply(odom_pose(r.start, r.body.pose()))
+            vx, wz = r.body.twist()
+            return cdr.encode_odometry(stamp, ODOM_FRAME, BASE_FRAME, x, y, yaw, vx, wz)
+        x, y, yaw = self.noise.apply(r.body.pose())
+        return cdr.encode_pose_stamped(stamp, WORLD_FRAME, x, y, yaw)
+
+    def step(self, now: float) -> float:
+        """Take the commands that arrived, move every robot to `now`, measure the poses that are
+        due and publish those whose latency has passed; the fleet time of the next thing to do."""
+        wake = math.inf
+        for r in self.robots:
+            while r.inbox:
+                t, vx, wz = r.inbox.popleft()
+                r.take(min(t, now), vx, wz)
+                if self.first_motion_at is None and r.last_moving_at is not None:
+                    self.first_motion_at = r.last_moving_at
+            r.body.advance(now)
+            if r.next_pose <= now:
+                if self.first_motion_at is None or now < self.first_motion_at + r.stop_poses_after:
+                    r.poses.push(now, self.measure(r, now))
+                elif not r.poses_stopped:
+                    r.poses_stopped = True
+                    self.out(f"robot {r.spec.agent}: poses stopped at t={now:.3f} s (--stop-poses)")
+                r.ticks = max(r.ticks + 1, math.floor(now / self.period) + 1)  # late: no burst to catch up
+                r.next_pose = r.ticks * self.period
+            for payload in r.poses.due(now):
+                if r.pose_pub is not None:
+                    r.pose_pub.put(payload)
+                r.published += 1
+            wake = min(wake, r.next_pose, r.poses.next_time() or math.inf)
+        return wake
+
+    def run(self, stop: threading.Event, duration: float | None = None) -> None:
+        """Step until `stop` is set (or `duration` fleet seconds have passed)."""
+        end = math.inf if duration is None else duration
+        while not stop.is_set():
+            now = self.now()
+            if now >= end:
+                break
+            wake = min(self.step(now), end)
+            wait = (wake - self.now()) / self.options.time_scale
+            if wait > 0:
+                stop.wait(wait)
+
+    def close(self) -> None:
+        for r in self.robots:
+            if r.node is not None:
+                r.node.close()
+                r.node = None
+
+
+def say(line: str) -> None:
+    print(line, flush=True)
+
+
+def run_fleet(
+    robots: RobotsFile,
+    scenario: Scenario,
+    options: FleetOptions,
+    listen: str | None = None,
+    duration: float | None = None,
+    out: Callable[[str], None] = say,
+) -> int:
+    """`swarm robots sim`: open the router, declare the robots, step them until Ctrl-C /
+    SIGTERM (exit 130 / 143) or `duration` fleet seconds (exit 0); one line per robot at start
+    and at the end."""
+    fleet = Fleet(robots, scenario, options, out)
+    endpoint = listen or robots.ros2.connect
+    try:
+        session = zenoh.open(router_config(endpoint))
+    except zenoh.ZError as e:
+        raise FleetError(f"cannot listen on {endpoint} (give another with --listen): {e}") from None
+    stop, caught = threading.Event(), []
+
+    def on_signal(signum: int, _frame: object) -> None:
+        caught.append(signum)
+        stop.set()
+
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        fleet.open(session)
+        o = fleet.options
+        out(
+            f"fleet: {len(fleet.robots)} robots, router on {endpoint} (domain {robots.ros2.domain}, "
+            f"{robots.ros2.distro}); poses at {o.rate:g} Hz, latency {o.latency:g} s, noise {o.pose_noise:g} m / "
+            f"{o.yaw_sigma:g} rad, command timeout {o.cmd_timeout:g} s, time scale {o.time_scale:g}"
+        )
+        for r in fleet.robots:
+            out(r.describe())
+        out("fleet ready (Ctrl-C stops it)")
+        fleet.run(stop, duration)
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        fleet.close()
+        session.close()
+    for r in fleet.robots:
+        out(r.report())
+    return signal_exit(caught[0]) if caught else ExitCode.OK

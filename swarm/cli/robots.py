@@ -1,0 +1,125 @@
+"""`swarm robots sim`: a simulated fleet of ROS 2 robots that speak rmw_zenoh (swarm/robots/fleet.py),
+to rehearse a hardware run on one machine (docs/guides/robots.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from swarm.cli.errors import fail
+from swarm.cli.options import ScenarioArg
+from swarm.contracts.vocabulary import ExitCode
+
+robots_app = typer.Typer(
+    help="Real robots through ROS 2 (rmw_zenoh): a simulated fleet to rehearse on.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+def parse_stop_poses(values: list[str]) -> dict[int, float]:
+    """["2:5", "3:7.5"] -> {2: 5.0, 3: 7.5}; a usage error naming the option otherwise."""
+    out = {}
+    for text in values:
+        agent, sep, at = text.partition(":")
+        try:
+            if not sep:
+                raise ValueError
+            out[int(agent)] = float(at)
+        except ValueError:
+            raise fail(f"--stop-poses {text}: give AGENT:SECONDS, e.g. 2:5", ExitCode.USAGE) from None
+    return out
+
+
+@robots_app.command("sim")
+def sim(
+    scenario: ScenarioArg,
+    robots: Annotated[
+        Path,
+        typer.Option("--robots", help="the robots file (which robot each agent drives)", show_default=False),
+    ],
+    listen: Annotated[
+        Optional[str],
+        typer.Option(
+            help="where the fleet's router listens (default: the robots file's ros2.connect)", show_default=False
+        ),
+    ] = None,
+    latency: Annotated[float, typer.Option(help="s from a pose's measurement to its publication", min=0.0)] = 0.0,
+    pose_noise: Annotated[float, typer.Option(help="m: standard deviation of the noise on x and y", min=0.0)] = 0.0,
+    yaw_noise: Annotated[
+        Optional[float],
+        typer.Option(help="rad: of the noise on the yaw (default: --pose-noise / 0.2 m)", min=0.0, show_default=False),
+    ] = None,
+    rate: Annotated[float, typer.Option(help="Hz: poses per second per robot", min=0.1)] = 30.0,
+    cmd_timeout: Annotated[
+        float, typer.Option(help="s: a robot whose last command is older stops (its watchdog)", min=0.0)
+    ] = 0.5,
+    time_scale: Annotated[
+        float,
+        typer.Option(
+            "--time-scale",
+            help="fleet seconds per wall second (the same as swarm up's --time-scale); "
+            "--latency, --rate and --cmd-timeout are in fleet seconds",
+            min=1e-6,
+        ),
+    ] = 1.0,
+    seed: Annotated[int, typer.Option(help="the pose noise's seed")] = 0,
+    duration: Annotated[
+        Optional[float],
+        typer.Option(help="stop after this many fleet seconds (default: at Ctrl-C)", min=0.0, show_default=False),
+    ] = None,
+    stop_poses: Annotated[
+        Optional[list[str]],
+        typer.Option(
+            help="AGENT:SECONDS: that robot stops publishing its poses SECONDS (fleet time) after the fleet's "
+            "first motion command, the run's start (rehearses stale poses; repeatable)",
+            show_default=False,
+        ),
+    ] = None,
+) -> None:
+    """Simulated robots that speak ROS 2 over rmw_zenoh, at the scenario's start poses.
+
+    One process: a zenoh router standing in for the robots' rmw_zenohd (on the robots file's
+    ros2.connect, or --listen) and, per robot of the robots file, a ROS node in its
+    namespace that subscribes to its command topic (Twist, or TwistStamped when the robots
+    file says so) and publishes its pose (Odometry relative to its start, or PoseStamped in
+    the world frame for mocap). Each robot is a unicycle that follows its last command,
+    saturated at its max_linear and max_angular, and stops when that command is older than
+    --cmd-timeout.
+
+    Exit codes: 0 --duration reached, 2 bad options, scenario or robots file, or the router
+    cannot listen, 130/143 stopped by Ctrl-C/SIGTERM.
+
+    Example: swarm robots sim scenarios/turtlebot.toml --robots scenarios/turtlebot-robots.toml --latency 0.03
+    --pose-noise 0.01, then swarm up scenarios/turtlebot.toml --robots scenarios/turtlebot-robots.toml
+    """
+    # lazy: zenoh, the scenario and robots models and the fleet, which `swarm --help` must not pay
+    from swarm.contracts.scenario import load_scenario
+    from swarm.robots.config import check_against, load_robots
+    from swarm.robots.fleet import FleetOptions, run_fleet
+
+    spec = load_scenario(scenario)
+    fleet_robots = load_robots(robots)
+    for warning in check_against(fleet_robots, spec, str(robots)):
+        typer.secho(f"warning: {warning}", err=True, fg=typer.colors.YELLOW)
+    try:
+        options = FleetOptions(
+            latency=latency,
+            pose_noise=pose_noise,
+            yaw_noise=yaw_noise,
+            rate=rate,
+            cmd_timeout=cmd_timeout,
+            time_scale=time_scale,
+            seed=seed,
+            stop_poses=parse_stop_poses(stop_poses or []),
+        )
+    except ValueError as e:
+        raise fail(str(e), ExitCode.USAGE) from None
+    raise typer.Exit(run_fleet(fleet_robots, spec, options, listen=listen, duration=duration))
+
+
+def register(app: typer.Typer) -> None:
+    app.add_typer(robots_app, name="robots")
