@@ -89,6 +89,9 @@ class QoS:
         )
 
 
+DEFAULT_QOS = QoS()  # reliable, volatile, keep last 10: rclcpp's QoS(10), a TurtleBot3's cmd_vel and odom
+
+
 def node_token(domain: int, zid: str, node_id: int, namespace: str, node: str, enclave: str = "") -> str:
     """The NN token of node `node` in `namespace` ("" or "/" for the root)."""
     return f"{LIVELINESS}/{domain}/{zid}/{node_id}/{node_id}/{NODE_KIND}/{mangle(enclave)}/{mangle(namespace)}/{node}"
