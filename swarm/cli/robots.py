@@ -93,8 +93,8 @@ def sim(
     Exit codes: 0 --duration reached, 2 bad options, scenario or robots file, or the router
     cannot listen, 130/143 stopped by Ctrl-C/SIGTERM.
 
-    Example: swarm robots sim scenarios/turtlebot.toml --robots scenarios/turtlebot-robots.toml --latency 0.03
-    --pose-noise 0.01, then swarm up scenarios/turtlebot.toml --robots scenarios/turtlebot-robots.toml
+    Example: swarm robots sim scenarios/turtlebot.toml --robots scenarios/robots/turtlebot.toml --latency 0.03
+    --pose-noise 0.01, then swarm up scenarios/turtlebot.toml --robots scenarios/robots/turtlebot.toml
     """
     # lazy: zenoh, the scenario and robots models and the fleet, which `swarm --help` must not pay
     from swarm.contracts.scenario import load_scenario
