@@ -41,7 +41,9 @@ from swarm.robots.plant import (
 )
 from swarm.ros2 import cdr
 from swarm.ros2.keys import EntityInfo
+from swarm.ros2.node import Ros2Node
 from swarm.ros2.types import ODOMETRY, POSE_STAMPED, TWIST, TWIST_STAMPED
+from swarm.runtime.procs import wait_until
 from swarm.world import main as world_main
 from swarm.world.core import WorldCore
 from swarm.world.engine import Engine
@@ -518,3 +520,114 @@ def test_a_pause_holds_the_plant():
     assert world.run() == ExitCode.OK
     assert time.monotonic() - t0 >= 0.3
     assert plant.calls[:3] == ["start", "hold", "step"]
+
+
+# -- in process, over zenoh: the robot world against a tiny robot made with Ros2Node ----------------
+def _zenoh_config(mode: str, ep: str) -> zenoh.Config:
+    cfg = zenoh.Config()
+    cfg.insert_json5("mode", f'"{mode}"')
+    cfg.insert_json5("listen/endpoints" if mode == "router" else "connect/endpoints", f'["{ep}"]')
+    cfg.insert_json5("scouting/multicast/enabled", "false")
+    return cfg
+
+
+class TinyRobot:
+    """A robot in `namespace`: its node subscribes to cmd_vel (`cmd` type) and records the
+    twists; a thread publishes its odometry (`odom`: x, y, yaw in its odom frame) at 50 Hz."""
+
+    def __init__(self, session, namespace: str, cmd, odom: tuple[float, float, float]):
+        self.node = Ros2Node(session, "turtlebot3_node", namespace=namespace)
+        self.cmd = cmd
+        self.odom = odom
+        self.twists: list[tuple[float, float]] = []
+        self.node.subscriber("cmd_vel", cmd, self._on_cmd)
+        self.pub = self.node.publisher("odom", ODOMETRY)
+        self.quit = threading.Event()
+        self.thread = threading.Thread(target=self._publish, daemon=True)
+        self.thread.start()
+
+    def _on_cmd(self, payload: bytes) -> None:
+        if self.cmd == TWIST_STAMPED:
+            _, _, vx, wz = cdr.decode_twist_stamped(payload)
+        else:
+            vx, wz = cdr.decode_twist(payload)
+        self.twists.append((vx, wz))
+
+    def _publish(self) -> None:
+        while not self.quit.wait(0.02):
+            self.pub.put(cdr.encode_odometry(time.time_ns(), "odom", "base_footprint", *self.odom))
+
+    def close(self) -> None:
+        self.quit.set()
+        self.thread.join(2.0)
+        self.node.close()
+
+
+@pytest.fixture
+def robots_router(tmp_path):
+    """(endpoint, a client session on it) of a router standing in for rmw_zenohd."""
+    ep = f"unixsock-stream/{tmp_path / 'robots.sock'}"
+    router = zenoh.open(_zenoh_config("router", ep))
+    robot_side = zenoh.open(_zenoh_config("client", ep))
+    try:
+        yield ep, robot_side
+    finally:
+        robot_side.close()
+        router.close()
+
+
+def test_the_robot_world_builds_frames_from_the_robots_poses_and_sends_them_the_agents_commands(
+    robots_router, signals_back
+):
+    ep, robot_side = robots_router
+    tb0 = TinyRobot(robot_side, "/tb3_0", TWIST_STAMPED, (0.3, 0.1, 0.2))  # cmd_type auto: read from its token
+    tb1 = TinyRobot(robot_side, "/tb3_1", TWIST, (0.0, 0.0, 0.0))  # cmd_type Twist in the file
+    try:
+        s = parse_scenario(SCENARIO)
+        plant = RobotPlant(parse_robots({**ROBOTS, "ros2": {**ROBOTS["ros2"], "connect": ep}}), s, "r.toml")
+        world, ses = world_with(plant)
+        assert world_main._prepare_plant(world, world.cfg, StopSignals(world_main.Stop)) is None
+        # our node is in the robots' graph
+        graph = tb0.node.remote_entities()
+        assert {(e.kind, e.topic) for e in graph if e.node == "swarm_world"} >= {
+            ("NN", ""),
+            ("MP", "/tb3_0/cmd_vel"),
+            ("MS", "/tb3_0/odom"),
+            ("MP", "/tb3_1/cmd_vel"),
+        }
+        assert tb0.twists == [(0.0, 0.0)] and tb1.twists == [(0.0, 0.0)]  # standing still before tick 0
+        join(world, 1)
+        join(world, 2)
+        world.engine.start_plant()
+
+        # tick 0's frames come from the robots' poses: the odom frame starts at each agent's start pose
+        p1 = odom_to_world((0.7, 0.0, math.pi / 2), (0.3, 0.1, 0.2))
+        p2 = (0.87, 0.16, 2.426)
+        assert world.core.pose(1) == pytest.approx(p1) and world.core.pose(2) == pytest.approx(p2)
+        world.publish_frames()
+        f1 = wire.decode_sense(ses.on(wire.agent_key(RUN, 1, "sense"))[-1])
+        f2 = wire.decode_sense(ses.on(wire.agent_key(RUN, 2, "sense"))[-1])
+        assert f1.heading == pytest.approx(p1[2]) and f1.target == pytest.approx((-p1[0], -p1[1]))
+        assert f2.heading == pytest.approx(p2[2])
+        (seen,) = [c for c in f2.contacts if c.id == 1]
+        assert seen.range == pytest.approx(math.dist(p1[:2], p2[:2]))
+
+        # the agents' commands go to the robots: linear.x = speed, angular.z = u (saturated)
+        world.engine.command(1, 0, 0.15, None, 0)
+        world.engine.command(2, 0, -4.0, 1, 1)
+        world.record_and_step()
+        assert wait_until(lambda: len(tb0.twists) >= 2 and len(tb1.twists) >= 2, 5.0)
+        assert tb0.twists[1] == pytest.approx((0.105, 0.15))
+        assert tb1.twists[1] == pytest.approx((0.22, -2.84))
+
+        # the end: zero twists to every robot, our node gone from their graph
+        world_main._stop_plant(world)
+        assert wait_until(lambda: tb0.twists[-1] == (0.0, 0.0) and tb1.twists[-1] == (0.0, 0.0), 5.0)
+        assert wait_until(lambda: not [e for e in tb0.node.remote_entities() if e.node == "swarm_world"], 5.0)
+        figures = plant.figures()["agents"]
+        assert figures["1"]["cmd_type"] == "TwistStamped" and figures["2"]["cmd_type"] == "Twist"
+        assert figures["1"]["poses"] > 0 and figures["1"]["pose_age_max"] < 0.5
+        assert 0.0 <= figures["2"]["pose_delay_p50"] < 0.5  # stamped now, received within ms
+    finally:
+        tb0.close()
+        tb1.close()
