@@ -5,11 +5,16 @@ close() taking the tokens away, and a subscription that hears its own type only.
 
 from __future__ import annotations
 
+import math
 import queue
 import time
+from pathlib import Path
 
 import pytest
 import zenoh
+import zenoh_ros2_sdk
+import zenoh_ros2_sdk.message_registry
+from rosbags.typesys import Stores, get_typestore
 
 from swarm.ros2 import cdr
 from swarm.ros2.attachment import parse_attachment
@@ -19,6 +24,7 @@ from swarm.ros2.types import ODOMETRY, TWIST, TWIST_STAMPED
 from swarm.runtime.procs import wait_until
 
 TS_HASH = "RIHS01_5f0fcd4f81d5d06ad9b4c4c63e3ea51b82d6ae4d0558f1d475229b1121db6f64"
+NS = 1_000_000_000
 ODOM_HASH = "RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0"
 
 
@@ -272,3 +278,154 @@ def test_bad_names_are_refused(net):
         with pytest.raises(ValueError):
             node.publisher(topic, TWIST)
     assert node.own_tokens() == {node.token_key}
+
+
+def test_a_node_on_the_router_session_itself(tmp_path):
+    """A simulated fleet may be the router (standing in for rmw_zenohd): its nodes' tokens and
+    samples reach the clients."""
+    ep = f"unixsock-stream/{tmp_path / 'r.sock'}"
+    router = zenoh.open(_config("router", ep))
+    client = zenoh.open(_config("client", ep))
+    try:
+        fleet = Ros2Node(router, "turtlebot3_node", "/tb3_0")
+        odom = fleet.publisher("odom", ODOMETRY)
+        cmds: queue.Queue = queue.Queue()
+        fleet.subscriber("cmd_vel", TWIST, cmds.put)
+        world = Ros2Node(client, "swarm_world")
+        poses: queue.Queue = queue.Queue()
+        world.subscriber("/tb3_0/odom", ODOMETRY, poses.put)
+        cmd = world.publisher("/tb3_0/cmd_vel", TWIST)
+        [ms] = wait_until(lambda: world.remote_entities("/tb3_0/cmd_vel", "MS", timeout=0.5), 5)
+        assert (ms.node, ms.rtype, ms.zid) == ("turtlebot3_node", TWIST, str(router.info.zid()))
+        assert wait_until(lambda: cmd.has_subscribers and odom.has_subscribers, 5)
+        cmd.put(cdr.encode_twist(0.22, -1.0))
+        odom.put(cdr.encode_odometry(1, "odom", "base_footprint", 0.5, 0.25, 0.0))
+        assert cdr.decode_twist(cmds.get(timeout=5)) == (0.22, -1.0)
+        assert cdr.decode_odometry(poses.get(timeout=5)) == cdr.Pose2D(1, 0.5, 0.25, 0.0, "odom")
+        fleet.close()
+        assert wait_until(lambda: world.remote_entities(timeout=0.5) == [], 5)
+    finally:
+        client.close()
+        router.close()
+
+
+# ---------------------------------------------------------------- interop: ROBOTIS' zenoh-ros2-sdk as the robot
+
+
+def _write_msgs(out: Path, roots: list[str]) -> Path:
+    """.msg files (<pkg>/msg/<Name>.msg) from rosbags' Jazzy store, so the SDK never git-clones
+    ros2/common_interfaces (it looks in its registry's directory first)."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    sep = "=" * 80 + "\n"
+    for root in roots:
+        text, _ = store.generate_msgdef(root, ros_version=2)
+        chunks = text.split(sep)
+        names = [root] + [c.split("\n", 1)[0].removeprefix("MSG: ") for c in chunks[1:]]
+        bodies = [chunks[0]] + [c.split("\n", 1)[1] for c in chunks[1:]]
+        for name, body in zip(names, bodies, strict=True):
+            pkg, _, base = name.partition("/")
+            path = out / pkg / "msg" / f"{base.removeprefix('msg/')}.msg"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(body)
+    return out
+
+
+@pytest.fixture
+def sdk(tmp_path, monkeypatch):
+    """A router on a Unix socket; the SDK's (process-wide) session connects to it as a client,
+    with message definitions from rosbags and its git cache in the tmp dir."""
+    ep = f"unixsock-stream/{tmp_path / 'r.sock'}"
+    router = zenoh.open(_config("router", ep))
+    msgs = _write_msgs(tmp_path / "msgs", [ODOMETRY.name, TWIST_STAMPED.name])
+    monkeypatch.setenv("ZENOH_ROS2_SDK_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("ZENOH_CONFIG_OVERRIDE", f'mode="client";connect/endpoints=["{ep}"];listen/endpoints=[]')
+    monkeypatch.setattr(zenoh_ros2_sdk.message_registry, "_registry", zenoh_ros2_sdk.MessageRegistry(str(msgs)))
+    monkeypatch.setattr(zenoh_ros2_sdk.ZenohSession, "_instance", None)
+    ours = zenoh.open(_config("client", ep))
+    try:
+        yield ours
+    finally:
+        ours.close()
+        if zenoh_ros2_sdk.ZenohSession._instance is not None:
+            zenoh_ros2_sdk.ZenohSession._instance.close()
+        router.close()
+        assert not (tmp_path / "cache").exists(), "the SDK tried to fetch message definitions"
+
+
+def test_interop_with_zenoh_ros2_sdk(sdk):
+    """Our node as a TurtleBot3 (odom publisher, cmd_vel subscription); the SDK as the world:
+    each hears the other, and each sees the other's tokens."""
+    robot = Ros2Node(sdk, "turtlebot3_node", "/robot1")
+    cmds: queue.Queue = queue.Queue()
+    robot.subscriber("cmd_vel", TWIST_STAMPED, cmds.put)
+    odom = robot.publisher("odom", ODOMETRY)
+    raw: queue.Queue = queue.Queue()  # the SDK's attachments on the wire
+    sdk.declare_subscriber(
+        "0/robot1/cmd_vel/geometry_msgs::msg::dds_::TwistStamped_/" + TS_HASH,
+        lambda s: raw.put(None if s.attachment is None else s.attachment.to_bytes()),
+    )
+
+    poses: queue.Queue = queue.Queue()
+    sdk_pub = zenoh_ros2_sdk.ROS2Publisher(topic="/robot1/cmd_vel", msg_type=TWIST_STAMPED.name, node_name="sdk_world")
+    sdk_sub = zenoh_ros2_sdk.ROS2Subscriber(
+        topic="/robot1/odom", msg_type=ODOMETRY.name, callback=poses.put, node_name="sdk_world"
+    )
+    assert sdk_pub.keyexpr == "0/robot1/cmd_vel/geometry_msgs::msg::dds_::TwistStamped_/" + TS_HASH
+    assert sdk_pub.type_hash == TWIST_STAMPED.rihs01  # the SDK's own RIHS01 of the .msg text
+
+    # the SDK's twist reaches our subscription
+    T = sdk_pub.session_mgr.store.types
+    twist = T["geometry_msgs/msg/Twist"](
+        linear=T["geometry_msgs/msg/Vector3"](x=0.22, y=0.0, z=0.0),
+        angular=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.5),
+    )
+    header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=1, nanosec=2), frame_id="base_link")
+
+    def twist_came():
+        sdk_pub.publish(header=header, twist=twist)
+        try:
+            return cmds.get(timeout=0.2)
+        except queue.Empty:
+            return None
+
+    payload = wait_until(twist_came, 5, interval=0)
+    assert payload is not None, "no TwistStamped from the SDK"
+    assert cdr.decode_twist_stamped(payload) == (1 * NS + 2, "base_link", 0.22, 0.5)
+    seq, _, gid = parse_attachment(raw.get(timeout=5))  # the SDK's attachment parses as rmw_zenoh's
+    assert seq >= 0 and len(gid) == 16
+
+    # our odometry reaches the SDK's subscription (rosbags deserializes it there)
+    def pose_came():
+        odom.put(cdr.encode_odometry(5 * NS + 6, "odom", "base_footprint", 1.5, -0.5, 0.75, 0.22, 0.5))
+        try:
+            return poses.get(timeout=0.2)
+        except queue.Empty:
+            return None
+
+    msg = wait_until(pose_came, 5, interval=0)
+    assert msg is not None, "no Odometry at the SDK"
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id, msg.child_frame_id) == (
+        5,
+        6,
+        "odom",
+        "base_footprint",
+    )
+    p, q = msg.pose.pose.position, msg.pose.pose.orientation
+    assert (p.x, p.y) == (1.5, -0.5) and math.isclose(2 * math.atan2(q.z, q.w), 0.75)
+    assert (msg.twist.twist.linear.x, msg.twist.twist.angular.z) == (0.22, 0.5)
+
+    # each side's graph shows the other
+    [mp] = wait_until(lambda: robot.remote_entities("cmd_vel", "MP", timeout=0.5), 5)
+    assert (mp.node, mp.namespace, mp.rtype, mp.type_hash, mp.qos) == ("sdk_world", "/", TWIST_STAMPED, TS_HASH, QoS())
+    [ms] = wait_until(lambda: robot.remote_entities("odom", "MS", timeout=0.5), 5)
+    assert (ms.node, ms.rtype) == ("sdk_world", ODOMETRY)
+    topics = dict(zenoh_ros2_sdk.get_topic_names_and_types(timeout=0.5))
+    assert topics["/robot1/cmd_vel"] == [TWIST_STAMPED.name] and topics["/robot1/odom"] == [ODOMETRY.name]
+    info = zenoh_ros2_sdk.get_topic_info("/robot1/odom", timeout=0.5, verbose=True)
+    assert info is not None and [(e.node_name, e.node_namespace) for e in info.publishers] == [
+        ("turtlebot3_node", "/robot1")
+    ]
+
+    sdk_pub.close()
+    sdk_sub.close()
+    robot.close()
