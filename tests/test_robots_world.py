@@ -17,15 +17,21 @@ import math
 import signal
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 import zenoh
+from click.testing import Result
 from fakes import FakeQuery, FakeSession
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from typer.testing import CliRunner
 
+from swarm.api.launch import Launch
+from swarm.cli.main import app
 from swarm.contracts import wire
+from swarm.contracts.errors import UsageError
 from swarm.contracts.scenario import parse_scenario
 from swarm.contracts.startup import Announcer
 from swarm.contracts.stop_signals import StopSignals
@@ -49,6 +55,7 @@ from swarm.world.core import WorldCore
 from swarm.world.engine import Engine
 from swarm.world.process import World, WorldConfig
 
+ROOT = Path(__file__).resolve().parent.parent
 RUN = "robots"
 SCENARIO = {
     "run": {"dt": 0.05, "duration": 0.2, "clock": "realtime"},
@@ -631,3 +638,49 @@ def test_the_robot_world_builds_frames_from_the_robots_poses_and_sends_them_the_
     finally:
         tb0.close()
         tb1.close()
+
+
+# -- the command line and the API: what is refused before anything starts -------------------------
+TURTLEBOT = ROOT / "scenarios" / "turtlebot.toml"
+TURTLEBOT_ROBOTS = ROOT / "scenarios" / "robots" / "turtlebot.toml"
+
+
+def invoke(*args) -> Result:
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+@pytest.mark.parametrize("command", ["world", "up"])
+def test_robots_with_the_lockstep_clock_is_a_usage_error(command, tmp_path):
+    res = invoke(command, TURTLEBOT, "--robots", TURTLEBOT_ROBOTS, "--clock", "lockstep", "--out", tmp_path / "o")
+    assert res.exit_code == ExitCode.USAGE
+    assert f"swarm {command}: --robots runs the realtime clock only" in res.output
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("command", ["world", "up"])
+def test_a_robots_file_that_does_not_fit_the_scenario_is_one_line_and_exit_2(command, tmp_path):
+    bad = tmp_path / "robots.toml"
+    bad.write_text('[[robots]]\nagent = 1\nnamespace = "/tb3_0"\n')
+    res = invoke(command, TURTLEBOT, "--robots", bad, "--out", tmp_path / "o")
+    assert res.exit_code == ExitCode.USAGE
+    assert f"swarm {command}: {bad}: no robot for agent 2 (every agent of the scenario needs one)" in res.output
+    assert not (tmp_path / "o").exists()
+    res = invoke(command, TURTLEBOT, "--robots", tmp_path / "none.toml")
+    assert res.exit_code == ExitCode.USAGE and "none.toml: no such file" in res.output
+
+
+def test_launch_with_robots_runs_realtime_passes_the_file_to_its_world_and_says_its_warnings_once(tmp_path):
+    fast = tmp_path / "fast.toml"
+    fast.write_text(TURTLEBOT_ROBOTS.read_text().replace("max_linear = 0.22", "max_linear = 0.1", 1))
+    said: list[str] = []
+    run = Launch(TURTLEBOT, tmp_path / "o", robots=fast, say=said.append)
+    cfg = run.launcher.cfg
+    assert cfg.clock == "realtime" and cfg.robots == fast
+    assert said == [
+        "warning: robots: agent 1: speed 0.105 m/s is above its robot's max_linear 0.1 m/s (the robot will be "
+        "saturated and the law's constant speed will not hold)"
+    ]
+    with pytest.raises(UsageError, match="realtime clock only"):
+        Launch(TURTLEBOT, tmp_path / "p", robots=fast, clock="lockstep")
+    with pytest.raises(RobotsError):
+        Launch(TURTLEBOT, tmp_path / "q", robots=tmp_path / "none.toml")
