@@ -132,8 +132,9 @@ def _run_world(cfg: WorldConfig, stops: StopSignals, tell: Announcer) -> int:
             stops.ignore()
             world._close()
     finally:
-        stops.ignore()  # the world ends: nothing may interrupt stopping the robots
-        _stop_plant(world)  # (done already unless the run never got to its ticks)
+        if cfg.plant is not None:  # (stopped already unless the run never got to its ticks)
+            stops.ignore()  # the world ends: nothing may interrupt stopping the robots
+            _stop_plant(world)
         if live is not None:
             live.stop()
         if sock is not None:
