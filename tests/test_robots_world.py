@@ -241,8 +241,7 @@ def fake_plant(robots=ROBOTS, entities=None, poses=None, **kw):
         "r.toml",
         open_session=lambda connect: session,
         make_node=lambda ses: node,
-        clock=clock,
-        **kw,
+        **{"clock": clock, "watchdog": False, **kw},
     )
     return plant, node, session, clock
 
@@ -334,6 +333,37 @@ def test_a_stale_robot_gets_zero_twists_and_one_stale_event_then_one_fresh():
     assert one["pose_age_max"] == pytest.approx(0.8)
     assert f["agents"]["2"]["pose_age_max"] == pytest.approx(0.25)
     assert f["agents"]["2"]["cmd_type"] == "Twist" and f["agents"]["2"]["twists"] == 6
+
+
+def test_the_watchdog_stops_the_robots_when_the_world_sends_nothing_for_stale_after():
+    """A stalled world (its main thread): zero twists from the watchdog's thread, once, until the
+    next step drives the robots again."""
+    robots = {**ROBOTS, "ros2": {**ROBOTS["ros2"], "stale_after": 0.2}}
+    said: list[str] = []
+    plant, node, _, _ = fake_plant(robots, clock=time.monotonic, watchdog=True, say=said.append)
+    plant.prepare()
+    core = WorldCore(parse_scenario(SCENARIO), plant=plant)
+    plant.start(core, lambda *a, **k: None)
+    try:
+        core.set_command(1, 0.1)
+        core.step()
+        assert node.pubs["/tb3_0/cmd_vel"].sent[-1] == pytest.approx((0.105, 0.1))
+        assert wait_until(lambda: plant.watchdog_stops == 1, 3.0)
+        assert node.pubs["/tb3_0/cmd_vel"].sent[-1] == (0.0, 0.0) == node.pubs["/tb3_1/cmd_vel"].sent[-1]
+        assert said[-1] == "robots: no command for 0.2 s (the world stalled): every robot stopped until the next tick"
+        time.sleep(0.4)
+        assert plant.watchdog_stops == 1  # once per stall
+        node.feed("/tb3_0/odom", odom(0, 0, 0))  # (not stale)
+        node.feed("/tb3_1/odom", odom(0, 0, 0))
+        core.step()
+        assert node.pubs["/tb3_0/cmd_vel"].sent[-1] == pytest.approx((0.105, 0.1))
+        plant.hold()  # the clock holds: stopped by the hold, nothing for the watchdog
+        time.sleep(0.4)
+        assert plant.watchdog_stops == 1
+    finally:
+        plant.stop()
+    assert plant._watch is not None and not plant._watch.is_alive()
+    assert plant.figures()["watchdog_stops"] == 1
 
 
 def test_mocap_poses_are_in_the_world_frame_and_malformed_ones_are_counted_not_used():

@@ -15,9 +15,11 @@ sends each agent's turn rate to its robot. Per robot of the robots file (swarm/r
 Safety: a robot gets a zero twist when its agent is gone (not when it coasts: that is straight
 on at its speed, as on_dropout = "coast" says), when its latest pose is older than
 `[ros2] stale_after` (a `stale` event, `fresh` when poses come again), while the world's clock
-holds (a pause, a scripted fault) and at the end, however the world ends (`stop`). A world
-killed with SIGKILL sends nothing: the robot side must stop a robot whose commands stop
-(docs/guides/robots.md). Pose ages (since each pose was received, in the run's seconds: wall
+holds (a pause, a scripted fault) and at the end, however the world ends (`stop`); and a
+watchdog thread stops every robot when the world's main thread has sent no command for
+stale_after (a stalled or starved world) until the next tick. A world killed with SIGKILL
+(or stopped with SIGSTOP) sends nothing: the robot side must stop a robot whose commands
+stop (docs/guides/robots.md). Pose ages (since each pose was received, in the run's seconds: wall
 seconds times the time scale) are measured at every tick: their maximum and median per agent
 are in summary.json's `robots` section, with the delays from the poses' stamps to their
 reception (which include any offset between the robot's clock and ours).
@@ -54,6 +56,7 @@ POSE_WAIT = 10.0  # s to wait for every robot's first pose
 DISCOVERY_POLL = 0.25  # s between looks at the robots' tokens
 STOP_REPEAT = 3  # zero twists sent to each robot at the end (reliable, but a robot must not miss it)
 STOP_GAP = 0.02  # s between them
+WATCHDOG_PERIOD = 0.05  # s between the watchdog's looks
 Pose = tuple[float, float, float]  # x (m), y (m), yaw (rad)
 
 
@@ -216,6 +219,10 @@ class Robot:
         self.ages = PoseAges()
         self._lock = threading.Lock()
 
+    @property
+    def limits(self) -> tuple[float, float]:
+        return self.spec.max_linear, self.spec.max_angular
+
     def world_pose(self, pose: cdr.Pose2D) -> Pose:
         if self.spec.pose == "odom":
             return odom_to_world(self.start, (pose.x, pose.y, pose.yaw))
@@ -287,6 +294,7 @@ class RobotPlant:
         cmd_wait: float = CMD_WAIT,
         pose_wait: float = POSE_WAIT,
         say: Callable[[str], None] | None = None,
+        watchdog: bool = True,
     ):
         self.file = robots
         self.source = source
@@ -306,6 +314,12 @@ class RobotPlant:
         self.node: Node | None = None
         self.event: EventSink | None = None
         self.stopped = False
+        self.watchdog = watchdog
+        self.watchdog_stops = 0  # times the watchdog stopped the robots (the world sent nothing for stale_after)
+        self._send_lock = threading.Lock()  # the main thread's commands and the watchdog's zeros
+        self._moving_since: float | None = None  # clock() of the last commands, None once all were zero
+        self._quit = threading.Event()
+        self._watch: threading.Thread | None = None
 
     # -- prepare: before the world listens ---------------------------------------------------------
     def prepare(self) -> None:
@@ -378,14 +392,18 @@ class RobotPlant:
 
     # -- the run ------------------------------------------------------------------------------------
     def start(self, core: WorldCore, event: EventSink) -> None:
-        """Before tick 0: the poses of tick 0 are the robots' latest."""
+        """Before tick 0: the poses of tick 0 are the robots' latest; the watchdog starts."""
         self.event = event
         self._read_poses(core)
+        if self.watchdog and self._watch is None:
+            self._watch = threading.Thread(target=self._watchdog, name="robots-watchdog", daemon=True)
+            self._watch.start()
 
     def step(self, core: WorldCore, u: np.ndarray) -> None:
         """This tick's commands out (zero for an agent gone or a stale robot), then the latest
         poses in."""
         now = self.clock()
+        twists: dict[int, tuple[float, float]] = {}
         for aid, r in self.robots.items():
             k = core.index.get(aid)
             if k is None:
@@ -395,11 +413,29 @@ class RobotPlant:
             change = r.ages.tick(age, self.stale_after)
             if change is not None and self.event is not None:
                 self._announce(change, aid, r, age)
-            if r.ages.stale:
-                r.send(0.0, 0.0)
-            else:
-                r.send(*twist_for(float(core.speed[k]), float(u[k]), r.spec.max_linear, r.spec.max_angular))
+            stale = r.ages.stale
+            twists[aid] = (0.0, 0.0) if stale else twist_for(float(core.speed[k]), float(u[k]), *r.limits)
+        with self._send_lock:
+            for aid, (vx, wz) in twists.items():
+                self.robots[aid].send(vx, wz)
+            moving = any(t != (0.0, 0.0) for t in twists.values())
+            self._moving_since = self.clock() if moving else None
         self._read_poses(core)
+
+    def _watchdog(self) -> None:
+        """Every robot stopped when the world has sent no command for stale_after (wall s: the
+        run's over the time scale) while they were moving; the next step drives them again."""
+        limit = self.stale_after / self.time_scale
+        while not self._quit.wait(WATCHDOG_PERIOD):
+            with self._send_lock:
+                since = self._moving_since
+                if since is None or self.clock() - since <= limit:
+                    continue
+                for r in self.robots.values():
+                    self._quietly(r.send, 0.0, 0.0)
+                self._moving_since = None
+                self.watchdog_stops += 1
+            self.say(f"robots: no command for {limit:g} s (the world stalled): every robot stopped until the next tick")
 
     def _announce(self, change: str, aid: int, r: Robot, age: float) -> None:
         assert self.event is not None
@@ -427,8 +463,10 @@ class RobotPlant:
 
     def hold(self) -> None:
         """The clock holds: every robot stands still until the next step."""
-        for r in self.robots.values():
-            self._quietly(r.send, 0.0, 0.0)
+        with self._send_lock:
+            for r in self.robots.values():
+                self._quietly(r.send, 0.0, 0.0)
+            self._moving_since = None
 
     def stop(self) -> None:
         """Every robot stopped (zero twists, STOP_REPEAT times), then our node and session closed;
@@ -436,6 +474,9 @@ class RobotPlant:
         if self.stopped:
             return
         self.stopped = True
+        self._quit.set()
+        if self._watch is not None:
+            self._watch.join(1.0)
         for i in range(STOP_REPEAT):
             for r in self.robots.values():
                 self._quietly(r.send, 0.0, 0.0)
@@ -460,5 +501,6 @@ class RobotPlant:
             "domain": self.file.ros2.domain,
             "distro": self.file.ros2.distro,
             "stale_after": self.stale_after,
+            "watchdog_stops": self.watchdog_stops,
             "agents": {str(aid): r.figures() for aid, r in self.robots.items()},
         }
