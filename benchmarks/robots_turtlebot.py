@@ -11,7 +11,7 @@ end and reads the run's results.
 
     python benchmarks/robots_turtlebot.py                             # 400 s of wall time
     python benchmarks/robots_turtlebot.py --time-scale 4              # 100 s
-    python benchmarks/robots_turtlebot.py --scenario scenarios/case2.toml --robots scenarios/case2-robots.toml
+    python benchmarks/robots_turtlebot.py --scenario scenarios/case2.toml --robots scenarios/robots/case2.toml
 
 Prints per agent its final radius (the distance to the target at the end), its mean, min
 and max over the last --tail s and the expected radius, the same for `swarm sim` of the
@@ -69,7 +69,7 @@ def radii(x: np.ndarray, y: np.ndarray, target: tuple[float, float]) -> np.ndarr
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenario", type=Path, default=ROOT / "scenarios" / "turtlebot.toml")
-    ap.add_argument("--robots", type=Path, default=ROOT / "scenarios" / "turtlebot-robots.toml")
+    ap.add_argument("--robots", type=Path, default=ROOT / "scenarios" / "robots" / "turtlebot.toml")
     ap.add_argument("--duration", type=float, default=None, help="run seconds (default: the scenario's)")
     ap.add_argument("--time-scale", type=float, default=1.0, help="run seconds per wall second (default 1)")
     ap.add_argument("--latency", type=float, default=0.03, help="s from a pose's measurement to its publication")
