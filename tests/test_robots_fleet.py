@@ -142,7 +142,14 @@ def test_pose_noise_is_seeded_and_of_its_size():
 def test_yaw_noise_defaults_to_the_pose_noise_over_its_baseline():
     assert FleetOptions(pose_noise=0.01).yaw_sigma == pytest.approx(0.05)
     assert FleetOptions(pose_noise=0.01, yaw_noise=0.2).yaw_sigma == 0.2
-    for bad in ({"rate": 0.0}, {"latency": -1.0}, {"time_scale": math.inf}, {"cmd_timeout": math.nan}):
+    bad_ones = (
+        {"rate": 0.0},
+        {"latency": -1.0},
+        {"time_scale": math.inf},
+        {"cmd_timeout": math.nan},
+        {"stop_poses": {2: -1}},
+    )
+    for bad in bad_ones:
         with pytest.raises(ValueError, match=next(iter(bad))):
             FleetOptions(**bad)
 

@@ -3,6 +3,7 @@ to rehearse a hardware run on one machine (docs/guides/robots.md)."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -28,9 +29,11 @@ def parse_stop_poses(values: list[str]) -> dict[int, float]:
         try:
             if not sep:
                 raise ValueError
-            out[int(agent)] = float(at)
+            out[int(agent)] = seconds = float(at)
         except ValueError:
             raise fail(f"--stop-poses {text}: give AGENT:SECONDS, e.g. 2:5", ExitCode.USAGE) from None
+        if not (seconds >= 0.0 and math.isfinite(seconds)):
+            raise fail(f"--stop-poses {text}: SECONDS must be a finite number >= 0", ExitCode.USAGE)
     return out
 
 

@@ -85,6 +85,9 @@ class FleetOptions:
                 raise ValueError(f"{name} must be a finite number > 0")
         if self.yaw_noise is not None and not (self.yaw_noise >= 0.0 and math.isfinite(self.yaw_noise)):
             raise ValueError("yaw_noise must be a finite number >= 0")
+        for agent, after in self.stop_poses.items():
+            if not (after >= 0.0 and math.isfinite(after)):
+                raise ValueError(f"stop_poses: agent {agent}'s seconds must be a finite number >= 0")
 
     @property
     def yaw_sigma(self) -> float:
