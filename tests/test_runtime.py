@@ -365,3 +365,6 @@ def test_two_runs_side_by_side(rt, tmp_path):
         assert d < 1e-9, f"{run.out.name}: differs from swarm sim by {d} m"
         np.testing.assert_array_equal(traj["out"], ref["out"])
     assert math.isfinite(sa["ticks_per_second"]) and math.isfinite(sb["ticks_per_second"])
+    for summ in (sa, sb):  # tick 0's wall time, the start event's (what export --ros2 stamps from)
+        (start,) = events_of(summ, EventKind.START)
+        assert summ["start_wall_time"] == start["wall_time"] > 1.7e9

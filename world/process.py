@@ -25,6 +25,7 @@ import numpy as np
 
 from swarm.contracts import wire
 from swarm.contracts.transport import open_hub, query_statuses
+from swarm.contracts.vocabulary import EventKind
 from swarm.world.clock import Clock
 from swarm.world.engine import Engine
 from swarm.world.fairness import FairQueue
@@ -271,6 +272,7 @@ class World:
         st, clock = self.state, self.clock
         wall = clock.wall_ticks
         plant = {} if self.cfg.plant is None else {"robots": self.cfg.plant.figures()}
+        start = next((e.get("wall_time") for e in self.engine.events if e["kind"] == EventKind.START), None)
         result = self.engine.result(
             {
                 "engine": "up",
@@ -285,6 +287,7 @@ class World:
                 "rejected_commands": c.rejected,
                 "over_limit": st.over_limit,
                 "wall_time": wall,
+                "start_wall_time": start,  # unix s at tick 0 (None: the run never started)
                 "ticks_per_second": (c.tick / wall) if wall else None,
                 "deadline_restarts": clock.restarts,
                 **clock.reproducibility(),

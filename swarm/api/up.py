@@ -62,7 +62,8 @@ class UpRun:
 
     Options: out (default runs/<name>-up-<time>-<random>), clock ("lockstep" |
     "realtime"), duration (s), time_scale, listen (endpoint), force (replace results in
-    out), world_grace (s), env (the launcher's environment; default this process's)."""
+    out), world_grace (s), robots (a robots file: the agents drive ROS 2 robots,
+    docs/guides/robots.md), env (the launcher's environment; default this process's)."""
 
     def __init__(
         self,
@@ -75,6 +76,7 @@ class UpRun:
         listen: str | None = None,
         force: bool = False,
         world_grace: float | None = None,
+        robots: str | Path | None = None,
         env: dict | None = None,
     ):
         s = as_scenario(scenario)  # bad scenarios and options fail here, before any process
@@ -99,6 +101,7 @@ class UpRun:
             ("--time-scale", time_scale),
             ("--listen", listen),
             ("--world-grace", world_grace),
+            ("--robots", robots),
         ):
             if value is not None:
                 args += [flag, str(value)]

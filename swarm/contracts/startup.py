@@ -22,6 +22,7 @@ STEPS = {
     "credentials": "writing the run's credentials",
     "recording": "creating its recording",
     "listening": "opening its hub (zenoh.open)",
+    "robots": "reaching the robots (command types, first poses)",
     READY: "listening",
 }
 

@@ -52,7 +52,7 @@ from swarm.ros2.node import Ros2Node, Ros2Publisher, Ros2Subscriber
 from swarm.ros2.types import ODOMETRY, POSE_STAMPED, TWIST, TWIST_STAMPED
 from swarm.world.kinematics import step_one
 
-DEFAULT_RATE = 30.0  # Hz: the TurtleBot3's odometry rate is about that
+DEFAULT_RATE = 30.0  # Hz: a little above a TurtleBot3 (turtlebot3_node reads its sensors every 50 ms: 20 Hz)
 DEFAULT_CMD_TIMEOUT = 0.5  # s
 YAW_NOISE_BASELINE = 0.2  # m: yaw noise = pose noise / this (a marker spread the size of a TurtleBot)
 ODOM_FRAME, BASE_FRAME, WORLD_FRAME = "odom", "base_footprint", "world"
