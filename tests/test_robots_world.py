@@ -714,3 +714,15 @@ def test_launch_with_robots_runs_realtime_passes_the_file_to_its_world_and_says_
         Launch(TURTLEBOT, tmp_path / "p", robots=fast, clock="lockstep")
     with pytest.raises(RobotsError):
         Launch(TURTLEBOT, tmp_path / "q", robots=tmp_path / "none.toml")
+
+
+def test_a_pose_is_carried_forward_from_its_stamp_along_the_last_twist():
+    """Latency compensation ([ros2] predict): the pose measured `age` s ago moves on with the
+    twist the robot was given; a clock out of step is not extrapolated past the horizon."""
+    from swarm.robots.plant import predicted
+    from swarm.world.kinematics import step_one
+
+    assert predicted((0.0, 0.0, 0.0), (1.0, 0.0), 0.5, 1.0) == pytest.approx((0.5, 0.0, 0.0))
+    assert predicted((1.0, 2.0, 0.3), (0.4, 0.8), 0.2, 1.0) == step_one(1.0, 2.0, 0.3, 0.4, 0.8, 0.2)
+    assert predicted((1.0, 2.0, 0.3), (0.4, 0.8), 5.0, 1.0) == step_one(1.0, 2.0, 0.3, 0.4, 0.8, 1.0)
+    assert predicted((1.0, 2.0, 0.3), (0.4, 0.8), -3.0, 1.0) == (1.0, 2.0, 0.3)

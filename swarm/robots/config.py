@@ -8,6 +8,9 @@ file and the field (exit 2).
     domain = 0                         # ROS_DOMAIN_ID
     distro = "jazzy"                   # jazzy (RIHS01 type hashes) | humble (TypeHashNotSupported)
     stale_after = 0.5                  # s: a robot whose last pose is older gets a zero twist
+    predict = false                    # true: each pose carried forward from its stamp to the tick
+                                       # with the robot's last twist (latency compensation; needs the
+                                       # robots' clocks synchronised with this machine's, e.g. chrony)
 
     [[robots]]
     agent = 1                # the scenario's agent id
@@ -51,6 +54,7 @@ class Ros2Spec(_Strict):
     domain: int = Field(default=0, ge=0, le=232, description="ROS_DOMAIN_ID")
     distro: Literal["jazzy", "humble"] = "jazzy"
     stale_after: float = Field(default=0.5, gt=0.0, le=60.0, description="s; an older pose stops the robot")
+    predict: bool = Field(default=False, description="carry each pose forward from its stamp to the tick")
 
 
 class RobotSpec(_Strict):

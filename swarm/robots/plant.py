@@ -48,6 +48,7 @@ from swarm.ros2 import cdr
 from swarm.ros2.keys import EntityInfo
 from swarm.ros2.types import ODOMETRY, POSE_STAMPED, TWIST, TWIST_STAMPED, RosType
 from swarm.world.core import WorldCore
+from swarm.world.kinematics import step_one
 from swarm.world.plant import EventSink
 
 NODE_NAME = "swarm_world"  # our node, in the root namespace ("ros2 node list" shows /swarm_world)
@@ -77,6 +78,16 @@ def odom_to_world(start: Pose, odom: Pose) -> Pose:
     x0, y0, h0 = start
     c, s = math.cos(h0), math.sin(h0)
     return x0 + c * odom[0] - s * odom[1], y0 + s * odom[0] + c * odom[1], float(wrap(h0 + odom[2]))
+
+
+def predicted(pose: Pose, twist: tuple[float, float], age: float, horizon: float) -> Pose:
+    """`pose`, measured `age` run seconds ago, carried forward along the unicycle's arc with
+    `twist` (linear, angular): latency compensation. The age is clamped to [0, horizon] (a
+    stamp from the future or far past, i.e. clocks out of step, is not extrapolated beyond)."""
+    dt = min(max(age, 0.0), horizon)
+    if dt == 0.0:
+        return pose
+    return step_one(pose[0], pose[1], pose[2], twist[0], twist[1], dt)
 
 
 def saturate(value: float, limit: float) -> float:
@@ -212,6 +223,8 @@ class Robot:
         self.pose_topic = spec.topic(spec.pose_topic_name)
         self.publisher: Any = None
         self.latest: tuple[float, Pose] | None = None  # (monotonic s received, world pose)
+        self.stamp_ns = 0  # the latest pose's stamp (the robot's wall clock; 0: none)
+        self.last_twist = (0.0, 0.0)  # (linear, angular) sent last: what the robot does meanwhile
         self.poses = 0  # received
         self.malformed = 0  # payloads that were no pose of the type
         self.twists = 0  # sent
@@ -243,6 +256,7 @@ class Robot:
             return
         with self._lock:
             self.latest = (now, pose)
+            self.stamp_ns = msg.stamp_ns
             self.poses += 1
             if msg.stamp_ns > 0:
                 self.delays.append((time.time_ns() - msg.stamp_ns) / 1e9)
@@ -255,6 +269,7 @@ class Robot:
         else:
             payload = cdr.encode_twist(vx, wz)
         self.publisher.put(payload)
+        self.last_twist = (vx, wz)
         self.twists += 1
 
     def figures(self) -> dict[str, Any]:
@@ -299,6 +314,7 @@ class RobotPlant:
         self.file = robots
         self.source = source
         self.stale_after = robots.ros2.stale_after
+        self.predict = robots.ros2.predict
         self.time_scale = time_scale
         self.open_session = open_session
         self.make_node = make_node or (lambda session: ros2_node(session, robots))
@@ -454,11 +470,16 @@ class RobotPlant:
 
     def _read_poses(self, core: WorldCore) -> None:
         x, y, g = core.x.copy(), core.y.copy(), core.heading.copy()
+        now_ns = time.time_ns()
         for aid, r in self.robots.items():
             k = core.index.get(aid)
             latest = r.latest
             if k is not None and latest is not None:
-                x[k], y[k], g[k] = latest[1]
+                pose = latest[1]
+                if self.predict and r.stamp_ns > 0:
+                    age = (now_ns - r.stamp_ns) / 1e9 * self.time_scale
+                    pose = predicted(pose, r.last_twist, age, self.stale_after)
+                x[k], y[k], g[k] = pose
         core.x, core.y, core.heading = x, y, g
 
     def hold(self) -> None:
