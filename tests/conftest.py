@@ -36,6 +36,8 @@ TIERS = {
         "test_batch",
         "test_batch_decisions",
         "test_docs_links",
+        "test_env",
+        "test_layout",
         "test_ros2_wire",
         "test_ros2_export",
         "test_cli_offline",
@@ -66,6 +68,7 @@ TIERS = {
     "process": {
         "test_access",
         "test_robots_e2e",
+        "test_live_tools",
         "test_robots_fleet",
         "test_api",
         "test_api_launch",
