@@ -1,0 +1,1 @@
+"""A PettingZoo environment over the in-process engine: learning-based laws."""
