@@ -4,6 +4,7 @@ the (C1, C2) x speed-ratio map of the single pair."""
 from __future__ import annotations
 
 import math
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -80,13 +81,11 @@ def plot_gains(summary: list[dict], path: Path, duration: float) -> Path:
     cells = {(r["c1"], r["c2"], r["ratio"]): r["worst_settling_s"] for r in summary}
     finite = [v for v in cells.values() if math.isfinite(v)]
     vmax = max(finite) if finite else 1.0
-    fig, axs = plt.subplots(
-        1,
-        len(c1s),
-        figsize=(1.2 + 0.55 * len(ratios) * len(c1s) + 1.5, 1.5 + 0.5 * len(c2s)),
-        layout="constrained",
-        squeeze=False,
-    )
+    # at least 8 x 3.4 in, and the title wrapped to the width: a small grid keeps its
+    # title and colour-bar label whole
+    width = max(8.0, 1.2 + 0.55 * len(ratios) * len(c1s) + 1.5)
+    height = max(3.4, 1.9 + 0.5 * len(c2s))
+    fig, axs = plt.subplots(1, len(c1s), figsize=(width, height), layout="constrained", squeeze=False)
     im = None
     for ax, a in zip(axs[0], c1s):
         grid = np.array([[cells.get((a, b, q), math.nan) for q in ratios] for b in c2s])
@@ -112,11 +111,12 @@ def plot_gains(summary: list[dict], path: Path, duration: float) -> Path:
         ax.set_ylabel("C2 / omega")
         ax.set_title(f"C1 / omega = {a:g}")
     if im is not None:
-        fig.colorbar(im, ax=axs[0].tolist(), label="worst time into the 2% band (1/omega)")
-    fig.suptitle(
+        fig.colorbar(im, ax=axs[0].tolist(), label="worst time into\nthe 2% band (1/omega)")
+    title = (
         f"single follower behind a leader on its orbit (omega = 1 rad/s): where the law settles "
         f"within {duration:g} s (worst of the starts)"
     )
+    fig.suptitle(textwrap.fill(title, int(width * 9)))
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
