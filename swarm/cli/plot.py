@@ -78,7 +78,8 @@ def plot(
     ] = False,
     frames: Annotated[int, typer.Option(help="at most this many animation frames, evenly spaced over the run")] = 200,
 ) -> None:
-    """Re-render the figures of a run from its trajectory.npz and summary.json.
+    """Re-render the figures of a run from its trajectory.npz and summary.json, and write
+    foxglove-layout.json, a Foxglove layout for the run's own agents, next to them.
 
     A run whose world died before writing them is first rebuilt from its recording.mcap
     (as `swarm export` does).
@@ -89,9 +90,25 @@ def plot(
     if frames < 2:
         raise fail(f"--frames: {frames} is too few (at least 2)", ExitCode.USAGE)
     _run_dir(run_dir)
-    say_plots(open_results(run_dir).plot(formats=formats))
+    results = open_results(run_dir)
+    say_plots(results.plot(formats=formats))
+    write_run_layout(results, run_dir)
     if animate:
         render_animation_cli(run_dir, frames)
+
+
+def write_run_layout(results, run_dir: Path) -> None:
+    """foxglove-layout.json next to the figures: the run's own agents (a write failure: exit 1)."""
+    # lazy: numpy (~0.1 s), loaded by then anyway, but `swarm --help` must not pay it
+    from swarm.offline.layout import run_agents, write_layout
+
+    a = results.arrays
+    agents, extent, centre = run_agents(a["ids"], a["role"], a.get("x"), a.get("y"), a.get("target"))
+    try:
+        path = write_layout(run_dir, agents, extent, centre)
+    except OSError as e:
+        raise fail(f"{run_dir}: foxglove layout: {e.strerror or e}", ExitCode.FAILED) from None
+    typer.echo(f"foxglove layout: {path.name} ({len(agents)} agents; Foxglove: Layouts > Import from file)")
 
 
 def write_csvs(results) -> None:

@@ -35,7 +35,7 @@ from swarm.cli.run import ROBOTS_LOCKSTEP, RobotsOpt
 from swarm.contracts import credentials
 from swarm.contracts.vocabulary import ExitCode
 from swarm.runtime.progress import Paused, ProgressLine
-from swarm.world.live_view import open_hint
+from swarm.world.live_view import live_url
 
 UpOutOpt = Annotated[  # (options.out_option's shape, written out: mypy takes no call for a type)
     Optional[Path],
@@ -106,7 +106,8 @@ def up(
         for line in attach_hints(run.run_id, run.dial, s):
             typer.echo(line)
         if live is not None:
-            typer.echo(open_hint(*live))
+            typer.echo(f"live view: {live_url(*live)}  (Foxglove: Open connection > Foxglove WebSocket)")
+            typer.echo(run_layout(s, run.out))
 
     line, paused = ProgressLine(sys.stdout.isatty()), Paused()
 
@@ -145,6 +146,20 @@ def up(
     for r in o.exits if o.failure is None else []:
         typer.echo(f"  {r.line()}" + ("" if r.sent else "  (not in summary.json: the world did not hear of it)"))
     raise typer.Exit(o.exit_code)
+
+
+def run_layout(s, out: Path) -> str:
+    """Write a Foxglove layout for the scenario's agents into `out`; the line that says where
+    (or, when it cannot be written, why: the run goes on, the live view works without it)."""
+    # lazy: numpy and the scenario model, loaded by `swarm up` by then, not by `swarm --help`
+    from swarm.offline.layout import scenario_agents, write_layout
+
+    agents, extent, centre = scenario_agents(s)
+    try:
+        path = write_layout(out, agents, extent, centre)
+    except OSError as e:
+        return f"layout: not written ({out}: {e.strerror or e}); docs/foxglove-layout.json is case 2's"
+    return f"layout for its {len(agents)} agents: {path}  (Foxglove: Layouts > Import from file)"
 
 
 def attach_hints(run_id: str, dial: str, s) -> list[str]:
