@@ -1,1 +1,47 @@
-"""A PettingZoo environment over the in-process engine: learning-based laws."""
+"""Learning: a scenario as a PettingZoo `ParallelEnv`, and a policy run as a law
+(docs/guides/learning.md).
+
+    from swarm.env import SwarmEnv, policy_law
+    env = SwarmEnv("scenarios/case2.toml")          # needs the `env` extra: pettingzoo, gymnasium
+    obs, infos = env.reset(seed=0)
+    law = policy_law(lambda a: 0.5 * a[16])          # obs array -> turn rate, as a law
+
+`policy_law` and the observation layout (swarm/env/observation.py) need only numpy: agent
+processes import them when they run such a law. `SwarmEnv` (swarm/env/parallel.py) imports
+pettingzoo and gymnasium when it is first asked for.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from swarm.env.observation import FIELDS, K_NEAREST, fields, index, observation_array, policy_law, size, turn_rate
+
+if TYPE_CHECKING:
+    from swarm.env.parallel import SwarmEnv, WorldView, agent_id, agent_name, radial_rate_reward
+
+__all__ = [
+    "FIELDS",
+    "K_NEAREST",
+    "SwarmEnv",
+    "WorldView",
+    "agent_id",
+    "agent_name",
+    "fields",
+    "index",
+    "observation_array",
+    "policy_law",
+    "radial_rate_reward",
+    "size",
+    "turn_rate",
+]
+_PARALLEL = {"SwarmEnv", "WorldView", "agent_id", "agent_name", "radial_rate_reward"}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _PARALLEL:
+        # lazy: pettingzoo and gymnasium are an optional extra; a policy law's agent process needs neither
+        from swarm.env import parallel
+
+        return getattr(parallel, name)
+    raise AttributeError(f"module 'swarm.env' has no attribute {name!r}")
