@@ -23,10 +23,11 @@ not written, so one identity's churn cannot grow the run's record without bound.
 from __future__ import annotations
 
 import os
+import signal
 import socket
 import sys
 import time
-from typing import Any
+from typing import Any, cast
 
 import zenoh
 
@@ -46,6 +47,7 @@ REJOIN_WAIT = 2.0  # s a token lost just after a stall of the world has to come 
 LINK_GRACE = 5.0  # s a token lost in a lockstep run has to come back (`rides_out`)
 
 ACTIVE = AgentState.ACTIVE
+STOP = cast(EventKind, "stop")  # the operator stopped the run (`swarm stop`); EventKind.STOP once it is there
 
 
 class Inbox:
@@ -313,11 +315,14 @@ class Inbox:
         answer(query, wire.world_info_key(self.state.cfg.run), wire.encode_info(self.info(sensing)))
 
     def on_admin(self, query: Any) -> None:
-        """pause / resume the world clock (the operator's)."""
+        """pause / resume the world clock, or stop the run (the operator's)."""
         st = self.state
         try:
             req = wire.decode_admin(query.payload.to_bytes() if query.payload else b"", wire.ADMIN_CMDS)
             cmd = req["cmd"]
+            if cmd == "stop":
+                self.stop_asked(query, str(req.get("by", "a client")))
+                return
             if (cmd == "pause") != st.paused:
                 st.paused = cmd == "pause"
                 st.event(
@@ -333,6 +338,15 @@ class Inbox:
             st.garbage += 1
             reply = wire.encode_admin_reply(False, error=str(e))
         answer(query, wire.world_admin_key(st.cfg.run), reply)
+
+    def stop_asked(self, query: Any, by: str) -> None:
+        """`swarm stop`: a `stop` event (the launcher of `swarm up` watches for it and ends
+        the run as on Ctrl-C), the reply, then SIGINT to this process: the run ends here as
+        on Ctrl-C, its results written (`stopped_by_signal` 2, `completed` false)."""
+        st = self.state
+        st.event(STOP, None, f"asked by {by}")
+        answer(query, wire.world_admin_key(st.cfg.run), wire.encode_admin_reply(True, stopping=True, tick=st.core.tick))
+        os.kill(os.getpid(), signal.SIGINT)  # world/main.py's Stop, on this (the main) thread
 
     def drain(self, pending: set[int] | None, timeout: float | None) -> bool:
         """Handle one inbox item, waiting up to `timeout` s; False when none came."""

@@ -1,12 +1,15 @@
 """`swarm.connect(...)` and `swarm.runs(...)`: a live run from Python, as the live commands
-see it (`swarm agents / graph / pause / resume / kill / spawn / runs / watch` are made of
-these; docs/reference/cli.md#live has the shapes of what they return).
+see it (`swarm agents / graph / pause / resume / kill / spawn / runs / watch / logs / stop / echo`
+are made of these; docs/reference/cli.md#live has the shapes of what they return).
 
     with swarm.connect() as live:               # the only local run (or run=ID, connect=EP, credentials=FILE)
         rows = live.agents()                    # `swarm agents --json`'s rows
         g = live.graph()                        # `swarm graph --json`'s document
         live.pause(); live.resume()             # the tick the world stopped / went on at
         live.kill(3)                            # SIGKILL, then the tick the world dropped it at
+        for m in live.echo("events", count=5):  # `swarm echo events --json`'s objects (m.data)
+            ...
+        live.stop()                             # end the run as Ctrl-C of its `swarm up` does
 
 Everything goes over zenoh (swarm/live/client.py), so a run on another machine works the same
 with its credentials. What cannot be done raises one of swarm/contracts/errors.py's classes, one
@@ -141,6 +144,12 @@ class Live:
             }
         )
 
+    def gone(self) -> bool:
+        """Whether the run has ended for sure: its world's end notice came (listened for from
+        the first call on), or its endpoint refuses connections."""
+        self._lr.watch_end()
+        return self._lr.gone()
+
     def again(self, read, last):
         """`read()` of a watching loop (`swarm watch`, `swarm graph --watch`): its value, or
         `last` while the world does not answer; NoRunError once the world has ended for sure
@@ -176,6 +185,38 @@ class Live:
     def resume(self) -> int | None:
         """Restart the world's clock; the tick it goes on from (no error if it runs)."""
         return self.admin("resume").get("tick")
+
+    def stop(self, wait: bool = True, timeout: float | None = None):
+        """End the run as Ctrl-C of its `swarm up` does (`swarm stop`): its results written,
+        summary.json `completed` false and `stopped_by_signal` 2, a `stop` event; with `wait`,
+        until it has ended (LiveError after `timeout` s). A `swarm.live.stop.Stopped` (tick, out)."""
+        from swarm.live.stop import STOP_DEADLINE, stop_run  # lazy: swarm.runtime.procs (~4 ms), as in `spawn`
+
+        with talking():
+            return stop_run(self._lr, wait=wait, timeout=STOP_DEADLINE if timeout is None else timeout)
+
+    def echo(self, key: str, count: int | None = None):
+        """The messages on `key` of the run (`truth`, `events`, `world/control`,
+        `agent/<id>/sense|cmd|status|ctl`; `*` for every agent), decoded, as they come, until
+        `count` of them or the run's end: `swarm.live.tap.Message`s (`data`: a dict as
+        `swarm echo --json` prints it; `error` for a malformed one). UsageError for an unknown key."""
+        from swarm.live.tap import parse_topic  # lazy: for a tap only; other live commands start without it
+
+        return self._echo(parse_topic(key), count)  # an unknown key: at once, not at the first message
+
+    def _echo(self, topic, count: int | None):
+        from swarm.live.tap import Tap  # lazy: as in `echo`
+
+        with talking(), Tap(self._lr, topic) as tap:
+            yield from tap.messages(count)
+
+    def logs(self):
+        """The logs of the run's processes on this machine (`swarm logs`): a
+        `swarm.live.logs.RunLogs` (`files()`, `path("world")`, `path("3")`); LiveError when
+        they are on another machine or the world writes no results."""
+        from swarm.live.logs import logs_of_info  # lazy: as in `echo`
+
+        return logs_of_info(self.info())
 
     def signal(self, agent_id: int, signal: str = "KILL"):
         """Send `signal` (KILL, TERM, STOP, CONT) to agent `agent_id`'s process, without

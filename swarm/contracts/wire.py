@@ -5,7 +5,7 @@ Keys (every key of a run starts with `swarm/<run>`, so runs never hear each othe
 
     swarm/<run>/world/alive          liveliness token of the world process
     swarm/<run>/world/info           queryable (operator): run info (scenario, clock, tick, agents)
-    swarm/<run>/world/admin          queryable (operator): pause / resume the clock, fault done, agent exit
+    swarm/<run>/world/admin          queryable (operator): pause / resume the clock, stop the run
     swarm/<run>/world/control        world -> all: run-wide notices (JSON), e.g. the end
     swarm/<run>/truth                world -> observers: ground truth of one tick (binary)
     swarm/<run>/events               world -> observers: one event (JSON)
@@ -465,13 +465,13 @@ def decode_info(buf: bytes) -> dict:
     return obj
 
 
-ADMIN_CMDS = ("pause", "resume")  # on world/admin (the operator)
+ADMIN_CMDS = ("pause", "resume", "stop")  # on world/admin (the operator)
 SUPERVISE_CMDS = ("fault_done", "agent_exit")  # on world/supervise (the launcher alone)
 EXIT_LOG_LINES, EXIT_LINE_CHARS = 20, 500  # agent_exit: at most this much of the agent's log
 
 
 def encode_admin(cmd: str, **fields) -> bytes:
-    """operator -> world/admin query: pause, resume (with `by`); launcher -> world/supervise
+    """operator -> world/admin query: pause, resume, stop (with `by`); launcher -> world/supervise
     query: fault_done (with `index`), agent_exit (see `encode_agent_exit`)."""
     return encode_json({"cmd": cmd, **fields})
 

@@ -7,8 +7,9 @@ results. Agents are forked by a fork server that has imported what they need (sw
 agents/forkserver.py; exec'd if it cannot), and are this process's children all the same (it
 is their subreaper). The launcher watches the run over zenoh like any observer would (ground truth and
 events), reports progress, and once told to `stop(signum)` (by whoever handles Ctrl-C/SIGTERM:
-swarm/api/launch.py) stops the world first with that signal (so the results are written,
-and say which signal), then the agents, then anything left in the group. Each child's
+swarm/api/launch.py; SIGINT on the world's `stop` event, i.e. `swarm stop` from any terminal)
+stops the world first with that signal (so the results are written, and say which signal),
+then the agents, then anything left in the group. Each child's
 output goes to `<out>/logs/`. The agents start once the world has said that it listens
 (its own word on a pipe, swarm/contracts/startup.py), never after a fixed wait.
 
@@ -49,6 +50,7 @@ from swarm.runtime.supervision import AgentExitReport, agent_exit, send_report, 
 # The world says when it listens (swarm/contracts/startup.py); these bounds are last resorts
 # only, for a world that neither gets there nor exits, and for our own session after that.
 READY_DEADLINE = 300.0
+STOP_EVENT = "stop"  # the world's event for `swarm stop` (EventKind.STOP once swarm/contracts/vocabulary.py has it)
 CONNECT_DEADLINE = 60.0
 
 
@@ -98,6 +100,7 @@ class Launcher:
         self.scripted: set[int] = set()  # pids signalled for a scripted fault
         self.exits: list[AgentExitReport] = []
         self.failure: str | None = None  # one line: why the run could not start
+        self.operator_stop: str | None = None  # `swarm stop` ended the run: the world's reason ("asked by ...")
         self.added: dict[int, AddedSpec] = {}  # agents added at run time (`swarm spawn`), for the progress line
         self.unknown_added: set[int] = set()  # added agents whose spec is still to be asked for
         self.starter: AgentStarter | None = None  # starts the agents (forked, or exec'd)
@@ -253,6 +256,10 @@ class Launcher:
             self.events.append(ev)
         if ev["kind"] == EventKind.START:
             self.started = True
+        elif ev["kind"] == STOP_EVENT and ev.get("agent") is None:
+            # `swarm stop` (world/inbox.py): the world stops itself, and this run ends as on Ctrl-C
+            self.operator_stop = str(ev.get("reason", "asked by the operator"))
+            self.stop(signal.SIGINT)
         elif ev["kind"] == EventKind.ADD and isinstance(ev.get("agent"), int):
             self.unknown_added.add(ev["agent"])
 
@@ -306,6 +313,8 @@ class Launcher:
                 show(self.progress(session), time.monotonic() - t0)
             if self.stop_signal is None and not self.failed:
                 self.supervise(None)  # exits just before the world ended (the world has ended)
+            if self.operator_stop is not None:
+                self.say(f"swarm up: the run was stopped from another terminal ({self.operator_stop})")
         finally:
             reaper.stop()
             if self.ready_wait is not None:
