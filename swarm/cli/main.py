@@ -13,6 +13,7 @@ an exit code in one place (swarm/cli/errors.py, wrapped round every command here
     access   credentials                    (hand an identity to another machine)
     host     host                           (agents of a run on this machine, via its router)
     study    study swarms, study gains      (batch studies)
+    tools    logs, stop, echo               (a live run's logs, its end, its streams)
 
 Options several groups share are in `options`, shared output in `output`; command modules
 never import each other.
@@ -32,7 +33,7 @@ import typer
 from swarm import __version__
 from swarm.cli.errors import OneLineErrors, map_app
 
-GROUPS = ("up", "run", "offline", "plot", "live", "watch", "control", "access", "host", "robots")
+GROUPS = ("up", "run", "offline", "plot", "live", "watch", "control", "access", "host", "robots", "tools")
 # command -> the group modules that are enough to run it (several commands in all: a typer app
 # of one command would run it without its name)
 LAZY = {
@@ -40,6 +41,7 @@ LAZY = {
     for modules, names in (
         (("live", "watch"), ("runs", "agents", "graph", "watch")),
         (("control",), ("kill", "spawn", "pause", "resume")),
+        (("tools",), ("logs", "stop", "echo")),
     )
     for name in names
 }
