@@ -347,3 +347,189 @@ def _gain_table(summary: list[dict]) -> None:
     for a, b in pairs:
         vals = [cells.get((a, b, q), math.nan) for q in ratios]
         typer.echo(f"{a:>5g} {b:>5g} " + " ".join(f"{v:>6.0f}" if math.isfinite(v) else f"{'-':>6}" for v in vals))
+
+
+def _sweep(option: str, text: Optional[str], *, lo: float, hi: float, inf: bool = False) -> list[float]:
+    """A swept list option: numbers in [lo, hi] (inf too where allowed)."""
+    if text is None:
+        return []
+    out = []
+    for v in _floats(option, text, positive=False, allow_inf=inf):
+        if not (lo <= v <= hi or (inf and math.isinf(v) and v > 0)):
+            raise _fail(f"{option}: {v:g} is out of range [{lo:g}, {hi:g}]" + (" (or inf)" if inf else ""))
+        out.append(v)
+    return out
+
+
+def _params(texts: list[str]) -> dict[str, list[float]]:
+    out = {}
+    for t in texts:
+        name, eq, values = t.partition("=")
+        if not eq or not name.strip().isidentifier():
+            raise _fail(f"--param: {t!r}: give NAME=V1,V2,... (e.g. k=0.1,0.2)")
+        out[f"param.{name.strip()}"] = _floats(f"--param {name.strip()}", values, positive=False)
+    return out
+
+
+@study_app.command()
+def scenario(
+    path: Annotated[Path, typer.Argument(help="the scenario file: the template every run varies")],
+    seeds: Annotated[int, typer.Option(help="runs per setting (seeds 0..N-1: each draws its own jitter)", min=1)] = 20,
+    positions: Annotated[float, typer.Option(help="jitter of every agent's x and y: +-M m, uniform", min=0.0)] = 0.0,
+    headings: Annotated[
+        str, typer.Option(help="jitter of every heading: +-RAD uniform, or 'uniform' (anywhere on the circle)")
+    ] = "0",
+    speeds: Annotated[
+        float,
+        typer.Option(
+            help="jitter of every speed: x U(1-F, 1+F) (a leader's orbit radius scales with it)", min=0, max=0.9
+        ),
+    ] = 0.0,
+    c1: Annotated[Optional[str], typer.Option(help="values of C1 (list: one setting each)")] = None,
+    c2: Annotated[Optional[str], typer.Option(help="values of C2 (list)")] = None,
+    param: Annotated[
+        Optional[list[str]], typer.Option(help="[law.params] entry NAME=V1,V2,... (repeat for more)")
+    ] = None,
+    sensing_range: Annotated[
+        Optional[str], typer.Option("--range", help="sensing ranges in m, inf = unlimited (list)")
+    ] = None,
+    fov: Annotated[Optional[str], typer.Option(help="fields of view in rad, 6.283 = all round (list)")] = None,
+    noise: Annotated[
+        Optional[str],
+        typer.Option(
+            help="sensing noise std in rad (list): the std of the scenario's noise faults, "
+            "or one on every agent for the whole run; 0 = none"
+        ),
+    ] = None,
+    loss: Annotated[Optional[str], typer.Option(help="message loss probability (list), as --noise")] = None,
+    delay: Annotated[Optional[str], typer.Option(help="sensor-frame delay in s (list), as --noise")] = None,
+    duration: Annotated[
+        Optional[float], typer.Option(help="simulated s per run (default: the scenario's)", min=0.1)
+    ] = None,
+    engine: Annotated[
+        str, typer.Option(help="auto (the batch engine where it runs every setting, else per-agent), batch, per-agent")
+    ] = "auto",
+    jobs: Annotated[
+        int, typer.Option("--jobs", "-j", "--workers", min=0, help="worker processes (0: one per core)")
+    ] = 0,
+    out: OutOpt = None,
+    plot: Annotated[bool, typer.Option(help="write study.png and sweep.png")] = True,
+) -> None:
+    """Your scenario, your law: vary it over seeds and settings; where does it converge?
+
+    The scenario file is the template. Every seed draws its own jitter of positions,
+    headings and speeds (and is the run's [run] seed, which drives loss and noise); every
+    combination of the lists (--c1, --c2, --param, --range, --fov, --noise, --loss,
+    --delay) is one setting, run over the same seeds. Any law runs: a follower law that
+    declares itself vectorised goes through the batch engine, any other through swarm
+    sim's per-agent engine on every core (the engine used is printed; docs/design/studies.md).
+
+    Writes runs.csv (one row per run, as it finishes), summary.csv, study.png, and
+    sweep.png (converged share and settling time against each swept parameter).
+
+    Example: swarm study scenario scenarios/case2.toml --seeds 100 --positions 10 --headings uniform --noise 0,0.02,0.05
+    """
+    # lazy: numpy, the scenario model and the engines (~0.3 s), not for `swarm --help`
+    from swarm.contracts.scenario import load_scenario
+    from swarm.study.batch import chunk_size
+    from swarm.study.scenario import (
+        Jitter,
+        Template,
+        columns,
+        engine_for,
+        jobs_of,
+        run_chunk,
+        run_one,
+        settings_of,
+        summarise,
+        varied,
+    )
+
+    if engine not in ("auto", "batch", "per-agent"):
+        raise _fail(f"--engine: {engine!r} is not one of auto, batch, per-agent")
+    if headings.strip() == "uniform":
+        spin = math.inf
+    else:
+        (spin,) = _sweep("--headings", headings, lo=0.0, hi=math.pi) if "," not in headings else [math.nan]
+        if math.isnan(spin):
+            raise _fail("--headings: give one number (rad) or 'uniform'")
+    sweeps: dict[str, list[float]] = {
+        "c1": _floats("--c1", c1) if c1 else [],
+        "c2": _floats("--c2", c2) if c2 else [],
+        **_params(param or []),
+        "range": _sweep("--range", sensing_range, lo=1e-9, hi=math.inf, inf=True),
+        "fov": _sweep("--fov", fov, lo=1e-3, hi=2 * math.pi),
+        "noise": _sweep("--noise", noise, lo=0.0, hi=math.pi),
+        "loss": _sweep("--loss", loss, lo=0.0, hi=1.0),
+        "delay": _sweep("--delay", delay, lo=0.0, hi=math.inf),
+    }
+    sweeps = {k: v for k, v in sweeps.items() if v}
+    spec = load_scenario(path)
+    template = Template(spec.model_dump(), str(path), (str(path.resolve().parent),), duration)
+    jitter = Jitter(positions, spin, speeds)
+    settings = settings_of(sweeps)
+    firsts = [varied(template, st, jitter, 0) for st in settings]  # a setting the model refuses fails here
+    batched, why = engine_for(firsts)
+    if engine == "batch" and batched != "batch":
+        raise _fail(f"--engine batch: the batch engine does not run this study: {why}")
+    use_batch = batched == "batch" and engine != "per-agent"
+    workers = jobs or os.cpu_count() or 1
+    run_s = firsts[0].run.duration
+    if use_batch:
+        per = chunk_size(seeds, workers, len(firsts[0].agents), int(round(run_s / firsts[0].run.dt)))
+        worker: Callable[[Any], Any] = run_chunk
+        line = f"engine: batch ({why}), {per} runs per batch"
+    else:
+        per = 1
+        worker = run_one
+        line = "engine: per-agent (swarm sim's), one run per job" + (
+            f": the batch engine refuses, {why}" if batched != "batch" else " (--engine per-agent)"
+        )
+    job_list = jobs_of(template, settings, jitter, seeds, per)
+    runs = len(settings) * seeds
+    typer.echo(line)
+    t0 = time.perf_counter()
+    out, rows, summary, stopped = _study(
+        "scenario",
+        worker,
+        job_list,
+        columns(settings),
+        lambda rs: summarise(rs, settings),
+        jobs,
+        out,
+        f"{len(settings)} setting(s) x {seeds} seeds = {runs} runs of {run_s:g} s of {path.name}",
+        runs,
+    )
+    wall = time.perf_counter() - t0
+    _table(
+        summary,
+        [
+            ("setting", "setting", str),
+            ("runs", "runs", str),
+            ("converged", "converged_fraction", _num(".1%")),
+            ("settle med s", "settling_median_s", _num(".1f")),
+            ("settle p90 s", "settling_p90_s", _num(".1f")),
+            ("switches med", "switches_median", _num("g")),
+            ("max", "switches_max", _num("g")),
+            ("crashes", "crashes", str),
+        ],
+    )
+    typer.echo(
+        f"wall time {wall:.1f} s. converged: every agent ends within 1% of its expected radius; settle: the "
+        "last agent into the 2% band, over the converged runs; switches: per follower"
+    )
+    if plot and summary:
+        # lazy: matplotlib (~0.3 s), for the figures only
+        from swarm.study.figures import plot_scenario_study, plot_sweep
+
+        varies = ", ".join(
+            [f"positions +-{positions:g} m"] * bool(positions)
+            + [f"headings {'uniform' if math.isinf(spin) else f'+-{spin:g} rad'}"] * bool(spin)
+            + [f"speeds x(1+-{speeds:g})"] * bool(speeds)
+        )
+        title = f"swarm study scenario {path.name}: {seeds} seeds" + (f" ({varies})" if varies else "")
+        typer.echo(f"plot: {plot_scenario_study(summary, rows, out / 'study.png', title)}")
+        swept = [k for k, v in sweeps.items() if len(v) > 1]
+        if swept:
+            typer.echo(f"plot: {plot_sweep(rows, swept, out / 'sweep.png', title)}")
+    _done(out, stopped)

@@ -13,6 +13,7 @@ matplotlib.use("Agg")
 
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
 
 from swarm.study.swarms import SwarmSetting, is_true, setting_of  # noqa: E402
 
@@ -73,6 +74,14 @@ def plot_swarms(summary: list[dict], rows: list[dict], path: Path) -> Path:
 
 
 def plot_gains(summary: list[dict], path: Path, duration: float) -> Path:
+    """gains_figure, written to `path`."""
+    fig = gains_figure(summary, duration)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def gains_figure(summary: list[dict], duration: float) -> Figure:
     """One panel per C1: C2 against speed ratio, coloured by the worst settling time;
     grey ("never") where some start had not settled by the end of its run (`duration` s)."""
     c1s = sorted({r["c1"] for r in summary})
@@ -117,6 +126,93 @@ def plot_gains(summary: list[dict], path: Path, duration: float) -> Path:
         f"within {duration:g} s (worst of the starts)"
     )
     fig.suptitle(textwrap.fill(title, int(width * 9)))
+    return fig
+
+
+def plot_scenario_study(summary: list[dict], rows: list[dict], path: Path, title: str) -> Path:
+    """`swarm study scenario`: per setting, the converged share of its runs and the
+    settling times of its converged runs."""
+    labels = [s["setting"] for s in summary]
+    by_label: dict[str, list[dict]] = {}
+    for r in rows:
+        by_label.setdefault(str(r["setting"]), []).append(r)
+    fig, axs = plt.subplots(1, 2, figsize=(11, 2.2 + 0.4 * len(labels)), layout="constrained")
+    y = np.arange(len(labels))
+    ax = axs[0]
+    frac = [float(s["converged_fraction"]) for s in summary]
+    ax.barh(y, frac, color=["tab:green" if f >= 0.99 else "tab:orange" if f >= 0.5 else "tab:red" for f in frac])
+    for k, s in enumerate(summary):
+        ax.text(min(frac[k], 0.75) + 0.01, k, f"{s['converged']}/{s['runs']}", va="center", fontsize=8)
+    ax.set_yticks(y, labels, fontsize=8)
+    ax.set_xlim(0, 1)
+    ax.invert_yaxis()
+    ax.set_xlabel("converged share")
+    ax.set_title("converged within the run")
+    ax = axs[1]
+    data = [_settling(by_label.get(lab, [])) or [math.nan] for lab in labels]
+    ax.boxplot(data, orientation="horizontal", positions=y, widths=0.6)
+    ax.set_yticks(y, [""] * len(labels))
+    ax.invert_yaxis()
+    ax.set_xlabel("settling time of converged runs (s)")
+    ax.set_title("last agent into the 2% band")
+    for a in axs:
+        a.grid(True, axis="x", lw=0.3, alpha=0.5)
+    fig.suptitle(textwrap.fill(title, 110))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _settling(rows: list[dict]) -> list[float]:
+    return [
+        float(r["settling_time"]) for r in rows if is_true(r["converged"]) and math.isfinite(float(r["settling_time"]))
+    ]
+
+
+SWEEP_UNITS = {
+    "c1": "C1 (1/s)",
+    "c2": "C2 (rad/s)",
+    "range": "sensing range (m)",
+    "fov": "field of view (rad)",
+    "noise": "sensing noise std (rad)",
+    "loss": "loss probability",
+    "delay": "sensor-frame delay (s)",
+}
+
+
+def plot_sweep(rows: list[dict], axes: list[str], path: Path, title: str) -> Path:
+    """One column per swept parameter (axes with more than one value): the converged share
+    and the settling time of converged runs (median, 10-90% band) against its values, over
+    every run at that value (the other parameters' values pooled)."""
+    fig, axs = plt.subplots(2, len(axes), figsize=(max(6.0, 3.6 * len(axes)), 5.2), layout="constrained", squeeze=False)
+    for k, name in enumerate(axes):
+        values = sorted({float(r[name]) for r in rows})
+        at = {v: [r for r in rows if float(r[name]) == v] for v in values}
+        xs = np.arange(len(values)) if any(math.isinf(v) for v in values) else np.asarray(values)
+        share = [sum(is_true(r["converged"]) for r in at[v]) / len(at[v]) for v in values]
+        ax = axs[0, k]
+        ax.plot(xs, share, "o-", color="tab:green")
+        ax.set_ylim(-0.03, 1.03)
+        ax.set_ylabel("converged share" if k == 0 else "")
+        ax.set_title(name.removeprefix("param.") + (" ([law.params])" if name.startswith("param.") else ""))
+        ax = axs[1, k]
+        st = [_settling(at[v]) for v in values]
+        med = [float(np.median(s)) if s else math.nan for s in st]
+        lo = [float(np.percentile(s, 10)) if s else math.nan for s in st]
+        hi = [float(np.percentile(s, 90)) if s else math.nan for s in st]
+        ax.fill_between(xs, lo, hi, color="tab:blue", alpha=0.2, lw=0, label="10-90%")
+        ax.plot(xs, med, "o-", color="tab:blue", label="median")
+        ax.set_ylabel("settling time of converged runs (s)" if k == 0 else "")
+        ax.set_xlabel(SWEEP_UNITS.get(name, name.removeprefix("param.")))
+        if not any(st):
+            ax.text(0.5, 0.5, "no converged run", transform=ax.transAxes, ha="center", va="center", color="0.4")
+        if k == 0:
+            ax.legend(fontsize=7)
+        for a in axs[:, k]:
+            a.grid(True, lw=0.3, alpha=0.5)
+            if any(math.isinf(v) for v in values):
+                a.set_xticks(xs, [f"{v:g}" for v in values])
+    fig.suptitle(textwrap.fill(title, int(max(6.0, 3.6 * len(axes)) * 9)))
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path

@@ -138,6 +138,12 @@ def run_swarm(job: tuple[SwarmSetting, int]) -> dict:
 
 def swarm_row(setting: SwarmSetting, seed: int, cut: bool, res, wall: float) -> dict:
     """The CSV row of one run's RunResult (either engine's)."""
+    return {**asdict(setting), **asdict(SwarmRow(seed=seed, cut_off=cut, wall_s=wall, **run_outcome(res)))}
+
+
+def run_outcome(res) -> dict:
+    """What a study records of one run's RunResult (either engine's): SwarmRow's fields
+    from `converged` to `loss_switches_max`, `cut_off` excepted."""
     summary = res.summary()
     a = res.recorder.arrays()
     follower = a["role"] == "follower"
@@ -147,22 +153,18 @@ def swarm_row(setting: SwarmSetting, seed: int, cut: bool, res, wall: float) -> 
     dt = float(a["t"][1] - a["t"][0]) if len(a["t"]) > 1 else 0.0
     searching = ((a["out"][:-1] < 0) & a["alive"][:-1]).sum(axis=0)[follower] * dt  # the last row is the end
     fol = [v for v in agents if v["role"] == "follower"]
-    row = SwarmRow(
-        seed,
-        bool(summary["converged"]),
-        cut,
-        max(settle) if settle and None not in settle else math.nan,
-        sum(counts),
-        max(counts, default=0),
-        ";".join(map(str, counts)),
-        sum(1 for v in fol if v["root"] is None),
-        float(searching.mean()) if searching.size else 0.0,
-        float(searching.max(initial=0.0)),
-        sum(v.get("losses", 0) for v in fol),
-        max((v.get("loss_switches_max", 0) for v in fol), default=0),
-        wall,
-    )
-    return {**asdict(setting), **asdict(row)}
+    return {
+        "converged": bool(summary["converged"]),
+        "settling_time": max(settle) if settle and None not in settle else math.nan,
+        "switches": sum(counts),
+        "switches_max": max(counts, default=0),
+        "switch_counts": ";".join(map(str, counts)),
+        "unrooted": sum(1 for v in fol if v["root"] is None),
+        "searching_s": float(searching.mean()) if searching.size else 0.0,
+        "searching_max_s": float(searching.max(initial=0.0)),
+        "losses": sum(v.get("losses", 0) for v in fol),
+        "loss_switches_max": max((v.get("loss_switches_max", 0) for v in fol), default=0),
+    }
 
 
 def swarm_jobs(settings: Iterable[SwarmSetting], seeds: Iterable[int]) -> list[tuple[SwarmSetting, int]]:
