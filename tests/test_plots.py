@@ -36,6 +36,7 @@ from swarm.plots.graph import panel_graph
 from swarm.plots.palette import agent_looks, palette
 from swarm.plots.placement import spread_1d, stack_offsets
 from swarm.plots.render import figure, save_figure
+from swarm.plots.style import EVENT_COLOURS, FAULT_COLOUR
 from swarm.plots.trajectories import panel_trajectories
 from swarm.world.recording import write_run
 
@@ -429,3 +430,131 @@ def test_animation_writes_a_gif_of_several_frames(tmp_path: Path) -> None:
     assert path.read_bytes()[:6] in (b"GIF87a", b"GIF89a")
     assert gif_frames(path) == 8
     assert seen[-1] == (8, 8) and len(seen) == 8
+
+
+def edit_run(run_dir: Path, **arrays_and_summary) -> Path:
+    """Change trajectory.npz's arrays in place (by a function of the array) and/or replace
+    summary.json's keys (`summary={...}`)."""
+    summary_keys = arrays_and_summary.pop("summary", {})
+    path = run_dir / "trajectory.npz"
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    for name, change in arrays_and_summary.items():
+        change(arrays[name])
+    np.savez(path, **arrays)
+    summary = json.loads((run_dir / "summary.json").read_text())
+    summary.update(summary_keys)
+    (run_dir / "summary.json").write_text(json.dumps(summary))
+    return run_dir
+
+
+@pytest.mark.parametrize("switches, words", [(1, "1 switch)"), (2, "2 switches)")])
+def test_titles_count_switches_in_the_singular_and_plural(tmp_path: Path, switches: int, words: str) -> None:
+    def flip(out: np.ndarray) -> None:
+        out[100:, 2] = 1  # follower 3: 2 -> 1 at tick 100 (one switch)
+        if switches == 2:
+            out[200:, 2] = 2  # and back at tick 200
+
+    run = load_run(edit_run(make_run(tmp_path / "run", drop=None), out=flip))
+    assert switch_count(run) == switches
+    ctx = make_context(run)
+    fig = figure("neighbours.png", ctx, "")
+    fig_a = figure("graph.png", ctx, "")
+    try:
+        assert fig.axes[0].get_title().endswith(f"({words}"), fig.axes[0].get_title()
+        title_a = fig_a.axes[0].get_title()
+        assert title_a.endswith(words.rstrip(")")) and "switchs" not in title_a, title_a
+    finally:
+        plt.close(fig)
+        plt.close(fig_a)
+
+
+def spans_in(ax) -> list[tuple[str, float, float]]:
+    """(label, x0, x1) of the shaded fault spans of an axes."""
+    out = []
+    for p in ax.patches:
+        if p.get_label().startswith("_span "):
+            xs = p.get_path().transformed(p.get_patch_transform()).vertices[:, 0]
+            out.append((p.get_label()[len("_span ") :], float(xs.min()), float(xs.max())))
+    return out
+
+
+def test_a_lasting_fault_is_a_span_in_a_colour_no_agent_has(tmp_path: Path) -> None:
+    """A fault with a duration (loss, noise, partition, delay) is shaded from its start to its
+    end on both time panels (a kill stays a line); faults are drawn in a colour of their own;
+    event labels are readable (7 pt or more)."""
+    faults = [
+        {"at": 1.0, "kind": "loss", "duration": 2.0, "probability": 0.3},
+        {"at": 2.0, "kind": "partition", "agent": 2, "duration": 1.5},
+        {"at": 4.5, "kind": "noise", "duration": 60.0, "std": 0.05},  # cut at the run's end, 6 s
+        {"at": 2.5, "kind": "kill", "agent": 3},
+    ]
+    run = load_run(edit_run(make_run(tmp_path / "run"), summary={"faults": faults}))
+    ctx = make_context(run)
+    for name in ("distance.png", "control.png"):
+        fig = figure(name, ctx, "")
+        try:
+            got = sorted(spans_in(fig.axes[0]))
+            assert got == [("loss", 1.0, 3.0), ("noise", 4.5, 6.0), ("partition 2", 2.0, 3.5)], (name, got)
+            span = next(p for p in fig.axes[0].patches if p.get_label().startswith("_span "))
+            assert to_rgba(span.get_facecolor())[:3] == to_rgba(FAULT_COLOUR)[:3]
+            sizes = [t.get_fontsize() for t in fig.axes[0].texts if t.get_rotation() == 90]
+            assert sizes and min(sizes) >= 7.0
+        finally:
+            plt.close(fig)
+    for n in (6, 9, 18, 30, 54):  # no agent's colour near the faults' (RGB distance)
+        agents = np.array([to_rgba(c)[:3] for c in palette(n)])
+        for colour in (EVENT_COLOURS[EventKind.FAULT], EVENT_COLOURS["kill"]):
+            assert np.sqrt(((agents - np.array(to_rgba(colour)[:3])) ** 2).sum(axis=1)).min() > 0.3, (n, colour)
+
+
+def test_a_leader_starting_at_the_target_is_drawn_above_it(tmp_path: Path) -> None:
+    """Case 2's L1 starts 2 m from the target: its start marker goes above the target's star."""
+
+    def at_target(x: np.ndarray) -> None:
+        x[0, 0] = 2.0  # the target is at (2, -1)
+
+    def also(y: np.ndarray) -> None:
+        y[0, 0] = -1.0
+
+    run = load_run(edit_run(make_run(tmp_path / "run"), x=at_target, y=also))
+    fig, ax = plt.subplots()
+    try:
+        panel_trajectories(ax, make_context(run))
+        target = [ln for ln in ax.lines if ln.get_marker() == "*" and ln.get_markersize() == 14]
+        starts = [ln for ln in ax.lines if ln.get_marker() == "o" and ln.get_markerfacecolor() == "white"]
+        assert len(target) == 1 and len(starts) == run.n_agents
+        start_l1 = [ln for ln in starts if tuple(np.ravel(ln.get_xydata())) == (2.0, -1.0)]
+        assert len(start_l1) == 1
+        assert start_l1[0].get_zorder() > target[0].get_zorder()
+        assert min(ln.get_zorder() for ln in starts) > target[0].get_zorder()
+    finally:
+        plt.close(fig)
+
+
+def test_the_clipped_note_leaves_the_title_clear(tmp_path: Path) -> None:
+    """A leader's spike at t = 0.1 s (a realtime run's first ticks) is clipped and named in a
+    note over the top edge: the panel's title is drawn above it, in the single figure and in
+    the overview, where (c)'s title stays level with (d)'s."""
+
+    def spike(u: np.ndarray) -> None:
+        u[10:13, 0] = 10.0
+
+    run = load_run(edit_run(make_run(tmp_path / "run"), u=spike))
+    ctx = make_context(run)
+    assert any(c.value > control_range(run).hi for c in control_range(run).clipped)
+    for name, panel in (("control.png", 0), ("overview.png", 3)):
+        fig = figure(name, ctx, " (synthetic, converged)")
+        try:
+            fig.canvas.draw()
+            r = fig.canvas.get_renderer()  # type: ignore[attr-defined]
+            ax = fig.axes[panel]
+            notes = [t for t in ax.texts if t.get_text().startswith("clipped:")]
+            assert len(notes) == 1
+            note, title = notes[0].get_window_extent(r), ax.title.get_window_extent(r)
+            assert title.y0 >= note.y1 - 0.5, (name, title, note)  # above the note: clear of it however long
+            assert ax.title.get_text().startswith("(d) control inputs")
+            if name == "overview.png":
+                assert abs(fig.axes[2].title.get_window_extent(r).y0 - title.y0) < 1.0
+        finally:
+            plt.close(fig)

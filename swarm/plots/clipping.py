@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.transforms import Transform, offset_copy
@@ -29,6 +30,7 @@ PAD = 0.08  # padding, as a fraction of the range
 CLIP_BEYOND = 0.25  # clip only what lies more than this fraction of the range outside it
 MAX_MARKS = 40  # clip markers drawn (the largest excursions)
 NOTE_FONT = 7.0
+NOTE_RISE = 5.0  # pt: the top note's bottom, above the axes
 
 
 @dataclass
@@ -152,7 +154,7 @@ def _name(ax: Axes, text: str, big: Clip, edge: float, top: bool) -> None:
     ax.annotate(
         text,
         (big.t, edge),
-        xytext=(16.0 if right else -16.0, 5.0 if top else 10.0),
+        xytext=(16.0 if right else -16.0, NOTE_RISE if top else 10.0),
         textcoords="offset points",
         ha="left" if right else "right",
         va="bottom",
@@ -162,6 +164,18 @@ def _name(ax: Axes, text: str, big: Clip, edge: float, top: bool) -> None:
         arrowprops=dict(arrowstyle="->", color="0.3", lw=0.7, shrinkB=7),
         zorder=7,
     )
+    if top:  # the title goes up, above the note (which otherwise covers it)
+        ax.set_title(ax.get_title(), pad=title_pad_over_note())
+
+
+def title_pad_over_note() -> float:
+    """A title's pad (pt) that keeps it above a note over the axes' top edge."""
+    return NOTE_RISE + NOTE_FONT * 1.8 + float(plt.rcParams["axes.titlepad"])
+
+
+def top_note(rng: ControlRange) -> bool:
+    """Whether the control panel of every agent has a note over its top edge."""
+    return any(c.value > rng.hi for c in rng.clipped)
 
 
 def _offset(ax: Axes, dx_pt: float, dy_pt: float) -> Transform:

@@ -3,7 +3,7 @@ the run, the rows to draw, each agent's look, the events and the expected radii.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -19,6 +19,21 @@ GROUP_ABOVE = 12
 PER_PANEL = 12
 
 
+@dataclass(frozen=True)
+class Span:
+    """A fault that lasts (partition, loss, delay, noise: one with a `duration`), from
+    `start` to `end` (s); `agent` None when it hits every agent."""
+
+    start: float
+    end: float
+    kind: str
+    agent: int | None
+
+    @property
+    def label(self) -> str:
+        return self.kind + ("" if self.agent is None else f" {self.agent}")
+
+
 @dataclass
 class Ctx:
     run: RunData
@@ -27,6 +42,7 @@ class Ctx:
     events: list[RunEvent]
     expected: np.ndarray  # (N,) expected radius per column, NaN if unknown
     max_points: int = MAX_POINTS
+    spans: list[Span] = field(default_factory=list)  # the faults that last, shaded over their time
 
     @property
     def all_columns(self) -> list[int]:
@@ -42,7 +58,27 @@ def make_context(run: RunData, max_points: int = MAX_POINTS) -> Ctx:
         named_faults(run, run_events(run)),
         expected_by_column(run),
         max_points,
+        fault_spans(run),
     )
+
+
+def fault_spans(run: RunData) -> list[Span]:
+    """summary.json's faults that last (a positive `duration`), each cut to the run's end."""
+    faults = run.summary.get("faults")
+    if not isinstance(faults, list) or run.n_rows == 0:
+        return []
+    end = float(run.t[-1])
+    out = []
+    for f in faults:
+        if not isinstance(f, dict):
+            continue
+        at, duration, kind, agent = f.get("at", f.get("time")), f.get("duration"), f.get("kind"), f.get("agent")
+        if not (isinstance(at, (int, float)) and isinstance(duration, (int, float)) and isinstance(kind, str)):
+            continue
+        if duration > 0 and at < end:
+            who = int(agent) if isinstance(agent, int) and not isinstance(agent, bool) else None
+            out.append(Span(float(at), min(end, float(at) + float(duration)), kind, who))
+    return out
 
 
 def named_faults(run: RunData, events: list[RunEvent]) -> list[RunEvent]:

@@ -13,6 +13,7 @@ import matplotlib.pyplot as plt
 from matplotlib.figure import Figure
 
 from swarm.offline.results import PLOT_NAMES
+from swarm.plots.clipping import control_range, title_pad_over_note, top_note
 from swarm.plots.context import GROUP_ABOVE, Ctx, grouped, make_context
 from swarm.plots.graph import panel_graph, panel_neighbours
 from swarm.plots.groups import grouped_control, grouped_distance
@@ -86,7 +87,7 @@ def check_formats(formats: Iterable[str]) -> tuple[str, ...]:
 def one_panel(size: tuple[float, float], draw: Callable[[Any], None], suffix: str) -> Figure:
     fig, ax = plt.subplots(figsize=size, layout="constrained")
     draw(ax)
-    ax.set_title(ax.get_title() + suffix)
+    ax.title.set_text(ax.get_title() + suffix)  # (not set_title: it would reset a raised title's pad)
     return fig
 
 
@@ -100,6 +101,8 @@ def figure(name: str, ctx: Ctx, suffix: str) -> Figure:
         panel_trajectories(axs[0, 1], ctx, tree_legend=False)  # (a) names the colours
         panel_distance(axs[1, 0], ctx)
         panel_control(axs[1, 1], ctx)
+        if top_note(control_range(ctx.run)):  # (d)'s title raised over its note: (c)'s level with it
+            axs[1, 0].set_title(axs[1, 0].get_title(), pad=title_pad_over_note())
         fig.suptitle("Run overview" + suffix)
         return fig
     if name == "distance.png" and grouped(ctx):

@@ -25,12 +25,16 @@ DEAD_COLOUR = "0.6"
 FLAG_COLOUR = "red"
 TARGET_COLOUR = "red"
 EXPECTED_COLOUR = "0.35"  # dashed expected orbits / radii
+#: Faults (and kills): magenta, a colour no agent has (palette.py's maps hold no pure
+#: magenta; the nearest of their 54 colours is 0.45 away in RGB).
+FAULT_COLOUR = "#e000e0"
 EVENT_COLOURS = {
     EventKind.DROP: "tab:red",
     EventKind.REJOIN: "tab:green",
-    EventKind.FAULT: "tab:purple",
-    "kill": "tab:purple",
+    EventKind.FAULT: FAULT_COLOUR,
+    "kill": FAULT_COLOUR,
 }
+SPAN_ALPHA = 0.12  # a lasting fault's shading, from its start to its end
 DPI = 120
 KEY_DROP_PT = 34.0  # the key legend's top, this far under the axes (below tick labels and x label)
 

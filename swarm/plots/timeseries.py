@@ -12,12 +12,14 @@ from matplotlib.lines import Line2D
 from matplotlib.transforms import offset_copy
 
 from swarm.plots.clipping import ControlRange, control_range, mark_clips
-from swarm.plots.context import Ctx
+from swarm.plots.context import Ctx, Span
 from swarm.plots.placement import axes_size_pt, spread_1d, stack_offsets
 from swarm.plots.style import (
     DEAD_COLOUR,
     EVENT_COLOURS,
     EXPECTED_COLOUR,
+    FAULT_COLOUR,
+    SPAN_ALPHA,
     envelope,
     figure_of,
     key_legend,
@@ -29,7 +31,7 @@ from swarm.world.run_reader import RunEvent, first_alive
 
 MAX_EVENT_LABELS = 30
 MAX_SWITCH_MARKS = 2000  # switch markers drawn on the distance plot
-EVENT_FONT = 6.0
+EVENT_FONT = 7.5  # pt: the event labels along the top
 MAX_MERGED = 6  # agent ids in one merged event label
 
 
@@ -55,6 +57,13 @@ def merged(events: list[RunEvent]) -> list[RunEvent]:
         more = f" +{len(names) - MAX_MERGED}" if len(names) > MAX_MERGED else ""
         result.append(RunEvent(ev.time, ev.kind, " ".join([head, ", ".join(names[:MAX_MERGED])]).strip() + more))
     return result
+
+
+def draw_spans(ax: Axes, spans: list[Span]) -> None:
+    """A lasting fault shaded from its start to its end, in the fault colour, under the
+    lines (its start keeps its event's line and label)."""
+    for sp in spans:
+        ax.axvspan(sp.start, sp.end, color=FAULT_COLOUR, alpha=SPAN_ALPHA, lw=0, zorder=0.5, label=f"_span {sp.label}")
 
 
 def draw_events(ax: Axes, events: list[RunEvent]) -> None:
@@ -156,6 +165,7 @@ def finish_time_axes(ax: Axes, ctx: Ctx, lines: np.ndarray, columns: list[int], 
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.grid(True, lw=0.3, alpha=0.5)
+    draw_spans(ax, spans_of(ctx, columns))
     draw_events(ax, events_of(ctx, columns))
     label_line_ends(ax, ctx, lines, columns)
 
@@ -166,6 +176,12 @@ def events_of(ctx: Ctx, columns: list[int]) -> list[RunEvent]:
         return ctx.events
     mine = {ctx.looks.labels[j].lstrip("L") for j in columns}
     return [ev for ev in ctx.events if ev.label.split()[-1] in mine or not ev.label.split()[-1].isdigit()]
+
+
+def spans_of(ctx: Ctx, columns: list[int]) -> list[Span]:
+    """The lasting faults of the agents in `columns`, and those that hit every agent."""
+    mine = {int(ctx.run.ids[j]) for j in columns}
+    return [sp for sp in ctx.spans if sp.agent is None or sp.agent in mine]
 
 
 def switch_marks(ctx: Ctx, values: np.ndarray, columns: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -17,6 +17,9 @@ from swarm.plots.placement import axes_size_pt, ha_va, place_point_labels
 from swarm.plots.style import DEAD_COLOUR, EXPECTED_COLOUR, TARGET_COLOUR, key_legend, size_for, split_alive
 from swarm.world.run_reader import expected_radii, first_alive, last_alive
 
+TARGET_Z = 6.0  # the target's star: above every path and final marker
+START_Z = 6.5  # the start markers: above the target's star, under the labels (7)
+
 
 def final_position(ctx: Ctx, j: int) -> tuple[float, float] | None:
     """Last row's position, else the last alive one; None if never finite."""
@@ -67,7 +70,9 @@ def panel_trajectories(ax: Axes, ctx: Ctx, tree_legend: bool | None = None) -> N
         s = first if first is not None else 0
         if np.isfinite(run.x[s, j]) and np.isfinite(run.y[s, j]):
             starts.append((run.x[s, j], run.y[s, j]))
-            ax.plot(run.x[s, j], run.y[s, j], marker="o", ms=4, mfc="white", mec=looks.colours[j], mew=1.0, zorder=3)
+            ax.plot(  # above the target's star: a leader may start next to the target (case 2's L1)
+                run.x[s, j], run.y[s, j], marker="o", ms=4, mfc="white", mec=looks.colours[j], mew=1.0, zorder=START_Z
+            )
         end = final_position(ctx, j)
         if end is None:
             continue
@@ -85,7 +90,7 @@ def panel_trajectories(ax: Axes, ctx: Ctx, tree_legend: bool | None = None) -> N
             )
         else:
             ax.plot(*end, marker="x", ms=6, color=DEAD_COLOUR, mew=1.5, zorder=4)
-    ax.plot(tx, ty, marker="*", ms=14, color=TARGET_COLOUR, mec="k", mew=0.6, zorder=6)
+    ax.plot(tx, ty, marker="*", ms=14, color=TARGET_COLOUR, mec="k", mew=0.6, zorder=TARGET_Z)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_title("(b) trajectories")
