@@ -361,6 +361,7 @@ def test_what_a_study_varies(tmp_path):
     assert again.faults[0].std == 0.2 and not varied(t, Setting((("noise", 0.0),)), Jitter(), 3).faults
 
 
+@pytest.mark.slow  # two studies in-process
 def test_a_vectorised_law_goes_through_the_batch_engine_with_the_per_agent_rows(tmp_path):
     src = vector_scenario(tmp_path)
     common = ["--seeds", "4", "--positions", "5", "--headings", "0.5", "--c2", "0.3,0.5", "-j", "1"]
