@@ -388,7 +388,7 @@ def scenario(
     c1: Annotated[Optional[str], typer.Option(help="values of C1 (list: one setting each)")] = None,
     c2: Annotated[Optional[str], typer.Option(help="values of C2 (list)")] = None,
     param: Annotated[
-        Optional[list[str]], typer.Option(help="[law.params] entry NAME=V1,V2,... (repeat for more)")
+        Optional[list[str]], typer.Option(help="a law parameter (law.params) NAME=V1,V2,... (repeat for more)")
     ] = None,
     sensing_range: Annotated[
         Optional[str], typer.Option("--range", help="sensing ranges in m, inf = unlimited (list)")
@@ -418,7 +418,7 @@ def scenario(
     """Your scenario, your law: vary it over seeds and settings; where does it converge?
 
     The scenario file is the template. Every seed draws its own jitter of positions,
-    headings and speeds (and is the run's [run] seed, which drives loss and noise); every
+    headings and speeds (and is the run's seed, run.seed, which drives loss and noise); every
     combination of the lists (--c1, --c2, --param, --range, --fov, --noise, --loss,
     --delay) is one setting, run over the same seeds. Any law runs: a follower law that
     declares itself vectorised goes through the batch engine, any other through swarm
