@@ -13,6 +13,7 @@ from test_plots import make_run
 from typer.testing import CliRunner
 
 from swarm.cli.main import app
+from swarm.cli.up import run_layout
 from swarm.contracts.scenario import load_scenario
 from swarm.offline.layout import LAYOUT_FILE, layout_text, run_agents, scenario_agents, write_layout
 from swarm.world.live_view import LIVE_TOPICS
@@ -125,3 +126,18 @@ def test_swarm_plot_writes_the_runs_layout(tmp_path: Path) -> None:
     assert "foxglove layout: foxglove-layout.json (5 agents" in r.output
     layout = json.loads((run_dir / LAYOUT_FILE).read_text())
     assert all(got == [1, 2, 3, 4, 5] for got in ids_in(layout).values())
+
+
+def test_swarm_up_foxglove_writes_the_scenarios_layout_and_says_where(tmp_path: Path) -> None:
+    """What `swarm up --foxglove` does as the run starts (swarm/cli/up.py's run_layout): the
+    layout for the scenario's agents in the run's output directory, one line naming it; a
+    directory it cannot write to is said in that line, and the run goes on."""
+    s = load_scenario(ten_agent_scenario(tmp_path))
+    out = tmp_path / "run"
+    out.mkdir()
+    line = run_layout(s, out)
+    assert line.startswith(f"layout for its 10 agents: {out / LAYOUT_FILE}")
+    assert all(got == list(range(21, 31)) for got in ids_in(json.loads((out / LAYOUT_FILE).read_text())).values())
+    missing = tmp_path / "gone"
+    assert run_layout(s, missing).startswith(f"layout: not written ({missing}")
+    assert not missing.exists()
