@@ -27,7 +27,7 @@ import signal
 import socket
 import sys
 import time
-from typing import Any, cast
+from typing import Any
 
 import zenoh
 
@@ -47,7 +47,6 @@ REJOIN_WAIT = 2.0  # s a token lost just after a stall of the world has to come 
 LINK_GRACE = 5.0  # s a token lost in a lockstep run has to come back (`rides_out`)
 
 ACTIVE = AgentState.ACTIVE
-STOP = cast(EventKind, "stop")  # the operator stopped the run (`swarm stop`); EventKind.STOP once it is there
 
 
 class Inbox:
@@ -344,7 +343,7 @@ class Inbox:
         the run as on Ctrl-C), the reply, then SIGINT to this process: the run ends here as
         on Ctrl-C, its results written (`stopped_by_signal` 2, `completed` false)."""
         st = self.state
-        st.event(STOP, None, f"asked by {by}")
+        st.event(EventKind.STOP, None, f"asked by {by}")
         answer(query, wire.world_admin_key(st.cfg.run), wire.encode_admin_reply(True, stopping=True, tick=st.core.tick))
         os.kill(os.getpid(), signal.SIGINT)  # world/main.py's Stop, on this (the main) thread
 

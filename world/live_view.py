@@ -56,5 +56,5 @@ def open_hint(host: str, port: int) -> str:
     """The line to print: where to point the Foxglove app."""
     return (
         f"live view: {live_url(host, port)}  (Foxglove: Open connection > Foxglove WebSocket; "
-        "layout: docs/foxglove-layout.json)"
+        "a layout for the run's agents: `swarm plot` of its results writes foxglove-layout.json)"
     )

@@ -260,11 +260,9 @@ def ending(launcher, code: int, out: Path) -> tuple[int, str | None, bool]:
     whether that is a failure, from the launcher's state and the world's exit `code`
     (docs/reference/exit-codes.md#swarm-up)."""
     if launcher.stop_signal is not None:
-        return (
-            signal_exit(launcher.stop_signal),
-            f"stopped by signal {launcher.stop_signal}; partial results in {out}",
-            False,
-        )
+        who = getattr(launcher, "operator_stop", None)  # `swarm stop` from another terminal
+        how = f"stopped by `swarm stop` ({who})" if who else f"stopped by signal {launcher.stop_signal}"
+        return signal_exit(launcher.stop_signal), f"{how}; partial results in {out}", False
     if launcher.failure is not None:  # an agent could not start (said live), or no world to reach
         failed = ExitCode.AGENT_FAILED if launcher.exits else ExitCode.FAILED
         return failed, f"swarm up: {launcher.failure}; the run is stopped", True

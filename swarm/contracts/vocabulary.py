@@ -65,6 +65,7 @@ class EventKind(StrEnum):
     EXIT = "exit"
     LIMIT = "limit"
     DESERTED = "deserted"
+    STOP = "stop"  # an operator's `swarm stop`: the run ends as on SIGINT
     STALE = "stale"  # robots: an agent's robot's pose is older than the robots file's stale_after (zero twist)
     FRESH = "fresh"  # robots: its poses come again
 

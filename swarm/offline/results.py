@@ -18,7 +18,9 @@ from swarm.world.recording import RECORDING_FILE, RESULT_FILES, SUMMARY_FILE, TR
 
 PLOT_NAMES = ("trajectories.png", "distance.png", "control.png", "graph.png", "overview.png", "neighbours.png")
 PLOT_SUFFIXES = (".png", ".pdf", ".svg")  # `swarm plot --format`
-DERIVED_NAMES = ("animation.gif",)  # `swarm plot --animate`; `swarm export --csv` writes csv/agent-<id>.csv
+# `swarm plot --animate`, the Foxglove layout of `swarm plot` / `swarm up --foxglove`; `swarm export --csv`
+# writes csv/agent-<id>.csv
+DERIVED_NAMES = ("animation.gif", "foxglove-layout.json")
 
 
 def derived_files(out: Path) -> list[Path]:

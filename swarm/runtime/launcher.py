@@ -50,7 +50,6 @@ from swarm.runtime.supervision import AgentExitReport, agent_exit, send_report, 
 # The world says when it listens (swarm/contracts/startup.py); these bounds are last resorts
 # only, for a world that neither gets there nor exits, and for our own session after that.
 READY_DEADLINE = 300.0
-STOP_EVENT = "stop"  # the world's event for `swarm stop` (EventKind.STOP once swarm/contracts/vocabulary.py has it)
 CONNECT_DEADLINE = 60.0
 
 
@@ -256,7 +255,7 @@ class Launcher:
             self.events.append(ev)
         if ev["kind"] == EventKind.START:
             self.started = True
-        elif ev["kind"] == STOP_EVENT and ev.get("agent") is None:
+        elif ev["kind"] == EventKind.STOP and ev.get("agent") is None:
             # `swarm stop` (world/inbox.py): the world stops itself, and this run ends as on Ctrl-C
             self.operator_stop = str(ev.get("reason", "asked by the operator"))
             self.stop(signal.SIGINT)
