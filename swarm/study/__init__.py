@@ -1,2 +1,3 @@
-"""`swarm study`: batch studies of random swarms (`swarms`) and of gains (`gains`), run on a
+"""`swarm study`: batch studies of random swarms (`swarms`), of gains (`gains`) and of one's own
+scenario (`scenario`, with `vectorised` for laws the batch engine runs), run on a
 process pool (`pool`) or the batch engine (`batch`), with their figures (`figures`)."""
