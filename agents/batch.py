@@ -27,7 +27,9 @@ run it per agent). Pure: no I/O.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -36,6 +38,7 @@ from swarm.agents.batch_leader import BatchLeaders
 from swarm.agents.batch_select import NONE, select
 from swarm.agents.batch_sticky import BatchSticky
 from swarm.agents.laws import bearing_law, loiter_rate
+from swarm.contracts.laws import GAINS, resolve_law
 from swarm.contracts.vocabulary import Phase
 
 
@@ -46,6 +49,32 @@ class BatchDecision:
     hops: np.ndarray  # (B, N) advertised hops, -1 none
 
 
+def vectorised(law: object) -> bool:
+    """A follower law of one's own (the `[gains] law` signature) that declares it works element
+    by element on arrays as on floats (`law.vectorised = True`): the batch engine runs it."""
+    return getattr(law, "vectorised", False) is True
+
+
+def follower_law_of(gains: list) -> Callable[..., Any]:
+    """The one follower law of a batch: laws.bearing_law itself, or a `[gains] law` of one's own
+    declared vectorised (called with (B, N) arrays where the built-in is, and with floats for
+    a follower that has just chosen); ValueError for anything else."""
+    names = {g.law for g in gains}
+    if len(names) != 1:
+        raise ValueError(f"one follower law per batch, got {sorted(names)}")
+    name = names.pop()
+    if name == "bearing":
+        return bearing_law
+    law = resolve_law(name, GAINS)
+    if not vectorised(law):
+        raise ValueError(f"only the built-in 'bearing' law and laws declared vectorised are batched, not {name!r}")
+
+    def batched(g_i: Any, g_j: Any, lambda_ij: Any, c1: Any, c2: Any, ops: object = None) -> Any:
+        return law(g_i, g_j, lambda_ij, c1, c2)  # (ops: the built-in law's switch between floats and arrays)
+
+    return batched
+
+
 class BatchBrains:
     def __init__(self, specs: list[list], gains: list, sensing: list, dt: float, max_hops: int):
         """specs: per member the AgentSpecs in column order (same N); gains, sensing: per
@@ -53,8 +82,7 @@ class BatchBrains:
         modes = {s.selection for s in sensing}
         if len(modes) != 1:
             raise ValueError(f"one selection rule per batch, got {sorted(modes)}")
-        if any(g.law != "bearing" for g in gains):
-            raise ValueError("only the built-in 'bearing' law is batched")
+        self.law = follower_law_of(gains)
         self.mode = modes.pop()
         shape = (len(specs), len(specs[0]))
         self.max_hops = max_hops
@@ -69,7 +97,7 @@ class BatchBrains:
             dtype=np.int64,
         )
         self.leaders = BatchLeaders(specs, dt)
-        self.sticky = BatchSticky(specs, gains, sensing, dt, max_hops) if self.mode == "sticky" else None
+        self.sticky = BatchSticky(specs, gains, sensing, dt, max_hops, self.law) if self.mode == "sticky" else None
         self.out = np.full(shape, NONE, dtype=np.int64)  # AgentBrain.out
         self.last_u = np.zeros(shape)
         self.hops = np.full(shape, NONE, dtype=np.int64)  # advertised last tick (rooted rule)
@@ -141,7 +169,7 @@ class BatchBrains:
         track = choice >= 0
         # the law on every follower with an out-neighbour: laws.bearing_law itself, on arrays
         lam = frames.bearing_pairs(choice)
-        u = bearing_law(heading, bm.take(heading, choice), lam, self.c1, self.c2, ops=bm.ARRAY)
+        u = self.law(heading, bm.take(heading, choice), lam, self.c1, self.c2, ops=bm.ARRAY)
         # nobody (rooted) in sight: loiter the way it last turned (laws.loiter's rate)
         u = np.where(track, u, loiter_rate(self.c2, self.last_u, ops=bm.ARRAY))
         h_j = bm.take(hops_in, choice)

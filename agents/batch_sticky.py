@@ -15,6 +15,9 @@ Pure: no I/O.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 
 from swarm.agents import batch_maths as bm
@@ -28,8 +31,18 @@ from swarm.agents.sticky_follower import StickyFollower
 class BatchSticky:
     """The sticky followers of a batch: arrays for the keep, one StickyFollower each."""
 
-    def __init__(self, specs: list[list], gains: list, sensing: list, dt: float, max_hops: int):
+    def __init__(
+        self,
+        specs: list[list],
+        gains: list,
+        sensing: list,
+        dt: float,
+        max_hops: int,
+        law: Callable[..., Any] = bearing_law,
+    ):
+        """law: the follower law (laws.bearing_law, or batch.follower_law_of's law of one's own)."""
         shape = (len(specs), len(specs[0]))
+        self.law = law
         self.dt = dt
         self.max_hops = max_hops
         self.specs = specs
@@ -131,7 +144,7 @@ class BatchSticky:
                     )
                     choice[b, i], hops[b, i] = NONE, NONE
                 else:
-                    u[b, i] = bearing_law(heading, c.heading, c.bearing, g.c1, g.c2)
+                    u[b, i] = self.law(heading, c.heading, c.bearing, g.c1, g.c2)
                     choice[b, i] = col[c.id]
                     hops[b, i] = c.hops + 1 if ch.rooted and 0 <= c.hops < self.max_hops else NONE
 

@@ -23,7 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from swarm.agents.batch import BatchBrains
+from swarm.agents.batch import BatchBrains, vectorised
+from swarm.contracts.laws import GAINS, resolve_law
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.vocabulary import EventKind
 from swarm.world.batch import BatchWorld
@@ -40,9 +41,12 @@ def refusal(s: Scenario) -> str | None:
     """Why the batch engine cannot run `s` exactly as `swarm sim` does, or None."""
     if s.faults:
         return "it has scripted faults ([[faults]]): the batch engine has no fault plan"
-    if s.gains.law != "bearing" or s.law.follower != "bearing":
+    if s.law.follower != "bearing" or (s.gains.law != "bearing" and not vectorised(resolve_law(s.gains.law, GAINS))):
         name = s.gains.law if s.gains.law != "bearing" else s.law.follower
-        return f"its follower law is {name!r}: only the built-in 'bearing' law is batched"
+        return (
+            f"its follower law is {name!r}: only the built-in 'bearing' law and `[gains] law`s declared "
+            "vectorised are batched"
+        )
     if s.law.leader != "cc":
         return f"its leader law is {s.law.leader!r}: only the built-in 'cc' law (CC path, then orbit hold) is batched"
     return None

@@ -16,20 +16,15 @@ out-neighbour, the search while there is nobody to follow, the turn-rate limit, 
 leaders. A `[law] follower` or `[law] leader` law (law(obs)) is Python per agent and is not
 batched.
 
-The batch engine (swarm/offline/batch.py) takes no law as an argument yet: `run_batch_with_law`
-puts the law where the batch brains call the built-in one (swarm.agents.batch and
-swarm.agents.batch_sticky's `bearing_law`) for the length of one batch, in this process, and
-puts the built-in back after.
+The batch engine (swarm/offline/batch.py, swarm/agents/batch.py `follower_law_of`) runs such a
+law itself, as `swarm sim --batch` does.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
-from typing import Any
+from collections.abc import Callable
 
-from swarm.agents import batch as agents_batch
-from swarm.agents import batch_sticky
+from swarm.agents.batch import vectorised
 from swarm.contracts.laws import GAINS, resolve_law
 from swarm.contracts.scenario import Scenario
 from swarm.offline.batch import run_batch
@@ -44,32 +39,12 @@ def batch_law(s: Scenario) -> VectorLaw | None:
     if s.gains.law == "bearing":
         return None
     law = resolve_law(s.gains.law, GAINS)
-    return law if getattr(law, "vectorised", False) is True else None
-
-
-@contextmanager
-def _in_batch(law: VectorLaw) -> Iterator[None]:
-    def batched(g_i, g_j, lambda_ij, c1, c2, *, ops=None):  # ops: the built-in law's array switch
-        return law(g_i, g_j, lambda_ij, c1, c2)
-
-    mods: tuple[Any, ...] = (agents_batch, batch_sticky)  # modules: their `bearing_law` swapped
-    saved = [m.bearing_law for m in mods]
-    for m in mods:
-        m.bearing_law = batched
-    try:
-        yield
-    finally:
-        for m, f in zip(mods, saved):
-            m.bearing_law = f
+    return law if vectorised(law) else None
 
 
 def run_batch_with_law(scenarios: list[Scenario], law: VectorLaw) -> list[RunResult]:
     """run_batch (lean) of scenarios whose `[gains] law` is the vectorised `law`: the
     batch engine with `law` in the built-in law's place. Each result's scenario is its own
     (naming `law`)."""
-    plain = [s.model_copy(update={"gains": s.gains.model_copy(update={"law": "bearing"})}) for s in scenarios]
-    with _in_batch(law):
-        results = run_batch(plain, lean=True)
-    for r, s in zip(results, scenarios):
-        r.scenario = s
-    return results
+    assert all(batch_law(s) is law for s in scenarios), "scenarios of one vectorised law"
+    return run_batch(scenarios, lean=True)
