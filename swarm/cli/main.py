@@ -12,7 +12,7 @@ an exit code in one place (swarm/cli/errors.py, wrapped round every command here
     control  kill, spawn, pause, resume     (act on a live run)
     access   credentials                    (hand an identity to another machine)
     host     host                           (agents of a run on this machine, via its router)
-    study    study swarms, study gains      (batch studies)
+    study    study swarms, gains, scenario  (batch studies)
     tools    logs, stop, echo               (a live run's logs, its end, its streams)
 
 Options several groups share are in `options`, shared output in `output`; command modules
