@@ -29,7 +29,7 @@ import numpy as np
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.vocabulary import AgentState, SwitchReason
 from swarm.world.kinematics import step, step_one
-from swarm.world.sensing import SensorFrame, build_frames, sensing_matrix
+from swarm.world.sensing import GRID_MIN_AGENTS, SensorFrame, build_frames, sensing_grid, sensing_matrix
 
 # The states as module names (world/, tests/test_sim.py import them)
 ACTIVE, COASTING, GONE = AgentState.ACTIVE, AgentState.COASTING, AgentState.GONE
@@ -105,10 +105,14 @@ class WorldCore:
 
     def sensing(self):
         """(S, bearing, range) matrices of the current tick: S[i, j] when i senses j.
-        Computed once per tick (and again after a drop, join or add); do not modify them."""
+        Computed once per tick (and again after a drop, join or add); do not modify them.
+        With a sensing range and at least GRID_MIN_AGENTS agents they come from the grid
+        (world/sensing.py `sensing_grid`, O(N k)): the same S, and the same bearing and range
+        wherever S (NaN and inf elsewhere); otherwise from every pair (`sensing_matrix`)."""
         if self._sensing is None:
             sens = self.scenario.sensing
-            self._sensing = sensing_matrix(self.x, self.y, self.heading, self.present_mask(), sens.range, sens.fov)
+            how = sensing_grid if sens.range is not None and len(self.ids) >= GRID_MIN_AGENTS else sensing_matrix
+            self._sensing = how(self.x, self.y, self.heading, self.present_mask(), sens.range, sens.fov)
         return self._sensing
 
     def set_command(self, agent_id: int, u: float, hops: int | None = None) -> bool:

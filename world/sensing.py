@@ -15,11 +15,32 @@ from swarm.contracts.frames import Contact, SensorFrame
 from swarm.contracts.orbits import wrap as wrap_one
 from swarm.world.kinematics import wrap
 
-__all__ = ["Contact", "SensorFrame", "sensing_matrix", "build_frames", "encode_frames_pairwise"]
+__all__ = [
+    "Contact",
+    "SensorFrame",
+    "sensing_matrix",
+    "sensing_pairs",
+    "sensing_grid",
+    "pairs_matrices",
+    "build_frames",
+    "encode_frames_pairwise",
+    "GRID_MIN_AGENTS",
+]
+
+# With a sensing range, from this many agents the world finds who senses whom through a grid
+# (`sensing_grid`: O(N k), k the agents in sight) instead of every pair (`sensing_matrix`,
+# O(N^2)); below it the grid's fixed cost (about 20 numpy calls) is the larger
+# (docs/benchmarks.md#scaling).
+GRID_MIN_AGENTS = 64
+# The grid's cells are this much wider than the range, so that every pair within range lies
+# in neighbouring cells whatever the rounding of the cell numbers (their relative error is
+# below 2^-28 while the grid spans at most GRID_MAX_CELLS cells a side).
+GRID_MARGIN = 1.0 + 1e-6
+GRID_MAX_CELLS = 1 << 24
 
 
 def sensing_matrix(x, y, heading, present, sense_range: float | None, fov: float | None):
-    """Boolean (N, N) matrix S with S[i, j] true when agent i senses agent j.
+    """The reference: every pair. Boolean (N, N) matrix S with S[i, j] true when agent i senses agent j.
 
     present: (N,) bool, agents that are in the world. sense_range (m) or None for
     unlimited; fov: full field of view (rad) centred on the heading, or None.
@@ -42,6 +63,74 @@ def sensing_matrix(x, y, heading, present, sense_range: float | None, fov: float
         i, j = np.nonzero(s)
         s[i, j] = np.abs(wrap(bearing[i, j] - heading[i])) <= 0.5 * fov
     return s, bearing, rng
+
+
+def sensing_pairs(x, y, heading, present, sense_range: float, fov: float | None):
+    """Who senses whom with a sensing range, through a uniform grid of cells a range wide:
+    (i, j, bearing, range) arrays of the sensed pairs (agent i senses agent j), sorted by i,
+    then j. The same pairs and the same bits as `sensing_matrix` (S, and its bearing and
+    range where S): the same numpy operations on the same numbers, but only on the pairs
+    in neighbouring cells (a superset of those within range), so the cost grows as N x the
+    agents in sight rather than N^2. Falls back to `sensing_matrix` where a grid does not
+    fit (positions not finite, a range of 0, a swarm more than GRID_MAX_CELLS ranges wide)."""
+    n = len(x)
+    idx = np.flatnonzero(present)
+    m = len(idx)
+    px, py = (x, y) if m == n else (x[idx], y[idx])
+    cell = float(sense_range) * GRID_MARGIN
+    if m < 2:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty, np.zeros(0), np.zeros(0)
+    x0, y0 = px.min(), py.min()
+    span = max(px.max() - x0, py.max() - y0)
+    if not (cell > 0 and np.isfinite(span) and span / cell < GRID_MAX_CELLS):
+        s, bearing, rng = sensing_matrix(x, y, heading, present, sense_range, fov)
+        i, j = np.nonzero(s)
+        return i, j, bearing[i, j], rng[i, j]
+    cx = ((px - x0) / cell).astype(np.int64)  # floor: the numbers are >= 0
+    cy = ((py - y0) / cell).astype(np.int64)
+    w = int(cy.max()) + 3  # cell (cx, cy) has key cx * w + cy; cy - 1 and cy + 1 stay in its column
+    key = cx * w + cy
+    order = np.argsort(key, kind="stable")
+    skey = key[order]
+    q = key[:, None] + np.array([-w, 0, w])  # the three columns of neighbouring cells, rows cy - 1 .. cy + 1
+    lo = np.searchsorted(skey, q - 1, "left").ravel()
+    cnt = np.searchsorted(skey, q + 1, "right").ravel() - lo
+    # the candidate pairs (a, b) as indices of px, py: a ascending, b in cell order
+    a = np.repeat(np.arange(m), cnt.reshape(m, 3).sum(axis=1))
+    b = order[np.arange(len(a)) - np.repeat(np.cumsum(cnt) - cnt - lo, cnt)]
+    dx = px[b] - px[a]  # x[j] - x[i], as in sensing_matrix
+    dy = py[b] - py[a]
+    rng = np.hypot(dx, dy)
+    near = (rng <= sense_range) & (a != b)
+    a, b, rng = a[near], b[near], rng[near]
+    bearing = np.arctan2(dy[near], dx[near])
+    if m != n:
+        a, b = idx[a], idx[b]
+    if fov is not None and fov < 2 * np.pi:
+        seen = np.abs(wrap(bearing - heading[a])) <= 0.5 * fov
+        a, b, bearing, rng = a[seen], b[seen], bearing[seen], rng[seen]
+    o = np.argsort(a * n + b)
+    return a[o], b[o], bearing[o], rng[o]
+
+
+def pairs_matrices(n: int, i, j, bearing, rng):
+    """(S, bearing, range) (N, N) matrices from sensed pairs: S true at the pairs, bearing and
+    range there (NaN and inf at every pair not sensed)."""
+    s = np.zeros((n, n), dtype=bool)
+    s[i, j] = True
+    b = np.full((n, n), np.nan)
+    b[i, j] = bearing
+    r = np.full((n, n), np.inf)
+    r[i, j] = rng
+    return s, b, r
+
+
+def sensing_grid(x, y, heading, present, sense_range: float, fov: float | None):
+    """`sensing_matrix` through the grid (`sensing_pairs`): the same S, and the same bearing
+    and range wherever S; NaN and inf elsewhere (pairs not sensed, whose values no frame
+    carries)."""
+    return pairs_matrices(len(x), *sensing_pairs(x, y, heading, present, sense_range, fov))
 
 
 def build_frames(

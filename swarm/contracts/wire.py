@@ -31,8 +31,9 @@ import json
 import math
 import re
 import struct
+from collections.abc import Iterable
 from dataclasses import dataclass
-from itertools import starmap
+from itertools import chain, starmap
 
 from swarm.contracts.frames import Contact, SensorFrame
 from swarm.contracts.vocabulary import AgentState, Phase
@@ -213,22 +214,60 @@ def encode_sense_rows(
     """encode_sense_arrays for the agents at indices `rows`, all at once, from the world's
     arrays: ids, heading, hops, is_leader and the target's offset from each agent
     (target_dx, target_dy) are (N,); sensed, bearing and ranges (N, N). The same bytes as
-    one encode_sense_arrays per agent, in one numpy pass over every sensed pair."""
+    one encode_sense_arrays per agent, in one numpy pass over every sensed pair (flat
+    indices into the matrices: no (N, N) copy when `rows` is every agent in order)."""
     import numpy as np  # lazy: agent processes import wire and never load numpy
 
+    n = len(ids)
     rows = np.asarray(rows, dtype=np.int64)
-    r, j = np.nonzero(sensed[rows])
-    i = rows[r]
+    if len(rows) != n or (n and not (rows == np.arange(n)).all()):
+        sensed, bearing, ranges = sensed[rows], bearing[rows], ranges[rows]
+    flat = np.flatnonzero(sensed)  # row by row, as np.nonzero
+    j = flat % n if n else flat
+    recs = np.empty(len(flat), dtype=np.dtype(CONTACT_FIELDS))
+    recs["id"], recs["heading"], recs["hops"] = ids[j], heading[j], hops[j]
+    recs["bearing"], recs["range"] = bearing.ravel()[flat], ranges.ravel()[flat]
+    return _sense_frames(tick, time, rows, ids, heading, target_dx, target_dy, is_leader, recs.tobytes(), sensed.sum(1))
+
+
+def encode_sense_pairs(
+    tick: int, time: float, rows, ids, heading, target_dx, target_dy, is_leader, i, j, bearing, ranges, hops
+) -> list[bytes]:
+    """encode_sense_rows from the sensed pairs instead of (N, N) matrices: agent i senses
+    agent j at `bearing`, `ranges` (arrays of the pairs, sorted by i, then j, as
+    swarm.world.sensing.sensing_pairs gives them; pairs of agents not in `rows` are left
+    out). The same bytes, in O(rows + pairs)."""
+    import numpy as np  # lazy: agent processes import wire and never load numpy
+
+    n = len(ids)
+    rows = np.asarray(rows, dtype=np.int64)
+    want = np.zeros(n, dtype=bool)
+    want[rows] = True
+    if not want[i].all():
+        keep = want[i]
+        i, j, bearing, ranges = i[keep], j[keep], bearing[keep], ranges[keep]
     recs = np.empty(len(j), dtype=np.dtype(CONTACT_FIELDS))
-    recs["id"], recs["bearing"], recs["heading"], recs["range"] = ids[j], bearing[i, j], heading[j], ranges[i, j]
-    recs["hops"] = hops[j]
+    recs["id"], recs["heading"], recs["hops"] = ids[j], heading[j], hops[j]
+    recs["bearing"], recs["range"] = bearing, ranges
+    counts = np.bincount(i, minlength=n)
     blob = recs.tobytes()
-    ends = np.cumsum(np.bincount(r, minlength=len(rows))).tolist()
+    if len(rows) > 1 and not (rows[1:] > rows[:-1]).all():  # not ascending: each row's run of pairs apart
+        starts = (np.cumsum(counts) - counts)[rows]
+        size = CONTACT.size
+        parts = [blob[s * size : (s + c) * size] for s, c in zip(starts.tolist(), counts[rows].tolist())]
+        blob = b"".join(parts)
+    return _sense_frames(tick, time, rows, ids, heading, target_dx, target_dy, is_leader, blob, counts[rows])
+
+
+def _sense_frames(tick, time, rows, ids, heading, target_dx, target_dy, is_leader, blob, counts) -> list[bytes]:
+    """One frame per row: its header, then its `counts` contact records from `blob` (the
+    rows' records one after another)."""
     ids_l, head_l, lead_l = ids.tolist(), heading.tolist(), is_leader.tolist()
     dx_l, dy_l = target_dx.tolist(), target_dy.tolist()
     out, start, size, pack, nan = [], 0, CONTACT.size, SENSE_HEAD.pack, math.nan
-    for k, end in zip(rows.tolist(), ends):
+    for k, c in zip(rows.tolist(), counts.tolist()):
         lead = lead_l[k]
+        end = start + c * size
         out.append(
             pack(
                 KIND_SENSE,
@@ -241,15 +280,25 @@ def encode_sense_rows(
                 head_l[k],
                 dx_l[k] if lead else nan,
                 dy_l[k] if lead else nan,
-                end - start,
+                c,
             )
-            + blob[start * size : end * size]
+            + blob[start:end]
         )
         start = end
     return out
 
 
 _contact = functools.partial(tuple.__new__, Contact)  # Contact from a tuple, in C (Contact._make is Python)
+
+
+CONTACTS_CACHED = 256  # frames of up to this many contacts are decoded with a layout kept per size
+
+
+@functools.lru_cache(maxsize=64)
+def _contacts_struct(n: int) -> struct.Struct:
+    """The layout of n contact records one after another (CONTACT, n times; at most 64 sizes
+    kept, each under 31 kB)."""
+    return struct.Struct("<" + CONTACT.format.lstrip("<") * n)
 
 
 def decode_sense(buf: bytes) -> SensorFrame:
@@ -260,11 +309,19 @@ def decode_sense(buf: bytes) -> SensorFrame:
     expected = SENSE_HEAD.size + n * CONTACT.size
     if len(buf) != expected:
         raise WireError(f"sense frame: {len(buf)} bytes, expected {expected} for {n} contacts")
-    contacts = tuple(map(_contact, CONTACT.iter_unpack(memoryview(buf)[SENSE_HEAD.size :])))
-    # One finiteness test for all numbers: a NaN or inf anywhere makes the sum non-finite
-    # (so would finite values near 1e308, which are garbage here anyway; the ids and hops
-    # summed along are integers, finite by construction).
-    total = time + heading + (tx + ty if has_t else 0.0) + sum(map(sum, contacts))
+    # Every contact's numbers in one unpack, grouped five by five into Contacts in C (zip
+    # over one iterator); one finiteness test for all numbers: a NaN or inf anywhere makes
+    # the sum non-finite (so would finite values near 1e308, which are garbage here anyway;
+    # the ids and hops summed along are integers, finite by construction).
+    numbers: Iterable[float]
+    if n <= CONTACTS_CACHED:
+        numbers = _contacts_struct(n).unpack_from(buf, SENSE_HEAD.size)
+        it = iter(numbers)
+        contacts = tuple(map(_contact, zip(it, it, it, it, it)))
+    else:  # no layout of its own kept for every size of a large frame
+        contacts = tuple(map(_contact, CONTACT.iter_unpack(memoryview(buf)[SENSE_HEAD.size :])))
+        numbers = chain.from_iterable(contacts)
+    total = time + heading + (tx + ty if has_t else 0.0) + sum(numbers)
     if not math.isfinite(total):
         raise WireError("sense frame: non-finite number")
     if tick < 0:
