@@ -29,11 +29,29 @@ import numpy as np
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.vocabulary import AgentState, SwitchReason
 from swarm.world.kinematics import step, step_one
-from swarm.world.sensing import GRID_MIN_AGENTS, SensorFrame, build_frames, sensing_grid, sensing_matrix
+from swarm.world.sensing import (
+    GRID_MIN_AGENTS,
+    SensorFrame,
+    build_frames,
+    pairs_matrices,
+    sensing_matrix,
+    sensing_pairs,
+)
 
 # The states as module names (world/, tests/test_sim.py import them)
 ACTIVE, COASTING, GONE = AgentState.ACTIVE, AgentState.COASTING, AgentState.GONE
 STEP_ONE_BY_ONE = 32  # agents: up to this many, `step` goes agent by agent (world/kinematics.py)
+
+
+class _Sensed:
+    """One tick's sensing, each form made when first asked for (`WorldCore.sensing`,
+    `WorldCore.sensed_pairs`); the core forgets it when poses or presence change."""
+
+    __slots__ = ("matrices", "pairs")
+
+    def __init__(self) -> None:
+        self.matrices: tuple | None = None
+        self.pairs: tuple | None = None
 
 
 class Physics(Protocol):
@@ -65,7 +83,7 @@ class WorldCore:
         self.dt = scenario.run.dt
         self.tick = 0
         self.rejected = 0  # non-finite commands refused
-        self._sensing = None  # this tick's sensing matrices, until poses or presence change
+        self._sensing: _Sensed | None = None  # this tick's sensing, until poses or presence change
 
     @property
     def time(self) -> float:
@@ -110,10 +128,36 @@ class WorldCore:
         (world/sensing.py `sensing_grid`, O(N k)): the same S, and the same bearing and range
         wherever S (NaN and inf elsewhere); otherwise from every pair (`sensing_matrix`)."""
         if self._sensing is None:
-            sens = self.scenario.sensing
-            how = sensing_grid if sens.range is not None and len(self.ids) >= GRID_MIN_AGENTS else sensing_matrix
-            self._sensing = how(self.x, self.y, self.heading, self.present_mask(), sens.range, sens.fov)
-        return self._sensing
+            self._sensing = _Sensed()
+        got = self._sensing
+        if got.matrices is None:
+            if self._grid():
+                got.matrices = pairs_matrices(len(self.ids), *self.sensed_pairs())
+            else:
+                sens = self.scenario.sensing
+                got.matrices = sensing_matrix(self.x, self.y, self.heading, self.present_mask(), sens.range, sens.fov)
+        return got.matrices
+
+    def sensed_pairs(self):
+        """(i, j, bearing, range) arrays of this tick's sensed pairs (agent i senses agent j),
+        sorted by i, then j, what wire.encode_sense_pairs takes: through the grid
+        (`sensing_pairs`, no (N, N) matrix made) where `sensing` uses it, else from
+        `sensing`'s matrices. Computed once per tick like them; do not modify them."""
+        if self._sensing is None:
+            self._sensing = _Sensed()
+        got = self._sensing
+        if got.pairs is None:
+            if self._grid():
+                sens = self.scenario.sensing
+                got.pairs = sensing_pairs(self.x, self.y, self.heading, self.present_mask(), sens.range, sens.fov)
+            else:
+                s, bearing, rng = self.sensing()
+                i, j = np.nonzero(s)
+                got.pairs = (i, j, bearing[i, j], rng[i, j])
+        return got.pairs
+
+    def _grid(self) -> bool:
+        return self.scenario.sensing.range is not None and len(self.ids) >= GRID_MIN_AGENTS
 
     def set_command(self, agent_id: int, u: float, hops: int | None = None) -> bool:
         """Latch agent_id's turn rate for the next step, and the hop count it advertises

@@ -29,9 +29,9 @@ __all__ = [
 
 # With a sensing range, from this many agents the world finds who senses whom through a grid
 # (`sensing_grid`: O(N k), k the agents in sight) instead of every pair (`sensing_matrix`,
-# O(N^2)); below it the grid's fixed cost (about 20 numpy calls) is the larger
-# (docs/benchmarks.md#scaling).
-GRID_MIN_AGENTS = 64
+# O(N^2)). In a tick (caches cold) the grid's 30 numpy calls cost as much as every pair's
+# dozen up to about 100 agents, and 2.5x less from 200 (docs/benchmarks.md#scaling).
+GRID_MIN_AGENTS = 128
 # The grid's cells are this much wider than the range, so that every pair within range lies
 # in neighbouring cells whatever the rounding of the cell numbers (their relative error is
 # below 2^-28 while the grid spans at most GRID_MAX_CELLS cells a side).
