@@ -131,7 +131,7 @@ class WorldCore:
             self._sensing = _Sensed()
         got = self._sensing
         if got.matrices is None:
-            if self._grid():
+            if self.uses_grid():
                 got.matrices = pairs_matrices(len(self.ids), *self.sensed_pairs())
             else:
                 sens = self.scenario.sensing
@@ -147,7 +147,7 @@ class WorldCore:
             self._sensing = _Sensed()
         got = self._sensing
         if got.pairs is None:
-            if self._grid():
+            if self.uses_grid():
                 sens = self.scenario.sensing
                 got.pairs = sensing_pairs(self.x, self.y, self.heading, self.present_mask(), sens.range, sens.fov)
             else:
@@ -156,7 +156,9 @@ class WorldCore:
                 got.pairs = (i, j, bearing[i, j], rng[i, j])
         return got.pairs
 
-    def _grid(self) -> bool:
+    def uses_grid(self) -> bool:
+        """Whether this tick's sensing goes through the grid (a sensing range, GRID_MIN_AGENTS
+        agents or more): then `sensed_pairs` is the cheaper form for encoding the frames."""
         return self.scenario.sensing.range is not None and len(self.ids) >= GRID_MIN_AGENTS
 
     def set_command(self, agent_id: int, u: float, hops: int | None = None) -> bool:
