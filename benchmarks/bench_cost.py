@@ -22,10 +22,11 @@ processes share the cores and every figure is larger; read the parts and their g
 
 `--tree DIR` imports `swarm` from another checkout (e.g. a clone at an older commit);
 `--compare OLD_TREE` runs this script on OLD_TREE and on this checkout in turn, `--reps`
-times, interleaved, and prints both (before = OLD_TREE). `--pairs`: the world encodes its
-frames from `WorldCore.sensed_pairs` with `wire.encode_sense_pairs` (no (N, N) matrices;
-world/process.py does not yet). `--scaling`: the cost model's constants against N and K
-(warm, best of many calls) instead. Asserts nothing.
+times, interleaved, and prints both (before = OLD_TREE). `--pairs`: where the world senses
+through the grid it encodes its frames from `WorldCore.sensed_pairs` with
+`wire.encode_sense_pairs` (no (N, N) matrices; world/process.py does not yet).
+`--scaling`: the cost model's constants against N and K (warm, best of many calls)
+instead. Asserts nothing.
 """
 
 from __future__ import annotations
@@ -146,7 +147,7 @@ def measure(n: int, neighbours: int | None, ticks: int, selection: str, warmup: 
                 sens.fov,
                 c.hops,
             )
-        elif pairs:  # what world/process.py would do with WorldCore.sensed_pairs (not yet its path)
+        elif pairs and c.uses_grid():  # what world/process.py would do with sensed_pairs (not yet)
             found = c.sensed_pairs()
             t1 = clock()
             tx, ty = c.target
@@ -338,7 +339,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--reps", type=int, default=3, help="with --compare: repetitions of each")
     ap.add_argument("--json", type=Path, help="write the rows to this JSON file")
     ap.add_argument("--quiet", action="store_true", help="no table (with --json)")
-    ap.add_argument("--pairs", action="store_true", help="the world encodes from WorldCore.sensed_pairs")
+    ap.add_argument("--pairs", action="store_true", help="the world encodes from sensed_pairs where the grid is used")
     ap.add_argument("--scaling", action="store_true", help="the cost model's constants against N and K instead")
     ap.add_argument("--scaling-sizes", default="50,100,200,500,1000")
     ap.add_argument("--contacts", default="0,5,10,20,50,99")
