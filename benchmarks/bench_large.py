@@ -152,10 +152,11 @@ def main(argv: list[str] | None = None) -> int:
         f"  {res['ticks']} ticks at {res['ticks_per_second']:.1f} ticks/s; converged {res['converged']} "
         f"(worst relative radial error {res['worst_relative_error']:.4f}, {res['without_leader']} without a leader)"
     )
+    mb = lambda v: "n/a" if v is None else f"{v:.1f}"  # noqa: E731  (a run too short to be sampled has none)
     print(
-        f"  RSS while ticking, MB: followers mean {r['follower']['mean']:.1f} max {r['follower']['max']:.1f} "
-        f"(n={r['follower']['n']}); leaders mean {r['leader']['mean']:.1f} max {r['leader']['max']:.1f} "
-        f"(n={r['leader']['n']}); world {res['world_rss_mb']:.1f}"
+        f"  RSS while ticking, MB: followers mean {mb(r['follower']['mean'])} max {mb(r['follower']['max'])} "
+        f"(n={r['follower']['n']}); leaders mean {mb(r['leader']['mean'])} max {mb(r['leader']['max'])} "
+        f"(n={r['leader']['n']}); world {mb(res['world_rss_mb'])}"
     )
     print(f"  trajectory vs the batch engine: largest difference {res['max_diff_to_batch_m']:.3g} m")
     print(
