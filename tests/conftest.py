@@ -36,6 +36,7 @@ TIERS = {
         "test_batch",
         "test_batch_decisions",
         "test_docs_links",
+        "test_sensing_fast",
         "test_env",
         "test_layout",
         "test_ros2_wire",
@@ -68,6 +69,7 @@ TIERS = {
     "process": {
         "test_access",
         "test_robots_e2e",
+        "test_peers_smoke",
         "test_live_tools",
         "test_robots_fleet",
         "test_api",

@@ -1,9 +1,6 @@
 """benchmarks/peers/run.py --smoke: bare zenoh, zmq over ipc and `swarm up` each complete
 their lockstep ticks at N = 3 (docs/benchmarks.md#peers; the figures are the benchmark's,
-not this test's).
-
-Meant for tests/ (tier "process", slow) once tests/conftest.py TIERS has it; until then run it
-here: python -m pytest benchmarks/peers/test_peers_smoke.py."""
+not this test's)."""
 
 from __future__ import annotations
 
