@@ -8,13 +8,12 @@ from __future__ import annotations
 import math
 import queue
 import time
-from pathlib import Path
 
 import pytest
 import zenoh
 import zenoh_ros2_sdk
 import zenoh_ros2_sdk.message_registry
-from rosbags.typesys import Stores, get_typestore
+from ros2_sdk_offline import sdk_offline
 
 from swarm.ros2 import cdr
 from swarm.ros2.attachment import parse_attachment
@@ -312,35 +311,13 @@ def test_a_node_on_the_router_session_itself(tmp_path):
 # ---------------------------------------------------------------- interop: ROBOTIS' zenoh-ros2-sdk as the robot
 
 
-def _write_msgs(out: Path, roots: list[str]) -> Path:
-    """.msg files (<pkg>/msg/<Name>.msg) from rosbags' Jazzy store, so the SDK never git-clones
-    ros2/common_interfaces (it looks in its registry's directory first)."""
-    store = get_typestore(Stores.ROS2_JAZZY)
-    sep = "=" * 80 + "\n"
-    for root in roots:
-        text, _ = store.generate_msgdef(root, ros_version=2)
-        chunks = text.split(sep)
-        names = [root] + [c.split("\n", 1)[0].removeprefix("MSG: ") for c in chunks[1:]]
-        bodies = [chunks[0]] + [c.split("\n", 1)[1] for c in chunks[1:]]
-        for name, body in zip(names, bodies, strict=True):
-            pkg, _, base = name.partition("/")
-            path = out / pkg / "msg" / f"{base.removeprefix('msg/')}.msg"
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_text(body)
-    return out
-
-
 @pytest.fixture
 def sdk(tmp_path, monkeypatch):
     """A router on a Unix socket; the SDK's (process-wide) session connects to it as a client,
     with message definitions from rosbags and its git cache in the tmp dir."""
     ep = f"unixsock-stream/{tmp_path / 'r.sock'}"
     router = zenoh.open(_config("router", ep))
-    msgs = _write_msgs(tmp_path / "msgs", [ODOMETRY.name, TWIST_STAMPED.name])
-    monkeypatch.setenv("ZENOH_ROS2_SDK_CACHE", str(tmp_path / "cache"))
-    monkeypatch.setenv("ZENOH_CONFIG_OVERRIDE", f'mode="client";connect/endpoints=["{ep}"];listen/endpoints=[]')
-    monkeypatch.setattr(zenoh_ros2_sdk.message_registry, "_registry", zenoh_ros2_sdk.MessageRegistry(str(msgs)))
-    monkeypatch.setattr(zenoh_ros2_sdk.ZenohSession, "_instance", None)
+    sdk_offline(monkeypatch, tmp_path, ep, [ODOMETRY.name, TWIST_STAMPED.name])
     ours = zenoh.open(_config("client", ep))
     try:
         yield ours

@@ -14,14 +14,13 @@ from __future__ import annotations
 import math
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 import zenoh
 import zenoh_ros2_sdk
 import zenoh_ros2_sdk.message_registry
-from rosbags.typesys import Stores, get_typestore
+from ros2_sdk_offline import sdk_offline
 from runtime_helpers import SCENARIOS, start_up, wait_for
 from test_robots_fleet import free_port, robots_file, write_robots
 
@@ -38,23 +37,6 @@ BURGER = (0.22, 2.84)
 NS = 1_000_000_000
 
 
-def write_msgs(out: Path, roots: list[str]) -> Path:
-    """.msg files (<pkg>/msg/<Name>.msg) of `roots` and what they use, from rosbags' Jazzy store."""
-    store = get_typestore(Stores.ROS2_JAZZY)
-    sep = "=" * 80 + "\n"
-    for root in roots:
-        text, _ = store.generate_msgdef(root, ros_version=2)
-        chunks = text.split(sep)
-        names = [root] + [c.split("\n", 1)[0].removeprefix("MSG: ") for c in chunks[1:]]
-        bodies = [chunks[0]] + [c.split("\n", 1)[1] for c in chunks[1:]]
-        for name, body in zip(names, bodies, strict=True):
-            pkg, _, base = name.partition("/")
-            path = out / pkg / "msg" / f"{base.removeprefix('msg/')}.msg"
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_text(body)
-    return out
-
-
 @pytest.fixture
 def robots_router(tmp_path, monkeypatch):
     """A zenoh router on a free TCP port standing in for rmw_zenohd (its endpoint); the SDK's
@@ -62,11 +44,7 @@ def robots_router(tmp_path, monkeypatch):
     and its git cache in the tmp dir (which must stay unused)."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = zenoh.open(router_config(endpoint))
-    msgs = write_msgs(tmp_path / "msgs", [TWIST.name, TWIST_STAMPED.name, ODOMETRY.name])
-    monkeypatch.setenv("ZENOH_ROS2_SDK_CACHE", str(tmp_path / "cache"))
-    monkeypatch.setenv("ZENOH_CONFIG_OVERRIDE", f'mode="client";connect/endpoints=["{endpoint}"];listen/endpoints=[]')
-    monkeypatch.setattr(zenoh_ros2_sdk.message_registry, "_registry", zenoh_ros2_sdk.MessageRegistry(str(msgs)))
-    monkeypatch.setattr(zenoh_ros2_sdk.ZenohSession, "_instance", None)
+    sdk_offline(monkeypatch, tmp_path, endpoint, [TWIST.name, TWIST_STAMPED.name, ODOMETRY.name])
     try:
         yield endpoint
     finally:
