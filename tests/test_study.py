@@ -184,26 +184,23 @@ def test_bad_options_name_the_option(tmp_path, args, message):
 @pytest.mark.parametrize("engine", ["--batch", "--per-agent"])
 def test_ctrl_c_keeps_finished_rows_and_leaves_no_worker(tmp_path, engine):
     out = tmp_path / "s"
+    args = ["swarms", "--seeds", "60", "--n", "6", "--duration", "60", "-j", "2", "--out", str(out), engine]
+    output, workers = interrupt_study(args, out)
+    assert "stopped:" in output and "Traceback" not in output
+    finished = rows(out / "runs.csv")
+    assert 2 <= len(finished) < 60
+    assert all(r["converged"] in ("True", "False") for r in finished)  # whole rows only
+    assert len(rows(out / "summary.csv")) == 1
+    assert_workers_gone(workers)
+
+
+def interrupt_study(args: list[str], out: Path) -> tuple[str, list]:
+    """`swarm study ARGS` in its own process group, Ctrl-C'd (SIGINT to the group, as a
+    terminal does) once its runs.csv holds two rows: its output and its worker processes; it
+    must have exited 130."""
     group = Group(session=True)
     proc = group.start(
-        [
-            sys.executable,
-            "-m",
-            "swarm",
-            "study",
-            "swarms",
-            "--seeds",
-            "60",
-            "--n",
-            "6",
-            "--duration",
-            "60",
-            "-j",
-            "2",
-            "--out",
-            str(out),
-            engine,
-        ],
+        [sys.executable, "-m", "swarm", "study", *args],
         cwd=ROOT,
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
@@ -225,11 +222,10 @@ def test_ctrl_c_keeps_finished_rows_and_leaves_no_worker(tmp_path, engine):
     finally:
         group.kill()
     assert proc.returncode == ExitCode.INTERRUPTED, output
-    assert "stopped:" in output and "Traceback" not in output
-    finished = rows(out / "runs.csv")
-    assert 2 <= len(finished) < 60
-    assert all(r["converged"] in ("True", "False") for r in finished)  # whole rows only
-    assert len(rows(out / "summary.csv")) == 1
+    return output, workers
+
+
+def assert_workers_gone(workers: list) -> None:
     psutil.wait_procs(workers, timeout=10)
     assert not [w for w in workers if w.is_running() and w.status() != psutil.STATUS_ZOMBIE]
 
@@ -417,39 +413,15 @@ def test_bad_scenario_study_options_name_the_option(tmp_path, args, message):
 def test_ctrl_c_keeps_a_scenario_studys_finished_rows(tmp_path):
     src = own_scenario(tmp_path, OBS_LAW)
     out = tmp_path / "o"
-    group = Group(session=True)
     args = ["--seeds", "200", "--positions", "5", "--duration", "30", "--workers", "2", "--out", str(out)]
-    proc = group.start(
-        [sys.executable, "-m", "swarm", "study", "scenario", str(src), *args],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    try:
-        csv_path = out / "runs.csv"
-
-        def two_rows() -> bool:
-            assert proc.poll() is None, proc.stdout.read()
-            return csv_path.exists() and len(rows(csv_path)) >= 2
-
-        if not wait_until(two_rows, 120, interval=0.1):
-            pytest.fail("no rows within 120 s")
-        workers = psutil.Process(proc.pid).children(recursive=True)
-        assert workers, "the study should run on worker processes"
-        group.signal(signal.SIGINT)  # what a terminal's Ctrl-C does
-        output, _ = proc.communicate(timeout=60)
-    finally:
-        group.kill()
-    assert proc.returncode == ExitCode.INTERRUPTED, output
+    output, workers = interrupt_study(["scenario", str(src), *args], out)
     assert "engine: per-agent" in output and "stopped:" in output and "Traceback" not in output
     finished = rows(out / "runs.csv")
     assert 2 <= len(finished) < 200
     assert all(r["converged"] in ("True", "False") for r in finished)  # whole rows only
     (line,) = rows(out / "summary.csv")
     assert int(line["runs"]) == len(finished)
-    psutil.wait_procs(workers, timeout=10)
-    assert not [w for w in workers if w.is_running() and w.status() != psutil.STATUS_ZOMBIE]
+    assert_workers_gone(workers)
 
 
 def test_a_small_gain_maps_title_and_colour_bar_label_fit_in_the_figure():
