@@ -109,6 +109,7 @@ def _creds_file(tmp_path, endpoint: str):
     return credentials.write(credentials.new_credentials("door-test", endpoint), tmp_path / "door.cred")
 
 
+@pytest.mark.slow  # each waits out a 3 s answer window
 def test_a_hub_that_does_not_answer_is_not_a_missing_run(tmp_path):
     lsn = socket.socket()  # accepts connections (the kernel does) and never answers
     lsn.bind(("127.0.0.1", 0))
@@ -123,6 +124,7 @@ def test_a_hub_that_does_not_answer_is_not_a_missing_run(tmp_path):
     assert f"the hub at {ep} did not answer" in msg and "not found" not in msg and "\n" not in msg, msg
 
 
+@pytest.mark.slow  # each waits out a 3 s answer window
 def test_a_hub_that_closes_at_once_refused_the_session(tmp_path):
     lsn = socket.socket()  # closes every connection as soon as it comes (a hub whose places are taken)
     lsn.bind(("127.0.0.1", 0))

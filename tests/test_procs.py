@@ -155,6 +155,7 @@ def test_alive_sees_a_grandchild_the_leader_left_and_reap_kills_it(groups):
     leader.stdout.close()
 
 
+@pytest.mark.slow  # waits out a grace period
 def test_stop_groups_shares_one_grace_period(groups, tmp_path):
     """One grace for all, not one each: every group gets its SIGTERM while all of them still
     run (one after another, the second would get it only once the first was killed). Each

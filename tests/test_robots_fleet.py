@@ -40,6 +40,8 @@ from swarm.ros2.node import Ros2Node
 from swarm.ros2.types import ODOMETRY, POSE_STAMPED, TWIST, TWIST_STAMPED
 from swarm.world.kinematics import step_one
 
+pytestmark = pytest.mark.slow  # zenoh sessions and `swarm robots sim` processes
+
 BURGER = (0.22, 2.84)
 TURTLEBOT = SCENARIOS / "turtlebot.toml"
 

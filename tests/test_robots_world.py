@@ -335,6 +335,7 @@ def test_a_stale_robot_gets_zero_twists_and_one_stale_event_then_one_fresh():
     assert f["agents"]["2"]["cmd_type"] == "Twist" and f["agents"]["2"]["twists"] == 6
 
 
+@pytest.mark.slow  # waits on real time or zenoh sessions
 def test_the_watchdog_stops_the_robots_when_the_world_sends_nothing_for_stale_after():
     """A stalled world (its main thread): zero twists from the watchdog's thread, once, until the
     next step drives the robots again."""
@@ -546,6 +547,7 @@ def test_a_plant_that_cannot_be_prepared_ends_the_world_with_its_errors_code_and
     )
 
 
+@pytest.mark.slow  # waits on real time or zenoh sessions
 def test_a_pause_holds_the_plant():
     plant = RecordingPlant()
     world, _ = world_with(plant)
@@ -613,6 +615,7 @@ def robots_router(tmp_path):
         router.close()
 
 
+@pytest.mark.slow  # waits on real time or zenoh sessions
 def test_the_robot_world_builds_frames_from_the_robots_poses_and_sends_them_the_agents_commands(
     robots_router, signals_back
 ):

@@ -22,6 +22,8 @@ from swarm.ros2.node import Ros2Node
 from swarm.ros2.types import ODOMETRY, TWIST, TWIST_STAMPED
 from swarm.runtime.procs import wait_until
 
+pytestmark = pytest.mark.slow  # zenoh sessions: a router and clients per test
+
 TS_HASH = "RIHS01_5f0fcd4f81d5d06ad9b4c4c63e3ea51b82d6ae4d0558f1d475229b1121db6f64"
 NS = 1_000_000_000
 ODOM_HASH = "RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0"

@@ -32,6 +32,8 @@ from swarm.robots.plant import NODE_NAME, RobotPlant
 from swarm.ros2.types import ODOMETRY, TWIST, TWIST_STAMPED
 from swarm.world.core import WorldCore
 
+pytestmark = pytest.mark.slow  # zenoh sessions and zenoh-ros2-sdk's own
+
 TURTLEBOT = SCENARIOS / "turtlebot.toml"
 BURGER = (0.22, 2.84)
 NS = 1_000_000_000
