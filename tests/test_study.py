@@ -15,10 +15,10 @@ import psutil
 import pytest
 from typer.testing import CliRunner
 
-import swarm.agents.batch
 from swarm.cli.main import app
 from swarm.contracts.scenario import load_scenario
 from swarm.contracts.vocabulary import ExitCode
+from swarm.offline.batch import refusal, run_batch
 from swarm.offline.sim import run_sim
 from swarm.runtime.procs import Group, wait_until
 from swarm.study.batch import gain_chunks, run_gain_chunk
@@ -26,7 +26,6 @@ from swarm.study.figures import gains_figure
 from swarm.study.gains import GainJob, run_gain
 from swarm.study.scenario import Jitter, Setting, Template, varied
 from swarm.study.swarms import SwarmSetting, cut_off_at_start, random_swarm, run_swarm, summarise_swarms
-from swarm.study.vectorised import batch_law, run_batch_with_law
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -380,16 +379,14 @@ def test_a_vectorised_law_in_the_batch_engine_flies_the_per_agent_trajectories(t
     spec = load_scenario(vector_scenario(tmp_path))
     t = Template(spec.model_dump(), "small.toml", (str(tmp_path),))
     runs = [varied(t, Setting(), Jitter(positions=8, headings=math.inf), seed) for seed in range(3)]
-    law = batch_law(runs[0])
-    assert law is not None
-    batched = run_batch_with_law(runs, law)
+    assert refusal(runs[0]) is None  # the batch engine takes the vectorised law itself
+    batched = run_batch(runs, lean=True)
     for s, b in zip(runs, batched):
         ref = run_sim(s).recorder.arrays()
         got = b.recorder.arrays()
         assert np.abs(got["x"] - ref["x"]).max() < 1e-9 and np.abs(got["y"] - ref["y"]).max() < 1e-9
         assert (got["out"] == ref["out"]).all()
         assert b.scenario.gains.law == "mylaw:vbearing"
-    assert swarm.agents.batch.bearing_law.__module__ == "swarm.agents.laws"  # the built-in is back
 
 
 @pytest.mark.parametrize(

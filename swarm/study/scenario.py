@@ -15,8 +15,8 @@ scenario has none, one on every agent for the whole run is added).
 Each run gives one row (the setting's values, the seed, and what `swarm study swarms`
 records of a run: converged, settling time, switches, ...). `engine_for` says which engine
 runs a study: the batch engine (swarm/offline/batch.py) when it runs every setting's
-scenario (swarm/study/vectorised.py: a follower law of one's own that declares
-`vectorised = True`), else `swarm sim`'s per-agent engine, one run per job.
+scenario (a follower law of one's own only if it declares `vectorised = True`: swarm/agents/
+batch.py `follower_law_of`), else `swarm sim`'s per-agent engine, one run per job.
 """
 
 from __future__ import annotations
@@ -37,7 +37,6 @@ from swarm.contracts.vocabulary import EventKind
 from swarm.offline.batch import refusal, run_batch
 from swarm.offline.sim import run_sim
 from swarm.study.swarms import is_true, run_outcome
-from swarm.study.vectorised import batch_law, run_batch_with_law
 
 # the axes a setting may sweep, in the order of the CSV's columns ("param.<name>" for [law.params])
 AXES = ("c1", "c2", "range", "fov", "noise", "loss", "delay")
@@ -154,13 +153,8 @@ def engine_for(scenarios: Sequence[Scenario]) -> tuple[str, str]:
     declared vectorised)."""
     for s in scenarios:
         why = refusal(s)
-        if why is None:
-            continue
-        if batch_law(s) is not None:
-            why = refusal(s.model_copy(update={"gains": s.gains.model_copy(update={"law": "bearing"})}))
-            if why is None:
-                continue
-        return "per-agent", why
+        if why is not None:
+            return "per-agent", why
     law = scenarios[0].gains.law if scenarios else "bearing"
     return "batch", ("the built-in 'bearing' law" if law == "bearing" else f"follower law {law!r} is vectorised")
 
@@ -196,8 +190,7 @@ def run_chunk(job: Job) -> list[dict]:
     _law_path(template)
     t0 = time.perf_counter()
     scenarios = [varied(template, setting, jitter, sd) for sd in seeds]
-    law = batch_law(scenarios[0])
-    results = run_batch(scenarios, lean=True) if law is None else run_batch_with_law(scenarios, law)
+    results = run_batch(scenarios, lean=True)
     wall = (time.perf_counter() - t0) / len(seeds)
     return [row(setting, sd, r, wall) for sd, r in zip(seeds, results)]
 
