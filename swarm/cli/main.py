@@ -49,7 +49,10 @@ LAZY = {
 
 def _print_version(value: bool) -> None:
     if value:
+        from swarm.contracts import fastpath  # lazy: only --version says which wire path runs
+
         typer.echo(f"swarm {__version__}")
+        typer.echo(f"wire path: {fastpath.path}")
         raise typer.Exit()
 
 

@@ -35,6 +35,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from itertools import chain, starmap
 
+from swarm.contracts.fastpath import compiled as _c
 from swarm.contracts.frames import Contact, SensorFrame
 from swarm.contracts.vocabulary import AgentState, Phase
 
@@ -162,16 +163,21 @@ def encode_sense(frame: SensorFrame) -> bytes:
     return encode_sense_tuples(frame.tick, frame.time, frame.agent, frame.heading, frame.target, frame.contacts)
 
 
-def encode_sense_tuples(
+def encode_sense_tuples_py(
     tick: int, time: float, agent: int, heading: float, target: tuple[float, float] | None, contacts
 ) -> bytes:
     """encode_sense from plain values; contacts: (id, bearing, heading, range, hops) tuples
-    (a Contact is one)."""
+    (a Contact is one). The pure-Python reference of `encode_sense_tuples`."""
     tx, ty = target if target is not None else (math.nan, math.nan)
     head = SENSE_HEAD.pack(
         KIND_SENSE, VERSION, int(target is not None), 0, agent, tick, time, heading, tx, ty, len(contacts)
     )
     return head + b"".join(starmap(CONTACT.pack, contacts))
+
+
+# encode_sense from plain values, compiled where it was built (swarm/contracts/fastpath.py):
+# the same bytes; the compiled one takes contacts as tuples only (a Contact is one)
+encode_sense_tuples = encode_sense_tuples_py if _c is None else _c.encode_sense_tuples
 
 
 CONTACT_FIELDS = [
@@ -209,6 +215,42 @@ def encode_sense_arrays(
 
 
 def encode_sense_rows(
+    tick: int, time: float, rows, ids, heading, target_dx, target_dy, is_leader, sensed, bearing, ranges, hops
+) -> list[bytes]:
+    """encode_sense_rows_py, compiled where it was built (swarm/contracts/fastpath.py): the
+    same bytes, written straight from the arrays (no copy of the matrices' rows)."""
+    if _c is None:
+        return encode_sense_rows_py(
+            tick, time, rows, ids, heading, target_dx, target_dy, is_leader, sensed, bearing, ranges, hops
+        )
+    import numpy as np  # lazy: agent processes import wire and never load numpy
+
+    def f8(a):
+        return np.ascontiguousarray(a, dtype=np.float64)
+
+    def i8(a):
+        return np.ascontiguousarray(a, dtype=np.int64)
+
+    def u1(a):
+        return np.ascontiguousarray(a, dtype=np.bool_)
+
+    return _c.encode_sense_rows(
+        int(tick),
+        float(time),
+        i8(rows),
+        i8(ids),
+        f8(heading),
+        f8(target_dx),
+        f8(target_dy),
+        u1(is_leader),
+        u1(sensed),
+        f8(bearing),
+        f8(ranges),
+        i8(hops),
+    )
+
+
+def encode_sense_rows_py(
     tick: int, time: float, rows, ids, heading, target_dx, target_dy, is_leader, sensed, bearing, ranges, hops
 ) -> list[bytes]:
     """encode_sense_arrays for the agents at indices `rows`, all at once, from the world's
@@ -301,7 +343,9 @@ def _contacts_struct(n: int) -> struct.Struct:
     return struct.Struct("<" + CONTACT.format.lstrip("<") * n)
 
 
-def decode_sense(buf: bytes) -> SensorFrame:
+def decode_sense_py(buf: bytes) -> SensorFrame:
+    """A sensor frame from its bytes (WireError for anything that is not a valid one): the
+    pure-Python reference of `decode_sense`."""
     f = _check_head(buf, SENSE_HEAD, KIND_SENSE, "sense frame")
     _, _, has_t, _, agent, tick, time, heading, tx, ty, n = f
     if n > MAX_AGENTS:
@@ -327,6 +371,30 @@ def decode_sense(buf: bytes) -> SensorFrame:
     if tick < 0:
         raise WireError(f"sense frame: negative tick {tick}")
     return SensorFrame(tick, time, agent, heading, contacts, (tx, ty) if has_t else None)
+
+
+def _decode_sense_c(buf: bytes) -> SensorFrame:
+    """decode_sense_py with the contacts decoded in C: the same frame, the same errors."""
+    assert _c is not None
+    f = _check_head(buf, SENSE_HEAD, KIND_SENSE, "sense frame")
+    _, _, has_t, _, agent, tick, time, heading, tx, ty, n = f
+    if n > MAX_AGENTS:
+        raise WireError(f"sense frame: {n} contacts, more than {MAX_AGENTS}")
+    expected = SENSE_HEAD.size + n * CONTACT.size
+    if len(buf) != expected:
+        raise WireError(f"sense frame: {len(buf)} bytes, expected {expected} for {n} contacts")
+    decoded = _c.decode_contacts(buf, SENSE_HEAD.size, n, Contact)
+    assert decoded is not None  # the length was checked above
+    contacts, numbers = decoded
+    if not math.isfinite(time + heading + (tx + ty if has_t else 0.0) + numbers):
+        raise WireError("sense frame: non-finite number")
+    if tick < 0:
+        raise WireError(f"sense frame: negative tick {tick}")
+    return SensorFrame(tick, time, agent, heading, contacts, (tx, ty) if has_t else None)
+
+
+# A sensor frame from its bytes, compiled where it was built (swarm/contracts/fastpath.py)
+decode_sense = decode_sense_py if _c is None else _decode_sense_c
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,0 +1,370 @@
+/* The wire's hot path in C: sensor frames encoded (world) and decoded (agents), and the
+ * nearest contact chosen (agents). Optional: swarm/contracts/fastwire.py uses it when it was
+ * built (pip install on a machine with a C compiler) and falls back to the pure-Python
+ * functions of swarm/contracts/wire.py and swarm/agents/selection.py otherwise. Those stay
+ * the reference: tests/test_fastwire.py checks that both give the same bytes and the same
+ * objects, bit for bit.
+ *
+ * The layouts (little-endian, packed) are wire.SENSE_HEAD "<BBBBiqddddI" (52 bytes) and
+ * wire.CONTACT "<idddh" (30 bytes): see docs/reference/protocol.md.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+#define HEAD_SIZE 52
+#define CONTACT_SIZE 30
+
+/* -- little-endian packing (memcpy: no alignment assumed) ------------------------------ */
+#if !defined(__BYTE_ORDER__) || __BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__
+#error "swarm._fastwire: little-endian machines only (the pure-Python path serves the others)"
+#endif
+
+static inline void put_i32(char *p, int32_t v) { memcpy(p, &v, 4); }
+static inline void put_i64(char *p, int64_t v) { memcpy(p, &v, 8); }
+static inline void put_u32(char *p, uint32_t v) { memcpy(p, &v, 4); }
+static inline void put_i16(char *p, int16_t v) { memcpy(p, &v, 2); }
+static inline void put_f64(char *p, double v) { memcpy(p, &v, 8); }
+static inline int32_t get_i32(const char *p) { int32_t v; memcpy(&v, p, 4); return v; }
+static inline int16_t get_i16(const char *p) { int16_t v; memcpy(&v, p, 2); return v; }
+static inline double get_f64(const char *p) { double v; memcpy(&v, p, 8); return v; }
+
+/* math.nan's bits (struct.pack("<d", math.nan)) */
+static double quiet_nan(void) {
+    uint64_t bits = 0x7ff8000000000000ULL;
+    double d;
+    memcpy(&d, &bits, 8);
+    return d;
+}
+
+static void put_head(char *p, int has_target, int32_t agent, int64_t tick, double time, double heading,
+                     double tx, double ty, uint32_t n) {
+    p[0] = 1; /* wire.KIND_SENSE */
+    p[1] = 1; /* wire.VERSION */
+    p[2] = (char)(has_target ? 1 : 0);
+    p[3] = 0;
+    put_i32(p + 4, agent);
+    put_i64(p + 8, tick);
+    put_f64(p + 16, time);
+    put_f64(p + 24, heading);
+    put_f64(p + 32, tx);
+    put_f64(p + 40, ty);
+    put_u32(p + 48, n);
+}
+
+/* A Python int that must fit `lo`..`hi` (struct.pack's range check, as struct.error would). */
+static int int_in(PyObject *o, long long lo, long long hi, long long *out, const char *what) {
+    long long v = PyLong_AsLongLong(o);
+    if (v == -1 && PyErr_Occurred()) return -1;
+    if (v < lo || v > hi) {
+        PyErr_Format(PyExc_OverflowError, "%s %lld out of range", what, v);
+        return -1;
+    }
+    *out = v;
+    return 0;
+}
+
+static int as_double(PyObject *o, double *out) {
+    double v = PyFloat_AsDouble(o);
+    if (v == -1.0 && PyErr_Occurred()) return -1;
+    *out = v;
+    return 0;
+}
+
+/* encode_sense_tuples(tick, time, agent, heading, target, contacts) -> bytes
+ * target: None or (dx, dy); contacts: a sequence of (id, bearing, heading, range, hops). */
+static PyObject *encode_sense_tuples(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 6) {
+        PyErr_SetString(PyExc_TypeError, "encode_sense_tuples takes 6 arguments");
+        return NULL;
+    }
+    long long tick, agent;
+    double time, heading, tx, ty;
+    if (int_in(args[0], INT64_MIN, INT64_MAX, &tick, "tick") < 0) return NULL;
+    if (as_double(args[1], &time) < 0) return NULL;
+    if (int_in(args[2], INT32_MIN, INT32_MAX, &agent, "agent") < 0) return NULL;
+    if (as_double(args[3], &heading) < 0) return NULL;
+    int has_target = args[4] != Py_None;
+    if (has_target) {
+        PyObject *t = PySequence_Fast(args[4], "target must be a pair");
+        if (t == NULL) return NULL;
+        if (PySequence_Fast_GET_SIZE(t) != 2) {
+            Py_DECREF(t);
+            PyErr_SetString(PyExc_ValueError, "target must be a pair");
+            return NULL;
+        }
+        int bad = as_double(PySequence_Fast_GET_ITEM(t, 0), &tx) < 0 ||
+                  as_double(PySequence_Fast_GET_ITEM(t, 1), &ty) < 0;
+        Py_DECREF(t);
+        if (bad) return NULL;
+    } else {
+        tx = ty = quiet_nan();
+    }
+    PyObject *cs = PySequence_Fast(args[5], "contacts must be a sequence");
+    if (cs == NULL) return NULL;
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(cs);
+    if (n > UINT32_MAX) {
+        Py_DECREF(cs);
+        PyErr_SetString(PyExc_OverflowError, "too many contacts");
+        return NULL;
+    }
+    PyObject *out = PyBytes_FromStringAndSize(NULL, HEAD_SIZE + n * CONTACT_SIZE);
+    if (out == NULL) {
+        Py_DECREF(cs);
+        return NULL;
+    }
+    char *p = PyBytes_AS_STRING(out);
+    put_head(p, has_target, (int32_t)agent, (int64_t)tick, time, heading, tx, ty, (uint32_t)n);
+    p += HEAD_SIZE;
+    for (Py_ssize_t k = 0; k < n; k++, p += CONTACT_SIZE) {
+        PyObject *c = PySequence_Fast_GET_ITEM(cs, k);
+        if (!PyTuple_Check(c) || PyTuple_GET_SIZE(c) != 5) {
+            PyErr_SetString(PyExc_TypeError, "a contact is a 5-tuple (id, bearing, heading, range, hops)");
+            goto fail;
+        }
+        long long id, hops;
+        double b, h, r;
+        if (int_in(PyTuple_GET_ITEM(c, 0), INT32_MIN, INT32_MAX, &id, "contact id") < 0 ||
+            as_double(PyTuple_GET_ITEM(c, 1), &b) < 0 || as_double(PyTuple_GET_ITEM(c, 2), &h) < 0 ||
+            as_double(PyTuple_GET_ITEM(c, 3), &r) < 0 ||
+            int_in(PyTuple_GET_ITEM(c, 4), INT16_MIN, INT16_MAX, &hops, "contact hops") < 0)
+            goto fail;
+        put_i32(p, (int32_t)id);
+        put_f64(p + 4, b);
+        put_f64(p + 12, h);
+        put_f64(p + 20, r);
+        put_i16(p + 28, (int16_t)hops);
+    }
+    Py_DECREF(cs);
+    return out;
+fail:
+    Py_DECREF(cs);
+    Py_DECREF(out);
+    return NULL;
+}
+
+/* -- numpy columns through the buffer protocol (no numpy headers needed) --------------- */
+typedef struct {
+    Py_buffer view;
+    int held;
+} Col;
+
+/* A C-contiguous buffer of `count` items of `itemsize` bytes (the caller passed arrays of
+ * the right dtype: fastwire.py makes sure of it). */
+static int col_get(PyObject *o, Col *c, Py_ssize_t count, Py_ssize_t itemsize, const char *what) {
+    if (PyObject_GetBuffer(o, &c->view, PyBUF_C_CONTIGUOUS) < 0) return -1;
+    c->held = 1;
+    if (c->view.len != count * itemsize) {
+        PyErr_Format(PyExc_ValueError, "%s: %zd bytes, expected %zd", what, c->view.len, count * itemsize);
+        return -1;
+    }
+    return 0;
+}
+
+static void col_release(Col *c) {
+    if (c->held) PyBuffer_Release(&c->view);
+    c->held = 0;
+}
+
+/* encode_sense_rows(tick, time, rows, ids, heading, target_dx, target_dy, is_leader, sensed,
+ *                   bearing, ranges, hops) -> list of bytes
+ * rows int64 (R,); ids int64, heading float64, target_dx/dy float64, is_leader uint8 (bool),
+ * hops int64 (N,); sensed uint8 (bool), bearing, ranges float64 (N, N). The bytes of
+ * wire.encode_sense_rows: row k's frame holds, for every j with sensed[k, j], in order of j,
+ * (ids[j] as int32, bearing[k, j], heading[j], ranges[k, j], hops[j] as int16). */
+static PyObject *encode_sense_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 12) {
+        PyErr_SetString(PyExc_TypeError, "encode_sense_rows takes 12 arguments");
+        return NULL;
+    }
+    long long tick;
+    double time;
+    if (int_in(args[0], INT64_MIN, INT64_MAX, &tick, "tick") < 0) return NULL;
+    if (as_double(args[1], &time) < 0) return NULL;
+    Col rows = {0}, ids = {0}, head = {0}, dx = {0}, dy = {0}, lead = {0}, sensed = {0}, bear = {0}, rng = {0},
+        hops = {0};
+    PyObject *out = NULL;
+    if (PyObject_GetBuffer(args[3], &ids.view, PyBUF_C_CONTIGUOUS) < 0) return NULL;
+    ids.held = 1;
+    Py_ssize_t n = ids.view.len / 8;
+    if (ids.view.len != n * 8) {
+        PyErr_SetString(PyExc_ValueError, "ids: not int64");
+        goto done;
+    }
+    if (PyObject_GetBuffer(args[2], &rows.view, PyBUF_C_CONTIGUOUS) < 0) goto done;
+    rows.held = 1;
+    Py_ssize_t nr = rows.view.len / 8;
+    if (rows.view.len != nr * 8) {
+        PyErr_SetString(PyExc_ValueError, "rows: not int64");
+        goto done;
+    }
+    if (col_get(args[4], &head, n, 8, "heading") < 0 || col_get(args[5], &dx, n, 8, "target_dx") < 0 ||
+        col_get(args[6], &dy, n, 8, "target_dy") < 0 || col_get(args[7], &lead, n, 1, "is_leader") < 0 ||
+        col_get(args[8], &sensed, n * n, 1, "sensed") < 0 || col_get(args[9], &bear, n * n, 8, "bearing") < 0 ||
+        col_get(args[10], &rng, n * n, 8, "ranges") < 0 || col_get(args[11], &hops, n, 8, "hops") < 0)
+        goto done;
+    const int64_t *rw = rows.view.buf, *idv = ids.view.buf, *hv = hops.view.buf;
+    const double *hd = head.view.buf, *dxv = dx.view.buf, *dyv = dy.view.buf, *bv = bear.view.buf,
+                 *rv = rng.view.buf;
+    const unsigned char *lv = lead.view.buf, *sv = sensed.view.buf;
+    out = PyList_New(nr);
+    if (out == NULL) goto done;
+    double nan = quiet_nan();
+    for (Py_ssize_t q = 0; q < nr; q++) {
+        int64_t k = rw[q];
+        if (k < 0 || k >= n) {
+            PyErr_Format(PyExc_IndexError, "row %lld out of range", (long long)k);
+            Py_CLEAR(out);
+            goto done;
+        }
+        const unsigned char *srow = sv + k * n;
+        Py_ssize_t count = 0;
+        for (Py_ssize_t j = 0; j < n; j++) count += srow[j] != 0;
+        if (idv[k] < INT32_MIN || idv[k] > INT32_MAX) {
+            PyErr_Format(PyExc_OverflowError, "agent id %lld out of range", (long long)idv[k]);
+            Py_CLEAR(out);
+            goto done;
+        }
+        PyObject *frame = PyBytes_FromStringAndSize(NULL, HEAD_SIZE + count * CONTACT_SIZE);
+        if (frame == NULL) {
+            Py_CLEAR(out);
+            goto done;
+        }
+        char *p = PyBytes_AS_STRING(frame);
+        int l = lv[k] != 0;
+        put_head(p, l, (int32_t)idv[k], (int64_t)tick, time, hd[k], l ? dxv[k] : nan, l ? dyv[k] : nan,
+                 (uint32_t)count);
+        p += HEAD_SIZE;
+        const double *brow = bv + k * n, *rrow = rv + k * n;
+        for (Py_ssize_t j = 0; j < n; j++) {
+            if (!srow[j]) continue;
+            put_i32(p, (int32_t)idv[j]); /* numpy's astype("<i4"): wraps, as the C cast */
+            put_f64(p + 4, brow[j]);
+            put_f64(p + 12, hd[j]);
+            put_f64(p + 20, rrow[j]);
+            put_i16(p + 28, (int16_t)hv[j]);
+            p += CONTACT_SIZE;
+        }
+        PyList_SET_ITEM(out, q, frame);
+    }
+done:
+    col_release(&rows);
+    col_release(&ids);
+    col_release(&head);
+    col_release(&dx);
+    col_release(&dy);
+    col_release(&lead);
+    col_release(&sensed);
+    col_release(&bear);
+    col_release(&rng);
+    col_release(&hops);
+    return out;
+}
+
+/* decode_contacts(buf, offset, n, contact_type) -> (contacts, total) or None
+ * The n contact records of `buf` from `offset`, each a `contact_type` (a tuple subclass:
+ * swarm.contracts.frames.Contact); None when the records do not fit the buffer. `total`:
+ * every number of every record added one after another as doubles, from 0, in the record
+ * order (id, bearing, heading, range, hops): Python's sum() of them, which wire.decode_sense
+ * tests for finiteness. */
+static PyObject *decode_contacts(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 4) {
+        PyErr_SetString(PyExc_TypeError, "decode_contacts takes 4 arguments");
+        return NULL;
+    }
+    if (!PyType_Check(args[3]) || !PyType_IsSubtype((PyTypeObject *)args[3], &PyTuple_Type)) {
+        PyErr_SetString(PyExc_TypeError, "contact_type must be a tuple subclass");
+        return NULL;
+    }
+    PyTypeObject *ct = (PyTypeObject *)args[3];
+    Py_ssize_t offset = PyLong_AsSsize_t(args[1]);
+    if (offset == -1 && PyErr_Occurred()) return NULL;
+    Py_ssize_t n = PyLong_AsSsize_t(args[2]);
+    if (n == -1 && PyErr_Occurred()) return NULL;
+    double total = 0.0;
+    Py_buffer view;
+    if (PyObject_GetBuffer(args[0], &view, PyBUF_SIMPLE) < 0) return NULL;
+    PyObject *contacts = NULL, *result = NULL;
+    if (offset < 0 || n < 0 || view.len - offset < n * CONTACT_SIZE) {
+        PyBuffer_Release(&view);
+        Py_RETURN_NONE;
+    }
+    contacts = PyTuple_New(n);
+    if (contacts == NULL) goto done;
+    const char *p = (const char *)view.buf + offset;
+    for (Py_ssize_t k = 0; k < n; k++, p += CONTACT_SIZE) {
+        int32_t id = get_i32(p);
+        double b = get_f64(p + 4), h = get_f64(p + 12), r = get_f64(p + 20);
+        int16_t hops = get_i16(p + 28);
+        total += (double)id;
+        total += b;
+        total += h;
+        total += r;
+        total += (double)hops;
+        PyObject *c = ct->tp_alloc(ct, 5);
+        if (c == NULL) goto fail;
+        PyObject *v0 = PyLong_FromLong(id), *v1 = PyFloat_FromDouble(b), *v2 = PyFloat_FromDouble(h),
+                 *v3 = PyFloat_FromDouble(r), *v4 = PyLong_FromLong(hops);
+        PyTuple_SET_ITEM(c, 0, v0);
+        PyTuple_SET_ITEM(c, 1, v1);
+        PyTuple_SET_ITEM(c, 2, v2);
+        PyTuple_SET_ITEM(c, 3, v3);
+        PyTuple_SET_ITEM(c, 4, v4);
+        PyTuple_SET_ITEM(contacts, k, c);
+        if (!v0 || !v1 || !v2 || !v3 || !v4) goto fail;
+    }
+    result = Py_BuildValue("(Od)", contacts, total);
+fail:
+    Py_XDECREF(contacts);
+done:
+    PyBuffer_Release(&view);
+    return result;
+}
+
+/* nearest(contacts) -> the contact with the smallest (range, id), the first of equals, or
+ * None for none; NotImplemented when a contact is not a tuple whose range (item 3) is a
+ * float and whose id (item 0) is an int (the caller then uses its own rule). */
+static PyObject *nearest(PyObject *self, PyObject *contacts) {
+    if (!PyTuple_Check(contacts)) Py_RETURN_NOTIMPLEMENTED;
+    Py_ssize_t n = PyTuple_GET_SIZE(contacts);
+    PyObject *best = NULL;
+    double best_r = 0.0;
+    long long best_id = 0;
+    for (Py_ssize_t k = 0; k < n; k++) {
+        PyObject *c = PyTuple_GET_ITEM(contacts, k);
+        if (!PyTuple_Check(c) || PyTuple_GET_SIZE(c) < 4) Py_RETURN_NOTIMPLEMENTED;
+        PyObject *ro = PyTuple_GET_ITEM(c, 3), *io = PyTuple_GET_ITEM(c, 0);
+        if (!PyFloat_CheckExact(ro) || !PyLong_CheckExact(io)) Py_RETURN_NOTIMPLEMENTED;
+        double r = PyFloat_AS_DOUBLE(ro);
+        if (isnan(r)) Py_RETURN_NOTIMPLEMENTED; /* tuple comparison with NaN: leave it to Python */
+        int overflow;
+        long long id = PyLong_AsLongLongAndOverflow(io, &overflow);
+        if (overflow) Py_RETURN_NOTIMPLEMENTED;
+        if (best == NULL || r < best_r || (r == best_r && id < best_id)) {
+            best = c;
+            best_r = r;
+            best_id = id;
+        }
+    }
+    if (best == NULL) Py_RETURN_NONE;
+    Py_INCREF(best);
+    return best;
+}
+
+static PyMethodDef methods[] = {
+    {"encode_sense_tuples", (PyCFunction)(void (*)(void))encode_sense_tuples, METH_FASTCALL,
+     "wire.encode_sense_tuples in C: the same bytes."},
+    {"encode_sense_rows", (PyCFunction)(void (*)(void))encode_sense_rows, METH_FASTCALL,
+     "wire.encode_sense_rows in C, from arrays of fixed dtypes (see fastwire.py): the same bytes."},
+    {"decode_contacts", (PyCFunction)(void (*)(void))decode_contacts, METH_FASTCALL,
+     "The contact records of a sensor frame and the sum wire.decode_sense tests."},
+    {"nearest", nearest, METH_O, "selection.nearest in C: the contact with the smallest (range, id)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_fastwire",
+                                    "The wire's hot path in C (see swarm/contracts/fastwire.py).", -1, methods};
+
+PyMODINIT_FUNC PyInit__fastwire(void) { return PyModule_Create(&module); }

@@ -1,0 +1,228 @@
+"""The compiled hot path (swarm/contracts/_fastwire.c) against the pure-Python reference, to
+the bit (tier pure), and the switch between them (swarm/contracts/fastpath.py).
+
+- `encode_sense_tuples`, `encode_sense_rows`: the same bytes as the pure functions, for
+  random frames (any float: NaN payloads, infinities, -0.0; ids and hops at their limits)
+  and any rows (a subset, in any order, repeated);
+- `decode_sense`: the same frame (the same objects: Contact tuples of int and float) or the
+  same refusal, on valid, non-finite, overflowing, short and long frames;
+- `nearest`: the very same contact object as the pure rule;
+- where a C compiler exists, the compiled module was built (CI cannot silently test the
+  pure path only), and SWARM_PURE_PYTHON=1 switches every process to the pure path.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import struct
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from swarm.agents import selection
+from swarm.contracts import fastpath, wire
+from swarm.contracts.frames import Contact, SensorFrame
+
+needs_c = pytest.mark.skipif(fastpath.compiled is None, reason=f"the compiled path is not in use: {fastpath.path}")
+C = fastpath.compiled
+SETTINGS = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+any_float = st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True)
+i32 = st.integers(-(2**31), 2**31 - 1)
+i16 = st.integers(-(2**15), 2**15 - 1)
+contact = st.tuples(i32, any_float, any_float, any_float, i16).map(lambda t: Contact(*t))
+
+
+def test_a_machine_with_a_c_compiler_runs_the_compiled_path():
+    """The install builds the module wherever a compiler exists (setup.py): here, unless the
+    environment asked for the pure path."""
+    if os.environ.get(fastpath.PURE_ENV) or os.environ.get("SWARM_NO_COMPILE"):
+        pytest.skip("the pure path was asked for")
+    if shutil.which(os.environ.get("CC", "cc")) is None:
+        pytest.skip("no C compiler here")
+    assert fastpath.compiled is not None, fastpath.path
+    assert wire.decode_sense is not wire.decode_sense_py
+    assert selection.nearest is not selection.nearest_py
+
+
+def test_swarm_pure_python_switches_the_path_off():
+    code = (
+        "from swarm.contracts import fastpath, wire; from swarm.agents import selection;"
+        "print(fastpath.compiled is None, wire.decode_sense is wire.decode_sense_py,"
+        " selection.nearest is selection.nearest_py, fastpath.path)"
+    )
+    env = {**os.environ, fastpath.PURE_ENV: "1"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    assert out.startswith("True True True pure Python (SWARM_PURE_PYTHON is set)"), out
+
+
+# -- encoding -----------------------------------------------------------------------------------
+@needs_c
+@SETTINGS
+@given(
+    st.integers(0, 2**63 - 1),
+    any_float,
+    i32,
+    any_float,
+    st.none() | st.tuples(any_float, any_float),
+    st.lists(contact, max_size=40),
+)
+def test_encode_sense_tuples_gives_the_same_bytes(tick, time, agent, heading, target, contacts):
+    want = wire.encode_sense_tuples_py(tick, time, agent, heading, target, contacts)
+    assert wire.encode_sense_tuples(tick, time, agent, heading, target, contacts) == want
+    assert wire.encode_sense_tuples(tick, time, agent, heading, target, tuple(contacts)) == want
+
+
+@needs_c
+def test_encode_sense_tuples_refuses_what_does_not_fit():
+    for bad in ((2**31, 0.0, 0.0, 1.0, -1), (1, 0.0, 0.0, 1.0, 2**15)):
+        with pytest.raises((OverflowError, struct.error)):
+            wire.encode_sense_tuples_py(1, 0.0, 1, 0.0, None, [bad])
+        with pytest.raises(OverflowError):
+            wire.encode_sense_tuples(1, 0.0, 1, 0.0, None, [bad])
+    with pytest.raises(TypeError):
+        wire.encode_sense_tuples(1, 0.0, 1, 0.0, None, [(1, 0.0, 0.0)])
+
+
+@st.composite
+def world_arrays(draw):
+    """The world's arrays for encode_sense_rows: N agents, rows (a subset in any order,
+    possibly repeated), who senses whom, bearings and ranges (any floats)."""
+    n = draw(st.integers(0, 30))
+    seed = draw(st.integers(0, 2**32 - 1))
+    rs = np.random.default_rng(seed)
+    ids = rs.permutation(np.arange(1, 3 * n + 2, dtype=np.int64))[:n]
+    if draw(st.booleans()):
+        rows = np.arange(n)
+    else:
+        rows = rs.integers(0, max(n, 1), size=int(rs.integers(0, n + 2))) if n else np.arange(0)
+    sensed = rs.random((n, n)) < draw(st.sampled_from([0.0, 0.3, 1.0]))
+    specials = np.array([math.nan, math.inf, -math.inf, -0.0, 5e-324, 1e308])
+    bearing = rs.normal(size=(n, n)) * 3
+    ranges = rs.random((n, n)) * 100
+    if n and draw(st.booleans()):
+        bearing.flat[rs.integers(0, n * n, size=n)] = rs.choice(specials, size=n)
+        ranges.flat[rs.integers(0, n * n, size=n)] = rs.choice(specials, size=n)
+    heading = rs.normal(size=n)
+    hops = rs.integers(-1, n + 1, size=n).astype(np.int64)
+    lead = rs.random(n) < 0.3
+    tdx, tdy = rs.normal(size=n) * 50, rs.normal(size=n) * 50
+    return rows, ids, heading, tdx, tdy, lead, sensed, bearing, ranges, hops
+
+
+@needs_c
+@SETTINGS
+@given(st.integers(0, 2**40), st.floats(0, 1e6), world_arrays())
+def test_encode_sense_rows_gives_the_same_bytes(tick, time, arrays):
+    want = wire.encode_sense_rows_py(tick, time, *arrays)
+    assert wire.encode_sense_rows(tick, time, *arrays) == want
+
+
+@needs_c
+def test_encode_sense_rows_takes_the_worlds_dtypes_as_they_come():
+    """Rows as a list, ids as int32, a non-contiguous matrix: converted, the same bytes."""
+    rs = np.random.default_rng(3)
+    n = 9
+    big = rs.random((n, 2 * n))
+    args = (
+        [4, 0, 8],
+        np.arange(10, 10 + n, dtype=np.int32),
+        rs.normal(size=n),
+        rs.normal(size=n),
+        rs.normal(size=n),
+        rs.random(n) < 0.5,
+        big[:, ::2] < 0.5,
+        big[:, 1::2],
+        big[:, ::2] * 10,
+        np.full(n, -1),
+    )
+    assert wire.encode_sense_rows(7, 0.07, *args) == wire.encode_sense_rows_py(7, 0.07, *args)
+
+
+# -- decoding -----------------------------------------------------------------------------------
+def outcome(decode, buf: bytes):
+    try:
+        return decode(buf)
+    except wire.WireError as e:
+        return f"refused: {e}"
+
+
+def same_objects(a, b) -> bool:
+    """Equal frames made of the same types (Contact tuples of int and float)."""
+    if isinstance(a, str) or isinstance(b, str):
+        return a == b
+    if a != b or type(a.contacts) is not type(b.contacts):
+        return False
+    return all(
+        type(x) is type(y) and [type(v) for v in x] == [type(v) for v in y] for x, y in zip(a.contacts, b.contacts)
+    )
+
+
+@needs_c
+@SETTINGS
+@given(
+    st.integers(-5, 2**40),
+    any_float,
+    i32,
+    any_float,
+    st.none() | st.tuples(any_float, any_float),
+    st.lists(contact, max_size=30),
+    st.sampled_from(["as is", "short", "long", "count"]),
+)
+def test_decode_sense_gives_the_same_frame_or_refusal(tick, time, agent, heading, target, contacts, how):
+    buf = bytearray(wire.encode_sense_tuples_py(max(tick, 0), time, agent, heading, target, contacts))
+    if tick < 0:
+        struct.pack_into("<q", buf, 8, tick)
+    if how == "short":
+        buf = buf[: max(0, len(buf) - 1 - tick % 40)]
+    elif how == "long":
+        buf += b"\1" * (1 + tick % 40)
+    elif how == "count":
+        struct.pack_into("<I", buf, 48, (tick % 3) * wire.MAX_AGENTS)
+    got, want = outcome(wire.decode_sense, bytes(buf)), outcome(wire.decode_sense_py, bytes(buf))
+    assert same_objects(got, want), (got, want)
+
+
+@needs_c
+def test_decode_sense_refuses_a_sum_that_overflows_as_the_reference_does():
+    """Finite numbers whose sum is not: both refuse (the finiteness test is on the sum)."""
+    frame = SensorFrame(3, 0.03, 1, 0.0, (Contact(2, 1e308, 1e308, 1.0, -1),), None)
+    buf = wire.encode_sense_tuples_py(3, 0.03, 1, 0.0, None, frame.contacts)
+    assert outcome(wire.decode_sense, buf) == outcome(wire.decode_sense_py, buf) == (
+        "refused: sense frame: non-finite number"
+    )
+
+
+@needs_c
+def test_decode_contacts_refuses_records_past_the_buffer():
+    assert C is not None
+    assert C.decode_contacts(b"\0" * 59, 0, 2, Contact) is None
+    assert C.decode_contacts(b"\0" * 60, 0, 2, Contact) is not None
+    assert C.decode_contacts(b"\0" * 60, -1, 1, Contact) is None
+    with pytest.raises(TypeError):
+        C.decode_contacts(b"", 0, 0, list)
+
+
+# -- selection ----------------------------------------------------------------------------------
+@needs_c
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.integers(-3, 6), st.sampled_from([0.0, -0.0, 1.0, 1.0, 2.5, 1e-300, math.inf]))))
+def test_nearest_is_the_same_contact_object(raw):
+    contacts = tuple(Contact(i, 0.0, 0.0, r, -1) for i, r in raw)
+    assert selection.nearest(contacts) is selection.nearest_py(contacts)
+
+
+@needs_c
+def test_nearest_leaves_what_it_does_not_know_to_the_reference():
+    odd = (Contact(1, 0.0, 0.0, math.nan, -1), Contact(2, 0.0, 0.0, 1.0, -1))
+    assert selection.nearest(odd) is selection.nearest_py(odd)
+    ints = (Contact(1, 0.0, 0.0, 3, -1), Contact(2, 0.0, 0.0, 1, -1))  # ranges as ints
+    assert selection.nearest(ints) is ints[1]
+    assert selection.nearest(list(ints)) is ints[1]  # type: ignore[arg-type]
+    assert selection.nearest(()) is None
