@@ -1,0 +1,57 @@
+"""Whole runs with and without the compiled hot path (swarm/contracts/_fastwire.c): the same
+trajectories to the bit (tier process, slow).
+
+- `swarm sim` in a process of its own with SWARM_PURE_PYTHON=1 and without: every array
+  of trajectory.npz equal, on the shipped scenarios whose out-neighbours change at run time;
+- a lockstep `swarm up` whose every process (world, agents) runs the pure path equals
+  `swarm sim` on the compiled one (the equivalence tests of tests/test_runtime.py run the
+  compiled path through `swarm up`, where a compiler exists).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from runtime_helpers import SCENARIOS, UpRun, load_trajectory, swarm_cmd
+
+from swarm.contracts import fastpath
+from swarm.contracts.scenario import load_scenario
+from swarm.contracts.vocabulary import ExitCode
+
+pytestmark = pytest.mark.slow
+KEYS = ("t", "x", "y", "heading", "u", "out", "alive")
+SELECTING = ["case2", "case2-range", "case2-fov", "swarm30-range", "rooted", "faults"]
+
+
+def env_of(rt, pure: bool) -> dict:
+    env = {k: v for k, v in rt.env.items() if k != fastpath.PURE_ENV}
+    return {**env, fastpath.PURE_ENV: "1"} if pure else env
+
+
+def sim(rt, scenario, out, pure: bool, duration: str = "20"):
+    args = swarm_cmd("sim", scenario, "--out", out, "--no-plots", "--duration", duration)
+    p = rt.tracker.spawn(args, f"sim-{out.name}", env=env_of(rt, pure))
+    assert p.wait(120) == ExitCode.OK, p.text()[-3000:]
+    return load_trajectory(out)
+
+
+@pytest.mark.skipif(fastpath.compiled is None, reason=f"the compiled path is not in use: {fastpath.path}")
+@pytest.mark.parametrize("name", SELECTING)
+def test_sim_is_the_same_with_and_without_the_compiled_path(rt, tmp_path, name):
+    scen = SCENARIOS / f"{name}.toml"
+    compiled, pure = sim(rt, scen, tmp_path / "c", False), sim(rt, scen, tmp_path / "p", True)
+    for key in KEYS:
+        np.testing.assert_array_equal(compiled[key], pure[key], err_msg=f"{name}: {key}")
+
+
+def test_a_pure_lockstep_up_equals_sim(rt, tmp_path):
+    """case2-range (limited sensing: the graph changes at run time) over 20 s."""
+    scen = SCENARIOS / "case2-range.toml"
+    ref = sim(rt, scen, tmp_path / "sim", False)
+    args = swarm_cmd("up", scen, "--out", tmp_path / "up", "--no-plots", "--clock", "lockstep", "--duration", "20")
+    up = UpRun(rt.tracker.spawn(args, "up", env=env_of(rt, True)), tmp_path / "up", rt.tracker)
+    assert up.launcher.wait(120) == ExitCode.OK, up.launcher.text()[-3000:]
+    traj = up.trajectory()
+    assert len(traj["t"]) == round(20 / load_scenario(scen).run.dt) + 1
+    for key in KEYS:
+        np.testing.assert_array_equal(traj[key], ref[key], err_msg=key)
