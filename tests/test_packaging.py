@@ -19,9 +19,9 @@ REPO = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.slow
 
 
-@pytest.fixture(scope="module")
-def wheel(tmp_path_factory) -> Path:
-    """A wheel built offline from a copy of the tracked files (the build writes next to them)."""
+def build_wheel(tmp_path_factory, env: dict | None = None) -> tuple[Path, str]:
+    """A wheel built offline from a copy of the tracked files (the build writes next to them),
+    and what the build printed."""
     src = tmp_path_factory.mktemp("src")
     files = subprocess.run(["git", "ls-files", "-z"], cwd=REPO, capture_output=True, check=True).stdout
     for name in filter(None, files.decode().split("\0")):
@@ -33,9 +33,47 @@ def wheel(tmp_path_factory) -> Path:
             shutil.copy2(here, there)
     out = tmp_path_factory.mktemp("dist")
     build = "from setuptools import build_meta as b; import sys; print(b.build_wheel(sys.argv[1]))"
-    p = subprocess.run([sys.executable, "-c", build, str(out)], cwd=src, capture_output=True, text=True)
+    p = subprocess.run([sys.executable, "-c", build, str(out)], cwd=src, capture_output=True, text=True, env=env)
     assert p.returncode == 0, p.stderr[-3000:]
-    return out / p.stdout.strip().splitlines()[-1]
+    return out / p.stdout.strip().splitlines()[-1], p.stdout + p.stderr
+
+
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory) -> Path:
+    return build_wheel(tmp_path_factory)[0]
+
+
+def compiled_modules(wheel: Path) -> list[str]:
+    return [n for n in zipfile.ZipFile(wheel).namelist() if n.endswith((".so", ".pyd"))]
+
+
+def test_the_wheel_holds_the_compiled_path_where_a_compiler_exists(wheel):
+    if shutil.which(os.environ.get("CC", "cc")) is None:
+        pytest.skip("no C compiler here")
+    assert [n.rsplit("/", 1)[0] for n in compiled_modules(wheel)] == ["swarm/contracts"]
+    assert "swarm/contracts/_fastwire.pyi" in zipfile.ZipFile(wheel).namelist()
+
+
+def test_a_machine_without_a_compiler_builds_a_pure_wheel_that_says_so(tmp_path_factory, tmp_path):
+    """CC names no compiler (a machine without one, simulated): the build succeeds, says in
+    one line that the compiled path was not built, and the installed wheel runs the pure path."""
+    env = {**os.environ, "CC": str(tmp_path / "no-such-cc")}
+    pure, printed = build_wheel(tmp_path_factory, env)
+    assert compiled_modules(pure) == []
+    assert "the compiled wire path was not built" in printed or "was not built" in printed, printed[-3000:]
+    site = tmp_path / "site"
+    install = [sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-index", "--target", str(site)]
+    subprocess.run([*install, str(pure)], check=True)
+    code = "from swarm.contracts import fastpath; print(fastpath.path)"
+    clean = {k: v for k, v in os.environ.items() if k not in ("SWARM_PURE_PYTHON", "CC")}
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=tmp_path,
+        env={**clean, "PYTHONPATH": str(site)},
+        capture_output=True,
+        text=True,
+    )
+    assert out.returncode == 0 and out.stdout.startswith("pure Python (the compiled module was not built"), out
 
 
 def test_the_wheel_holds_one_top_level_package(wheel):
