@@ -14,7 +14,8 @@ Measured in one run, on this machine:
    gets a sensing range under which each agent senses about K others at the start.
 2. Lockstep ticks/s of `swarm up` for the same N on a generated scenario (1-2 leaders,
    the rest followers with selection = "nearest", on a ring; speeds and radii like
-   scenarios/case2.toml), read from summary.json (`ticks_per_second`).
+   scenarios/case2.toml), read from summary.json (`ticks_per_second`; the world's own
+   p50/p99/max of a tick's wall time, `tick_ms`, as tick_ms_p50 / _p99 / _max in the JSON).
 3. For the largest N: the time from Popen of `swarm up` to the first tick (the start
    event's wall_time minus the Popen time) and the world's own startup_s.
 4. Resident memory of every agent process during each swarm run (psutil): RSS sampled
@@ -659,11 +660,15 @@ def run_swarm(
         return res
     start = next((e for e in summary.get("events", []) if e.get("kind") == EventKind.START), None)
     agents = summary.get("agents", {})
+    tick_ms = summary.get("tick_ms") or {}  # the world's own per-tick wall time (None: an older world)
     res.update(
         ok=bool(summary.get("completed")) and summary.get("ticks_per_second") is not None,
         completed=summary.get("completed"),
         ticks=summary.get("ticks"),
         ticks_per_second=summary.get("ticks_per_second"),
+        tick_ms_p50=tick_ms.get("p50"),
+        tick_ms_p99=tick_ms.get("p99"),
+        tick_ms_max=tick_ms.get("max"),
         wall_time=summary.get("wall_time"),
         startup_s=start.get("startup_s") if start else None,
         first_tick_s=(start["wall_time"] - t_popen) if start else None,

@@ -29,6 +29,7 @@ from swarm.world.faults import fault_event
 from swarm.world.inbox import Inbox
 from swarm.world.memory import Trimmer
 from swarm.world.state import RunState
+from swarm.world.tick_times import TickTimes
 
 DESERTED_GRACE = 5.0  # s of wall time a started run may go on with no agent at all
 STALL_GRACE = 3.0  # s the agents get to answer after a stall of the world (their links come back in ~0.5 s)
@@ -65,6 +66,11 @@ class Clock:
         self.late: dict[int, int] = {}  # lockstep: commands per agent that missed the deadline
         self.t_start = 0.0
         self.wall_ticks: float | None = None  # wall s from the first tick to the last (set at the end)
+        # Each tick's wall duration, from its frames going out to the end of its record and
+        # step (lockstep: the tick's critical path; realtime: that includes the wait for the
+        # clock), for summary.json's `tick_ms`; pauses, held faults and deserted holds are
+        # between ticks, not in any.
+        self.tick_times = TickTimes()
         self.trimmer: Trimmer | None = None
 
     def answer_pause_waiters(self) -> None:
@@ -273,6 +279,7 @@ class Clock:
         t_next = time.monotonic() + period
         t0_ticks = time.monotonic()
         self.trimmer = trimmer = Trimmer()  # freed native memory back to the system (world/memory.py)
+        add_tick = self.tick_times.add
         while core.tick < st.ticks:
             if self.deserted():
                 st.event(
@@ -303,12 +310,14 @@ class Clock:
                 t_next += self.held - held  # realtime: the hold is not lateness
                 t0_ticks += self.held - held
             st.ticking = True
+            t_tick = time.perf_counter()
             if cfg.clock == "lockstep":
                 self.lockstep_tick()
             else:
                 self.realtime_tick(t_next)
                 t_next += period
             self.shell.record_and_step()
+            add_tick(time.perf_counter() - t_tick)
             st.ticking = False
             now = time.monotonic()
             trimmer.maybe(now)

@@ -289,6 +289,7 @@ class World:
                 "wall_time": wall,
                 "start_wall_time": start,  # unix s at tick 0 (None: the run never started)
                 "ticks_per_second": (c.tick / wall) if wall else None,
+                "tick_ms": clock.tick_times.summary_ms(),  # each tick's wall time (world/clock.py)
                 "deadline_restarts": clock.restarts,
                 **clock.reproducibility(),
                 **plant,

@@ -14,7 +14,9 @@ agent senses about --range-k others (the peers then send K = --range-k contacts)
 
 For each repetition, each size, each system (the order rotated every repetition, so the
 systems are interleaved): ticks/s over --ticks ticks after a warm-up, p50/p99 of a tick's
-duration (peers: from sending the first frame to the last answer, in the world), CPU per
+duration (peers: from sending the first frame to the last answer, in the world; swarm up:
+summary.json's `tick_ms`, from its first frame going out to the end of its record and step,
+over every tick, the warm-up included, as its ticks/s), CPU per
 tick (user + system time of every process of the run: world, agents, and dora's daemon or
 swarm up's launcher, over the measured ticks / ticks), RSS (sum over those processes, the
 peak of each). The table gives every repetition's ticks/s and the medians of the rest, with
@@ -188,7 +190,6 @@ def run_up(n: int, k: int | None, ticks: int, warmup: int, work: Path, env: dict
     if agents and world:
         res["rss_mb"] = agents["mean_mb"] * agents["n"] + world["max_mb"]  # the launcher's is not sampled
     res["agent_rss"] = agents
-    res["tick_ms_p50"] = res["tick_ms_p99"] = None  # swarm up records no per-tick wall time
     return res
 
 
