@@ -7,7 +7,8 @@
 In this one process, on bench_runtime.py's ring scenario with N agents (unlimited sensing, and
 a range under which each agent senses about --neighbours others), the code that runs each
 tick of `swarm up`, with the world process's choices (its pairwise frames up to
-FRAMES_PAIRWISE agents, the matrices and `wire.encode_sense_rows` above; the recording
+FRAMES_PAIRWISE agents, the matrices and `wire.encode_sense_rows` above, or with --pairs
+the sensed pairs where the grid is used, as the world does; the recording
 deferred and streamed to an MCAP file), timed part by part in thread CPU time (what other
 processes on the machine do is not counted; the cost of reading the clock is taken off):
 
@@ -24,7 +25,9 @@ processes share the cores and every figure is larger; read the parts and their g
 `--compare OLD_TREE` runs this script on OLD_TREE and on this checkout in turn, `--reps`
 times, interleaved, and prints both (before = OLD_TREE). `--pairs`: where the world senses
 through the grid it encodes its frames from `WorldCore.sensed_pairs` with
-`wire.encode_sense_pairs` (no (N, N) matrices; world/process.py does not yet).
+`wire.encode_sense_pairs` (no (N, N) matrices), as world/process.py does since it took that
+path; without it, from the matrices, as before (with --compare: OLD_TREE without, this
+checkout with).
 `--scaling`: the cost model's constants against N and K (warm, best of many calls)
 instead. Asserts nothing.
 """
@@ -147,7 +150,7 @@ def measure(n: int, neighbours: int | None, ticks: int, selection: str, warmup: 
                 sens.fov,
                 c.hops,
             )
-        elif pairs and c.uses_grid():  # what world/process.py would do with sensed_pairs (not yet)
+        elif pairs and c.uses_grid():  # what world/process.py does where the grid is used
             found = c.sensed_pairs()
             t1 = clock()
             tx, ty = c.target
@@ -339,7 +342,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--reps", type=int, default=3, help="with --compare: repetitions of each")
     ap.add_argument("--json", type=Path, help="write the rows to this JSON file")
     ap.add_argument("--quiet", action="store_true", help="no table (with --json)")
-    ap.add_argument("--pairs", action="store_true", help="the world encodes from sensed_pairs where the grid is used")
+    ap.add_argument(
+        "--pairs", action="store_true", help="the world encodes from sensed_pairs where the grid is used (as it does)"
+    )
     ap.add_argument("--scaling", action="store_true", help="the cost model's constants against N and K instead")
     ap.add_argument("--scaling-sizes", default="50,100,200,500,1000")
     ap.add_argument("--contacts", default="0,5,10,20,50,99")

@@ -156,6 +156,16 @@ class WorldCore:
                 got.pairs = (i, j, bearing[i, j], rng[i, j])
         return got.pairs
 
+    def in_sight(self, k: int, j: int) -> bool:
+        """Whether the agent at index k senses the one at index j this tick (`sensing`'s
+        S[k, j]), from the form this tick has: where the grid is used and no matrices were
+        made, from the sensed pairs (sorted by i: k's run of them), without making any."""
+        got = self._sensing
+        if (got is not None and got.matrices is not None) or not self.uses_grid():
+            return bool(self.sensing()[0][k, j])
+        i, sensed, _, _ = self.sensed_pairs()
+        return j in sensed[i.searchsorted(k) : i.searchsorted(k + 1)].tolist()
+
     def uses_grid(self) -> bool:
         """Whether this tick's sensing goes through the grid (a sensing range, GRID_MIN_AGENTS
         agents or more): then `sensed_pairs` is the cheaper form for encoding the frames."""
@@ -258,7 +268,7 @@ class WorldCore:
             pinned_missed=self.scenario.sensing.selection == "fixed" and spec.follow is not None and new != spec.follow,
             old=old is not None,
             old_left=lambda: j is None or self.state[j] == GONE,
-            old_in_sight=lambda: bool(self.sensing()[0][self.index[agent_id], j]),
+            old_in_sight=lambda: j is not None and self.in_sight(self.index[agent_id], j),
             old_hopless=lambda: j is not None and j < len(hops_sent) and bool(hops_sent[j] < 0),
         )
 

@@ -191,6 +191,12 @@ class World:
                 sens.fov,
                 c.hops,
             )
+        elif c.uses_grid():  # the sensed pairs straight from the grid: no (N, N) matrix made
+            i, j, bearing, rng = c.sensed_pairs()
+            tx, ty = c.target
+            frames = wire.encode_sense_pairs(
+                c.tick, c.time, rows, c.ids, c.heading, tx - c.x, ty - c.y, c.is_leader, i, j, bearing, rng, c.hops
+            )
         else:
             sensed, bearing, rng = c.sensing()
             tx, ty = c.target
