@@ -12,6 +12,7 @@ import pytest
 
 from swarm.contracts.orbits import root_of, roots
 from swarm.contracts.scenario import load_scenario, parse_scenario
+from swarm.contracts.scenario_tables import AgentSpec
 from swarm.offline.sim import run_sim
 from swarm.world.core import ACTIVE, COASTING, GONE, WorldCore
 from swarm.world.metrics import agent_metrics, angular_rate, converged, settling_time
@@ -161,6 +162,44 @@ def test_world_dropout_coast(base):
     assert w.applied()[1] == 0.0
     assert w.pose(2) == pytest.approx((x + 1.5 * 0.05 * math.cos(g), y + 1.5 * 0.05 * math.sin(g), g))
     assert not w.alive_mask()[1] and w.present_mask()[1]
+
+
+def test_what_the_core_derives_from_the_states_follows_every_change(base):
+    """active_ids, the masks and applied are kept from one change of `state` to the next
+    (world/core.py `_roster`): however the states change, they say what the states say now,
+    and what a caller gets is its own copy."""
+    w = WorldCore(parse_scenario(base), joined=False)
+
+    def check():
+        st = list(w.state)
+        assert w.active_ids() == [int(w.ids[k]) for k, s in enumerate(st) if s == ACTIVE]
+        assert w.alive_mask().tolist() == [s == ACTIVE for s in st]
+        assert w.present_mask().tolist() == [s != GONE for s in st]
+        want = np.where([s == ACTIVE for s in st], w.u, np.where([s == COASTING for s in st], 0.0, np.nan))
+        np.testing.assert_array_equal(w.applied(), want)
+
+    check()
+    w.join(1)
+    check()
+    w.join(2)
+    w.set_command(2, 0.3)
+    check()
+    w.drop(2)
+    check()
+    w.state[0] = COASTING  # straight into the list
+    check()
+    w.state[:] = [ACTIVE, ACTIVE, GONE]
+    check()
+    w.state = [GONE, COASTING, ACTIVE]  # a new list
+    check()
+    w.add_agent(AgentSpec(id=9, role="follower", x=5.0, y=5.0, heading=0.0, speed=1.0))
+    check()
+    w.join(9)
+    w.active_ids().append(1)
+    w.alive_mask()[:] = False
+    w.present_mask()[:] = False
+    check()
+    assert w.active_ids() == [3, 9]
 
 
 def test_world_not_joined(base):

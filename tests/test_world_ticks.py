@@ -14,6 +14,7 @@ from fakes import FakeQuery, FakeSession
 
 from swarm.contracts import wire
 from swarm.contracts.scenario import parse_scenario
+from swarm.contracts.vocabulary import Phase
 from swarm.world.process import World, WorldConfig
 from swarm.world.sensing import GRID_MIN_AGENTS, sensing_matrix
 
@@ -135,3 +136,32 @@ def test_summary_says_how_long_each_tick_took(tmp_path):
     assert list(ms) == ["p50", "p99", "max", "mean"]
     assert 0 < ms["p50"] <= ms["p99"] <= ms["max"] and 0 < ms["mean"] <= ms["max"]
     assert ms["max"] == round(1e3 * world.clock.tick_times.high, 4)
+
+
+def test_command_keys_are_parsed_once_and_only_the_runs_own():
+    """The callbacks keep the id of each agent's own command key (world/fairness.py): another
+    spelling of a key or a stranger's key is parsed every time, never kept, so what is kept
+    stays one key per agent whatever arrives; what a command decodes to is the same."""
+    world, _ = open_world(ring(3, None))
+    join_all(world)
+    q = world.queue
+    own = wire.agent_key(RUN, 2, "cmd")
+    cmd = wire.encode_cmd_fields(2, 0, 0.1, None, Phase.TRACK, 1, world.book[2].key)
+    for _ in range(2):
+        q.enqueue(("cmd", own, cmd))
+    assert q.cmd_keys == {own: 2}
+    stranger = wire.encode_cmd_fields(77, 0, 0.1, None, Phase.TRACK, 1, 5)
+    for key in (wire.agent_key(RUN, 77, "cmd"), own.replace("/2/", "/02/"), own + "/more", "elsewhere/agent/2/cmd"):
+        for payload in (cmd, stranger, b"garbage"):
+            got = q._decoded(key, payload)
+            try:
+                want = (wire.agent_of_key(key), wire.decode_cmd(payload))
+                want = want if want[1].agent == want[0] else None
+            except wire.WireError:
+                want = None
+            assert got == want, key
+    assert q.cmd_keys == {own: 2}
+    pending = {1, 2, 3}
+    while world.inbox.drain(pending, 0):
+        pass
+    assert pending == {1, 3} and world.book[2].commands == 1 and world.state.ignored == 1  # the second: a duplicate

@@ -54,6 +54,62 @@ class _Sensed:
         self.pairs: tuple | None = None
 
 
+class _States(list):
+    """`WorldCore.state`: a list of the agents' states that counts its changes (`version`), so
+    that what the core derives from it each tick (`WorldCore._roster`) is made again only
+    after one, however the list is changed (every mutating method of list bumps it)."""
+
+    __slots__ = ("version",)
+
+    def __init__(self, items=()) -> None:
+        super().__init__(items)
+        self.version = 0
+
+
+def _bumping(name: str):
+    base = getattr(list, name)
+
+    def changed(self, *args, **kwargs):
+        self.version += 1
+        return base(self, *args, **kwargs)
+
+    changed.__name__ = changed.__qualname__ = name
+    return changed
+
+
+for _name in (
+    "__setitem__",
+    "__delitem__",
+    "__iadd__",
+    "__imul__",
+    "append",
+    "extend",
+    "insert",
+    "pop",
+    "remove",
+    "clear",
+    "sort",
+    "reverse",
+):
+    setattr(_States, _name, _bumping(_name))
+
+
+class _Roster:
+    """Who is where, derived from one version of the states (`WorldCore._roster`): the active
+    agents' ids, the alive and present masks, the coasting and the gone agents' indices."""
+
+    __slots__ = ("states", "version", "active_ids", "alive", "present", "coasting", "gone")
+
+    def __init__(self, states: _States, ids: np.ndarray):
+        self.states, self.version = states, states.version
+        ids_l = ids.tolist()
+        self.active_ids = [ids_l[k] for k, s in enumerate(states) if s == ACTIVE]
+        self.alive = np.array([s == ACTIVE for s in states], dtype=bool)
+        self.present = np.array([s != GONE for s in states], dtype=bool)
+        self.coasting = [k for k, s in enumerate(states) if s == COASTING]
+        self.gone = [k for k, s in enumerate(states) if s == GONE]
+
+
 class Physics(Protocol):
     """What the core asks of a plant (world/plant.py `Plant`, which imports this module)."""
 
@@ -78,7 +134,7 @@ class WorldCore:
         self.u = np.zeros(len(agents))  # last applied turn rate (rad/s)
         # advertised hops to a leader (-1 none); leaders advertise 0 from the start
         self.hops = np.where(self.is_leader, 0, -1).astype(np.int64)
-        self.state: list[AgentState] = [ACTIVE if joined else GONE for _ in agents]
+        self.state = [ACTIVE if joined else GONE for _ in agents]
         self.target = (scenario.target.x, scenario.target.y)
         self.dt = scenario.run.dt
         self.tick = 0
@@ -90,14 +146,32 @@ class WorldCore:
         """Simulated time of the current tick (s)."""
         return self.tick * self.dt
 
+    @property
+    def state(self) -> list[AgentState]:
+        """Each agent's state, by index (ACTIVE, COASTING, GONE): change it in place or assign
+        a new list; either way what is derived from it follows (`_roster`)."""
+        return self._state
+
+    @state.setter
+    def state(self, states: list[AgentState]) -> None:
+        self._state = _States(states)
+        self._roster_of: _Roster | None = None
+
+    def _roster(self) -> _Roster:
+        """Who is where, made again only when the states have changed since it was made."""
+        r, st = self._roster_of, self._state
+        if r is None or r.states is not st or r.version != st.version:
+            r = self._roster_of = _Roster(st, self.ids)
+        return r
+
     def active_ids(self) -> list[int]:
-        return [int(self.ids[k]) for k, s in enumerate(self.state) if s == ACTIVE]
+        return list(self._roster().active_ids)
 
     def present_mask(self) -> np.ndarray:
-        return np.array([s != GONE for s in self.state], dtype=bool)
+        return self._roster().present.copy()
 
     def alive_mask(self) -> np.ndarray:
-        return np.array([s == ACTIVE for s in self.state], dtype=bool)
+        return self._roster().alive.copy()
 
     def frames(self, only: list[int] | None = None) -> dict[int, SensorFrame]:
         """Sensor frames of the current tick for the active agents (or `only` those)."""
@@ -178,18 +252,19 @@ class WorldCore:
         if not math.isfinite(u):
             self.rejected += 1
             return False
-        self.u[k] = max(-self.limit[k], min(self.limit[k], u))
+        lim = self.limit.item(k)  # a float: numpy scalars are slow to compare
+        self.u[k] = u if -lim <= u <= lim else max(-lim, min(lim, u))
         self.hops[k] = hops if hops is not None and 0 <= hops <= len(self.ids) else -1
         return True
 
     def applied(self) -> np.ndarray:
         """Turn rates that the next step will integrate (NaN for agents not in the world)."""
         out = self.u.copy()
-        for k, s in enumerate(self.state):
-            if s == COASTING:
-                out[k] = 0.0
-            elif s == GONE:
-                out[k] = math.nan
+        r = self._roster()
+        for k in r.coasting:
+            out[k] = 0.0
+        for k in r.gone:
+            out[k] = math.nan
         return out
 
     def step(self) -> None:

@@ -185,19 +185,22 @@ class Engine:
         if self.network and tick == self.core.tick and self.fault_plan.command_lost(tick, agent):
             self.missed_now += 1
             return LOST
-        if not self.core.set_command(agent, u, hops):
+        c = self.core
+        if not c.set_command(agent, u, hops):
             return REFUSED
-        k = self.core.index[agent]
+        k = c.index[agent]
         new = -1 if out is None else out
-        if new != self.out[k] and not self.core.is_leader[k]:
-            old = None if self.out[k] < 0 else int(self.out[k])
-            self.event(
-                EventKind.SWITCH,
-                agent,
-                self.core.switch_reason(agent, old, out, self.hops_sent),
-                **{"from": old, "to": out},
-            )
-        self.out[k] = new
+        was = self.out.item(k)  # a Python int: numpy scalars are slow to compare
+        if new != was:
+            if not c.is_leader.item(k):
+                old = None if was < 0 else was
+                self.event(
+                    EventKind.SWITCH,
+                    agent,
+                    c.switch_reason(agent, old, out, self.hops_sent),
+                    **{"from": old, "to": out},
+                )
+            self.out[k] = new
         return LATCHED
 
     def miss(self, n: int = 1) -> None:

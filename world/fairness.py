@@ -51,6 +51,9 @@ class FairQueue:
         self.noted: set[str] = set()  # keys whose drops have had their `limit` event
         self.rogue: dict[int, int] = {}  # agent -> commands without its owner's claim key, not yet counted
         self.dropped = 0  # messages dropped by the callbacks (see `enqueue`)
+        # An agent's own command key -> its id, for the agents of the run (at most one key each:
+        # `_decoded`); filled by the callbacks, read without the lock (one key, one id, ever).
+        self.cmd_keys: dict[str, int] = {}
 
     # -- the zenoh callbacks' side --------------------------------------------------------------
     def enqueue(self, item: tuple, droppable: bool = True) -> None:
@@ -80,12 +83,16 @@ class FairQueue:
             self.waiting[key] = n + 1
         self.queue.put(item)
 
-    @staticmethod
-    def _decoded(key: str, payload: bytes) -> tuple[int, wire.Command] | None:
+    def _decoded(self, key: str, payload: bytes) -> tuple[int, wire.Command] | None:
         """(agent id of the key, the command) when both decode and agree; None: garbage,
-        which the main thread counts."""
+        which the main thread counts. The id of an agent's own command key is parsed once."""
         try:
-            aid, cmd = wire.agent_of_key(key), wire.decode_cmd(payload)
+            aid = self.cmd_keys.get(key)
+            if aid is None:
+                aid = wire.agent_of_key(key)
+                if aid in self.state.core.index and key == wire.agent_key(self.state.cfg.run, aid, "cmd"):
+                    self.cmd_keys[key] = aid
+            cmd = wire.decode_cmd(payload)
         except wire.WireError:
             return None
         return (aid, cmd) if cmd.agent == aid else None
@@ -135,9 +142,10 @@ class FairQueue:
 
     def taken(self, item: tuple) -> None:
         """The main thread took `item` off the inbox: one less waiting on its key."""
-        if item[0] == "alive":
+        kind = item[0]
+        if kind == "alive":
             return
-        key = _key_of(item)
+        key = item[1] if kind == "cmd" else _key_of(item)
         with self.lock:
             n = self.waiting.get(key, 0) - 1
             if n > 0:
