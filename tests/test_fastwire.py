@@ -1,7 +1,7 @@
 """The compiled hot path (swarm/contracts/_fastwire.c) against the pure-Python reference, to
 the bit (tier pure), and the switch between them (swarm/contracts/fastpath.py).
 
-- `encode_sense_tuples`, `encode_sense_rows`: the same bytes as the pure functions, for
+- `encode_sense_tuples`, `encode_sense_rows`, `encode_sense_pairs`: the same bytes as the pure functions, for
   random frames (any float: NaN payloads, infinities, -0.0; ids and hops at their limits)
   and any rows (a subset, in any order, repeated);
 - `decode_sense`: the same frame (the same objects: Contact tuples of int and float) or the
@@ -125,6 +125,24 @@ def test_encode_sense_rows_gives_the_same_bytes(tick, time, arrays):
 
 
 @needs_c
+@SETTINGS
+@given(st.integers(0, 2**40), st.floats(0, 1e6), world_arrays())
+def test_encode_sense_pairs_gives_the_same_bytes(tick, time, arrays):
+    """The sensed pairs of the same swarms (sorted by i, then j, as sensing_pairs gives them)."""
+    rows, ids, heading, tdx, tdy, lead, sensed, bearing, ranges, hops = arrays
+    i, j = np.nonzero(sensed)
+    args = (rows, ids, heading, tdx, tdy, lead, i, j, bearing[i, j], ranges[i, j], hops)
+    assert wire.encode_sense_pairs(tick, time, *args) == wire.encode_sense_pairs_py(tick, time, *args)
+
+
+@needs_c
+def test_encode_sense_pairs_refuses_pairs_out_of_order():
+    args = ([0, 1], np.arange(2), np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2, bool))
+    with pytest.raises(ValueError):
+        wire.encode_sense_pairs(1, 0.0, *args, [1, 0], [0, 1], [0.0, 0.0], [1.0, 1.0], np.full(2, -1))
+
+
+@needs_c
 def test_encode_sense_rows_takes_the_worlds_dtypes_as_they_come():
     """Rows as a list, ids as int32, a non-contiguous matrix: converted, the same bytes."""
     rs = np.random.default_rng(3)
@@ -194,8 +212,10 @@ def test_decode_sense_refuses_a_sum_that_overflows_as_the_reference_does():
     """Finite numbers whose sum is not: both refuse (the finiteness test is on the sum)."""
     frame = SensorFrame(3, 0.03, 1, 0.0, (Contact(2, 1e308, 1e308, 1.0, -1),), None)
     buf = wire.encode_sense_tuples_py(3, 0.03, 1, 0.0, None, frame.contacts)
-    assert outcome(wire.decode_sense, buf) == outcome(wire.decode_sense_py, buf) == (
-        "refused: sense frame: non-finite number"
+    assert (
+        outcome(wire.decode_sense, buf)
+        == outcome(wire.decode_sense_py, buf)
+        == ("refused: sense frame: non-finite number")
     )
 
 

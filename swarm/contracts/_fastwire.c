@@ -263,6 +263,114 @@ done:
     return out;
 }
 
+/* encode_sense_pairs(tick, time, rows, ids, heading, target_dx, target_dy, is_leader, i, j,
+ *                    bearing, ranges, hops) -> list of bytes
+ * rows int64 (R,); ids int64, heading float64, target_dx/dy float64, is_leader uint8 (bool),
+ * hops int64 (N,); i, j int64, bearing, ranges float64 (P,): the sensed pairs, sorted by i,
+ * then j. The bytes of wire.encode_sense_pairs_py: row k's frame holds, in order, the pairs
+ * whose i is k, each as (ids[j] as int32, bearing, heading[j], range, hops[j] as int16). */
+static PyObject *encode_sense_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 13) {
+        PyErr_SetString(PyExc_TypeError, "encode_sense_pairs takes 13 arguments");
+        return NULL;
+    }
+    long long tick;
+    double time;
+    if (int_in(args[0], INT64_MIN, INT64_MAX, &tick, "tick") < 0) return NULL;
+    if (as_double(args[1], &time) < 0) return NULL;
+    Col rows = {0}, ids = {0}, head = {0}, dx = {0}, dy = {0}, lead = {0}, pi = {0}, pj = {0}, bear = {0}, rng = {0},
+        hops = {0};
+    PyObject *out = NULL;
+    Py_ssize_t *start = NULL;
+    if (PyObject_GetBuffer(args[3], &ids.view, PyBUF_C_CONTIGUOUS) < 0) return NULL;
+    ids.held = 1;
+    Py_ssize_t n = ids.view.len / 8;
+    if (PyObject_GetBuffer(args[2], &rows.view, PyBUF_C_CONTIGUOUS) < 0) goto done;
+    rows.held = 1;
+    Py_ssize_t nr = rows.view.len / 8;
+    if (PyObject_GetBuffer(args[8], &pi.view, PyBUF_C_CONTIGUOUS) < 0) goto done;
+    pi.held = 1;
+    Py_ssize_t np_ = pi.view.len / 8;
+    if (ids.view.len != n * 8 || rows.view.len != nr * 8 || pi.view.len != np_ * 8) {
+        PyErr_SetString(PyExc_ValueError, "ids, rows and i: int64");
+        goto done;
+    }
+    if (col_get(args[4], &head, n, 8, "heading") < 0 || col_get(args[5], &dx, n, 8, "target_dx") < 0 ||
+        col_get(args[6], &dy, n, 8, "target_dy") < 0 || col_get(args[7], &lead, n, 1, "is_leader") < 0 ||
+        col_get(args[9], &pj, np_, 8, "j") < 0 || col_get(args[10], &bear, np_, 8, "bearing") < 0 ||
+        col_get(args[11], &rng, np_, 8, "ranges") < 0 || col_get(args[12], &hops, n, 8, "hops") < 0)
+        goto done;
+    const int64_t *rw = rows.view.buf, *idv = ids.view.buf, *hv = hops.view.buf, *iv = pi.view.buf,
+                  *jv = pj.view.buf;
+    const double *hd = head.view.buf, *dxv = dx.view.buf, *dyv = dy.view.buf, *bv = bear.view.buf,
+                 *rv = rng.view.buf;
+    const unsigned char *lv = lead.view.buf;
+    /* start[a] .. start[a + 1]: the pairs of agent a (sorted by i: a check, not an assumption) */
+    start = PyMem_Calloc((size_t)n + 1, sizeof(Py_ssize_t));
+    if (start == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    for (Py_ssize_t p = 0; p < np_; p++) {
+        if (iv[p] < 0 || iv[p] >= n || jv[p] < 0 || jv[p] >= n || (p && iv[p] < iv[p - 1])) {
+            PyErr_SetString(PyExc_ValueError, "pairs: i and j must be indices, sorted by i");
+            goto done;
+        }
+        start[iv[p] + 1]++;
+    }
+    for (Py_ssize_t a = 0; a < n; a++) start[a + 1] += start[a];
+    out = PyList_New(nr);
+    if (out == NULL) goto done;
+    double nan = quiet_nan();
+    for (Py_ssize_t q = 0; q < nr; q++) {
+        int64_t k = rw[q];
+        if (k < 0 || k >= n) {
+            PyErr_Format(PyExc_IndexError, "row %lld out of range", (long long)k);
+            Py_CLEAR(out);
+            goto done;
+        }
+        if (idv[k] < INT32_MIN || idv[k] > INT32_MAX) {
+            PyErr_Format(PyExc_OverflowError, "agent id %lld out of range", (long long)idv[k]);
+            Py_CLEAR(out);
+            goto done;
+        }
+        Py_ssize_t a = start[k], b = start[k + 1];
+        PyObject *frame = PyBytes_FromStringAndSize(NULL, HEAD_SIZE + (b - a) * CONTACT_SIZE);
+        if (frame == NULL) {
+            Py_CLEAR(out);
+            goto done;
+        }
+        char *p = PyBytes_AS_STRING(frame);
+        int l = lv[k] != 0;
+        put_head(p, l, (int32_t)idv[k], (int64_t)tick, time, hd[k], l ? dxv[k] : nan, l ? dyv[k] : nan,
+                 (uint32_t)(b - a));
+        p += HEAD_SIZE;
+        for (Py_ssize_t e = a; e < b; e++, p += CONTACT_SIZE) {
+            int64_t j = jv[e];
+            put_i32(p, (int32_t)idv[j]);
+            put_f64(p + 4, bv[e]);
+            put_f64(p + 12, hd[j]);
+            put_f64(p + 20, rv[e]);
+            put_i16(p + 28, (int16_t)hv[j]);
+        }
+        PyList_SET_ITEM(out, q, frame);
+    }
+done:
+    PyMem_Free(start);
+    col_release(&rows);
+    col_release(&ids);
+    col_release(&head);
+    col_release(&dx);
+    col_release(&dy);
+    col_release(&lead);
+    col_release(&pi);
+    col_release(&pj);
+    col_release(&bear);
+    col_release(&rng);
+    col_release(&hops);
+    return out;
+}
+
 /* decode_contacts(buf, offset, n, contact_type) -> (contacts, total) or None
  * The n contact records of `buf` from `offset`, each a `contact_type` (a tuple subclass:
  * swarm.contracts.frames.Contact); None when the records do not fit the buffer. `total`:
@@ -358,6 +466,8 @@ static PyMethodDef methods[] = {
      "wire.encode_sense_tuples in C: the same bytes."},
     {"encode_sense_rows", (PyCFunction)(void (*)(void))encode_sense_rows, METH_FASTCALL,
      "wire.encode_sense_rows in C, from arrays of fixed dtypes (see fastwire.py): the same bytes."},
+    {"encode_sense_pairs", (PyCFunction)(void (*)(void))encode_sense_pairs, METH_FASTCALL,
+     "wire.encode_sense_pairs in C, from arrays of fixed dtypes (see wire.py): the same bytes."},
     {"decode_contacts", (PyCFunction)(void (*)(void))decode_contacts, METH_FASTCALL,
      "The contact records of a sensor frame and the sum wire.decode_sense tests."},
     {"nearest", nearest, METH_O, "selection.nearest in C: the contact with the smallest (range, id)."},

@@ -20,5 +20,20 @@ def encode_sense_rows(
     ranges: Any,
     hops: Any,
 ) -> list[bytes]: ...
+def encode_sense_pairs(
+    tick: int,
+    time: float,
+    rows: Any,
+    ids: Any,
+    heading: Any,
+    target_dx: Any,
+    target_dy: Any,
+    is_leader: Any,
+    i: Any,
+    j: Any,
+    bearing: Any,
+    ranges: Any,
+    hops: Any,
+) -> list[bytes]: ...
 def decode_contacts(buf: bytes, offset: int, n: int, contact_type: type) -> tuple[tuple, float] | None: ...
 def nearest(contacts: tuple) -> Any: ...

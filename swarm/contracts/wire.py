@@ -223,31 +223,26 @@ def encode_sense_rows(
         return encode_sense_rows_py(
             tick, time, rows, ids, heading, target_dx, target_dy, is_leader, sensed, bearing, ranges, hops
         )
+    rows, ids, hops, heading, target_dx, target_dy, is_leader = _agent_columns(
+        rows, ids, hops, heading, target_dx, target_dy, is_leader
+    )
+    sensed, bearing, ranges = _columns("?ff", sensed, bearing, ranges)
+    return _c.encode_sense_rows(
+        int(tick), float(time), rows, ids, heading, target_dx, target_dy, is_leader, sensed, bearing, ranges, hops
+    )
+
+
+def _columns(kinds: str, *arrays) -> list:
+    """The arrays as the compiled module reads them, C-contiguous: kind i int64, f float64,
+    ? bool (no copy where they already are)."""
     import numpy as np  # lazy: agent processes import wire and never load numpy
 
-    def f8(a):
-        return np.ascontiguousarray(a, dtype=np.float64)
+    dtypes = {"i": np.int64, "f": np.float64, "?": np.bool_}
+    return [np.ascontiguousarray(a, dtype=dtypes[k]) for k, a in zip(kinds, arrays)]
 
-    def i8(a):
-        return np.ascontiguousarray(a, dtype=np.int64)
 
-    def u1(a):
-        return np.ascontiguousarray(a, dtype=np.bool_)
-
-    return _c.encode_sense_rows(
-        int(tick),
-        float(time),
-        i8(rows),
-        i8(ids),
-        f8(heading),
-        f8(target_dx),
-        f8(target_dy),
-        u1(is_leader),
-        u1(sensed),
-        f8(bearing),
-        f8(ranges),
-        i8(hops),
-    )
+def _agent_columns(rows, ids, hops, heading, target_dx, target_dy, is_leader) -> list:
+    return _columns("iiifff?", rows, ids, hops, heading, target_dx, target_dy, is_leader)
 
 
 def encode_sense_rows_py(
@@ -273,6 +268,24 @@ def encode_sense_rows_py(
 
 
 def encode_sense_pairs(
+    tick: int, time: float, rows, ids, heading, target_dx, target_dy, is_leader, i, j, bearing, ranges, hops
+) -> list[bytes]:
+    """encode_sense_pairs_py, compiled where it was built (swarm/contracts/fastpath.py): the
+    same bytes, each frame written straight from the pairs."""
+    if _c is None:
+        return encode_sense_pairs_py(
+            tick, time, rows, ids, heading, target_dx, target_dy, is_leader, i, j, bearing, ranges, hops
+        )
+    rows, ids, hops, heading, target_dx, target_dy, is_leader = _agent_columns(
+        rows, ids, hops, heading, target_dx, target_dy, is_leader
+    )
+    i, j, bearing, ranges = _columns("iiff", i, j, bearing, ranges)
+    return _c.encode_sense_pairs(
+        int(tick), float(time), rows, ids, heading, target_dx, target_dy, is_leader, i, j, bearing, ranges, hops
+    )
+
+
+def encode_sense_pairs_py(
     tick: int, time: float, rows, ids, heading, target_dx, target_dy, is_leader, i, j, bearing, ranges, hops
 ) -> list[bytes]:
     """encode_sense_rows from the sensed pairs instead of (N, N) matrices: agent i senses
