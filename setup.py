@@ -1,8 +1,8 @@
 """The one compiled module, swarm.contracts._fastwire (the wire's hot path in C), is optional:
 everything else is declared in pyproject.toml. Without a C compiler (or Python's headers) the
-build says so in one line and goes on; swarm then runs its pure-Python path, which gives the
-same bytes and the same trajectories (swarm/contracts/fastpath.py, tests/test_fastwire.py).
-SWARM_NO_COMPILE=1 skips the build on purpose (a machine without a compiler, simulated)."""
+build says so in one line (pip shows it with -v) and goes on; swarm then runs its pure-Python
+path, which gives the same bytes and the same trajectories (swarm/contracts/fastpath.py,
+tests/test_fastwire.py). SWARM_NO_COMPILE=1 skips the build on purpose."""
 
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ class OptionalBuildExt(build_ext):
     """build_ext that never fails the install: a module that cannot be built is left out."""
 
     def run(self) -> None:
-        if os.environ.get("SWARM_NO_COMPILE"):
+        if os.environ.get("SWARM_NO_COMPILE", "") not in ("", "0"):
             print("swarm: SWARM_NO_COMPILE is set: the compiled wire path is not built (pure Python)", file=sys.stderr)
             return
         try:

@@ -1,14 +1,20 @@
 """Whole runs with and without the compiled hot path (swarm/contracts/_fastwire.c): the same
 trajectories to the bit (tier process, slow).
 
-- `swarm sim` in a process of its own with SWARM_PURE_PYTHON=1 and without: every array
-  of trajectory.npz equal, on the shipped scenarios whose out-neighbours change at run time;
-- a lockstep `swarm up` whose every process (world, agents) runs the pure path equals
-  `swarm sim` on the compiled one (the equivalence tests of tests/test_runtime.py run the
-  compiled path through `swarm up`, where a compiler exists).
+- `swarm sim` in a process of its own with SWARM_PURE_PYTHON=1 and without, on the shipped
+  scenarios whose out-neighbours change at run time (`swarm sim` passes frames as objects:
+  what differs there is the nearest choice): every array of trajectory.npz equal;
+- a lockstep `swarm up` whose every process (world, agents) runs the pure path (frames
+  encoded and decoded in Python) equals `swarm sim`; the equivalence tests of
+  tests/test_runtime.py run `swarm up` on the compiled path where a compiler exists, so
+  compiled and pure `swarm up` are equal through `swarm sim`;
+- SWARM_PURE_PYTHON=1 switches a process to the pure path.
 """
 
 from __future__ import annotations
+
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -55,3 +61,14 @@ def test_a_pure_lockstep_up_equals_sim(rt, tmp_path):
     assert len(traj["t"]) == round(20 / load_scenario(scen).run.dt) + 1
     for key in KEYS:
         np.testing.assert_array_equal(traj[key], ref[key], err_msg=key)
+
+
+def test_swarm_pure_python_switches_the_path_off(rt):
+    code = (
+        "from swarm.contracts import fastpath, wire; from swarm.agents import selection;"
+        "print(fastpath.compiled is None, wire.decode_sense is wire.decode_sense_py,"
+        " selection.nearest is selection.nearest_py, fastpath.path)"
+    )
+    env = env_of(rt, True)
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    assert out.startswith("True True True pure Python (SWARM_PURE_PYTHON is set)"), out

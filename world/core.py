@@ -70,8 +70,10 @@ def _bumping(name: str):
     base = getattr(list, name)
 
     def changed(self, *args, **kwargs):
-        self.version += 1
-        return base(self, *args, **kwargs)
+        try:
+            return base(self, *args, **kwargs)
+        finally:  # after the change: a roster built meanwhile is of the old version, and stale
+            self.version += 1
 
     changed.__name__ = changed.__qualname__ = name
     return changed

@@ -1,5 +1,5 @@
 /* The wire's hot path in C: sensor frames encoded (world) and decoded (agents), and the
- * nearest contact chosen (agents). Optional: swarm/contracts/fastwire.py uses it when it was
+ * nearest contact chosen (agents). Optional: swarm/contracts/fastpath.py loads it where it was
  * built (pip install on a machine with a C compiler) and falls back to the pure-Python
  * functions of swarm/contracts/wire.py and swarm/agents/selection.py otherwise. Those stay
  * the reference: tests/test_fastwire.py checks that both give the same bytes and the same
@@ -13,6 +13,11 @@
 #include <math.h>
 #include <stdint.h>
 #include <string.h>
+
+/* fastpath.py uses this module only when its API is the one it expects: a module built from
+ * an older checkout (pip install -e, then a pull) is not used. Raise it with every change of
+ * a function's signature or meaning. */
+#define FASTWIRE_API 2
 
 #define HEAD_SIZE 52
 #define CONTACT_SIZE 30
@@ -88,24 +93,24 @@ static PyObject *encode_sense_tuples(PyObject *self, PyObject *const *args, Py_s
     if (as_double(args[3], &heading) < 0) return NULL;
     int has_target = args[4] != Py_None;
     if (has_target) {
-        PyObject *t = PySequence_Fast(args[4], "target must be a pair");
+        /* a tuple (copied from any other sequence): a __float__ cannot change it meanwhile */
+        PyObject *t = PySequence_Tuple(args[4]);
         if (t == NULL) return NULL;
-        if (PySequence_Fast_GET_SIZE(t) != 2) {
+        if (PyTuple_GET_SIZE(t) != 2) {
             Py_DECREF(t);
             PyErr_SetString(PyExc_ValueError, "target must be a pair");
             return NULL;
         }
-        int bad = as_double(PySequence_Fast_GET_ITEM(t, 0), &tx) < 0 ||
-                  as_double(PySequence_Fast_GET_ITEM(t, 1), &ty) < 0;
+        int bad = as_double(PyTuple_GET_ITEM(t, 0), &tx) < 0 || as_double(PyTuple_GET_ITEM(t, 1), &ty) < 0;
         Py_DECREF(t);
         if (bad) return NULL;
     } else {
         tx = ty = quiet_nan();
     }
-    PyObject *cs = PySequence_Fast(args[5], "contacts must be a sequence");
+    PyObject *cs = PySequence_Tuple(args[5]); /* as the target: a tuple, copied from a list */
     if (cs == NULL) return NULL;
-    Py_ssize_t n = PySequence_Fast_GET_SIZE(cs);
-    if (n > UINT32_MAX) {
+    Py_ssize_t n = PyTuple_GET_SIZE(cs);
+    if (n > (PY_SSIZE_T_MAX - HEAD_SIZE) / CONTACT_SIZE || (uint64_t)n > UINT32_MAX) {
         Py_DECREF(cs);
         PyErr_SetString(PyExc_OverflowError, "too many contacts");
         return NULL;
@@ -119,7 +124,7 @@ static PyObject *encode_sense_tuples(PyObject *self, PyObject *const *args, Py_s
     put_head(p, has_target, (int32_t)agent, (int64_t)tick, time, heading, tx, ty, (uint32_t)n);
     p += HEAD_SIZE;
     for (Py_ssize_t k = 0; k < n; k++, p += CONTACT_SIZE) {
-        PyObject *c = PySequence_Fast_GET_ITEM(cs, k);
+        PyObject *c = PyTuple_GET_ITEM(cs, k);
         if (!PyTuple_Check(c) || PyTuple_GET_SIZE(c) != 5) {
             PyErr_SetString(PyExc_TypeError, "a contact is a 5-tuple (id, bearing, heading, range, hops)");
             goto fail;
@@ -152,7 +157,7 @@ typedef struct {
 } Col;
 
 /* A C-contiguous buffer of `count` items of `itemsize` bytes (the caller passed arrays of
- * the right dtype: fastwire.py makes sure of it). */
+ * the right dtype: wire.py's _columns makes sure of it). */
 static int col_get(PyObject *o, Col *c, Py_ssize_t count, Py_ssize_t itemsize, const char *what) {
     if (PyObject_GetBuffer(o, &c->view, PyBUF_C_CONTIGUOUS) < 0) return -1;
     c->held = 1;
@@ -371,12 +376,10 @@ done:
     return out;
 }
 
-/* decode_contacts(buf, offset, n, contact_type) -> (contacts, total) or None
+/* decode_contacts(buf, offset, n, contact_type) -> (contacts, finite) or None
  * The n contact records of `buf` from `offset`, each a `contact_type` (a tuple subclass:
- * swarm.contracts.frames.Contact); None when the records do not fit the buffer. `total`:
- * every number of every record added one after another as doubles, from 0, in the record
- * order (id, bearing, heading, range, hops): Python's sum() of them, which wire.decode_sense
- * tests for finiteness. */
+ * swarm.contracts.frames.Contact); None when the records do not fit the buffer. `finite`:
+ * whether every float of every record is finite (wire.decode_sense refuses the frame if not). */
 static PyObject *decode_contacts(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     if (nargs != 4) {
         PyErr_SetString(PyExc_TypeError, "decode_contacts takes 4 arguments");
@@ -391,11 +394,11 @@ static PyObject *decode_contacts(PyObject *self, PyObject *const *args, Py_ssize
     if (offset == -1 && PyErr_Occurred()) return NULL;
     Py_ssize_t n = PyLong_AsSsize_t(args[2]);
     if (n == -1 && PyErr_Occurred()) return NULL;
-    double total = 0.0;
+    int finite = 1;
     Py_buffer view;
     if (PyObject_GetBuffer(args[0], &view, PyBUF_SIMPLE) < 0) return NULL;
     PyObject *contacts = NULL, *result = NULL;
-    if (offset < 0 || n < 0 || view.len - offset < n * CONTACT_SIZE) {
+    if (offset < 0 || n < 0 || offset > view.len || n > (view.len - offset) / CONTACT_SIZE) {
         PyBuffer_Release(&view);
         Py_RETURN_NONE;
     }
@@ -406,13 +409,12 @@ static PyObject *decode_contacts(PyObject *self, PyObject *const *args, Py_ssize
         int32_t id = get_i32(p);
         double b = get_f64(p + 4), h = get_f64(p + 12), r = get_f64(p + 20);
         int16_t hops = get_i16(p + 28);
-        total += (double)id;
-        total += b;
-        total += h;
-        total += r;
-        total += (double)hops;
+        finite &= isfinite(b) && isfinite(h) && isfinite(r);
         PyObject *c = ct->tp_alloc(ct, 5);
         if (c == NULL) goto fail;
+#if PY_VERSION_HEX >= 0x030E0000
+        ((PyTupleObject *)c)->ob_hash = -1; /* 3.14 caches a tuple's hash: not computed yet */
+#endif
         PyObject *v0 = PyLong_FromLong(id), *v1 = PyFloat_FromDouble(b), *v2 = PyFloat_FromDouble(h),
                  *v3 = PyFloat_FromDouble(r), *v4 = PyLong_FromLong(hops);
         PyTuple_SET_ITEM(c, 0, v0);
@@ -423,7 +425,7 @@ static PyObject *decode_contacts(PyObject *self, PyObject *const *args, Py_ssize
         PyTuple_SET_ITEM(contacts, k, c);
         if (!v0 || !v1 || !v2 || !v3 || !v4) goto fail;
     }
-    result = Py_BuildValue("(Od)", contacts, total);
+    result = Py_BuildValue("(ON)", contacts, PyBool_FromLong(finite));
 fail:
     Py_XDECREF(contacts);
 done:
@@ -465,7 +467,7 @@ static PyMethodDef methods[] = {
     {"encode_sense_tuples", (PyCFunction)(void (*)(void))encode_sense_tuples, METH_FASTCALL,
      "wire.encode_sense_tuples in C: the same bytes."},
     {"encode_sense_rows", (PyCFunction)(void (*)(void))encode_sense_rows, METH_FASTCALL,
-     "wire.encode_sense_rows in C, from arrays of fixed dtypes (see fastwire.py): the same bytes."},
+     "wire.encode_sense_rows in C, from arrays of fixed dtypes (see wire.py): the same bytes."},
     {"encode_sense_pairs", (PyCFunction)(void (*)(void))encode_sense_pairs, METH_FASTCALL,
      "wire.encode_sense_pairs in C, from arrays of fixed dtypes (see wire.py): the same bytes."},
     {"decode_contacts", (PyCFunction)(void (*)(void))decode_contacts, METH_FASTCALL,
@@ -475,6 +477,10 @@ static PyMethodDef methods[] = {
 };
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_fastwire",
-                                    "The wire's hot path in C (see swarm/contracts/fastwire.py).", -1, methods};
+                                    "The wire's hot path in C (see swarm/contracts/fastpath.py).", -1, methods};
 
-PyMODINIT_FUNC PyInit__fastwire(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__fastwire(void) {
+    PyObject *m = PyModule_Create(&module);
+    if (m != NULL && PyModule_AddIntConstant(m, "API", FASTWIRE_API) < 0) Py_CLEAR(m);
+    return m;
+}

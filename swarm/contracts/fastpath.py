@@ -11,6 +11,7 @@ import os
 from types import ModuleType
 
 PURE_ENV = "SWARM_PURE_PYTHON"
+API = 2  # the compiled module's API this code calls (FASTWIRE_API in _fastwire.c)
 
 
 def _load() -> tuple[ModuleType | None, str]:
@@ -20,6 +21,9 @@ def _load() -> tuple[ModuleType | None, str]:
         from swarm.contracts import _fastwire  # lazy: optional (built only where a C compiler was)
     except ImportError:
         return None, "pure Python (the compiled module was not built: no C compiler at install?)"
+    built = getattr(_fastwire, "API", 1)
+    if built != API:  # built from another checkout (pip install -e, then a pull)
+        return None, f"pure Python (the compiled module is of API {built}, this code needs {API}: install again)"
     return _fastwire, "compiled (swarm.contracts._fastwire)"
 
 

@@ -31,7 +31,7 @@ import json
 import math
 import re
 import struct
-from collections.abc import Iterable
+from collections.abc import Sequence
 from dataclasses import dataclass
 from itertools import chain, starmap
 
@@ -356,6 +356,12 @@ def _contacts_struct(n: int) -> struct.Struct:
     return struct.Struct("<" + CONTACT.format.lstrip("<") * n)
 
 
+def _all_finite(numbers: Sequence[float]) -> bool:
+    """Whether every number is finite: their sum is not if one is NaN or infinite; only when the
+    sum is not finite (one is, or finite numbers near 1e308 overflowed it) each is tested."""
+    return math.isfinite(sum(numbers)) or all(map(math.isfinite, numbers))
+
+
 def decode_sense_py(buf: bytes) -> SensorFrame:
     """A sensor frame from its bytes (WireError for anything that is not a valid one): the
     pure-Python reference of `decode_sense`."""
@@ -367,19 +373,17 @@ def decode_sense_py(buf: bytes) -> SensorFrame:
     if len(buf) != expected:
         raise WireError(f"sense frame: {len(buf)} bytes, expected {expected} for {n} contacts")
     # Every contact's numbers in one unpack, grouped five by five into Contacts in C (zip
-    # over one iterator); one finiteness test for all numbers: a NaN or inf anywhere makes
-    # the sum non-finite (so would finite values near 1e308, which are garbage here anyway;
-    # the ids and hops summed along are integers, finite by construction).
-    numbers: Iterable[float]
+    # over one iterator); every number must be finite (`_all_finite`; the ids and hops among
+    # them are integers, finite by construction).
+    numbers: Sequence[float]
     if n <= CONTACTS_CACHED:
         numbers = _contacts_struct(n).unpack_from(buf, SENSE_HEAD.size)
         it = iter(numbers)
         contacts = tuple(map(_contact, zip(it, it, it, it, it)))
     else:  # no layout of its own kept for every size of a large frame
         contacts = tuple(map(_contact, CONTACT.iter_unpack(memoryview(buf)[SENSE_HEAD.size :])))
-        numbers = chain.from_iterable(contacts)
-    total = time + heading + (tx + ty if has_t else 0.0) + sum(numbers)
-    if not math.isfinite(total):
+        numbers = list(chain.from_iterable(contacts))
+    if not (_all_finite((time, heading, tx, ty) if has_t else (time, heading)) and _all_finite(numbers)):
         raise WireError("sense frame: non-finite number")
     if tick < 0:
         raise WireError(f"sense frame: negative tick {tick}")
@@ -398,8 +402,8 @@ def _decode_sense_c(buf: bytes) -> SensorFrame:
         raise WireError(f"sense frame: {len(buf)} bytes, expected {expected} for {n} contacts")
     decoded = _c.decode_contacts(buf, SENSE_HEAD.size, n, Contact)
     assert decoded is not None  # the length was checked above
-    contacts, numbers = decoded
-    if not math.isfinite(time + heading + (tx + ty if has_t else 0.0) + numbers):
+    contacts, finite = decoded
+    if not (finite and _all_finite((time, heading, tx, ty) if has_t else (time, heading))):
         raise WireError("sense frame: non-finite number")
     if tick < 0:
         raise WireError(f"sense frame: negative tick {tick}")
