@@ -26,7 +26,7 @@ from swarm.contracts.vocabulary import ExitCode
 
 pytestmark = pytest.mark.slow
 KEYS = ("t", "x", "y", "heading", "u", "out", "alive")
-SELECTING = ["case2", "case2-range", "case2-fov", "swarm30-range", "rooted", "faults"]
+SELECTING = ["case2-range", "case2-fov", "swarm30-range", "faults"]  # limited sensing and faults: the graph changes
 
 
 def env_of(rt, pure: bool) -> dict:

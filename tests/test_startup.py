@@ -236,7 +236,7 @@ if args[1:4] == [b"-m", b"swarm", b"world"]:
 
 @pytest.mark.slow
 def test_up_waits_for_a_slow_world(tmp_path):
-    """A world that takes 20 s to start (longer than the fixed 15 s wait there was): `swarm
+    """A world that takes 16 s to start (longer than the fixed 15 s wait there was): `swarm
     up` waits for its word that it listens, and the run completes."""
     site = tmp_path / "site"
     site.mkdir()
@@ -244,7 +244,7 @@ def test_up_waits_for_a_slow_world(tmp_path):
     with Runtime(tmp_path) as rt:
         env = {
             **rt.env,
-            "SLOW_WORLD_S": "20",
+            "SLOW_WORLD_S": "16",
             "PYTHONPATH": os.pathsep.join([str(site), rt.env.get("PYTHONPATH", "")]).rstrip(os.pathsep),
         }
         up = rt.tracker.spawn(
