@@ -173,12 +173,83 @@ static void col_release(Col *c) {
     c->held = 0;
 }
 
+/* What both array encoders take about the agents: the rows to encode (int64 (R,)) and, per
+ * agent, ids (int64), heading, target_dx, target_dy (float64), is_leader (uint8, bool) and
+ * the hops it advertises (int64), each (N,). */
+typedef struct {
+    Col rows, ids, head, dx, dy, lead, hops;
+    Py_ssize_t n, nr;
+} Agents;
+
+/* Agents from the arguments rows, ids, heading, target_dx, target_dy, is_leader (`cols`, in
+ * that order) and hops; 0, or -1 with an exception set (agents_release either way). */
+static int agents_get(PyObject *const *cols, PyObject *hops, Agents *a) {
+    if (PyObject_GetBuffer(cols[1], &a->ids.view, PyBUF_C_CONTIGUOUS) < 0) return -1;
+    a->ids.held = 1;
+    if (PyObject_GetBuffer(cols[0], &a->rows.view, PyBUF_C_CONTIGUOUS) < 0) return -1;
+    a->rows.held = 1;
+    a->n = a->ids.view.len / 8;
+    a->nr = a->rows.view.len / 8;
+    if (a->ids.view.len != a->n * 8 || a->rows.view.len != a->nr * 8) {
+        PyErr_SetString(PyExc_ValueError, "ids and rows: int64");
+        return -1;
+    }
+    Py_ssize_t n = a->n;
+    if (col_get(cols[2], &a->head, n, 8, "heading") < 0 || col_get(cols[3], &a->dx, n, 8, "target_dx") < 0 ||
+        col_get(cols[4], &a->dy, n, 8, "target_dy") < 0 || col_get(cols[5], &a->lead, n, 1, "is_leader") < 0 ||
+        col_get(hops, &a->hops, n, 8, "hops") < 0)
+        return -1;
+    return 0;
+}
+
+static void agents_release(Agents *a) {
+    col_release(&a->rows);
+    col_release(&a->ids);
+    col_release(&a->head);
+    col_release(&a->dx);
+    col_release(&a->dy);
+    col_release(&a->lead);
+    col_release(&a->hops);
+}
+
+/* The frame of agent index k with room for `count` contacts, its head written; *p: where its
+ * contacts go. NULL with an exception set (k out of range, an id past int32). */
+static PyObject *row_frame(const Agents *a, int64_t k, long long tick, double time, Py_ssize_t count, char **p) {
+    const int64_t *idv = a->ids.view.buf;
+    if (k < 0 || k >= a->n) {
+        PyErr_Format(PyExc_IndexError, "row %lld out of range", (long long)k);
+        return NULL;
+    }
+    if (idv[k] < INT32_MIN || idv[k] > INT32_MAX) {
+        PyErr_Format(PyExc_OverflowError, "agent id %lld out of range", (long long)idv[k]);
+        return NULL;
+    }
+    PyObject *frame = PyBytes_FromStringAndSize(NULL, HEAD_SIZE + count * CONTACT_SIZE);
+    if (frame == NULL) return NULL;
+    const double *hd = a->head.view.buf, *dxv = a->dx.view.buf, *dyv = a->dy.view.buf;
+    int l = ((const unsigned char *)a->lead.view.buf)[k] != 0;
+    double nan = quiet_nan();
+    *p = PyBytes_AS_STRING(frame);
+    put_head(*p, l, (int32_t)idv[k], (int64_t)tick, time, hd[k], l ? dxv[k] : nan, l ? dyv[k] : nan,
+             (uint32_t)count);
+    *p += HEAD_SIZE;
+    return frame;
+}
+
+/* The contact record of agent index j, sensed at `bearing` and `range`. */
+static inline void put_contact(char *p, const Agents *a, int64_t j, double bearing, double range) {
+    put_i32(p, (int32_t)((const int64_t *)a->ids.view.buf)[j]); /* numpy's astype("<i4"): wraps, as the C cast */
+    put_f64(p + 4, bearing);
+    put_f64(p + 12, ((const double *)a->head.view.buf)[j]);
+    put_f64(p + 20, range);
+    put_i16(p + 28, (int16_t)((const int64_t *)a->hops.view.buf)[j]);
+}
+
 /* encode_sense_rows(tick, time, rows, ids, heading, target_dx, target_dy, is_leader, sensed,
  *                   bearing, ranges, hops) -> list of bytes
- * rows int64 (R,); ids int64, heading float64, target_dx/dy float64, is_leader uint8 (bool),
- * hops int64 (N,); sensed uint8 (bool), bearing, ranges float64 (N, N). The bytes of
- * wire.encode_sense_rows: row k's frame holds, for every j with sensed[k, j], in order of j,
- * (ids[j] as int32, bearing[k, j], heading[j], ranges[k, j], hops[j] as int16). */
+ * The agents' arrays as in `Agents`; sensed uint8 (bool), bearing, ranges float64 (N, N). The
+ * bytes of wire.encode_sense_rows_py: row k's frame holds, for every j with sensed[k, j], in
+ * order of j, the contact record of j at bearing[k, j], ranges[k, j]. */
 static PyObject *encode_sense_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     if (nargs != 12) {
         PyErr_SetString(PyExc_TypeError, "encode_sense_rows takes 12 arguments");
@@ -188,92 +259,50 @@ static PyObject *encode_sense_rows(PyObject *self, PyObject *const *args, Py_ssi
     double time;
     if (int_in(args[0], INT64_MIN, INT64_MAX, &tick, "tick") < 0) return NULL;
     if (as_double(args[1], &time) < 0) return NULL;
-    Col rows = {0}, ids = {0}, head = {0}, dx = {0}, dy = {0}, lead = {0}, sensed = {0}, bear = {0}, rng = {0},
-        hops = {0};
+    Agents a = {0};
+    Col sensed = {0}, bear = {0}, rng = {0};
     PyObject *out = NULL;
-    if (PyObject_GetBuffer(args[3], &ids.view, PyBUF_C_CONTIGUOUS) < 0) return NULL;
-    ids.held = 1;
-    Py_ssize_t n = ids.view.len / 8;
-    if (ids.view.len != n * 8) {
-        PyErr_SetString(PyExc_ValueError, "ids: not int64");
+    if (agents_get(args + 2, args[11], &a) < 0) goto done;
+    Py_ssize_t n = a.n;
+    if (col_get(args[8], &sensed, n * n, 1, "sensed") < 0 || col_get(args[9], &bear, n * n, 8, "bearing") < 0 ||
+        col_get(args[10], &rng, n * n, 8, "ranges") < 0)
         goto done;
-    }
-    if (PyObject_GetBuffer(args[2], &rows.view, PyBUF_C_CONTIGUOUS) < 0) goto done;
-    rows.held = 1;
-    Py_ssize_t nr = rows.view.len / 8;
-    if (rows.view.len != nr * 8) {
-        PyErr_SetString(PyExc_ValueError, "rows: not int64");
-        goto done;
-    }
-    if (col_get(args[4], &head, n, 8, "heading") < 0 || col_get(args[5], &dx, n, 8, "target_dx") < 0 ||
-        col_get(args[6], &dy, n, 8, "target_dy") < 0 || col_get(args[7], &lead, n, 1, "is_leader") < 0 ||
-        col_get(args[8], &sensed, n * n, 1, "sensed") < 0 || col_get(args[9], &bear, n * n, 8, "bearing") < 0 ||
-        col_get(args[10], &rng, n * n, 8, "ranges") < 0 || col_get(args[11], &hops, n, 8, "hops") < 0)
-        goto done;
-    const int64_t *rw = rows.view.buf, *idv = ids.view.buf, *hv = hops.view.buf;
-    const double *hd = head.view.buf, *dxv = dx.view.buf, *dyv = dy.view.buf, *bv = bear.view.buf,
-                 *rv = rng.view.buf;
-    const unsigned char *lv = lead.view.buf, *sv = sensed.view.buf;
-    out = PyList_New(nr);
+    const int64_t *rw = a.rows.view.buf;
+    const double *bv = bear.view.buf, *rv = rng.view.buf;
+    const unsigned char *sv = sensed.view.buf;
+    out = PyList_New(a.nr);
     if (out == NULL) goto done;
-    double nan = quiet_nan();
-    for (Py_ssize_t q = 0; q < nr; q++) {
+    for (Py_ssize_t q = 0; q < a.nr; q++) {
         int64_t k = rw[q];
-        if (k < 0 || k >= n) {
-            PyErr_Format(PyExc_IndexError, "row %lld out of range", (long long)k);
-            Py_CLEAR(out);
-            goto done;
-        }
-        const unsigned char *srow = sv + k * n;
         Py_ssize_t count = 0;
-        for (Py_ssize_t j = 0; j < n; j++) count += srow[j] != 0;
-        if (idv[k] < INT32_MIN || idv[k] > INT32_MAX) {
-            PyErr_Format(PyExc_OverflowError, "agent id %lld out of range", (long long)idv[k]);
-            Py_CLEAR(out);
-            goto done;
-        }
-        PyObject *frame = PyBytes_FromStringAndSize(NULL, HEAD_SIZE + count * CONTACT_SIZE);
+        if (k >= 0 && k < n)
+            for (Py_ssize_t j = 0; j < n; j++) count += sv[k * n + j] != 0;
+        char *p;
+        PyObject *frame = row_frame(&a, k, tick, time, count, &p);
         if (frame == NULL) {
             Py_CLEAR(out);
             goto done;
         }
-        char *p = PyBytes_AS_STRING(frame);
-        int l = lv[k] != 0;
-        put_head(p, l, (int32_t)idv[k], (int64_t)tick, time, hd[k], l ? dxv[k] : nan, l ? dyv[k] : nan,
-                 (uint32_t)count);
-        p += HEAD_SIZE;
-        const double *brow = bv + k * n, *rrow = rv + k * n;
         for (Py_ssize_t j = 0; j < n; j++) {
-            if (!srow[j]) continue;
-            put_i32(p, (int32_t)idv[j]); /* numpy's astype("<i4"): wraps, as the C cast */
-            put_f64(p + 4, brow[j]);
-            put_f64(p + 12, hd[j]);
-            put_f64(p + 20, rrow[j]);
-            put_i16(p + 28, (int16_t)hv[j]);
+            if (!sv[k * n + j]) continue;
+            put_contact(p, &a, j, bv[k * n + j], rv[k * n + j]);
             p += CONTACT_SIZE;
         }
         PyList_SET_ITEM(out, q, frame);
     }
 done:
-    col_release(&rows);
-    col_release(&ids);
-    col_release(&head);
-    col_release(&dx);
-    col_release(&dy);
-    col_release(&lead);
+    agents_release(&a);
     col_release(&sensed);
     col_release(&bear);
     col_release(&rng);
-    col_release(&hops);
     return out;
 }
 
 /* encode_sense_pairs(tick, time, rows, ids, heading, target_dx, target_dy, is_leader, i, j,
  *                    bearing, ranges, hops) -> list of bytes
- * rows int64 (R,); ids int64, heading float64, target_dx/dy float64, is_leader uint8 (bool),
- * hops int64 (N,); i, j int64, bearing, ranges float64 (P,): the sensed pairs, sorted by i,
- * then j. The bytes of wire.encode_sense_pairs_py: row k's frame holds, in order, the pairs
- * whose i is k, each as (ids[j] as int32, bearing, heading[j], range, hops[j] as int16). */
+ * The agents' arrays as in `Agents`; i, j int64, bearing, ranges float64 (P,): the sensed
+ * pairs, sorted by i, then j. The bytes of wire.encode_sense_pairs_py: row k's frame holds,
+ * in order, the contact records of the pairs whose i is k. */
 static PyObject *encode_sense_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     if (nargs != 13) {
         PyErr_SetString(PyExc_TypeError, "encode_sense_pairs takes 13 arguments");
@@ -283,96 +312,60 @@ static PyObject *encode_sense_pairs(PyObject *self, PyObject *const *args, Py_ss
     double time;
     if (int_in(args[0], INT64_MIN, INT64_MAX, &tick, "tick") < 0) return NULL;
     if (as_double(args[1], &time) < 0) return NULL;
-    Col rows = {0}, ids = {0}, head = {0}, dx = {0}, dy = {0}, lead = {0}, pi = {0}, pj = {0}, bear = {0}, rng = {0},
-        hops = {0};
+    Agents a = {0};
+    Col pi = {0}, pj = {0}, bear = {0}, rng = {0};
     PyObject *out = NULL;
     Py_ssize_t *start = NULL;
-    if (PyObject_GetBuffer(args[3], &ids.view, PyBUF_C_CONTIGUOUS) < 0) return NULL;
-    ids.held = 1;
-    Py_ssize_t n = ids.view.len / 8;
-    if (PyObject_GetBuffer(args[2], &rows.view, PyBUF_C_CONTIGUOUS) < 0) goto done;
-    rows.held = 1;
-    Py_ssize_t nr = rows.view.len / 8;
+    if (agents_get(args + 2, args[12], &a) < 0) goto done;
+    Py_ssize_t n = a.n;
     if (PyObject_GetBuffer(args[8], &pi.view, PyBUF_C_CONTIGUOUS) < 0) goto done;
     pi.held = 1;
     Py_ssize_t np_ = pi.view.len / 8;
-    if (ids.view.len != n * 8 || rows.view.len != nr * 8 || pi.view.len != np_ * 8) {
-        PyErr_SetString(PyExc_ValueError, "ids, rows and i: int64");
+    if (pi.view.len != np_ * 8) {
+        PyErr_SetString(PyExc_ValueError, "i: int64");
         goto done;
     }
-    if (col_get(args[4], &head, n, 8, "heading") < 0 || col_get(args[5], &dx, n, 8, "target_dx") < 0 ||
-        col_get(args[6], &dy, n, 8, "target_dy") < 0 || col_get(args[7], &lead, n, 1, "is_leader") < 0 ||
-        col_get(args[9], &pj, np_, 8, "j") < 0 || col_get(args[10], &bear, np_, 8, "bearing") < 0 ||
-        col_get(args[11], &rng, np_, 8, "ranges") < 0 || col_get(args[12], &hops, n, 8, "hops") < 0)
+    if (col_get(args[9], &pj, np_, 8, "j") < 0 || col_get(args[10], &bear, np_, 8, "bearing") < 0 ||
+        col_get(args[11], &rng, np_, 8, "ranges") < 0)
         goto done;
-    const int64_t *rw = rows.view.buf, *idv = ids.view.buf, *hv = hops.view.buf, *iv = pi.view.buf,
-                  *jv = pj.view.buf;
-    const double *hd = head.view.buf, *dxv = dx.view.buf, *dyv = dy.view.buf, *bv = bear.view.buf,
-                 *rv = rng.view.buf;
-    const unsigned char *lv = lead.view.buf;
+    const int64_t *rw = a.rows.view.buf, *iv = pi.view.buf, *jv = pj.view.buf;
+    const double *bv = bear.view.buf, *rv = rng.view.buf;
     /* start[a] .. start[a + 1]: the pairs of agent a (sorted by i: a check, not an assumption) */
     start = PyMem_Calloc((size_t)n + 1, sizeof(Py_ssize_t));
     if (start == NULL) {
         PyErr_NoMemory();
         goto done;
     }
-    for (Py_ssize_t p = 0; p < np_; p++) {
-        if (iv[p] < 0 || iv[p] >= n || jv[p] < 0 || jv[p] >= n || (p && iv[p] < iv[p - 1])) {
+    for (Py_ssize_t e = 0; e < np_; e++) {
+        if (iv[e] < 0 || iv[e] >= n || jv[e] < 0 || jv[e] >= n || (e && iv[e] < iv[e - 1])) {
             PyErr_SetString(PyExc_ValueError, "pairs: i and j must be indices, sorted by i");
             goto done;
         }
-        start[iv[p] + 1]++;
+        start[iv[e] + 1]++;
     }
-    for (Py_ssize_t a = 0; a < n; a++) start[a + 1] += start[a];
-    out = PyList_New(nr);
+    for (Py_ssize_t m = 0; m < n; m++) start[m + 1] += start[m];
+    out = PyList_New(a.nr);
     if (out == NULL) goto done;
-    double nan = quiet_nan();
-    for (Py_ssize_t q = 0; q < nr; q++) {
+    for (Py_ssize_t q = 0; q < a.nr; q++) {
         int64_t k = rw[q];
-        if (k < 0 || k >= n) {
-            PyErr_Format(PyExc_IndexError, "row %lld out of range", (long long)k);
-            Py_CLEAR(out);
-            goto done;
-        }
-        if (idv[k] < INT32_MIN || idv[k] > INT32_MAX) {
-            PyErr_Format(PyExc_OverflowError, "agent id %lld out of range", (long long)idv[k]);
-            Py_CLEAR(out);
-            goto done;
-        }
-        Py_ssize_t a = start[k], b = start[k + 1];
-        PyObject *frame = PyBytes_FromStringAndSize(NULL, HEAD_SIZE + (b - a) * CONTACT_SIZE);
+        Py_ssize_t first = 0, last = 0;
+        if (k >= 0 && k < n) first = start[k], last = start[k + 1];
+        char *p;
+        PyObject *frame = row_frame(&a, k, tick, time, last - first, &p);
         if (frame == NULL) {
             Py_CLEAR(out);
             goto done;
         }
-        char *p = PyBytes_AS_STRING(frame);
-        int l = lv[k] != 0;
-        put_head(p, l, (int32_t)idv[k], (int64_t)tick, time, hd[k], l ? dxv[k] : nan, l ? dyv[k] : nan,
-                 (uint32_t)(b - a));
-        p += HEAD_SIZE;
-        for (Py_ssize_t e = a; e < b; e++, p += CONTACT_SIZE) {
-            int64_t j = jv[e];
-            put_i32(p, (int32_t)idv[j]);
-            put_f64(p + 4, bv[e]);
-            put_f64(p + 12, hd[j]);
-            put_f64(p + 20, rv[e]);
-            put_i16(p + 28, (int16_t)hv[j]);
-        }
+        for (Py_ssize_t e = first; e < last; e++, p += CONTACT_SIZE) put_contact(p, &a, jv[e], bv[e], rv[e]);
         PyList_SET_ITEM(out, q, frame);
     }
 done:
     PyMem_Free(start);
-    col_release(&rows);
-    col_release(&ids);
-    col_release(&head);
-    col_release(&dx);
-    col_release(&dy);
-    col_release(&lead);
+    agents_release(&a);
     col_release(&pi);
     col_release(&pj);
     col_release(&bear);
     col_release(&rng);
-    col_release(&hops);
     return out;
 }
 

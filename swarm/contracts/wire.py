@@ -362,16 +362,22 @@ def _all_finite(numbers: Sequence[float]) -> bool:
     return math.isfinite(sum(numbers)) or all(map(math.isfinite, numbers))
 
 
-def decode_sense_py(buf: bytes) -> SensorFrame:
-    """A sensor frame from its bytes (WireError for anything that is not a valid one): the
-    pure-Python reference of `decode_sense`."""
-    f = _check_head(buf, SENSE_HEAD, KIND_SENSE, "sense frame")
-    _, _, has_t, _, agent, tick, time, heading, tx, ty, n = f
+def _sense_head(buf: bytes) -> tuple:
+    """(has_target, agent, tick, time, heading, target dx, dy, contacts) of a sensor frame whose
+    length is that of its contacts (WireError otherwise)."""
+    _, _, has_t, _, agent, tick, time, heading, tx, ty, n = _check_head(buf, SENSE_HEAD, KIND_SENSE, "sense frame")
     if n > MAX_AGENTS:
         raise WireError(f"sense frame: {n} contacts, more than {MAX_AGENTS}")
     expected = SENSE_HEAD.size + n * CONTACT.size
     if len(buf) != expected:
         raise WireError(f"sense frame: {len(buf)} bytes, expected {expected} for {n} contacts")
+    return has_t, agent, tick, time, heading, tx, ty, n
+
+
+def decode_sense_py(buf: bytes) -> SensorFrame:
+    """A sensor frame from its bytes (WireError for anything that is not a valid one): the
+    pure-Python reference of `decode_sense`."""
+    has_t, agent, tick, time, heading, tx, ty, n = _sense_head(buf)
     # Every contact's numbers in one unpack, grouped five by five into Contacts in C (zip
     # over one iterator); every number must be finite (`_all_finite`; the ids and hops among
     # them are integers, finite by construction).
@@ -393,13 +399,7 @@ def decode_sense_py(buf: bytes) -> SensorFrame:
 def _decode_sense_c(buf: bytes) -> SensorFrame:
     """decode_sense_py with the contacts decoded in C: the same frame, the same errors."""
     assert _c is not None
-    f = _check_head(buf, SENSE_HEAD, KIND_SENSE, "sense frame")
-    _, _, has_t, _, agent, tick, time, heading, tx, ty, n = f
-    if n > MAX_AGENTS:
-        raise WireError(f"sense frame: {n} contacts, more than {MAX_AGENTS}")
-    expected = SENSE_HEAD.size + n * CONTACT.size
-    if len(buf) != expected:
-        raise WireError(f"sense frame: {len(buf)} bytes, expected {expected} for {n} contacts")
+    has_t, agent, tick, time, heading, tx, ty, n = _sense_head(buf)
     decoded = _c.decode_contacts(buf, SENSE_HEAD.size, n, Contact)
     assert decoded is not None  # the length was checked above
     contacts, finite = decoded
