@@ -72,7 +72,18 @@ class _Liveliness:
         return d
 
     def get(self, key: str, timeout: float = 1.0):
-        return []
+        """Scripted: the next entry of `session.token_replies` (how many tokens answer this
+        query; for ever the last one when `session.tokens_stay`), none once it is empty."""
+        ses = self.session
+        ses.token_gets.append(key)
+        if not ses.token_replies:
+            return []
+        n = ses.token_replies[0] if ses.tokens_stay and len(ses.token_replies) == 1 else ses.token_replies.pop(0)
+        return [_Reply()] * n
+
+
+class _Reply:
+    ok = object()  # a token that answered (zenoh: Reply.ok is its sample)
 
 
 class _Info:
@@ -85,6 +96,9 @@ class FakeSession:
         self.sent: list[tuple[str, bytes]] = []  # (key, payload) of every put
         self.declared: list[_Declared] = []
         self.tokens: list[str] = []
+        self.token_replies: list[int] = []  # liveliness queries: tokens answering each (_Liveliness.get)
+        self.tokens_stay = False
+        self.token_gets: list[str] = []  # the key of every liveliness query
         self.info = _Info()
         self.closed = False
 

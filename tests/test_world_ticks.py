@@ -165,3 +165,25 @@ def test_command_keys_are_parsed_once_and_only_the_runs_own():
     while world.inbox.drain(pending, 0):
         pass
     assert pending == {1, 3} and world.book[2].commands == 1 and world.state.ignored == 1  # the second: a duplicate
+
+
+def test_the_world_closes_once_its_agents_have_left_after_the_end_notice():
+    """The end notice first, then the session kept open while agent tokens answer (each agent
+    leaves on the notice): closed at once, the notice could go down with the links."""
+    world, ses = open_world(ring(3, None))
+    ses.token_replies = [3, 1]  # three agents, then one, then none left
+    world._close()
+    assert [wire.decode_control(b) for b in ses.on(wire.world_control_key(RUN))] == [0]
+    assert ses.token_gets == [wire.agent_key(RUN, "*", "alive")] * 3
+    assert ses.closed
+
+
+def test_an_agent_that_never_leaves_holds_the_world_up_no_longer_than_the_wait(monkeypatch):
+    import swarm.world.process as process  # lazy: the module whose wait is shortened here
+
+    monkeypatch.setattr(process, "END_WAIT_S", 0.2)
+    world, ses = open_world(ring(3, None))
+    ses.token_replies, ses.tokens_stay = [1], True  # a stopped agent: its token stays
+    world._close()
+    assert ses.closed and len(ses.token_gets) >= 1
+    assert ses.token_replies == [1]

@@ -40,6 +40,7 @@ __all__ = ["FRAMES_PAIRWISE", "TRUTH_PERIOD", "World", "WorldConfig"]
 
 FRAMES_PAIRWISE = 8  # agents: up to this many, frames are built pair by pair (world/sensing.py)
 TRUTH_PERIOD = 0.02  # s of wall time between ground-truth messages (observers, not the recording)
+END_WAIT_S = 1.0  # s the world waits, after its end notice, for its agents' tokens to go (see `_close`)
 
 
 class World:
@@ -137,11 +138,27 @@ class World:
         self.control_pub.put(payload)
 
     def _close(self) -> None:
+        """The end notice, then the session closed once the agents have left (at most
+        END_WAIT_S): closing at once could take the notice down with the links before zenoh
+        sent it (seen on a loaded machine), and an agent that sees the world's token go
+        without it exits 4, "the world vanished", instead of 0."""
         try:
             self.control_pub.put(wire.encode_end(self.core.tick))
+            self._wait_agents_gone(END_WAIT_S)
         except Exception:
             pass
         self.session.close()
+
+    def _wait_agents_gone(self, timeout: float) -> None:
+        """Until no agent token of the run is left (each agent leaves on the end notice), or
+        `timeout` s: a stopped or unreachable agent does not hold the world up longer."""
+        key = wire.agent_key(self.cfg.run, "*", "alive")
+        t_end = time.monotonic() + timeout
+        while (left := t_end - time.monotonic()) > 0:
+            replies = self.session.liveliness().get(key, timeout=min(max(left, 0.05), 0.25))
+            if not any(r.ok is not None for r in replies):
+                return
+            time.sleep(0.02)
 
     # -- events -----------------------------------------------------------------------------
     def _announce(self, ev: dict[str, Any]) -> None:
