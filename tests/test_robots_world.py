@@ -36,6 +36,7 @@ from swarm.contracts.scenario import parse_scenario
 from swarm.contracts.startup import Announcer
 from swarm.contracts.stop_signals import StopSignals
 from swarm.contracts.vocabulary import EventKind, ExitCode
+from swarm.robots import plant
 from swarm.robots.config import RobotsError, parse_robots
 from swarm.robots.fleet import odom_pose
 from swarm.robots.plant import (
@@ -170,6 +171,20 @@ def test_pose_ages_say_stale_once_and_fresh_once_and_keep_their_figures():
     assert f["pose_age_p50"] == pytest.approx(float(np.median([a for a in seq if math.isfinite(a)])))
     assert (f["stale_ticks"], f["stale_spells"], f["ticks_without_pose"]) == (4, 2, 1)
     assert PoseAges().figures()["pose_age_max"] is None
+
+
+def test_pose_figures_keep_bounded_memory_and_the_exact_maximum(monkeypatch):
+    """A long run keeps the latest KEPT ages for the median, every maximum and count exactly."""
+    monkeypatch.setattr(plant, "KEPT", 10)
+    ages = PoseAges()
+    seq = [5.0] + [0.1] * 30 + [math.inf] * 3 + [0.2] * 5
+    for a in seq:
+        ages.tick(a, 1.0)
+    assert len(ages.ages.latest) == 10
+    f = ages.figures()
+    assert f["pose_age_max"] == 5.0  # long out of the window, still the maximum
+    assert f["pose_age_p50"] == pytest.approx(0.15)  # five of 0.1 and five of 0.2
+    assert f["ticks_without_pose"] == 3
 
 
 # -- the plant against a fake node ------------------------------------------------------------------

@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -142,11 +143,34 @@ def cmd_type_from(spec: RobotSpec, entities: Sequence[EntityInfo], distro: str, 
     return rtype
 
 
+KEPT = 20_000  # the latest pose ages and delays kept per robot for their medians (~0.6 MB each)
+
+
+class Spread:
+    """The maximum of every value noted, and the median of the latest KEPT (a run of hours
+    at 20 Hz would otherwise keep every value: memory that grows with the run)."""
+
+    __slots__ = ("latest", "high")
+
+    def __init__(self) -> None:
+        self.latest: deque[float] = deque(maxlen=KEPT)
+        self.high: float | None = None
+
+    def add(self, v: float) -> None:
+        self.latest.append(v)
+        if self.high is None or v > self.high:
+            self.high = v
+
+    def median(self) -> float | None:
+        return float(np.median(self.latest)) if self.latest else None
+
+
 @dataclass
 class PoseAges:
     """The age of a robot's latest pose at each tick (s), and its stale spells."""
 
-    ages: list[float] = field(default_factory=list)
+    ages: Spread = field(default_factory=Spread)  # the finite ones (a pose had come)
+    ticks_without_pose: int = 0
     stale: bool = False
     stale_ticks: int = 0
     stale_spells: int = 0
@@ -154,7 +178,10 @@ class PoseAges:
     def tick(self, age: float, stale_after: float) -> str | None:
         """Note this tick's age; EventKind.STALE when the pose has just gone stale (older than
         `stale_after`), EventKind.FRESH when it has just come back, else None."""
-        self.ages.append(age)
+        if math.isfinite(age):
+            self.ages.add(age)
+        else:
+            self.ticks_without_pose += 1
         was, self.stale = self.stale, age > stale_after
         if self.stale:
             self.stale_ticks += 1
@@ -166,12 +193,12 @@ class PoseAges:
         return None
 
     def figures(self) -> dict[str, Any]:
-        """max and median age (s; None before any tick or pose), ticks stale, stale spells."""
-        seen = [a for a in self.ages if math.isfinite(a)]
+        """max and median age (s; None before any tick or pose; the median of the latest
+        KEPT ticks), ticks without a pose, ticks stale, stale spells."""
         return {
-            "pose_age_max": max(seen) if seen else None,
-            "pose_age_p50": float(np.median(seen)) if seen else None,
-            "ticks_without_pose": len(self.ages) - len(seen),
+            "pose_age_max": self.ages.high,
+            "pose_age_p50": self.ages.median(),
+            "ticks_without_pose": self.ticks_without_pose,
             "stale_ticks": self.stale_ticks,
             "stale_spells": self.stale_spells,
         }
@@ -228,7 +255,7 @@ class Robot:
         self.poses = 0  # received
         self.malformed = 0  # payloads that were no pose of the type
         self.twists = 0  # sent
-        self.delays: list[float] = []  # s from each pose's stamp to its reception (wall clocks)
+        self.delays = Spread()  # s from each pose's stamp to its reception (wall clocks)
         self.ages = PoseAges()
         self._lock = threading.Lock()
 
@@ -259,7 +286,7 @@ class Robot:
             self.stamp_ns = msg.stamp_ns
             self.poses += 1
             if msg.stamp_ns > 0:
-                self.delays.append((time.time_ns() - msg.stamp_ns) / 1e9)
+                self.delays.add((time.time_ns() - msg.stamp_ns) / 1e9)
 
     def send(self, vx: float, wz: float) -> None:
         if self.publisher is None or self.cmd_type is None:
@@ -285,8 +312,8 @@ class Robot:
             **self.ages.figures(),
             # from the poses' stamps to their reception: the transport's latency, plus any offset
             # between the robot's clock and this machine's
-            "pose_delay_max": max(self.delays) if self.delays else None,
-            "pose_delay_p50": float(np.median(self.delays)) if self.delays else None,
+            "pose_delay_max": self.delays.high,
+            "pose_delay_p50": self.delays.median(),
         }
 
 
