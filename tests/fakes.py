@@ -73,9 +73,10 @@ class _Liveliness:
 
     def get(self, key: str, timeout: float = 1.0):
         """Scripted: the next entry of `session.token_replies` (how many tokens answer this
-        query; for ever the last one when `session.tokens_stay`), none once it is empty."""
+        query; for ever the last one when `session.tokens_stay`), none once it is empty.
+        Noted in `session.token_gets` with the number of puts made before it."""
         ses = self.session
-        ses.token_gets.append(key)
+        ses.token_gets.append((key, len(ses.sent)))
         if not ses.token_replies:
             return []
         n = ses.token_replies[0] if ses.tokens_stay and len(ses.token_replies) == 1 else ses.token_replies.pop(0)
@@ -98,7 +99,7 @@ class FakeSession:
         self.tokens: list[str] = []
         self.token_replies: list[int] = []  # liveliness queries: tokens answering each (_Liveliness.get)
         self.tokens_stay = False
-        self.token_gets: list[str] = []  # the key of every liveliness query
+        self.token_gets: list[tuple[str, int]] = []  # every liveliness query: (key, puts made before it)
         self.info = _Info()
         self.closed = False
 

@@ -29,7 +29,16 @@ import time
 
 import psutil
 import pytest
-from runtime_helpers import SCENARIOS, live_swarm, reaped, ring_scenario, run_credentials, swarm_cmd, wait_for
+from runtime_helpers import (
+    SCENARIOS,
+    live_swarm,
+    reaped,
+    ring_scenario,
+    run_credentials,
+    short_runtime_dir,
+    swarm_cmd,
+    wait_for,
+)
 from typer.testing import CliRunner
 
 from swarm.cli.main import app
@@ -970,9 +979,8 @@ def test_a_world_that_stops_answering_is_not_an_ended_one(live, tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("args", LIVE_COMMANDS, ids=lambda a: " ".join(a))
-def test_no_swarm_fails_fast(args, monkeypatch, tmp_path):
-    empty = os.path.join("/tmp", os.path.basename(tmp_path)[:8] + "-e")
-    os.makedirs(empty, exist_ok=True)
+def test_no_swarm_fails_fast(args, monkeypatch):
+    empty = short_runtime_dir()  # its own: two xdist workers run these side by side
     try:
         monkeypatch.setenv("SWARM_RUNTIME_DIR", empty)
         res = invoke(*args)
@@ -987,11 +995,10 @@ def test_no_swarm_fails_fast(args, monkeypatch, tmp_path):
 
 
 @pytest.mark.slow
-def test_no_swarm_as_processes(tmp_path):
+def test_no_swarm_as_processes():
     """The same, end to end as real processes (imports included), and for an endpoint or run
     that does not exist."""
-    empty = os.path.join("/tmp", os.path.basename(tmp_path)[:8] + "-p")
-    os.makedirs(empty, exist_ok=True)
+    empty = short_runtime_dir()  # its own: two xdist workers run these side by side
     env = dict(os.environ, SWARM_RUNTIME_DIR=empty)
     try:
         for args, what in [

@@ -173,17 +173,36 @@ def test_the_world_closes_once_its_agents_have_left_after_the_end_notice():
     world, ses = open_world(ring(3, None))
     ses.token_replies = [3, 1]  # three agents, then one, then none left
     world._close()
-    assert [wire.decode_control(b) for b in ses.on(wire.world_control_key(RUN))] == [0]
-    assert ses.token_gets == [wire.agent_key(RUN, "*", "alive")] * 3
+    end = wire.world_control_key(RUN)
+    assert [wire.decode_control(b) for b in ses.on(end)] == [0]
+    notice_at = next(i for i, (k, _) in enumerate(ses.sent) if k == end)
+    assert [k for k, _ in ses.token_gets] == [wire.agent_key(RUN, "*", "alive")] * 3
+    assert all(puts > notice_at for _, puts in ses.token_gets), "asked for the agents before the notice went"
     assert ses.closed
 
 
-def test_an_agent_that_never_leaves_holds_the_world_up_no_longer_than_the_wait(monkeypatch):
-    import swarm.world.process as process  # lazy: the module whose wait is shortened here
+class FakeClock:
+    """time.monotonic and time.sleep for world/process.py: sleeping moves the clock on."""
 
-    monkeypatch.setattr(process, "END_WAIT_S", 0.2)
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def monotonic(self) -> float:
+        return self.now
+
+    def sleep(self, s: float) -> None:
+        self.now += s
+
+
+def test_an_agent_that_never_leaves_holds_the_world_up_no_longer_than_the_wait(monkeypatch):
+    import swarm.world.process as process  # lazy: the module whose clock is replaced here
+
     world, ses = open_world(ring(3, None))
+    clock = FakeClock()
+    monkeypatch.setattr(process, "time", clock)
     ses.token_replies, ses.tokens_stay = [1], True  # a stopped agent: its token stays
     world._close()
-    assert ses.closed and len(ses.token_gets) >= 1
-    assert ses.token_replies == [1]
+    assert ses.closed
+    waited = clock.now - 1000.0
+    assert process.END_WAIT_S <= waited <= process.END_WAIT_S + 0.1, waited
+    assert 10 <= len(ses.token_gets) <= process.END_WAIT_S / 0.02 + 2, len(ses.token_gets)
