@@ -7,9 +7,10 @@ For each N (unlimited sensing), interleaved and repeated: the bare-zenoh peer of
 benchmarks/peers (a world and N agents on swarm's own transport, doing nothing but the
 exchange) and `swarm up` of bench_runtime.py's ring scenario; with --both also `swarm up`
 with the world and the agents doing no work (benchmarks/ablation, "both": what the
-runtime's shells cost alone). In a window of --window s in the middle of each run it reads
-every thread's CPU time (/proc) of the world and of two agents and prints microseconds of
-CPU per tick by kind of thread:
+runtime's shells cost alone). It reads every thread's CPU time (/proc) of the world and of
+two agents, for the bare peer over all its measured ticks, for `swarm up` over --window s
+in the middle of the run (the ticks made meanwhile asked of the world, `swarm.connect`),
+and prints microseconds of CPU per tick by kind of thread:
 
 - world main:    the world's Python main thread (swarm: the tick loop, sensing, encoding,
                  recording, the step; bare: waiting for answers and sending frames);
@@ -58,6 +59,8 @@ from bench_runtime import (  # noqa: E402
     world_started,
 )
 
+from swarm.api.live import connect  # noqa: E402
+from swarm.contracts.errors import SwarmError  # noqa: E402
 from swarm.contracts.vocabulary import ExitCode  # noqa: E402
 from swarm.runtime.procs import wait_until  # noqa: E402
 
@@ -107,35 +110,37 @@ class Window:
         return {"seconds": dt, "cores": kinds, "total_cores": (tot1 - tot0) / dt}
 
 
-def measure_window(world: psutil.Process, agents: list[psutil.Process], window: float) -> dict:
-    w = Window(world, agents)
-    w.start()
-    time.sleep(window)
-    return w.stop()
-
-
-def run_bare(n: int, ticks: int, window: float, work: Path, env: dict, tag: str) -> dict:
+def run_bare(n: int, ticks: int, work: Path, env: dict, tag: str) -> dict:
+    """The bare peer: CPU from its first measured tick to its result (the peer's world then
+    waits for the release file, its agents idle), over its measured ticks."""
     d = work / f"bare-{tag}"
     d.mkdir()
-    result, measuring = d / "result.json", d / "measuring"
+    result, measuring, release = d / "result.json", d / "measuring", d / "release"
     ep = f"unixsock-stream/{env['SWARM_RUNTIME_DIR']}/b{tag}.sock"
     argv = ["--n", str(n), "--k", str(n - 1), "--ticks", str(ticks), "--result", str(result)]
+    argv += ["--measuring", str(measuring), "--release", str(release)]
     tr = Tracked()
     res: dict = {"system": "bare zenoh", "n": n, "ok": False}
     try:
-        world = tr.spawn([PY, str(PEER), "world", ep, *argv, "--measuring", str(measuring)], d / "world.log", env)
+        world = tr.spawn([PY, str(PEER), "world", ep, *argv], d / "world.log", env)
         time.sleep(0.3)  # the router listens before the clients connect
         agents = [
             tr.spawn([PY, str(PEER), "agent", ep, str(i)], d / f"agent-{i}.log", env, own_group=False) for i in range(n)
         ]
-        if not wait_until(measuring.exists, 60):
+        if not wait_until(measuring.exists, 60, 0.005):
             res["error"] = f"never ticked; see {d}"
             return res
-        time.sleep(1.0)
-        res["window"] = measure_window(tr.seen[world.pid], [tr.seen[a.pid] for a in agents], window)
-        wait_until(all_exited([world]), 120 + ticks / 50)
+        w = Window(tr.seen[world.pid], [tr.seen[a.pid] for a in agents])
+        w.start()
+        if not wait_until(lambda: result.exists() or world.poll() is not None, 120 + ticks / 50, 0.005):
+            res["error"] = f"no result; see {d}"
+            return res
+        res["window"] = w.stop()
+        release.touch()
         r = json.loads(result.read_text())
+        res["window"]["ticks"] = r["ticks"]
         res.update(ok=bool(r.get("ok")), ticks_per_second=r.get("ticks_per_second"))
+        wait_until(all_exited([world]), 30)
     except (OSError, ValueError, KeyError) as e:
         res["error"] = f"{e}; see {d}"
     finally:
@@ -143,7 +148,13 @@ def run_bare(n: int, ticks: int, window: float, work: Path, env: dict, tag: str)
     return res
 
 
+def world_tick(live) -> int:
+    return int(live.info()["tick"])
+
+
 def run_up(n: int, ticks: int, window: float, work: Path, env: dict, tag: str, ablate: str | None) -> dict:
+    """`swarm up`: CPU over `window` s in the middle of the run, over the ticks the world
+    says it made meanwhile (its info, asked just before and just after)."""
     d = work / f"up-{tag}"
     d.mkdir()
     toml = d / f"bench{n}.toml"
@@ -154,6 +165,7 @@ def run_up(n: int, ticks: int, window: float, work: Path, env: dict, tag: str, a
         env = {**env, "PYTHONPATH": path, "SWARM_ABLATE": ablate}
     tr = Tracked()
     res: dict = {"system": "swarm up" + (f" ({ablate}: no work)" if ablate else ""), "n": n, "ok": False}
+    live = None
     try:
         up = tr.spawn(
             [PY, "-m", "swarm", "up", str(toml), "--out", str(out), "--duration", f"{ticks * DT:.6f}", "--no-plots"],
@@ -163,28 +175,45 @@ def run_up(n: int, ticks: int, window: float, work: Path, env: dict, tag: str, a
         if not wait_until(lambda: world_started(out) or up.poll() is not None, 120):
             res["error"] = f"never ticked; see {d}"
             return res
-        time.sleep(1.0)
         kids = tr.discover(up)
         worlds, agents = [k for k in kids if is_world(k)], [k for k in kids if is_agent(k)]
         if not worlds or len(agents) != n:
             res["error"] = f"found {len(worlds)} world(s) and {len(agents)} of {n} agents; see {d}"
             return res
-        res["window"] = measure_window(worlds[0], agents, window)
+        live = connect()  # the only run in this benchmark's runtime directory
+        k0, t0 = world_tick(live), time.monotonic()
+        time.sleep(1.0)
+        k1, t1 = world_tick(live), time.monotonic()
+        rate = (k1 - k0) / (t1 - t0)
+        left = (ticks - k1) / rate if rate > 0 else 0.0  # s of ticking left: the window in its middle
+        time.sleep(max(0.0, (left - window) / 2))
+        w = Window(worlds[0], agents)
+        a = world_tick(live)
+        w.start()
+        time.sleep(window)
+        res["window"] = w.stop()
+        res["window"]["ticks"] = world_tick(live) - a
+        live.close()
+        live = None
         wait_until(all_exited([up]), 120 + ticks / 50)
         s = json.loads((out / "summary.json").read_text())
         res.update(ok=up.returncode == ExitCode.OK, ticks_per_second=s.get("ticks_per_second"))
-    except (OSError, ValueError) as e:
+    except (OSError, ValueError, KeyError, SwarmError) as e:
         res["error"] = f"{e}; see {d}"
     finally:
+        if live is not None:
+            live.close()
         tr.stop()
     return res
 
 
 def per_tick(run: dict) -> dict[str, float]:
-    """Microseconds of CPU per tick, by kind (total: every process of the run)."""
-    w, tps = run["window"], run["ticks_per_second"]
-    out = {k: 1e6 * c / tps for k, c in w["cores"].items()}
-    out["total"] = 1e6 * w["total_cores"] / tps
+    """Microseconds of CPU per tick, by kind (total: every process of the run), over the
+    ticks made in the measured window."""
+    w = run["window"]
+    per = w["seconds"] / w["ticks"]  # s per tick in the window
+    out = {k: 1e6 * c * per for k, c in w["cores"].items()}
+    out["total"] = 1e6 * w["total_cores"] * per
     return out
 
 
@@ -193,7 +222,8 @@ def table(runs: list[dict], cores: int) -> str:
     head = ["N", "system", "ticks/s", *KINDS, "total", f"ceiling ({cores} cores)"]
     lines.append("| " + " | ".join(head) + " |")
     lines.append("|" + " --- |" * len(head))
-    done = {(r["n"], r["system"]) for r in runs if r.get("ok")}
+    runs = [r for r in runs if r.get("ok") and r.get("ticks_per_second") and r["window"].get("ticks")]
+    done = {(r["n"], r["system"]) for r in runs}
     keys = sorted(done, key=lambda k: (k[0], k[1] != "bare zenoh", k[1]))
     for n, system in keys:
         rs = [r for r in runs if r.get("ok") and (r["n"], r["system"]) == (n, system)]
@@ -221,7 +251,8 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--sizes: at least one N, each 2 or more")
     rt = tempfile.mkdtemp(prefix="bb", dir="/tmp")  # short: Unix socket paths are limited to 108 bytes
     work = Path(tempfile.mkdtemp(prefix="swarm-budget-"))
-    env = {**os.environ, "SWARM_RUNTIME_DIR": rt, "PYTHONUNBUFFERED": "1"}
+    os.environ["SWARM_RUNTIME_DIR"] = rt  # this process asks the world its tick (run_up)
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     env.pop("SWARM_ABLATE", None)
     systems = ["bare", "swarm"] + (["both"] if a.both else [])
     runs: list[dict] = []
@@ -233,7 +264,7 @@ def main(argv: list[str] | None = None) -> int:
                     tag = f"{n}-{rep}-{s}"
                     log(f"[rep {rep + 1}/{a.reps}] N={n} {s} (load {os.getloadavg()[0]:.2f})")
                     if s == "bare":
-                        r = run_bare(n, ticks, a.window, work, env, tag)
+                        r = run_bare(n, ticks, work, env, tag)
                     else:
                         r = run_up(n, ticks, a.window, work, env, tag, "both" if s == "both" else None)
                     r["rep"] = rep
@@ -249,10 +280,10 @@ def main(argv: list[str] | None = None) -> int:
         f"\nCPU per tick in microseconds (medians of {a.reps}); {when}, commit {commit.strip()}, "
         f"{platform.processor() or platform.machine()}, {cores} cores, Python {platform.python_version()}"
     )
-    print(table(runs, cores))
     if a.json:
         doc = {"when": when, "commit": commit.strip(), "cores": cores, "runs": runs}
         a.json.write_text(json.dumps(doc, indent=2) + "\n")
+    print(table(runs, cores))
     return ExitCode.OK if runs and all(r.get("ok") for r in runs) else ExitCode.FAILED
 
 
