@@ -196,9 +196,11 @@ def same_objects(a, b) -> bool:
     any_float,
     st.none() | st.tuples(any_float, any_float),
     st.lists(contact, max_size=30),
-    st.sampled_from(["as is", "short", "long", "count"]),
+    st.sampled_from(["as is", "short", "long", "count", "kind", "version"]),
 )
 def test_decode_sense_gives_the_same_frame_or_refusal(tick, time, agent, heading, target, contacts, how):
+    """The same frame or the same refusal; and the C decoder alone takes exactly the frames
+    the reference takes (what it refuses, the reference decodes again to say why)."""
     buf = bytearray(wire.encode_sense_tuples_py(max(tick, 0), time, agent, heading, target, contacts))
     if tick < 0:
         struct.pack_into("<q", buf, 8, tick)
@@ -208,8 +210,13 @@ def test_decode_sense_gives_the_same_frame_or_refusal(tick, time, agent, heading
         buf += b"\1" * (1 + tick % 40)
     elif how == "count":
         struct.pack_into("<I", buf, 48, (tick % 3) * wire.MAX_AGENTS)
+    elif how in ("kind", "version"):
+        buf[0 if how == "kind" else 1] ^= 1 + tick % 7
     got, want = outcome(wire.decode_sense, bytes(buf)), outcome(wire.decode_sense_py, bytes(buf))
     assert same_objects(got, want), (got, want)
+    alone = C.decode_sense(bytes(buf), wire.KIND_SENSE, wire.VERSION, wire.MAX_AGENTS, Contact, SensorFrame)
+    assert (alone is None) == isinstance(want, str), (alone, want)
+    assert alone is None or same_objects(alone, want), (alone, want)
 
 
 @needs_c
@@ -221,6 +228,13 @@ def test_finite_numbers_whose_sum_overflows_are_accepted_by_both():
         frame = SensorFrame(3, 0.03, 1, big, contacts, target)
         buf = wire.encode_sense(frame)
         assert same_objects(wire.decode_sense(buf), frame) and same_objects(wire.decode_sense_py(buf), frame)
+
+
+@needs_c
+def test_decode_sense_refuses_a_type_that_is_no_tuple():
+    with pytest.raises(TypeError, match="frame_type must be a tuple subclass"):
+        C.decode_sense(b"", wire.KIND_SENSE, wire.VERSION, wire.MAX_AGENTS, Contact, list)
+    assert C.decode_sense(b"\0" * 10, wire.KIND_SENSE, wire.VERSION, wire.MAX_AGENTS, Contact, SensorFrame) is None
 
 
 @needs_c

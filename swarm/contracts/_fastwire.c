@@ -17,7 +17,7 @@
 /* fastpath.py uses this module only when its API is the one it expects: a module built from
  * an older checkout (pip install -e, then a pull) is not used. Raise it with every change of
  * a function's signature or meaning. */
-#define FASTWIRE_API 2
+#define FASTWIRE_API 3
 
 #define HEAD_SIZE 52
 #define CONTACT_SIZE 30
@@ -369,40 +369,16 @@ done:
     return out;
 }
 
-/* decode_contacts(buf, offset, n, contact_type) -> (contacts, finite) or None
- * The n contact records of `buf` from `offset`, each a `contact_type` (a tuple subclass:
- * swarm.contracts.frames.Contact); None when the records do not fit the buffer. `finite`:
- * whether every float of every record is finite (wire.decode_sense refuses the frame if not). */
-static PyObject *decode_contacts(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 4) {
-        PyErr_SetString(PyExc_TypeError, "decode_contacts takes 4 arguments");
-        return NULL;
-    }
-    if (!PyType_Check(args[3]) || !PyType_IsSubtype((PyTypeObject *)args[3], &PyTuple_Type)) {
-        PyErr_SetString(PyExc_TypeError, "contact_type must be a tuple subclass");
-        return NULL;
-    }
-    PyTypeObject *ct = (PyTypeObject *)args[3];
-    Py_ssize_t offset = PyLong_AsSsize_t(args[1]);
-    if (offset == -1 && PyErr_Occurred()) return NULL;
-    Py_ssize_t n = PyLong_AsSsize_t(args[2]);
-    if (n == -1 && PyErr_Occurred()) return NULL;
-    int finite = 1;
-    Py_buffer view;
-    if (PyObject_GetBuffer(args[0], &view, PyBUF_SIMPLE) < 0) return NULL;
-    PyObject *contacts = NULL, *result = NULL;
-    if (offset < 0 || n < 0 || offset > view.len || n > (view.len - offset) / CONTACT_SIZE) {
-        PyBuffer_Release(&view);
-        Py_RETURN_NONE;
-    }
-    contacts = PyTuple_New(n);
-    if (contacts == NULL) goto done;
-    const char *p = (const char *)view.buf + offset;
+/* The n contact records at p as a tuple of `ct` (a tuple subclass); *finite &= every float
+ * of every record is finite. NULL with an exception set on failure. */
+static PyObject *contacts_at(const char *p, Py_ssize_t n, PyTypeObject *ct, int *finite) {
+    PyObject *contacts = PyTuple_New(n);
+    if (contacts == NULL) return NULL;
     for (Py_ssize_t k = 0; k < n; k++, p += CONTACT_SIZE) {
         int32_t id = get_i32(p);
         double b = get_f64(p + 4), h = get_f64(p + 12), r = get_f64(p + 20);
         int16_t hops = get_i16(p + 28);
-        finite &= isfinite(b) && isfinite(h) && isfinite(r);
+        *finite &= isfinite(b) && isfinite(h) && isfinite(r);
         PyObject *c = ct->tp_alloc(ct, 5);
         if (c == NULL) goto fail;
 #if PY_VERSION_HEX >= 0x030E0000
@@ -418,12 +394,113 @@ static PyObject *decode_contacts(PyObject *self, PyObject *const *args, Py_ssize
         PyTuple_SET_ITEM(contacts, k, c);
         if (!v0 || !v1 || !v2 || !v3 || !v4) goto fail;
     }
-    result = Py_BuildValue("(ON)", contacts, PyBool_FromLong(finite));
+    return contacts;
 fail:
-    Py_XDECREF(contacts);
-done:
+    Py_DECREF(contacts);
+    return NULL;
+}
+
+static int is_tuple_type(PyObject *t, const char *what) {
+    if (!PyType_Check(t) || !PyType_IsSubtype((PyTypeObject *)t, &PyTuple_Type)) {
+        PyErr_Format(PyExc_TypeError, "%s must be a tuple subclass", what);
+        return 0;
+    }
+    return 1;
+}
+
+/* decode_contacts(buf, offset, n, contact_type) -> (contacts, finite) or None
+ * The n contact records of `buf` from `offset`, each a `contact_type` (a tuple subclass:
+ * swarm.contracts.frames.Contact); None when the records do not fit the buffer. `finite`:
+ * whether every float of every record is finite (wire.decode_sense refuses the frame if not). */
+static PyObject *decode_contacts(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 4) {
+        PyErr_SetString(PyExc_TypeError, "decode_contacts takes 4 arguments");
+        return NULL;
+    }
+    if (!is_tuple_type(args[3], "contact_type")) return NULL;
+    PyTypeObject *ct = (PyTypeObject *)args[3];
+    Py_ssize_t offset = PyLong_AsSsize_t(args[1]);
+    if (offset == -1 && PyErr_Occurred()) return NULL;
+    Py_ssize_t n = PyLong_AsSsize_t(args[2]);
+    if (n == -1 && PyErr_Occurred()) return NULL;
+    int finite = 1;
+    Py_buffer view;
+    if (PyObject_GetBuffer(args[0], &view, PyBUF_SIMPLE) < 0) return NULL;
+    PyObject *result = NULL;
+    if (offset < 0 || n < 0 || offset > view.len || n > (view.len - offset) / CONTACT_SIZE) {
+        PyBuffer_Release(&view);
+        Py_RETURN_NONE;
+    }
+    PyObject *contacts = contacts_at((const char *)view.buf + offset, n, ct, &finite);
+    if (contacts != NULL) result = Py_BuildValue("(NN)", contacts, PyBool_FromLong(finite));
     PyBuffer_Release(&view);
     return result;
+}
+
+/* decode_sense(buf, kind, version, max_agents, contact_type, frame_type) -> frame or None
+ * A whole sensor frame (wire.SENSE_HEAD, then its contacts) as `frame_type` (a tuple subclass:
+ * swarm.contracts.frames.SensorFrame): (tick, time, agent, heading, contacts, target or None).
+ * None for anything wire.decode_sense_py refuses (a header of another kind or version, more
+ * than max_agents contacts, a length not that of its contacts, a non-finite number, a negative
+ * tick): the caller then decodes it in Python, which says why. */
+static PyObject *decode_sense(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 6) {
+        PyErr_SetString(PyExc_TypeError, "decode_sense takes 6 arguments");
+        return NULL;
+    }
+    if (!is_tuple_type(args[4], "contact_type") || !is_tuple_type(args[5], "frame_type")) return NULL;
+    long kind = PyLong_AsLong(args[1]), version = PyLong_AsLong(args[2]);
+    long long max_agents = PyLong_AsLongLong(args[3]);
+    if (PyErr_Occurred()) return NULL;
+    Py_buffer view;
+    if (PyObject_GetBuffer(args[0], &view, PyBUF_SIMPLE) < 0) return NULL;
+    const unsigned char *b = (const unsigned char *)view.buf;
+    const char *p = (const char *)view.buf;
+    PyObject *frame = NULL, *contacts = NULL, *target = NULL;
+    if (view.len < HEAD_SIZE || b[0] != kind || b[1] != version) goto refused;
+    int has_t = b[2] != 0;
+    int32_t agent = get_i32(p + 4);
+    int64_t tick;
+    memcpy(&tick, p + 8, 8);
+    double time = get_f64(p + 16), heading = get_f64(p + 24), tx = get_f64(p + 32), ty = get_f64(p + 40);
+    uint32_t n;
+    memcpy(&n, p + 48, 4);
+    if ((long long)n > max_agents || view.len != HEAD_SIZE + (Py_ssize_t)n * CONTACT_SIZE) goto refused;
+    int finite = isfinite(time) && isfinite(heading) && (!has_t || (isfinite(tx) && isfinite(ty)));
+    if (!finite || tick < 0) goto refused;
+    contacts = contacts_at(p + HEAD_SIZE, (Py_ssize_t)n, (PyTypeObject *)args[4], &finite);
+    if (contacts == NULL) goto done;
+    if (!finite) goto refused;
+    if (has_t) {
+        target = Py_BuildValue("(dd)", tx, ty);
+        if (target == NULL) goto done;
+    } else {
+        target = Py_NewRef(Py_None);
+    }
+    PyTypeObject *ft = (PyTypeObject *)args[5];
+    frame = ft->tp_alloc(ft, 6);
+    if (frame == NULL) goto done;
+#if PY_VERSION_HEX >= 0x030E0000
+    ((PyTupleObject *)frame)->ob_hash = -1;
+#endif
+    PyObject *v0 = PyLong_FromLongLong(tick), *v1 = PyFloat_FromDouble(time), *v2 = PyLong_FromLong(agent),
+             *v3 = PyFloat_FromDouble(heading);
+    PyTuple_SET_ITEM(frame, 0, v0);
+    PyTuple_SET_ITEM(frame, 1, v1);
+    PyTuple_SET_ITEM(frame, 2, v2);
+    PyTuple_SET_ITEM(frame, 3, v3);
+    PyTuple_SET_ITEM(frame, 4, contacts);
+    PyTuple_SET_ITEM(frame, 5, target);
+    contacts = target = NULL; /* owned by the frame now */
+    if (!v0 || !v1 || !v2 || !v3) Py_CLEAR(frame);
+    goto done;
+refused:
+    frame = Py_NewRef(Py_None);
+done:
+    Py_XDECREF(contacts);
+    Py_XDECREF(target);
+    PyBuffer_Release(&view);
+    return frame;
 }
 
 /* nearest(contacts) -> the contact with the smallest (range, id), the first of equals, or
@@ -465,6 +542,8 @@ static PyMethodDef methods[] = {
      "wire.encode_sense_pairs in C, from arrays of fixed dtypes (see wire.py): the same bytes."},
     {"decode_contacts", (PyCFunction)(void (*)(void))decode_contacts, METH_FASTCALL,
      "The contact records of a sensor frame and the sum wire.decode_sense tests."},
+    {"decode_sense", (PyCFunction)(void (*)(void))decode_sense, METH_FASTCALL,
+     "wire.decode_sense_py in C for a valid frame: the same frame; None for any it refuses."},
     {"nearest", nearest, METH_O, "selection.nearest in C: the contact with the smallest (range, id)."},
     {NULL, NULL, 0, NULL},
 };

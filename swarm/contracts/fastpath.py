@@ -11,7 +11,7 @@ import os
 from types import ModuleType
 
 PURE_ENV = "SWARM_PURE_PYTHON"
-API = 2  # the compiled module's API this code calls (FASTWIRE_API in _fastwire.c)
+API = 3  # the compiled module's API this code calls (FASTWIRE_API in _fastwire.c)
 
 
 def _load() -> tuple[ModuleType | None, str]:

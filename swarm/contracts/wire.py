@@ -34,6 +34,7 @@ import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
 from itertools import chain, starmap
+from typing import NamedTuple
 
 from swarm.contracts.fastpath import compiled as _c
 from swarm.contracts.frames import Contact, SensorFrame
@@ -397,25 +398,21 @@ def decode_sense_py(buf: bytes) -> SensorFrame:
 
 
 def _decode_sense_c(buf: bytes) -> SensorFrame:
-    """decode_sense_py with the contacts decoded in C: the same frame, the same errors."""
+    """decode_sense_py in C: the same frame for a valid one; anything the C decoder refuses is
+    decoded again by decode_sense_py, which raises the WireError that says why."""
     assert _c is not None
-    has_t, agent, tick, time, heading, tx, ty, n = _sense_head(buf)
-    decoded = _c.decode_contacts(buf, SENSE_HEAD.size, n, Contact)
-    assert decoded is not None  # the length was checked above
-    contacts, finite = decoded
-    if not (finite and _all_finite((time, heading, tx, ty) if has_t else (time, heading))):
-        raise WireError("sense frame: non-finite number")
-    if tick < 0:
-        raise WireError(f"sense frame: negative tick {tick}")
-    return SensorFrame(tick, time, agent, heading, contacts, (tx, ty) if has_t else None)
+    frame = _c.decode_sense(buf, KIND_SENSE, VERSION, MAX_AGENTS, Contact, SensorFrame)
+    return decode_sense_py(buf) if frame is None else frame
 
 
 # A sensor frame from its bytes, compiled where it was built (swarm/contracts/fastpath.py)
 decode_sense = decode_sense_py if _c is None else _decode_sense_c
 
 
-@dataclass(frozen=True, slots=True)
-class Command:
+class Command(NamedTuple):
+    """An agent's answer to its frame (a named tuple: the world decodes one per agent per tick,
+    and a tuple is made in C, a frozen dataclass field by field)."""
+
     agent: int
     tick: int
     u: float  # rad/s
@@ -423,6 +420,9 @@ class Command:
     phase: str
     hops: int | None = None  # advertised hops to a leader
     key: int = 0  # the claim key the world gave this agent's process (proves who sends)
+
+
+_command = functools.partial(tuple.__new__, Command)  # Command from a tuple, in C
 
 
 def encode_cmd(c: Command) -> bytes:
@@ -453,14 +453,16 @@ def encode_cmd_fields(
 def decode_cmd(buf: bytes) -> Command:
     if len(buf) != CMD.size:
         raise WireError(f"command: {len(buf)} bytes, expected {CMD.size}")
-    _, _, phase, _, agent, tick, u, out, hops, key = _check_head(buf, CMD, KIND_CMD, "command")
+    kind, version, phase, _, agent, tick, u, out, hops, key = CMD.unpack(buf)
+    if kind != KIND_CMD or version != VERSION:
+        _check_head(buf, CMD, KIND_CMD, "command")  # raises, saying which
     if not math.isfinite(u):
         raise WireError("command: non-finite turn rate")
     if phase >= len(PHASES):
         raise WireError(f"command: unknown phase code {phase}")
     if tick < 0:
         raise WireError(f"command: negative tick {tick}")
-    return Command(agent, tick, u, None if out < 0 else out, PHASES[phase], None if hops < 0 else hops, key)
+    return _command((agent, tick, u, None if out < 0 else out, PHASES[phase], None if hops < 0 else hops, key))
 
 
 def encode_truth(tick: int, time: float, ids, x, y, heading, u, out, states: list[str]) -> bytes:
