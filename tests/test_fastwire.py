@@ -238,15 +238,16 @@ def test_decode_sense_refuses_a_type_that_is_no_tuple():
 
 
 @needs_c
-def test_decode_contacts_refuses_records_past_the_buffer():
-    assert C is not None
-    assert C.decode_contacts(b"\0" * 59, 0, 2, Contact) is None
-    assert C.decode_contacts(b"\0" * 60, 0, 2, Contact) is not None
-    assert C.decode_contacts(b"\0" * 60, -1, 1, Contact) is None
-    assert C.decode_contacts(b"\0" * 60, 61, 0, Contact) is None
-    assert C.decode_contacts(b"\0" * 60, 0, 614891469123651721, Contact) is None  # n * 30 wraps around
-    with pytest.raises(TypeError):
-        C.decode_contacts(b"", 0, 0, list)
+def test_decode_sense_reads_nothing_past_the_buffer():
+    """A count of contacts the buffer does not hold is refused, however large (with any limit:
+    n * 30 must not wrap around), and so is a header cut short."""
+    head = bytearray(wire.encode_sense_tuples_py(1, 0.01, 2, 0.0, None, [(3, 0.1, 0.2, 5.0, -1)] * 2))
+    args = (wire.KIND_SENSE, wire.VERSION, 2**62, Contact, SensorFrame)
+    assert C.decode_sense(bytes(head), *args) is not None
+    for n in (3, 2**31, 2**32 - 1):
+        struct.pack_into("<I", head, 48, n)
+        assert C.decode_sense(bytes(head), *args) is None
+    assert C.decode_sense(bytes(head[:51]), *args) is None
 
 
 @needs_c

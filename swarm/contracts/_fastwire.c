@@ -408,35 +408,6 @@ static int is_tuple_type(PyObject *t, const char *what) {
     return 1;
 }
 
-/* decode_contacts(buf, offset, n, contact_type) -> (contacts, finite) or None
- * The n contact records of `buf` from `offset`, each a `contact_type` (a tuple subclass:
- * swarm.contracts.frames.Contact); None when the records do not fit the buffer. `finite`:
- * whether every float of every record is finite (wire.decode_sense refuses the frame if not). */
-static PyObject *decode_contacts(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 4) {
-        PyErr_SetString(PyExc_TypeError, "decode_contacts takes 4 arguments");
-        return NULL;
-    }
-    if (!is_tuple_type(args[3], "contact_type")) return NULL;
-    PyTypeObject *ct = (PyTypeObject *)args[3];
-    Py_ssize_t offset = PyLong_AsSsize_t(args[1]);
-    if (offset == -1 && PyErr_Occurred()) return NULL;
-    Py_ssize_t n = PyLong_AsSsize_t(args[2]);
-    if (n == -1 && PyErr_Occurred()) return NULL;
-    int finite = 1;
-    Py_buffer view;
-    if (PyObject_GetBuffer(args[0], &view, PyBUF_SIMPLE) < 0) return NULL;
-    PyObject *result = NULL;
-    if (offset < 0 || n < 0 || offset > view.len || n > (view.len - offset) / CONTACT_SIZE) {
-        PyBuffer_Release(&view);
-        Py_RETURN_NONE;
-    }
-    PyObject *contacts = contacts_at((const char *)view.buf + offset, n, ct, &finite);
-    if (contacts != NULL) result = Py_BuildValue("(NN)", contacts, PyBool_FromLong(finite));
-    PyBuffer_Release(&view);
-    return result;
-}
-
 /* decode_sense(buf, kind, version, max_agents, contact_type, frame_type) -> frame or None
  * A whole sensor frame (wire.SENSE_HEAD, then its contacts) as `frame_type` (a tuple subclass:
  * swarm.contracts.frames.SensorFrame): (tick, time, agent, heading, contacts, target or None).
@@ -540,8 +511,6 @@ static PyMethodDef methods[] = {
      "wire.encode_sense_rows in C, from arrays of fixed dtypes (see wire.py): the same bytes."},
     {"encode_sense_pairs", (PyCFunction)(void (*)(void))encode_sense_pairs, METH_FASTCALL,
      "wire.encode_sense_pairs in C, from arrays of fixed dtypes (see wire.py): the same bytes."},
-    {"decode_contacts", (PyCFunction)(void (*)(void))decode_contacts, METH_FASTCALL,
-     "The contact records of a sensor frame and the sum wire.decode_sense tests."},
     {"decode_sense", (PyCFunction)(void (*)(void))decode_sense, METH_FASTCALL,
      "wire.decode_sense_py in C for a valid frame: the same frame; None for any it refuses."},
     {"nearest", nearest, METH_O, "selection.nearest in C: the contact with the smallest (range, id)."},
