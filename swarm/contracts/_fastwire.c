@@ -78,17 +78,24 @@ static int as_double(PyObject *o, double *out) {
     return 0;
 }
 
+/* The arguments every encoder starts with: nargs == want, then tick (int64) and time (float);
+ * -1 with an exception set otherwise. */
+static int tick_time(PyObject *const *args, Py_ssize_t nargs, Py_ssize_t want, const char *name, long long *tick,
+                     double *time) {
+    if (nargs != want) {
+        PyErr_Format(PyExc_TypeError, "%s takes %zd arguments", name, want);
+        return -1;
+    }
+    if (int_in(args[0], INT64_MIN, INT64_MAX, tick, "tick") < 0) return -1;
+    return as_double(args[1], time);
+}
+
 /* encode_sense_tuples(tick, time, agent, heading, target, contacts) -> bytes
  * target: None or (dx, dy); contacts: a sequence of (id, bearing, heading, range, hops). */
 static PyObject *encode_sense_tuples(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 6) {
-        PyErr_SetString(PyExc_TypeError, "encode_sense_tuples takes 6 arguments");
-        return NULL;
-    }
     long long tick, agent;
     double time, heading, tx, ty;
-    if (int_in(args[0], INT64_MIN, INT64_MAX, &tick, "tick") < 0) return NULL;
-    if (as_double(args[1], &time) < 0) return NULL;
+    if (tick_time(args, nargs, 6, "encode_sense_tuples", &tick, &time) < 0) return NULL;
     if (int_in(args[2], INT32_MIN, INT32_MAX, &agent, "agent") < 0) return NULL;
     if (as_double(args[3], &heading) < 0) return NULL;
     int has_target = args[4] != Py_None;
@@ -251,14 +258,9 @@ static inline void put_contact(char *p, const Agents *a, int64_t j, double beari
  * bytes of wire.encode_sense_rows_py: row k's frame holds, for every j with sensed[k, j], in
  * order of j, the contact record of j at bearing[k, j], ranges[k, j]. */
 static PyObject *encode_sense_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 12) {
-        PyErr_SetString(PyExc_TypeError, "encode_sense_rows takes 12 arguments");
-        return NULL;
-    }
     long long tick;
     double time;
-    if (int_in(args[0], INT64_MIN, INT64_MAX, &tick, "tick") < 0) return NULL;
-    if (as_double(args[1], &time) < 0) return NULL;
+    if (tick_time(args, nargs, 12, "encode_sense_rows", &tick, &time) < 0) return NULL;
     Agents a = {0};
     Col sensed = {0}, bear = {0}, rng = {0};
     PyObject *out = NULL;
@@ -304,14 +306,9 @@ done:
  * pairs, sorted by i, then j. The bytes of wire.encode_sense_pairs_py: row k's frame holds,
  * in order, the contact records of the pairs whose i is k. */
 static PyObject *encode_sense_pairs(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 13) {
-        PyErr_SetString(PyExc_TypeError, "encode_sense_pairs takes 13 arguments");
-        return NULL;
-    }
     long long tick;
     double time;
-    if (int_in(args[0], INT64_MIN, INT64_MAX, &tick, "tick") < 0) return NULL;
-    if (as_double(args[1], &time) < 0) return NULL;
+    if (tick_time(args, nargs, 13, "encode_sense_pairs", &tick, &time) < 0) return NULL;
     Agents a = {0};
     Col pi = {0}, pj = {0}, bear = {0}, rng = {0};
     PyObject *out = NULL;

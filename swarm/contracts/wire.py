@@ -363,22 +363,15 @@ def _all_finite(numbers: Sequence[float]) -> bool:
     return math.isfinite(sum(numbers)) or all(map(math.isfinite, numbers))
 
 
-def _sense_head(buf: bytes) -> tuple:
-    """(has_target, agent, tick, time, heading, target dx, dy, contacts) of a sensor frame whose
-    length is that of its contacts (WireError otherwise)."""
+def decode_sense_py(buf: bytes) -> SensorFrame:
+    """A sensor frame from its bytes (WireError for anything that is not a valid one): the
+    pure-Python reference of `decode_sense`."""
     _, _, has_t, _, agent, tick, time, heading, tx, ty, n = _check_head(buf, SENSE_HEAD, KIND_SENSE, "sense frame")
     if n > MAX_AGENTS:
         raise WireError(f"sense frame: {n} contacts, more than {MAX_AGENTS}")
     expected = SENSE_HEAD.size + n * CONTACT.size
     if len(buf) != expected:
         raise WireError(f"sense frame: {len(buf)} bytes, expected {expected} for {n} contacts")
-    return has_t, agent, tick, time, heading, tx, ty, n
-
-
-def decode_sense_py(buf: bytes) -> SensorFrame:
-    """A sensor frame from its bytes (WireError for anything that is not a valid one): the
-    pure-Python reference of `decode_sense`."""
-    has_t, agent, tick, time, heading, tx, ty, n = _sense_head(buf)
     # Every contact's numbers in one unpack, grouped five by five into Contacts in C (zip
     # over one iterator); every number must be finite (`_all_finite`; the ids and hops among
     # them are integers, finite by construction).
