@@ -22,11 +22,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zenoh
-from click.testing import Result
 from fakes import FakeQuery, FakeSession
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from typer.testing import CliRunner
+from typer.testing import CliRunner, Result
 
 from swarm.api.launch import Launch
 from swarm.cli.main import app
