@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -38,6 +39,7 @@ from swarm.plots.placement import spread_1d, stack_offsets
 from swarm.plots.render import figure, save_figure
 from swarm.plots.style import EVENT_COLOURS, FAULT_COLOUR
 from swarm.plots.trajectories import panel_trajectories
+from swarm.study.figures import plot_sweep, sweep_figure
 from swarm.world.recording import write_run
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -558,3 +560,50 @@ def test_the_clipped_note_leaves_the_title_clear(tmp_path: Path) -> None:
                 assert abs(fig.axes[2].title.get_window_extent(r).y0 - title.y0) < 1.0
         finally:
             plt.close(fig)
+
+
+# -- swarm study scenario's sweep.png (swarm/study/figures.py) --------------------------------
+
+
+def _sweep_rows(converged: bool) -> list[dict]:
+    # as the study's rows.csv gives them back: strings
+    return [
+        {
+            "param.k": str(k),
+            "noise": str(n),
+            "converged": str(converged),
+            "settling_time": "3.5" if converged else "nan",
+        }
+        for k in (0.5, 1.0, 2.0)
+        for n in (0.0, math.inf)
+        for _ in range(2)
+    ]
+
+
+@pytest.mark.parametrize("converged", [False, True])
+def test_sweep_axes_span_the_swept_values_even_when_no_run_converged(tmp_path, converged):
+    # issue 33: with no converged run the settling panel had no data and its axis read -0.04..0.04, not k
+    fig = sweep_figure(_sweep_rows(converged), ["param.k", "noise"], "a study")
+    try:
+        fig.canvas.draw()
+        k_top, _, k_low, n_low = fig.axes
+        for ax in (k_top, k_low):
+            lo, hi = ax.get_xlim()
+            assert lo < 0.5 and 2.0 < hi and hi - lo < 2.0, (lo, hi)
+        assert k_low.get_xlabel() == "k"
+        shown = [float(t.get_text().replace("\u2212", "-")) for t in k_low.get_xticklabels() if t.get_text()]
+        lo, hi = k_low.get_xlim()
+        inside = [v for v in shown if lo <= v <= hi]  # the tick labels read k: 0.5 .. 2.0
+        assert inside[0] <= 0.5 and inside[-1] >= 2.0
+        # a value that cannot be placed (inf): the values as categories
+        assert [t.get_text() for t in n_low.get_xticklabels()] == ["0", "inf"]
+        assert n_low.get_xlim()[0] < 0.0 < 1.0 < n_low.get_xlim()[1]
+        texts = [t.get_text() for t in k_low.texts]
+        if converged:
+            assert texts == [] and k_low.get_ylim()[0] < 3.5 < k_low.get_ylim()[1]
+        else:
+            assert texts == ["no converged run"] and k_low.get_ylim() == (0.0, 1.0)
+            assert not any(t.get_visible() and t.get_text() for t in k_low.get_yticklabels())
+    finally:
+        plt.close(fig)
+    assert plot_sweep(_sweep_rows(converged), ["param.k"], tmp_path / "sweep.png", "t").stat().st_size > 1000

@@ -181,14 +181,26 @@ SWEEP_UNITS = {
 
 
 def plot_sweep(rows: list[dict], axes: list[str], path: Path, title: str) -> Path:
+    """sweep_figure, written to `path`."""
+    fig = sweep_figure(rows, axes, title)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def sweep_figure(rows: list[dict], axes: list[str], title: str) -> Figure:
     """One column per swept parameter (axes with more than one value): the converged share
     and the settling time of converged runs (median, 10-90% band) against its values, over
-    every run at that value (the other parameters' values pooled)."""
-    fig, axs = plt.subplots(2, len(axes), figsize=(max(6.0, 3.6 * len(axes)), 5.2), layout="constrained", squeeze=False)
+    every run at that value (the other parameters' values pooled). Both panels of a column
+    share its x axis, which spans the swept values even where no run converged (the lower
+    panel then has no data to scale to: it says so and shows no time scale)."""
+    width = max(6.0, 3.6 * len(axes))
+    fig, axs = plt.subplots(2, len(axes), figsize=(width, 5.2), layout="constrained", squeeze=False, sharex="col")
     for k, name in enumerate(axes):
         values = sorted({float(r[name]) for r in rows})
         at = {v: [r for r in rows if float(r[name]) == v] for v in values}
-        xs = np.arange(len(values)) if any(math.isinf(v) for v in values) else np.asarray(values)
+        categorical = any(math.isinf(v) for v in values)
+        xs = np.arange(len(values), dtype=float) if categorical else np.asarray(values)
         share = [sum(is_true(r["converged"]) for r in at[v]) / len(at[v]) for v in values]
         ax = axs[0, k]
         ax.plot(xs, share, "o-", color="tab:green")
@@ -202,17 +214,20 @@ def plot_sweep(rows: list[dict], axes: list[str], path: Path, title: str) -> Pat
         hi = [float(np.percentile(s, 90)) if s else math.nan for s in st]
         ax.fill_between(xs, lo, hi, color="tab:blue", alpha=0.2, lw=0, label="10-90%")
         ax.plot(xs, med, "o-", color="tab:blue", label="median")
-        ax.set_ylabel("settling time of converged runs (s)" if k == 0 else "")
+        ax.set_ylabel("settling time of\nconverged runs (s)" if k == 0 else "")
         ax.set_xlabel(SWEEP_UNITS.get(name, name.removeprefix("param.")))
-        if not any(st):
+        if not any(st):  # nothing to scale the panel to: matplotlib would show -0.05..0.05 on both axes
             ax.text(0.5, 0.5, "no converged run", transform=ax.transAxes, ha="center", va="center", color="0.4")
-        if k == 0:
+            ax.set_ylim(0.0, 1.0)
+            ax.tick_params(axis="y", labelleft=False, left=False)
+        elif k == 0:
             ax.legend(fontsize=7)
+        # the swept values, whatever the data: a margin of 5% of their span (or of the value, for one)
+        span = float(xs[-1] - xs[0]) or abs(float(xs[0])) or 1.0
+        ax.set_xlim(float(xs[0]) - 0.05 * span, float(xs[-1]) + 0.05 * span)
         for a in axs[:, k]:
             a.grid(True, lw=0.3, alpha=0.5)
-            if any(math.isinf(v) for v in values):
-                a.set_xticks(xs, [f"{v:g}" for v in values])
-    fig.suptitle(textwrap.fill(title, int(max(6.0, 3.6 * len(axes)) * 9)))
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+        if categorical:
+            ax.set_xticks(xs, [f"{v:g}" for v in values])
+    fig.suptitle(textwrap.fill(title, int(width * 9)))
+    return fig
