@@ -259,3 +259,37 @@ def test_progress_line_sums_up_a_large_swarm():
         == "20 live: 0 settled, 20 without a leader"
     )
     assert progress_errors({"errors": {i: 0.001 for i in range(30)}, "dropped": []}) == "30 live: 30 settled"
+
+
+def _command_paths(command, path=()):
+    """Every command and group under `command` (a click command of typer's), as argv prefixes."""
+    yield path
+    for name, sub in sorted(getattr(command, "commands", {}).items()):
+        yield from _command_paths(sub, (*path, name))
+
+
+def test_no_help_page_shows_a_flag_as_taking_a_value():
+    # issue 33: typer's rich help printed every flag (--force, --plots/--no-plots, --help) with `<bool>`
+    import typer
+
+    from swarm.cli.main import LAZY, build
+
+    paths = list(_command_paths(typer.main.get_command(app)))
+    assert {("export",), ("study",), ("study", "scenario"), ("robots",), ("up",), ("kill",)} <= set(paths)
+    pages = {}
+    for path in paths:
+        res = CliRunner().invoke(app, [*path, "--help"], env={"COLUMNS": "200"})
+        assert res.exit_code == 0, (path, res.output)
+        pages[path] = res.output
+    # a live command's process builds its group alone (swarm/cli/main.py LAZY): its pages too
+    for name, groups in LAZY.items():
+        res = CliRunner().invoke(build(groups, study=False), [name, "--help"], env={"COLUMNS": "200"})
+        assert res.exit_code == 0, (name, res.output)
+        pages[("lazy", name)] = res.output
+    shown = {path: page for path, page in pages.items() if "<bool>" in page}
+    assert not shown, f"<bool> in the help of: {', '.join(' '.join(p) or 'swarm' for p in shown)}"
+    # flags show no value; options that take one still say what
+    lines = {line.split()[1]: line for line in pages[("export",)].splitlines() if line.startswith("│ --")}
+    assert lines["--csv"].split()[2] == "also" and lines["--help"].split()[2] == "Show"
+    assert lines["--plots"].split()[2:4] == ["--no-plots", "render"]
+    assert "<float>" in pages[("sim",)]

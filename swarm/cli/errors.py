@@ -22,7 +22,7 @@ import functools
 
 import typer
 from typer._click.exceptions import BadParameter, MissingParameter, NoArgsIsHelpError, UsageError
-from typer.core import TyperGroup
+from typer.core import TyperCommand, TyperGroup
 
 from swarm.contracts.errors import SwarmError, one_line
 from swarm.contracts.vocabulary import Coded, ExitCode
@@ -71,12 +71,40 @@ def mapped(command):
 
 
 def map_app(app: typer.Typer) -> None:
-    """Wrap every command of `app` and of its sub-apps with `mapped`."""
+    """Wrap every command of `app` and of its sub-apps with `mapped`; their help shows flags
+    as flags (`FlagCommand`, `FlagGroup`)."""
     for info in app.registered_commands:
         info.callback = mapped(info.callback)
+        if info.cls in (None, TyperCommand):  # (typer's default: no class of its own)
+            info.cls = FlagCommand
     for group in app.registered_groups:
         if group.typer_instance is not None:  # (always set by add_typer)
+            cls = group.typer_instance.info.cls
+            if not isinstance(cls, type) or cls is TyperGroup:  # (typer's default: no class of its own)
+                group.typer_instance.info.cls = FlagGroup
             map_app(group.typer_instance)
+
+
+class FlagsAsFlags:
+    """Help that shows a flag (`--force`, `--plots/--no-plots`, `--help`) without a value:
+    typer's rich help (0.29) prints a bool option's type, `<bool>`, in the column of what an
+    option takes, as if the flag took a value. A flag without a metavar of its own gets an
+    empty one (what its plain help shows)."""
+
+    def get_params(self, ctx):
+        params = super().get_params(ctx)  # (a mixin: the class after it in the MRO has it)
+        for p in params:
+            if getattr(p, "is_flag", False) and p.metavar is None:
+                p.metavar = ""
+        return params
+
+
+class FlagCommand(FlagsAsFlags, TyperCommand):
+    """Every command's class (`map_app`)."""
+
+
+class FlagGroup(FlagsAsFlags, TyperGroup):
+    """Every command group's class but the root's (`map_app`)."""
 
 
 def _value_of(e) -> str | None:
@@ -108,9 +136,10 @@ def usage_line(e) -> str:
     return f"{path}: {text[:1].lower()}{text[1:]}{where}"
 
 
-class OneLineErrors(TyperGroup):
+class OneLineErrors(FlagsAsFlags, TyperGroup):
     """The root app's class: typer's usage errors (in any command or group under it) as one
-    line on stderr and exit 2, not typer's box (usage, hint and a framed message)."""
+    line on stderr and exit 2, not typer's box (usage, hint and a framed message); flags shown
+    as flags (`FlagsAsFlags`)."""
 
     def invoke(self, ctx):
         try:
