@@ -69,6 +69,7 @@ TIERS = {
         "test_robots_world",
     },
     "process": {
+        "test_docs_examples",
         "test_access",
         "test_robots_e2e",
         "test_peers_smoke",

@@ -193,4 +193,4 @@ def test_without_rosbags_one_line_says_how_to_install_it_exit_2(case2, monkeypat
     res = invoke("export", case2, "--ros2", "--no-plots")
     assert res.exit_code == ExitCode.USAGE
     assert res.output.strip() == INSTALL_HINT
-    assert "pip install 'swarm[ros2]'" in INSTALL_HINT
+    assert "pip install -e '.[ros2]'" in INSTALL_HINT and "swarm-circumnav[ros2]" in INSTALL_HINT

@@ -20,12 +20,13 @@ agent, a spawned agent that did not join...), `UsageError` (a bad argument).
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 from swarm.api.record import Record
-from swarm.contracts.errors import NoRunError, StoppedAnswering, UsageError
+from swarm.contracts.errors import LiveError, NoRunError, StoppedAnswering, UsageError
 from swarm.live.client import ENDED_SILENT_S, LiveRun, Patience, find_runs, open_run_session, talking
 
 __all__ = ["Live", "LiveState", "connect", "runs"]
@@ -118,6 +119,23 @@ class Live:
     def agents(self) -> list[dict]:
         """One row per agent, sorted by id: `swarm agents --json`'s `agents`."""
         return self.snapshot()["agents"]
+
+    def wait_joined(self, ids: Iterable[int] | None = None, timeout: float = 60.0) -> list[dict]:
+        """Until every agent of `ids` (default: every agent the run has, dropped ones too: pass `ids`
+        once some have dropped) has joined and is alive;
+        the rows of `agents()` then. A run just started by `swarm up` answers before its agents
+        have all joined: wait for them before killing one. LiveError after `timeout` s."""
+        deadline = time.monotonic() + timeout
+        while True:
+            rows = self.agents()
+            want = set(ids) if ids is not None else {r["id"] for r in rows}
+            ready = {r["id"] for r in rows if r.get("alive") and r.get("pid") is not None}
+            if want <= ready:
+                return rows
+            if time.monotonic() > deadline:
+                late = ", ".join(map(str, sorted(want - ready)))
+                raise LiveError(f"agents {late} of run {self.run} had not joined after {timeout} s")
+            time.sleep(0.05)
 
     def graph(self, sensing: bool = False) -> dict:
         """The communication graph: `swarm graph --json`'s document."""

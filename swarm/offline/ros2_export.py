@@ -37,7 +37,10 @@ ROS2_DIR = "ros2"
 WORLD_FRAME = "world"
 DISTRO_STORE = "ROS2_JAZZY"  # the message definitions (and RIHS01 hashes) written into the bag
 START_KEYS = ("start_wall_time", "started_at")  # the summary's run start, unix seconds, if it has one
-INSTALL_HINT = "swarm export --ros2 needs rosbags: pip install 'swarm[ros2]' (or pip install 'rosbags>=0.11,<0.12')"
+INSTALL_HINT = (
+    "swarm export --ros2 needs rosbags: pip install -e '.[ros2]' in the clone "
+    "(the distribution swarm-circumnav[ros2]), or pip install 'rosbags>=0.11,<0.12'"
+)
 
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 ODOMETRY = "nav_msgs/msg/Odometry"
