@@ -1,8 +1,8 @@
 """The Python blocks of README.md's "Python API" section and of getting-started's "From Python"
 run top to bottom as written, in a fresh interpreter at the repository's root: only their output
 folders are moved to a temporary directory (the runs keep their lengths: a lockstep run much
-shorter than the block's live calls could end before them). A block that uses a name before it exists, or a live run after it has
-ended (swarm.NoRunError), fails here."""
+shorter than the block's live calls could end before them). A block that uses a name before it
+exists, or a live run after it has ended (swarm.NoRunError), fails here."""
 
 from __future__ import annotations
 
