@@ -395,6 +395,43 @@ def test_cli_refuses_a_bad_format_and_exports_csv(tmp_path: Path) -> None:
     assert len(list((run_dir / "csv").glob("agent-*.csv"))) == 3
 
 
+@pytest.mark.parametrize("flag, written", [("--csv", "csv"), ("--ros2", "ros2")])
+def test_export_writes_only_what_was_asked_unless_the_results_are_missing(
+    tmp_path: Path, monkeypatch, flag, written
+) -> None:
+    # issue 33: `swarm export --ros2` re-rendered every figure (62 s on a long run) to add a bag
+    import swarm
+    from swarm.api.runs import Results
+
+    drawn: list[Path | None] = []  # the figures are drawn by Results.plot (tests above): here, whether they are
+    monkeypatch.setattr(Results, "plot", lambda self, *a, **k: drawn.append(self.run_dir) or [])
+    run_dir = tmp_path / "run"
+    swarm.simulate(Path(__file__).resolve().parent.parent / "scenarios" / "case2.toml", duration=0.5, out=run_dir)
+    data = {n: (run_dir / n).read_bytes() for n in ("trajectory.npz", "summary.json")}
+
+    def export(*args: str) -> str:
+        res = CliRunner().invoke(app, ["export", str(run_dir), *args])
+        assert res.exit_code == ExitCode.OK, res.output
+        return res.output
+
+    out = export(flag)
+    assert (run_dir / written).is_dir() and "nothing to recover" in out
+    assert drawn == [] and {n: (run_dir / n).read_bytes() for n in data} == data
+    export(flag, "--plots")  # asked for
+    export()  # `swarm export DIR` alone draws them, as before
+    assert drawn == [run_dir, run_dir]
+    # a world killed before writing its results: they are rebuilt, and drawn (its world never drew them)
+    drawn.clear()
+    for name in data:
+        (run_dir / name).unlink()
+    out = export(flag)
+    assert "recovered " in out and json.loads((run_dir / "summary.json").read_text())["complete"] is False
+    assert drawn == [run_dir]
+    (run_dir / "trajectory.npz").unlink()
+    export(flag, "--no-plots")
+    assert drawn == [run_dir] and (run_dir / "trajectory.npz").is_file()
+
+
 @pytest.mark.slow  # renders every figure three times: the long tier
 def test_render_writes_every_format(tmp_path: Path) -> None:
     run_dir = make_run(tmp_path / "run", ticks=200)

@@ -124,7 +124,15 @@ def write_csvs(results) -> None:
 
 def export(
     run_dir: RunDirArg,
-    plots: Annotated[bool, typer.Option(help="render PNG plots too")] = True,
+    plots: Annotated[
+        Optional[bool],
+        typer.Option(
+            "--plots/--no-plots",
+            help="render the PNG plots too (default: when it rebuilds the results from the recording, or when "
+            "neither --csv nor --ros2 is given)",
+            show_default=False,
+        ),
+    ] = None,
     csv: Annotated[
         bool,
         typer.Option(
@@ -147,7 +155,8 @@ def export(
     write its trajectory as one CSV per agent; with --ros2, as a rosbag2 with ROS 2 types.
 
     Results already written are kept. For a run whose world was killed: everything that reached the disk (all but the last
-    second at most) becomes a valid run directory; the summary says "complete": false.
+    second at most) becomes a valid run directory; the summary says "complete": false. With --csv or --ros2 it writes
+    only those files (and the plots only if it rebuilt the results, or with --plots).
 
     Example: swarm export runs/case2-1a2b3c --csv
     """  # noqa: E501 (the help text as it was: typer keeps its line breaks)
@@ -162,6 +171,8 @@ def export(
             typer.echo(f"{run_dir}: trajectory.npz and summary.json are already there; nothing to recover")
         elif not (csv or ros2):
             raise fail(f"{run_dir}: no recording.mcap to export from", ExitCode.FAILED)
+    if plots is None:  # what was asked: a bag or CSV files alone never redraw a complete run's figures
+        plots = recover or not (csv or ros2)
     if not (recover or csv or ros2 or plots):
         return
     results = open_results(run_dir)
