@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import shutil
 import subprocess
 import sys
@@ -19,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+import swarm
 
 pytest.importorskip("pettingzoo")  # the `env` extra
 
@@ -37,7 +40,6 @@ from swarm.env import (  # noqa: E402
     radial_rate_reward,
     size,
 )
-from swarm.offline.sim import run_sim  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 CASE2 = ROOT / "scenarios" / "case2.toml"
@@ -136,19 +138,20 @@ def test_a_policy_in_the_env_is_the_run_swarm_sim_gives_with_it_as_a_law(tmp_pat
         law_dirs=(tmp_path,),
     )
     policy = __import__(mod).policy
-    sim = run_sim(scenario).recorder.arrays()
+    sim = swarm.simulate(scenario)  # swarm sim's engine, as the Python API returns its run
     env = SwarmEnv(scenario, agents="all")
     obs, _ = env.reset()
     while env.agents:
         obs, *_ = env.step({a: policy(o) for a, o in obs.items()})
     got = env.result()
-    arr = got.recorder.arrays()
+    assert type(got) is type(sim) and got.run_dir is None
     for key in ("t", "x", "y", "heading", "u", "out", "alive", "missed"):
-        np.testing.assert_array_equal(arr[key], sim[key], err_msg=key)
-    sim_events = [(e["tick"], e["kind"], e["agent"]) for e in run_sim(scenario).events]
-    assert [(e["tick"], e["kind"], e["agent"]) for e in got.events] == sim_events
+        np.testing.assert_array_equal(got.arrays[key], sim.arrays[key], err_msg=key)
+    sim_events = [(e.tick, e.kind, e.agent) for e in sim.summary.events]
+    assert [(e.tick, e.kind, e.agent) for e in got.summary.events] == sim_events
     assert {"drop", "rejoin", "switch"} <= {k for _, k, _ in sim_events}
-    assert got.summary()["engine"] == "env"
+    assert got.summary.engine == "env" and got.summary.agents == sim.summary.agents
+    assert got.summary.converged == sim.summary.converged and got.summary.faults == sim.summary.faults
 
 
 def _contact(i: int, bearing: float, heading: float, rng: float, hops: int = -1) -> Contact:
@@ -197,7 +200,7 @@ def test_actions_are_saturated_and_a_nonfinite_one_holds_the_last_turn_rate():
     env.step({a: np.array([50.0]) for a in obs})
     env.step({a: -0.75 for a in obs})
     env.step({a: math.nan for a in obs})
-    u = env.result().recorder.arrays()["u"]
+    u = env.result().u
     col = [2, 3, 4, 5]  # followers' columns (scenario order: 1, 2, 3, 4, 5, 6)
     assert u[0, 1:5].tolist() == [2.0] * 4
     assert u[1, 1:5].tolist() == [-0.75] * 4
@@ -243,6 +246,27 @@ def test_episodes_are_reproducible_from_the_seed():
     assert not np.array_equal(a[0], c[0]) and a[1] != c[1]
     d, e = episode(env, None), episode(env, None)  # the generator goes on: new starts
     assert not np.array_equal(d[0], e[0])
+
+
+def test_the_guides_first_block_runs_and_its_result_is_swarm_sims_results(tmp_path):
+    # issue 33: env.result() was documented as swarm sim's results but was a RunResult, whose
+    # summary is a method (res.summary.converged: AttributeError). The block of
+    # docs/guides/learning.md as written, but 1 s of case 2 and its run directory in tmp_path.
+    text = (ROOT / "docs" / "guides" / "learning.md").read_text()
+    block = re.search(r"```python\n(.*?)```", text, re.S)[1]
+    code = block.replace('SwarmEnv("scenarios/case2.toml")', f"SwarmEnv({str(CASE2)!r}, duration=1.0)")
+    code = code.replace('"runs/', f'"{tmp_path}/')
+    assert code.count(str(CASE2)) == 1 and code.count(str(tmp_path)) == 1, block  # the block still reads so
+    space: dict = {"my_policy": gains_policy}
+    exec(compile(code, "learning.md", "exec"), space)
+    res = space["res"]
+    assert isinstance(res, swarm.Results) and res.x.shape == (101, 6)
+    assert res.summary.converged is False and res.converged is False  # 1 s: far from its orbit yet
+    assert res.summary.engine == "env" and isinstance(res.summary.agents[3].radial_error, float)
+    assert res.agent(3).x.shape == (101,)
+    saved = swarm.open_run(res.run_dir)  # res.save(...) wrote trajectory.npz and summary.json
+    assert saved.summary.to_dict() == res.summary.to_dict()
+    np.testing.assert_array_equal(saved.x, res.x)
 
 
 def test_policy_law_is_a_law_a_scenario_can_name_and_swarm_env_stays_light(tmp_path):

@@ -34,7 +34,7 @@ from swarm.api.scenario import Builder, Scenario, ScenarioError, as_scenario, so
 from swarm.offline.csv_export import write_agent_csvs
 from swarm.offline.results import OutDirError, Recovery, claim_out_dir
 from swarm.offline.results import recover as rebuild
-from swarm.world.recording import RECORDING_FILE, SUMMARY_FILE, TRAJECTORY_FILE, write_run
+from swarm.world.recording import RECORDING_FILE, SUMMARY_FILE, TRAJECTORY_FILE, RunResult, write_run
 from swarm.world.run_reader import RunReadError, load_run
 
 __all__ = ["AgentTrack", "Record", "Results", "RunReadError", "Summary", "open_run", "simulate"]
@@ -244,12 +244,17 @@ def simulate(
     result.extra["wall_time"] = wall
     result.extra["sim_seconds_per_wall_second"] = sim_time / wall if wall > 0 else None
     if out is None:
-        summary = result.summary()
-    else:
-        summary = write_run(result, out)
-    # the summary as summary.json holds it (plain JSON values), whether written or not
-    summary = json.loads(json.dumps(summary, default=_plain))
-    return Results(result.recorder.arrays(), summary, out)
+        return in_memory(result)
+    return in_memory(result, write_run(result, out), out)
+
+
+def in_memory(result: RunResult, summary: dict | None = None, run_dir: Path | None = None) -> Results:
+    """A run of this process (a `swarm.world.recording.RunResult`) as `Results`: what
+    `simulate` returns, and `swarm.env.SwarmEnv.result()`. `summary`: the one written to
+    `run_dir` (default: the run's, computed now); held as summary.json holds it (plain JSON
+    values), whether written or not."""
+    summary = result.summary() if summary is None else summary
+    return Results(result.recorder.arrays(), json.loads(json.dumps(summary, default=_plain)), run_dir)
 
 
 def open_run(run_dir: str | Path, recover: bool = True) -> Results:

@@ -30,6 +30,7 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv  # type: ignore[import-untyped]  # pettingzoo ships no py.typed
 
 from swarm.agents.brain import AgentBrain, Decision, saturate
+from swarm.api.runs import Results, in_memory
 from swarm.contracts.observation import Observation
 from swarm.contracts.orbits import expected_radius, roots
 from swarm.contracts.scenario import Scenario, load_scenario
@@ -37,7 +38,6 @@ from swarm.contracts.vocabulary import EventKind
 from swarm.env.observation import K_NEAREST, observation_array, size, turn_rate
 from swarm.world.core import ACTIVE
 from swarm.world.engine import Engine
-from swarm.world.recording import RunResult
 
 PROCESS_RETURNS = ("restart", "thaw")  # scripted faults that bring an agent back: a new env agent
 
@@ -374,17 +374,21 @@ class SwarmEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
             c.is_leader, radius, direction, c.target, roots(out, live_leaders),
         )  # fmt: skip
 
-    def result(self) -> RunResult:
-        """The episode so far as a run's result (`swarm.world.recording.write_run` writes
-        it like `swarm sim`'s: trajectory.npz, summary.json)."""
+    def result(self) -> Results:
+        """The episode so far as `swarm sim`'s results: a `swarm.Results` kept in memory, what
+        `swarm.simulate` returns: the trajectory's arrays as attributes (`res.x`,
+        `res.agent(3)`), the summary with attribute access (`res.summary.converged`,
+        `res.summary.agents[3].radial_error`; `res.summary.engine` is "env"); `res.save(dir)`
+        writes its trajectory.npz and summary.json, `res.plot(dir)` its figures."""
         e = self.engine
         if e is None:
             raise RuntimeError("result() before reset()")
-        return e.result(
+        run = e.result(
             {"engine": "env", "rejected_commands": e.core.rejected, "lost_frames": e.fault_plan.lost_sense,
              "lost_commands": e.fault_plan.lost_cmd},
             {str(aid): b.figures() for aid, b in self.brains.items()},
         )  # fmt: skip
+        return in_memory(run)  # (its arrays: the rows written so far, which later steps leave as they are)
 
     def render(self) -> None:
         return None
