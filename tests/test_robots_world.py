@@ -528,6 +528,31 @@ def test_the_worlds_ticks_go_through_the_plant_which_is_stopped_at_the_end(signa
     assert world.core.x[0] == pytest.approx(0.7 + 1.0 + 0.01 * world.ticks)
 
 
+def test_after_a_stall_the_plant_stands_still_then_starts_from_its_latest_poses(signals_back):
+    """The world stalls 0.5 s (ten of its 50 ms periods) in tick 1 of 4: the next tick is not a burst
+    of the missed ones; the plant is held (a zero twist to every robot) and started again (its
+    latest poses read) before the world's next step; then the run goes on."""
+    plant = RecordingPlant()
+    world, _ = world_with(plant)
+    join(world, 1)
+    join(world, 2)
+    step = world.record_and_step
+
+    def record_and_step():
+        if world.core.tick == 1:
+            time.sleep(10 * world.core.dt)
+        step()
+
+    world.record_and_step = record_and_step  # type: ignore[method-assign]
+    code = world_main._serve(world, world.cfg, None, StopSignals(world_main.Stop), Announcer(None))
+    assert code == ExitCode.OK
+    resync = plant.calls.index("hold")
+    assert plant.calls[:resync] == ["start"] + ["step"] * 2  # ticks 0 and 1, the stall in tick 1's step
+    assert plant.calls[resync : resync + 3] == ["hold", "start", "step"]
+    assert plant.calls.count("step") == world.ticks and plant.calls[-1] == "stop"
+    assert any(e["kind"] == EventKind.LATE for e in world.engine.events)
+
+
 @pytest.mark.parametrize(
     ("raised", "code"),
     [

@@ -206,3 +206,38 @@ def test_an_agent_that_never_leaves_holds_the_world_up_no_longer_than_the_wait(m
     waited = clock.now - 1000.0
     assert process.END_WAIT_S <= waited <= process.END_WAIT_S + 0.1, waited
     assert 10 <= len(ses.token_gets) <= process.END_WAIT_S / 0.02 + 2, len(ses.token_gets)
+
+
+def test_a_stalled_realtime_world_re_anchors_instead_of_bursting(tmp_path):
+    """Realtime, 20 ticks of 50 ms; the world stalls 0.35 s (7 periods) in tick 5. Before, it
+    ran the missed ticks back to back (frames and commands a few ms apart, from stale poses);
+    now no two ticks start less than half a period apart (a bound the clock keeps however
+    slow the machine: load only widens the gaps), a `late` event says how far behind it fell,
+    and summary.json counts the late and skipped ticks. Every tick still runs."""
+    import time
+
+    s = ring(3, None)
+    world, _ = open_world(s, tmp_path / "rt", duration=1.0, clock="realtime")
+    join_all(world)
+    period = world.core.dt
+    starts: list[float] = []
+    publish, step = world.publish_frames, world.record_and_step
+
+    def publish_frames():
+        starts.append(time.monotonic())
+        return publish()
+
+    def record_and_step():
+        if world.core.tick == 5:
+            time.sleep(7 * period)
+        step()
+
+    world.publish_frames, world.record_and_step = publish_frames, record_and_step  # type: ignore[method-assign]
+    assert world.run() == 0 and world.core.tick == 20
+    gaps = [b - a for a, b in zip(starts, starts[1:])]
+    assert len(gaps) == 19 and min(gaps) >= period / 2, [round(g, 4) for g in gaps]
+    summary = world.finish()
+    assert summary is not None
+    late = [e for e in summary["events"] if e["kind"] == "late"]
+    assert late and late[0]["skipped"] >= 6 and late[0]["behind_s"] >= 6 * period, late
+    assert summary["late_ticks"] >= 1 and summary["skipped_ticks"] >= 6

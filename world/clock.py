@@ -31,6 +31,7 @@ from swarm.world.memory import Trimmer
 from swarm.world.state import RunState
 from swarm.world.tick_times import TickTimes
 
+LATE_EVENT_GAP_S = 1.0  # s of wall time between two `late` events (the counts in summary.json keep every one)
 DESERTED_GRACE = 5.0  # s of wall time a started run may go on with no agent at all
 STALL_GRACE = 3.0  # s the agents get to answer after a stall of the world (their links come back in ~0.5 s)
 RESEND_S = 0.25  # s between resends of a tick's frames after a stall of the world
@@ -72,6 +73,12 @@ class Clock:
         # between ticks, not in any.
         self.tick_times = TickTimes()
         self.trimmer: Trimmer | None = None
+        # realtime: ticks that started more than half a period late (the clock re-anchored
+        # instead of running them back to back), the whole periods the run fell behind by
+        # there, and when the last `late` event was recorded
+        self.late_ticks = 0
+        self.skipped_ticks = 0
+        self.late_event_at: float | None = None
 
     def answer_pause_waiters(self) -> None:
         """Answer the pause queries that came during a tick, now that it is done, with the
@@ -237,6 +244,37 @@ class Clock:
         while inbox.drain(None, 0):  # joins/drops that arrived meanwhile take effect now
             pass
 
+    def keep_time(self, t_next: float, period: float) -> float:
+        """Realtime: when this tick starts more than half a period late (the world stalled:
+        SIGSTOP, a starved CPU, a long garbage collection), the clock re-anchors on now
+        instead of running the missed ticks back to back: no two ticks' commands go out less
+        than half a period apart, and none is computed from poses the stall made stale. The
+        simulated time goes on from where it was (the run lasts longer in wall time). A
+        re-anchoring that skipped at least one whole period records a `late` event (at most
+        one per LATE_EVENT_GAP_S of wall time; summary.json counts every one), and a plant
+        (robots) gets a zero twist and starts the tick from its latest poses. Returns the
+        time this tick ends."""
+        now = time.monotonic()
+        behind = now - (t_next - period)  # how late this tick starts
+        if behind <= period / 2:
+            return t_next
+        skipped = int(behind // period)
+        self.late_ticks += 1
+        self.skipped_ticks += skipped
+        if skipped:
+            self.state.engine.resync_plant()
+            if self.late_event_at is None or now - self.late_event_at >= LATE_EVENT_GAP_S:
+                self.late_event_at = now
+                self.state.event(
+                    EventKind.LATE,
+                    None,
+                    f"the clock fell {behind:.3f} s ({skipped} tick{'s' if skipped > 1 else ''}) behind: "
+                    "re-anchored, no tick run late",
+                    behind_s=round(behind, 6),
+                    skipped=skipped,
+                )
+        return time.monotonic() + period
+
     def realtime_tick(self, t_next: float) -> None:
         st, inbox = self.state, self.inbox
         tick = st.core.tick
@@ -314,6 +352,7 @@ class Clock:
             if cfg.clock == "lockstep":
                 self.lockstep_tick()
             else:
+                t_next = self.keep_time(t_next, period)
                 self.realtime_tick(t_next)
                 t_next += period
             self.shell.record_and_step()

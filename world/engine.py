@@ -108,6 +108,13 @@ class Engine:
         if self.plant is not None and not self.plant_stopped:
             self.plant.hold()
 
+    def resync_plant(self) -> None:
+        """The clock could not keep time (a stall): the plant stands still first (a zero
+        twist), then the next tick starts from its latest poses, not from the stalled ones."""
+        if self.plant is not None and not self.plant_stopped:
+            self.plant.hold()
+            self.plant.start(self.core, self.event)
+
     def stop_plant(self) -> None:
         """However the run ends: the plant stops what it moves (once; later calls do nothing)."""
         if self.plant is not None and not self.plant_stopped:

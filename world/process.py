@@ -314,6 +314,8 @@ class World:
                 "ticks_per_second": (c.tick / wall) if wall else None,
                 "tick_ms": clock.tick_times.summary_ms(),  # each tick's wall time (world/clock.py)
                 "deadline_restarts": clock.restarts,
+                "late_ticks": clock.late_ticks,  # realtime: ticks started > half a period late (re-anchored)
+                "skipped_ticks": clock.skipped_ticks,  # realtime: whole periods the clock fell behind there
                 **clock.reproducibility(),
                 **plant,
             },

@@ -68,6 +68,7 @@ class EventKind(StrEnum):
     STOP = "stop"  # an operator's `swarm stop`: the run ends as on SIGINT
     STALE = "stale"  # robots: an agent's robot's pose is older than the robots file's stale_after (zero twist)
     FRESH = "fresh"  # robots: its poses come again
+    LATE = "late"  # realtime: the world fell a tick or more behind and re-anchored its clock (no burst)
 
 
 class SwitchReason(StrEnum):
