@@ -48,6 +48,7 @@ TIERS = {
         "test_layers",
         "test_plots",
         "test_recording_deferred",
+        "test_results_stream",
         "test_rooted",
         "test_scenario",
         "test_search",

@@ -3,7 +3,8 @@
 A run with an output directory streams its ticks to recording.mcap as it goes
 (`StreamRecorder`, world/stream.py); one without (studies, tests) keeps them in memory
 (`Recorder`). At the end, or after a crash (`recover_run`), trajectory.npz and
-summary.json are written from the recording, each to a temporary name and renamed, so a
+summary.json are written from the recording, by streaming it (world/results_stream.py:
+memory does not grow with the run's length), each to a temporary name and renamed, so a
 result file is either whole or absent. The layout is documented in docs/reference/outputs.md
 (#summary, #trajectory); the reader of trajectory.npz is world/run_reader.py.
 """
@@ -21,7 +22,8 @@ import numpy as np
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.vocabulary import EventKind
 from swarm.world.metrics import agent_metrics, converged, recovery, relative_errors, switch_ticks
-from swarm.world.stream import RECORDING_FILE, Recording, RecordingError, StreamWriter, read_recording
+from swarm.world.results_stream import PER_TICK, Metrics, Scan, scan, streamed, write_npz
+from swarm.world.stream import RECORDING_FILE, Recording, RecordingError, StreamWriter
 
 TRAJECTORY_FILE = "trajectory.npz"
 SUMMARY_FILE = "summary.json"
@@ -167,10 +169,14 @@ class StreamRecorder:
         """The recording could not be written to the end: it stops at its last good flush."""
         return self.writer.failed
 
+    def finished(self) -> Path:
+        """The recording, finished (its writer closed): what `write_run` streams the results from."""
+        self.writer.close()
+        return self.path
+
     def arrays(self) -> dict[str, np.ndarray]:
         if self._arrays is None:
-            self.writer.close()
-            self._arrays = recording_arrays(read_recording(self.path))
+            self._arrays = streamed_arrays(self.finished())
         return self._arrays
 
 
@@ -226,11 +232,19 @@ class DeferredRecorder:
         return getattr(self.inner, name)
 
 
+def streamed_arrays(path: Path) -> dict[str, np.ndarray]:
+    """`recording_arrays(read_recording(path))`, without a dict per tick: the arrays are
+    decoded in batches (world/results_stream.py) through files beside the recording."""
+    with streamed(path, path.parent) as (sc, files):
+        return {**static_arrays(sc.scenario), **{k: np.load(files.path(k)) for k in PER_TICK}}
+
+
 def recording_arrays(rec: Recording) -> dict[str, np.ndarray]:
     """The arrays of trajectory.npz from a recording's tick rows (agents added at run time
     are columns of their own, absent before they were added). A tick written twice (a
     signal between writing a row and counting it, then the final row) counts once, the
-    later; rows stop at the first missing tick."""
+    later; rows stop at the first missing tick. All in memory: the results of a run are
+    written by streaming instead (`write_run`, world/results_stream.py), to the same arrays."""
     s = rec.scenario
     col = {aid: j for j, aid in enumerate(s.ids)}
     by_tick = {row["tick"]: row for row in rec.rows}
@@ -295,10 +309,6 @@ class RunResult:
                 target=a["target"],
                 switches=counts,
             )
-        for aid, more in self.agent_extra.items():
-            if aid in agents:
-                agents[aid].update(more)
-        ticks = max(len(a["t"]) - 1, 0)
         faults = []
         if self.scenario.faults and len(a["t"]) > 1:
             err = relative_errors(
@@ -317,14 +327,23 @@ class RunResult:
                 for i, f in enumerate(self.scenario.faults)
             ]
             faults = recovery(specs, a["t"], err, a["missed"], self.events)
+        sim_time = float(a["t"][-1]) if len(a["t"]) else 0.0
+        return self.summary_of(len(a["t"]), agents, switches, faults, sim_time)
+
+    def summary_of(self, rows: int, agents: dict, switches: int, faults: list, sim_time: float) -> dict:
+        """summary.json from the run's figures (computed from whole arrays by `summary`, or
+        streamed by `write_run`)."""
+        for aid, more in self.agent_extra.items():
+            if aid in agents:
+                agents[aid].update(more)
         return {
             "scenario": self.scenario.name,
             # An agent process that crashed (not a scripted kill: that is a "fault") fails the run.
             "converged": converged(agents) and not any(e["kind"] == EventKind.CRASH for e in self.events),
-            "ticks": ticks,
+            "ticks": max(rows - 1, 0),
             "selection": self.scenario.sensing.selection,
             "switches": switches,
-            "sim_time": float(a["t"][-1]) if len(a["t"]) else 0.0,
+            "sim_time": sim_time,
             "dt": self.scenario.run.dt,
             "agents": agents,
             "events": self.events,
@@ -359,15 +378,35 @@ def _write_atomic(path: Path, write) -> None:
         raise RecordingError(f"cannot write {path}: {e.strerror or e}") from None
 
 
-def write_run(result: RunResult, out_dir: Path) -> dict:
-    """Write trajectory.npz and summary.json into out_dir (each atomically); returns the summary."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    arrays = result.recorder.arrays()
-    _write_atomic(out_dir / TRAJECTORY_FILE, lambda f: np.savez_compressed(f, **arrays))  # type: ignore[arg-type]  # numpy's stubs: **kw could be allow_pickle
-    summary = result.summary()
+def _write_summary(summary: dict, out_dir: Path) -> dict:
     text = (json.dumps(summary, indent=2, default=_json_default) + "\n").encode()
     _write_atomic(out_dir / SUMMARY_FILE, lambda f: f.write(text))
     return summary
+
+
+def write_run(result: RunResult, out_dir: Path) -> dict:
+    """Write trajectory.npz and summary.json into out_dir (each atomically); returns the summary.
+    A run recorded to recording.mcap (`StreamRecorder`) has them written by streaming the
+    recording (world/results_stream.py): memory does not grow with the run's length."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    finished = getattr(result.recorder, "finished", None)
+    if finished is not None:
+        return _write_streamed(finished(), out_dir, result)
+    arrays = result.recorder.arrays()
+    _write_atomic(out_dir / TRAJECTORY_FILE, lambda f: np.savez_compressed(f, **arrays))  # type: ignore[arg-type]  # numpy's stubs: **kw could be allow_pickle
+    return _write_summary(result.summary(), out_dir)
+
+
+def _write_streamed(path: Path, out_dir: Path, result: RunResult, sc: Scan | None = None) -> dict:
+    """`write_run` from the recording at `path`, read in passes: the arrays of trajectory.npz
+    through .npy files in a temporary directory in `out_dir`, the summary's figures by
+    streaming accumulators. The same files as `write_run` from `recording_arrays`, to the bit."""
+    with streamed(path, out_dir, sc) as (sc, files):
+        static = static_arrays(sc.scenario)
+        m = Metrics(result.scenario, static, result.events)
+        m.compute(files)
+        _write_atomic(out_dir / TRAJECTORY_FILE, lambda f: write_npz(f, static, files))
+    return _write_summary(result.summary_of(files.rows, m.agents, m.switches, m.faults, m.sim_time), out_dir)
 
 
 def recover_run(run_dir: Path) -> dict:
@@ -378,13 +417,13 @@ def recover_run(run_dir: Path) -> dict:
     path = run_dir / RECORDING_FILE
     if not path.is_file():
         raise ValueError(f"{path}: no recording to recover from")
-    rec = read_recording(path)
-    if not rec.rows:
+    sc = scan(path)
+    if not sc.messages:
         raise ValueError(f"{path}: the recording holds no tick")
     result = RunResult(
-        rec.scenario,
-        _Loaded(recording_arrays(rec)),
-        rec.events,
-        {"engine": "recovered", "complete": False, "recording_finished": rec.complete, "completed": False},
+        sc.scenario,
+        _Loaded({}),  # nothing in memory: the results are streamed from the recording
+        sc.events,
+        {"engine": "recovered", "complete": False, "recording_finished": sc.complete, "completed": False},
     )
-    return write_run(result, run_dir)
+    return _write_streamed(path, run_dir, result, sc)

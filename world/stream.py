@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -191,9 +192,14 @@ def _records(f):
         yield r, isinstance(r, Footer)
 
 
-def read_recording(path: Path) -> Recording:
+def read_recording(path: Path, on_tick: Callable[[bytes], None] | None = None, events: bool = True) -> Recording:
     """Read a recording.mcap, finished or cut short (a torn tail is where it stops).
-    Raises ValueError when the file is not a swarm recording at all."""
+    Raises ValueError when the file is not a swarm recording at all.
+
+    `on_tick`: each tick message's bytes (after the run header) go to it, in the file's order,
+    instead of into `Recording.rows`, which stays empty: a reader that streams the ticks
+    (world/results_stream.py) keeps nothing per tick. `events=False`: the events are not read
+    (`Recording.events` stays empty)."""
     from mcap.records import Channel, Message  # lazy: as in _records
 
     topics: dict[int, str] = {}
@@ -206,8 +212,11 @@ def read_recording(path: Path) -> Recording:
             elif isinstance(r, Message):
                 topic = topics.get(r.channel_id)
                 if topic == "/swarm/ticks" and rec is not None:
-                    rec.rows.append(decode_tick(r.data))
-                elif topic == "/swarm/events" and rec is not None:
+                    if on_tick is None:
+                        rec.rows.append(decode_tick(r.data))
+                    else:
+                        on_tick(r.data)
+                elif topic == "/swarm/events" and rec is not None and events:
                     rec.events.append(json.loads(r.data))
                 elif topic == "/swarm/run":
                     msg = json.loads(r.data)

@@ -1,0 +1,595 @@
+"""A run's results written from its recording by streaming, in memory that does not grow
+with the run's length: O(agents x CHUNK), never O(agents x ticks).
+
+`write_run` and `recover_run` (world/recording.py) write trajectory.npz and summary.json
+from a recording.mcap this way: the same files as `recording_arrays(read_recording(path))`
+then `np.savez_compressed` and `RunResult.summary` would (which kept a dict per tick, then
+whole arrays: hundreds of MB after an hour), to the bit, in three passes:
+
+1. `scan`: the recording read once for its header, the agents added at run time, its events,
+   whether it was finished, and which ticks it holds (runs of consecutive ticks, a handful
+   even in a recording with a tick written twice), hence the rows: ticks 0, 1, ... up to
+   the first missing one. Nothing is kept per tick.
+2. `fill`: read again, each tick message decoded in batches (consecutive ticks with the same
+   agents: one `np.frombuffer` per batch) into each array's raw .npy file in a temporary
+   directory beside the results, written at its tick's place, so that a tick written twice
+   counts once, the later, as `recording_arrays` has it.
+3. `Metrics`: summary.json's figures from those files read back CHUNK rows at a time, by
+   streaming accumulators that do exactly the arithmetic of world/metrics.py, in the same
+   order (switch counts, each agent's final radius, settling time, angular rate, the fault
+   recoveries). Lookups of single rows (the final one, t at a tick) and `searchsorted` go
+   through a memory map of the small `t` file: a few pages.
+
+Then each .npy file is copied into trajectory.npz as the member `np.savez_compressed` writes
+(same names, order, headers and deflate compression), and the temporary directory removed.
+Memory: the chunk being decoded or read back, the expected radii of the graphs seen (at most
+CACHE_MAX), pass 1's runs of consecutive ticks (one per gap or repeat) and the events, which
+summary.json lists anyway. Disk: the temporary files hold the arrays uncompressed (41 N + 16
+bytes per tick for N agents, about the recording's size) until trajectory.npz is written.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+import tempfile
+import zipfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from swarm.contracts.orbits import expected_radius, root_of
+from swarm.contracts.scenario import Scenario
+from swarm.contracts.vocabulary import EventKind
+from swarm.world.metrics import SETTLING_BAND, _finite_or_none
+from swarm.world.stream import TICK_ENCODING, RecordingError, read_recording
+
+CHUNK = 4096  # rows per chunk: memory is O(agents x CHUNK)
+COPY_BLOCK = 1 << 20  # bytes per read when a .npy file is copied into the zip
+CACHE_MAX = 4096  # graphs (out, alive) whose expected radii relative_errors keeps
+PER_TICK = ("t", "missed", "x", "y", "heading", "u", "out", "alive")  # after the static arrays, in this order
+_TIME_HEAD = 32  # bytes of a tick message's head (tick, time, n, missed)
+
+
+@dataclass
+class Scan:
+    """What pass 1 found: the recording's header, events, whether it was finished, how many
+    tick messages it holds and the rows (consecutive ticks from 0)."""
+
+    scenario: Scenario
+    ticks: int
+    events: list[dict]
+    complete: bool
+    messages: int
+    rows: int
+
+
+class _Ticks:
+    """Pass 1's tick counter: runs [lo, hi) of consecutive ticks, in the order they came."""
+
+    def __init__(self) -> None:
+        self.runs: list[list[int]] = []
+        self.messages = 0
+
+    def see(self, data: bytes) -> None:
+        if len(data) < _TIME_HEAD:
+            raise ValueError(f"a {TICK_ENCODING} message of {len(data)} bytes")
+        n = int.from_bytes(data[16:24], "little", signed=True)
+        if n < 0 or len(data) != _TIME_HEAD + n * (6 * 8 + 1):  # as decode_tick checks it
+            raise ValueError(f"a {TICK_ENCODING} message of {len(data)} bytes for {n} agents")
+        k = int.from_bytes(data[0:8], "little", signed=True)
+        self.messages += 1
+        if self.runs and self.runs[-1][1] == k:
+            self.runs[-1][1] = k + 1
+        else:
+            self.runs.append([k, k + 1])
+
+    def rows(self) -> int:
+        """Ticks 0, 1, ... present without a gap."""
+        rows = 0
+        for lo, hi in sorted(self.runs):
+            if lo > rows:
+                break
+            rows = max(rows, hi)
+        return rows
+
+
+def scan(path: Path) -> Scan:
+    """Pass 1 (see the module's docstring). ValueError as `read_recording` raises it."""
+    ticks = _Ticks()
+    rec = read_recording(path, on_tick=ticks.see)
+    return Scan(rec.scenario, rec.ticks, rec.events, rec.complete, ticks.messages, ticks.rows())
+
+
+# ------------------------------------------------------------------ pass 2: the arrays, to files
+
+
+def _dtypes() -> dict[str, np.dtype]:
+    f8, i8 = np.dtype(float), np.dtype(np.int64)
+    return {"t": f8, "x": f8, "y": f8, "heading": f8, "u": f8, "out": i8, "alive": np.dtype(bool), "missed": i8}
+
+
+FILL = {"t": np.nan, "x": np.nan, "y": np.nan, "heading": np.nan, "u": np.nan, "out": -1, "alive": False, "missed": 0}
+
+
+def _message_dtype(n: int) -> np.dtype:
+    """A `swarm-tick-v1` message for n agents as one record (world/stream.py)."""
+    return np.dtype(
+        [
+            ("tick", "<i8"),
+            ("time", "<f8"),
+            ("n", "<i8"),
+            ("missed", "<i8"),
+            ("ids", "<i8", (n,)),
+            ("x", "<f8", (n,)),
+            ("y", "<f8", (n,)),
+            ("heading", "<f8", (n,)),
+            ("u", "<f8", (n,)),
+            ("out", "<i8", (n,)),
+            ("alive", "u1", (n,)),
+        ]
+    )
+
+
+class NpyFiles:
+    """The per-tick arrays of trajectory.npz as raw .npy files (header, then rows) in `dir`."""
+
+    def __init__(self, dir: Path, rows: int, n: int):
+        self.dir = dir
+        self.rows, self.n = rows, n
+        self.dtypes = _dtypes()
+        self.shapes = {k: (rows,) if k in ("t", "missed") else (rows, n) for k in PER_TICK}
+        self.header: dict[str, int] = {}
+        self.files: dict[str, IO[bytes]] = {}
+        for k in PER_TICK:
+            f = open(self.path(k), "w+b")
+            self.files[k] = f
+            np.lib.format.write_array_header_1_0(
+                f,
+                {
+                    "descr": np.lib.format.dtype_to_descr(self.dtypes[k]),
+                    "fortran_order": False,
+                    "shape": self.shapes[k],
+                },
+            )
+            self.header[k] = f.tell()
+
+    def path(self, key: str) -> Path:
+        return self.dir / f"{key}.npy"
+
+    def width(self, key: str) -> int:
+        return 1 if key in ("t", "missed") else self.n
+
+    def write(self, key: str, row: int, block: np.ndarray) -> None:
+        f = self.files[key]
+        f.seek(self.header[key] + row * self.width(key) * self.dtypes[key].itemsize)
+        f.write(np.ascontiguousarray(block, self.dtypes[key]).tobytes())
+
+    def read(self, key: str, r0: int, r1: int) -> np.ndarray:
+        """Rows r0..r1-1 of `key` (a copy)."""
+        f = self.files[key]
+        size = self.width(key) * self.dtypes[key].itemsize
+        f.seek(self.header[key] + r0 * size)
+        a = np.frombuffer(f.read((r1 - r0) * size), self.dtypes[key])
+        return a if key in ("t", "missed") else a.reshape(r1 - r0, self.n)
+
+    def flush(self) -> None:
+        for f in self.files.values():
+            f.flush()
+
+    def close(self) -> None:
+        for f in self.files.values():
+            f.close()
+
+
+class _Filler:
+    """Pass 2: tick messages, in the file's order, to `NpyFiles` at their ticks' places.
+    Consecutive messages of consecutive ticks with the same agent count are decoded and
+    written as one batch; a tick that comes again starts a new batch written after the
+    first one, so the later message is the one that stays."""
+
+    def __init__(self, files: NpyFiles, ids: list[int], messages: int):
+        self.files = files
+        self.col = {aid: j for j, aid in enumerate(ids)}
+        self.ids = np.array(ids, dtype=np.int64)
+        self.left = messages  # the tick messages pass 1 counted: a file that grew since is read as it was
+        self.batch: list[bytes] = []
+        self.k0 = self.n = 0
+
+    def add(self, data: bytes) -> None:
+        if self.left <= 0:
+            return
+        self.left -= 1
+        k = int.from_bytes(data[0:8], "little", signed=True)
+        n = int.from_bytes(data[16:24], "little", signed=True)
+        if self.batch and (k != self.k0 + len(self.batch) or n != self.n or len(self.batch) >= CHUNK):
+            self.flush()
+        if not self.batch:
+            self.k0, self.n = k, n
+        self.batch.append(data)
+
+    def flush(self) -> None:
+        if not self.batch:
+            return
+        recs = np.frombuffer(b"".join(self.batch), _message_dtype(self.n))
+        k0, self.batch = self.k0, []
+        lo, hi = max(k0, 0), min(k0 + len(recs), self.files.rows)  # ticks outside the rows are not kept
+        if lo >= hi:
+            return
+        recs = recs[lo - k0 : hi - k0]
+        f, m, n = self.files, len(recs), self.files.n
+        f.write("t", lo, recs["time"])
+        f.write("missed", lo, recs["missed"])
+        ids = recs["ids"]
+        if self.n <= n and (ids == self.ids[: self.n]).all():  # the usual case: the scenario's order
+            for key in ("x", "y", "heading", "u", "out", "alive"):
+                block = np.full((m, n), FILL[key], dtype=f.dtypes[key])
+                block[:, : self.n] = recs[key]
+                f.write(key, lo, block)
+            return
+        blocks = {
+            key: np.full((m, n), FILL[key], dtype=f.dtypes[key]) for key in ("x", "y", "heading", "u", "out", "alive")
+        }
+        for r in range(m):
+            cols = [self.col[int(i)] for i in ids[r]]
+            for key, block in blocks.items():
+                block[r, cols] = recs[key][r]
+        for key, block in blocks.items():
+            f.write(key, lo, block)
+
+
+def fill(path: Path, sc: Scan, files: NpyFiles) -> None:
+    """Pass 2 (see the module's docstring)."""
+    filler = _Filler(files, list(sc.scenario.ids), sc.messages)
+    read_recording(path, on_tick=filler.add, events=False)
+    filler.flush()
+    files.flush()
+
+
+# ------------------------------------------------------------------ pass 3: summary.json's figures
+
+
+def _chunks(files: NpyFiles, keys: tuple[str, ...], start: int = 0):
+    for r0 in range(start, files.rows, CHUNK):
+        r1 = min(r0 + CHUNK, files.rows)
+        yield r0, r1, {k: files.read(k, r0, r1) for k in keys}
+
+
+class _Switches:
+    """`metrics.switch_ticks` counted as rows come: a change of out-neighbour while alive at
+    both ticks counts once the agent had an out-neighbour at an earlier tick since it last
+    (re)joined (tick 0 starts the first stay)."""
+
+    def __init__(self, n: int):
+        self.counts = np.zeros(n, dtype=np.int64)
+        self.last_has = np.full(n, -1, dtype=np.int64)  # the last tick with an out-neighbour while alive
+        self.last_join = np.zeros(n, dtype=np.int64)  # the last (re)join: 0, or a tick alive after one not
+        self.prev: tuple[np.ndarray, np.ndarray] | None = None
+
+    def add(self, r0: int, out: np.ndarray, alive: np.ndarray) -> None:
+        m = len(out)
+        g = np.arange(r0, r0 + m, dtype=np.int64)[:, None]
+        if self.prev is None:  # tick 0 has no tick before it: no change (and a join at 0 is last_join's 0)
+            p_out, p_alive = np.vstack([out[:1], out[:-1]]), np.vstack([np.zeros_like(alive[:1]), alive[:-1]])
+        else:
+            p_out, p_alive = np.vstack([self.prev[0], out[:-1]]), np.vstack([self.prev[1], alive[:-1]])
+        changed = (out != p_out) & alive & p_alive
+        joined = alive & ~p_alive
+        last_join = np.maximum(self.last_join, np.maximum.accumulate(np.where(joined, g, -1), axis=0))
+        has = (out >= 0) & alive
+        acc = np.maximum.accumulate(np.where(has, g, -1), axis=0)
+        before = np.maximum(self.last_has, np.vstack([np.full((1, out.shape[1]), -1, np.int64), acc[:-1]]))
+        self.counts += (changed & (before >= last_join)).sum(axis=0)
+        self.last_has = np.maximum(self.last_has, acc[-1])
+        self.last_join = last_join[-1]
+        self.prev = (out[-1:].copy(), alive[-1:].copy())
+
+
+class _Unwrap:
+    """`np.unwrap` of a series that comes in pieces: its first value and the running sum of
+    the corrections, so that the last unwrapped value is `last + sum`, bit for bit."""
+
+    def __init__(self) -> None:
+        self.first: float | None = None
+        self.last: np.ndarray | None = None  # the previous piece's last value (1 element)
+        self.sum: np.ndarray | None = None  # the corrections' running sum (1 element)
+
+    def add(self, p: np.ndarray) -> None:
+        if not len(p):
+            return
+        if self.last is None:
+            self.first = p[0]
+            ext = p
+        else:
+            ext = np.concatenate([self.last, p])
+        self.last = p[-1:]
+        if len(ext) < 2:
+            return
+        dd = np.diff(ext)
+        period = 2 * math.pi
+        interval_high = period / 2
+        interval_low = -interval_high
+        ddmod = np.mod(dd - interval_low, period) + interval_low
+        np.copyto(ddmod, interval_high, where=(ddmod == interval_low) & (dd > 0))
+        ph_correct = ddmod - dd
+        np.copyto(ph_correct, 0, where=abs(dd) < period / 2)
+        cs = ph_correct.cumsum() if self.sum is None else np.concatenate([self.sum, ph_correct]).cumsum()
+        self.sum = cs[-1:]
+
+    def span(self) -> Any:
+        """theta[-1] - theta[0]."""
+        assert self.last is not None and self.first is not None
+        end = self.last if self.sum is None else self.last + self.sum
+        return end[0] - self.first
+
+
+@dataclass
+class _Fault:
+    spec: dict
+    k0: int
+    k1: int
+    start: int
+    stop: int  # the window err[k0:k1] is rows start..stop-1
+    last_bad: int = -1  # row in the window (from its start)
+    last_no_live: bool = False
+    worst: float | None = None
+    missed: int = 0
+
+
+@dataclass
+class Metrics:
+    """summary.json's run figures from `NpyFiles` (pass 3): what `RunResult.summary` computes
+    from whole arrays (world/recording.py, world/metrics.py), with the same arithmetic."""
+
+    scenario: Scenario  # the run's: name, faults
+    static: dict[str, np.ndarray]  # the recording's static arrays: ids, role, speed, orbit_radius, target
+    events: list[dict]
+    agents: dict = field(default_factory=dict)
+    switches: int = 0
+    faults: list = field(default_factory=list)
+    sim_time: float = 0.0
+
+    def compute(self, files: NpyFiles) -> None:
+        T = files.rows
+        if T == 0:
+            return
+        ids, roles, speeds, orbit, target = (self.static[k] for k in ("ids", "role", "speed", "orbit_radius", "target"))
+        tmap = np.load(files.path("t"), mmap_mode="r")  # single values and searchsorted: a few pages
+        last = {k: files.read(k, T - 1, T)[0] for k in ("x", "y", "out", "alive")}
+        t0, t_end = tmap[0], tmap[-1]
+        self.sim_time = float(t_end)
+        # agent_metrics: the final graph, each agent's root and expected radius
+        leaders = {int(i) for i, r in zip(ids, roles) if r == "leader"}
+        alive_final = {int(i): bool(last["alive"][k]) for k, i in enumerate(ids)}
+        outs = {
+            int(i): (None if not alive_final[int(i)] or last["out"][k] < 0 else int(last["out"][k]))
+            for k, i in enumerate(ids)
+        }
+        live_leaders = {i for i in leaders if alive_final[i]}
+        col = {int(i): k for k, i in enumerate(ids)}
+        window = max(0.1 * (t_end - t0), tmap[1] - t0 if T > 1 else 0.0)
+        n = len(ids)
+        roots: list[tuple[int | None, int | None]] = []
+        expected: list[float | None] = []
+        for k, i in enumerate(ids):
+            i = int(i)
+            root, hops = root_of(i, outs, live_leaders) if alive_final[i] else (None, None)
+            roots.append((root, hops))
+            expected.append(
+                None
+                if root is None
+                else expected_radius(float(speeds[k]), float(speeds[col[root]]), float(orbit[col[root]]))
+            )
+        # angular_rate's window: rows k0.. (the same searchsorted on the same t)
+        k0 = int(np.searchsorted(tmap, t_end - window))
+        k0 = min(k0, T - 2)
+        ang_from = None if k0 < 0 or T < 2 else k0
+        unwraps = [_Unwrap() for _ in range(n)]
+        last_out = [-1] * n  # settling: last row outside the band
+        settle_t: list[Any] = [None] * n  # t just after it (row last_out + 1)
+        pending = [False] * n
+        final_r: list[Any] = [None] * n
+        switches = _Switches(n)
+        faults = self._faults(tmap) if self.scenario.faults and T > 1 else []
+        rel = _RelativeErrors(ids, roles, speeds, orbit, target) if faults else None
+        keys = ("t", "x", "y", "out", "alive") + (("missed",) if faults else ())
+        for r0, r1, c in _chunks(files, keys):
+            switches.add(r0, c["out"], c["alive"])
+            for k in range(n):
+                if ang_from is not None and r1 > ang_from:
+                    a = max(ang_from - r0, 0)
+                    unwraps[k].add(np.arctan2(c["y"][a:, k] - target[1], c["x"][a:, k] - target[0]))
+                if pending[k]:
+                    settle_t[k], pending[k] = c["t"][0], False
+                R = expected[k]
+                if R is None and r1 < T:  # r: for the settling time, and the final radius (last chunk)
+                    continue
+                r = np.hypot(c["x"][:, k] - target[0], c["y"][:, k] - target[1])
+                final_r[k] = r[-1]
+                if R is not None:
+                    idx = np.flatnonzero(np.abs(r - R) > SETTLING_BAND * R)
+                    if idx.size:
+                        last_out[k] = r0 + int(idx[-1])
+                        if idx[-1] + 1 < len(r):
+                            settle_t[k] = c["t"][idx[-1] + 1]
+                        else:
+                            pending[k] = True
+            if rel is not None and any(f.start < r1 and r0 < f.stop for f in faults):
+                err = rel.rows(c["x"], c["y"], c["out"], c["alive"])
+                for f in faults:
+                    self._fault_rows(f, r0, err, c["missed"])
+        # agent_metrics' dicts, key by key
+        for k, i in enumerate(ids):
+            i = int(i)
+            root, hops = roots[k]
+            R = expected[k]
+            err_k = None if R is None else float(abs(final_r[k] - R))
+            settle = None
+            if R is not None:
+                if last_out[k] == T - 1:
+                    settle = None
+                elif last_out[k] < 0:
+                    settle = float(t0)
+                else:
+                    settle = float(settle_t[k])
+            rate: Any
+            if ang_from is None:
+                rate = math.nan
+            else:
+                rate = float(unwraps[k].span() / (t_end - tmap[ang_from]))
+            self.agents[str(i)] = {
+                "role": str(roles[k]),
+                "out_neighbour": outs[i],
+                "root": root,
+                "hops": hops,
+                "final_radius": float(final_r[k]),
+                "expected_radius": R,
+                "radial_error": err_k,
+                "relative_error": None if err_k is None or R is None else err_k / R,
+                "angular_rate": _finite_or_none(rate),
+                "settling_time": settle,
+                "alive": alive_final[i],
+            }
+            self.agents[str(i)]["switches"] = int(switches.counts[k])
+        self.switches = int(sum(int(c) for c in switches.counts))
+        self.faults = [self._fault_result(f, tmap) for f in faults]
+
+    # metrics.recovery, a window at a time
+    def _faults(self, tmap) -> list[_Fault]:
+        T = len(tmap)
+        dt = float(tmap[1] - tmap[0]) if T > 1 else 1.0
+        specs = [
+            {"index": i, **{k: v for k, v in f.model_dump().items() if v is not None}}
+            for i, f in enumerate(self.scenario.faults)
+        ]
+        starts = sorted(int(round(f["at"] / dt)) for f in specs)
+        out = []
+        for f in specs:
+            k0 = int(round(f["at"] / dt))
+            later = [s for s in starts if s > k0]
+            k1 = min(later[0] if later else T, T)
+            start, stop, _ = slice(k0, k1).indices(T)
+            out.append(_Fault(f, k0, k1, start, max(stop, start)))
+        return out
+
+    @staticmethod
+    def _fault_rows(f: _Fault, r0: int, err: np.ndarray, missed: np.ndarray) -> None:
+        a, b = max(f.start, r0), min(f.stop, r0 + len(err))
+        if a >= b:
+            return
+        window = err[a - r0 : b - r0]
+        with np.errstate(invalid="ignore"):
+            worst_row = np.nanmax(np.where(np.isnan(window), -np.inf, window), axis=1)
+        bad = np.flatnonzero(~(worst_row <= SETTLING_BAND) & np.isfinite(worst_row))
+        if bad.size:
+            f.last_bad = a - f.start + int(bad[-1])
+        if b == f.stop:
+            f.last_no_live = bool(np.all(np.isnan(window), axis=1)[-1])
+        finite = worst_row[np.isfinite(worst_row)]
+        if finite.size:
+            w = float(finite.max())
+            f.worst = w if f.worst is None else max(f.worst, w)
+        f.missed += int(missed[a - r0 : b - r0].sum())
+
+    def _fault_result(self, f: _Fault, tmap) -> dict:
+        T = len(tmap)
+        dt = float(tmap[1] - tmap[0]) if T > 1 else 1.0
+        length = f.stop - f.start
+        if length == 0 or (f.last_bad == length - 1) or f.last_no_live:
+            rec_time = None
+        else:
+            rec_time = float((f.last_bad + 1) * dt) if f.last_bad >= 0 else 0.0
+        return {
+            **f.spec,
+            "tick": f.k0,
+            "window_end_time": float(tmap[f.k1 - 1]) if f.k1 > f.k0 else None,
+            "recovery_time": rec_time,
+            "worst_relative_error": f.worst,
+            "commands_missed": f.missed,
+            "switches": sum(
+                1 for e in self.events if e.get("kind") == EventKind.SWITCH and f.k0 <= e.get("tick", -1) < f.k1
+            ),
+        }
+
+
+class _RelativeErrors:
+    """`metrics.relative_errors`, rows at a time."""
+
+    def __init__(self, ids, roles, speeds, orbit_radius, target) -> None:
+        self.ids, self.speeds, self.orbit, self.target = ids, speeds, orbit_radius, target
+        self.col = {int(i): k for k, i in enumerate(ids)}
+        self.leaders = {int(i) for i, r in zip(ids, roles) if r == "leader"}
+        self.cache: dict[tuple, np.ndarray] = {}
+
+    def radii(self, out_row: np.ndarray, alive_row: np.ndarray) -> np.ndarray:
+        key = (out_row.tobytes(), alive_row.tobytes())
+        R = self.cache.get(key)
+        if R is None:
+            ids, col, N = self.ids, self.col, len(self.ids)
+            live = {int(i) for i, a in zip(ids, alive_row) if a}
+            o = {int(i): (int(j) if j >= 0 else None) for i, j in zip(ids, out_row)}
+            R = np.full(N, np.nan)
+            for i in live:
+                root, _ = root_of(i, o, self.leaders & live)
+                if root is not None:
+                    c = col[root]
+                    R[col[i]] = expected_radius(self.speeds[col[i]], self.speeds[c], self.orbit[c])
+            if len(self.cache) >= CACHE_MAX:
+                self.cache.clear()
+            self.cache[key] = R
+        return R
+
+    def rows(self, x: np.ndarray, y: np.ndarray, out: np.ndarray, alive: np.ndarray) -> np.ndarray:
+        r = np.hypot(x - self.target[0], y - self.target[1])
+        err = np.empty_like(r)
+        for k in range(len(r)):
+            R = self.radii(out[k], alive[k])
+            err[k] = np.abs(r[k] - R) / R
+        return err
+
+
+# ------------------------------------------------------------------ trajectory.npz from the files
+
+
+def write_npz(dest: IO[bytes], static: dict[str, np.ndarray], files: NpyFiles) -> None:
+    """trajectory.npz as `np.savez_compressed(dest, **static, **per_tick)` writes it: the
+    per-tick members copied from their .npy files a block at a time."""
+    with zipfile.ZipFile(dest, mode="w", compression=zipfile.ZIP_DEFLATED, allowZip64=True) as z:
+        for key, val in static.items():
+            with z.open(key + ".npy", "w", force_zip64=True) as fid:
+                np.lib.format.write_array(fid, np.asanyarray(val), allow_pickle=True)
+        for key in PER_TICK:
+            with z.open(key + ".npy", "w", force_zip64=True) as fid, open(files.path(key), "rb") as src:
+                shutil.copyfileobj(src, fid, COPY_BLOCK)
+
+
+@contextmanager
+def streamed(path: Path, work_in: Path, sc: Scan | None = None) -> Iterator[tuple[Scan, NpyFiles]]:
+    """Passes 1 and 2: the recording at `path` scanned (unless `sc` is given) and its per-tick
+    arrays written to .npy files in a temporary directory in `work_in`, removed on leaving.
+    ValueError as `read_recording` raises it; RecordingError when the files cannot be written."""
+    if sc is None:
+        sc = scan(path)
+    try:
+        work = Path(tempfile.mkdtemp(prefix=".results-", dir=work_in))
+    except OSError as e:
+        raise RecordingError(f"cannot write {work_in}: {e.strerror or e}") from None
+    try:
+        try:
+            files = NpyFiles(work, sc.rows, len(sc.scenario.ids))
+        except OSError as e:
+            raise RecordingError(f"cannot write {work}: {e.strerror or e}") from None
+        try:
+            try:
+                fill(path, sc, files)
+            except OSError as e:
+                raise RecordingError(f"cannot write {work}: {e.strerror or e}") from None
+            yield sc, files
+        finally:
+            files.close()
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
