@@ -768,3 +768,34 @@ def test_a_pose_is_carried_forward_from_its_stamp_along_the_last_twist():
     assert predicted((1.0, 2.0, 0.3), (0.4, 0.8), 0.2, 1.0) == step_one(1.0, 2.0, 0.3, 0.4, 0.8, 0.2)
     assert predicted((1.0, 2.0, 0.3), (0.4, 0.8), 5.0, 1.0) == step_one(1.0, 2.0, 0.3, 0.4, 0.8, 1.0)
     assert predicted((1.0, 2.0, 0.3), (0.4, 0.8), -3.0, 1.0) == (1.0, 2.0, 0.3)
+
+
+@pytest.mark.parametrize(
+    ("change", "says"),
+    [
+        (lambda d: d["robots"][1].update(max_linear=math.inf), r"robots\[1\]\.max_linear: Input should be a finite"),
+        (lambda d: d["robots"][0].update(max_angular=math.nan), r"robots\[0\]\.max_angular: Input should be a finite"),
+        (lambda d: d["robots"][1].update(namespace="/tb3_0/"), "agents 1 and 2 share the topic /tb3_0/cmd_vel"),
+        (lambda d: d["robots"][1].update(pose_topic="/tb3_0/odom"), "agents 1 and 2 share the topic /tb3_0/odom"),
+        (lambda d: d["ros2"].update(connect="nonsense"), r"ros2.*connect: not an endpoint: 'nonsense'"),
+        (lambda d: d["ros2"].update(connect="tcp/host:99999"), r"ros2.*connect: not an endpoint"),
+    ],
+    ids=["inf-speed", "nan-turn", "one-namespace", "one-pose-topic", "nonsense-connect", "bad-port"],
+)
+def test_robots_files_that_would_fail_later_are_refused_at_once_naming_the_field(change, says, tmp_path):
+    """Gaps that used to pass the check and fail at run time (a zenoh Json5Err, exit 1; or two
+    agents driving one robot): one message naming the file and the field, exit 2 from the CLI."""
+    import copy
+
+    from conftest import to_toml
+
+    data = copy.deepcopy(ROBOTS)
+    change(data)
+    with pytest.raises(RobotsError, match=says) as e:
+        parse_robots(data, "r.toml")
+    assert str(e.value).startswith("r.toml: invalid robots file") and e.value.exit_code == ExitCode.USAGE
+    path = tmp_path / "r.toml"
+    path.write_text(to_toml(data))
+    res = invoke("robots", "sim", str(TURTLEBOT), "--robots", str(path))
+    assert res.exit_code == ExitCode.USAGE and "Traceback" not in res.output, res.output
+    assert f"{path}: invalid robots file" in res.output

@@ -32,6 +32,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from swarm.contracts.endpoints import EndpointError, check_endpoint
 from swarm.contracts.scenario import Scenario, format_validation_error
 from swarm.contracts.vocabulary import Coded, ExitCode
 
@@ -46,7 +47,7 @@ class RobotsError(Coded):
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)  # max_linear = inf: refused
 
 
 class Ros2Spec(_Strict):
@@ -55,6 +56,14 @@ class Ros2Spec(_Strict):
     distro: Literal["jazzy", "humble"] = "jazzy"
     stale_after: float = Field(default=0.5, gt=0.0, le=60.0, description="s; an older pose stops the robot")
     predict: bool = Field(default=False, description="carry each pose forward from its stamp to the tick")
+
+    @model_validator(mode="after")
+    def _endpoint(self) -> Ros2Spec:
+        try:
+            check_endpoint(self.connect)
+        except EndpointError as e:
+            raise ValueError(f"connect: {e}") from None
+        return self
 
 
 class RobotSpec(_Strict):
@@ -93,10 +102,15 @@ class RobotsFile(_Strict):
     @model_validator(mode="after")
     def _unique(self) -> RobotsFile:
         seen: set[int] = set()
+        topics: dict[str, int] = {}
         for r in self.robots:
             if r.agent in seen:
                 raise ValueError(f"agent {r.agent} has two robots")
             seen.add(r.agent)
+            for topic in (r.topic(r.cmd_topic), r.topic(r.pose_topic_name)):
+                other = topics.setdefault(topic, r.agent)
+                if other != r.agent:  # two agents would drive one robot, or read one pose
+                    raise ValueError(f"agents {other} and {r.agent} share the topic {topic} (one robot each)")
         return self
 
     def robot(self, agent: int) -> RobotSpec | None:
