@@ -5,8 +5,9 @@ then the 16-byte publisher GID behind its length byte (0x10), as zenoh-ext seria
 
 from __future__ import annotations
 
-import hashlib
 import struct
+
+from swarm.ros2.xxh3 import xxh3_128_le
 
 GID_LEN = 16
 SIZE = 8 + 8 + 1 + GID_LEN  # 33
@@ -34,6 +35,8 @@ def parse_attachment(b: bytes) -> tuple[int, int, bytes]:
 
 
 def gid_for(key: str) -> bytes:
-    """A stable 16-byte GID for the entity whose liveliness token is `key` (rmw_zenoh hashes the
-    token too, with XXH3-128; nobody checks a GID against its token)."""
-    return hashlib.blake2b(key.encode(), digest_size=GID_LEN).digest()
+    """The GID of the entity whose liveliness token is `key`, as rmw_zenoh (Jazzy and later) makes
+    it: XXH3-128 of the whole key, its low 64 bits then its high 64 bits, little-endian. `ros2 topic
+    info -v` shows it, and the attachment of every sample carries it: a subscriber that knows a
+    publisher's token can tell its samples from anyone else's."""
+    return xxh3_128_le(key.encode())
