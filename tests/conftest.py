@@ -59,7 +59,7 @@ TIERS = {
         "test_tick_times",
         "test_wire",
     },
-    "seam": {"test_law_api", "test_shells", "test_supervision", "test_world_ticks"},
+    "seam": {"test_freetext", "test_law_api", "test_shells", "test_supervision", "test_world_ticks"},
     "zenoh": {
         "test_credentials",
         "test_tls",

@@ -17,7 +17,14 @@ load is ridden out, and the run stays what `swarm sim` gives.
 
 Fairness: no identity's messages may cost another's (how messages wait: world/fairness.py).
 An agent's join, rejoin and drop events past CHURN_EVENTS (world/roster.py) are counted,
-not written, so one identity's churn cannot grow the run's record without bound.
+not written, so one identity's churn cannot grow the run's record without bound. The same
+for the operator's pause and resume (only the operator and the launcher may query
+world/admin): each takes effect, but their events are written within a budget (ADMIN_RATE a
+second, ADMIN_BURST at once); those beyond it are counted (`over_limit.admin`, one `limit`
+event the first time), and once the budget allows, one event says the clock's state then
+and how many requests it stands for. A run is stopped once: a second stop is answered, not
+recorded. Who asked (`by`) comes bounded and escaped from the wire's decoder
+(swarm/contracts/freetext.py).
 """
 
 from __future__ import annotations
@@ -32,6 +39,7 @@ from typing import Any
 import zenoh
 
 from swarm.contracts import wire
+from swarm.contracts.freetext import Budget
 from swarm.contracts.transport import answer
 from swarm.contracts.vocabulary import AgentState, EventKind
 from swarm.world.engine import LOST, REFUSED
@@ -45,6 +53,9 @@ from swarm.world.state import RunState
 STALL_S = 0.8  # s the world's main thread may go without reaching its inbox (the link lease is 1 s)
 REJOIN_WAIT = 2.0  # s a token lost just after a stall of the world has to come back
 LINK_GRACE = 5.0  # s a token lost in a lockstep run has to come back (`rides_out`)
+
+ADMIN_RATE = 2.0  # pause/resume events written a second, at most (beyond: counted, coalesced)
+ADMIN_BURST = 10  # ... and at most this many at once
 
 ACTIVE = AgentState.ACTIVE
 
@@ -62,6 +73,12 @@ class Inbox:
         self.stall_seen = -1e9  # monotonic s a stall of the world itself was last noticed
         self.disturbed = 0  # stalls of the world and links back: each sends the tick's frames again (lockstep)
         self.lost_after_stall: dict[int, float] = {}  # agent -> monotonic s its drop is due (token held)
+        self.admin_budget = Budget(ADMIN_RATE, ADMIN_BURST)  # pause/resume events written
+        self.admin_clock = time.monotonic  # the budget's clock (a test's own)
+        self.admin_held = 0  # pause/resume requests since the last such event, not written
+        self.admin_by = ""  # who asked the last of those
+        self.paused_written = False  # the clock's state the last pause/resume event wrote
+        self.stop_taken: int | None = None  # the tick a stop was asked at (a second one is not recorded)
 
     def handle(self, item: tuple, pending: set[int] | None) -> None:
         kind = item[0]
@@ -318,17 +335,13 @@ class Inbox:
         st = self.state
         try:
             req = wire.decode_admin(query.payload.to_bytes() if query.payload else b"", wire.ADMIN_CMDS)
-            cmd = req["cmd"]
+            cmd, by = req["cmd"], req["by"]  # by: bounded and escaped (wire.decode_admin)
             if cmd == "stop":
-                self.stop_asked(query, str(req.get("by", "a client")))
+                self.stop_asked(query, by)
                 return
             if (cmd == "pause") != st.paused:
                 st.paused = cmd == "pause"
-                st.event(
-                    EventKind.PAUSE if cmd == "pause" else EventKind.RESUME,
-                    None,
-                    "asked by " + str(req.get("by", "a client")),
-                )
+                self.admin_event(by)
             if st.paused and st.ticking:
                 st.pause_waiters.append(query)  # answered once the tick in progress is done
                 return
@@ -338,11 +351,56 @@ class Inbox:
             reply = wire.encode_admin_reply(False, error=str(e))
         answer(query, wire.world_admin_key(st.cfg.run), reply)
 
+    def admin_event(self, by: str) -> None:
+        """The clock was just paused or resumed (`state.paused`), asked by `by`: its event, if
+        the budget allows; otherwise held back and counted (`over_limit.admin`), and said later
+        by `admin_due` (module docstring)."""
+        self.admin_held += 1
+        self.admin_by = by
+        if self.admin_budget.take(self.admin_clock()):
+            self._write_admin_event(by)
+            return
+        self.state.limited(
+            "admin",
+            f"more than {ADMIN_BURST} pauses and resumes at once or {ADMIN_RATE:g} a second: later ones "
+            "take effect but are counted (over_limit.admin) and written as one event each time the budget allows",
+        )
+
+    def _write_admin_event(self, by: str) -> None:
+        """The clock's state now, as a pause or resume event; when it stands for more than one
+        request (those held back since the last such event), it says how many (`requests`)."""
+        st = self.state
+        n, self.admin_held = self.admin_held, 0
+        self.paused_written = st.paused
+        reason = f"asked by {by}"
+        if n > 1:
+            reason += f" (the last of {n} pause and resume requests since the previous such event)"
+        st.event(EventKind.PAUSE if st.paused else EventKind.RESUME, None, reason, **({"requests": n} if n > 1 else {}))
+
+    def admin_due(self, now: bool = False) -> None:
+        """Pause/resume requests held back (`admin_event`): once the budget allows (`now`: at
+        once, the run is ending), one event with the clock's state then, if it is not the
+        state last written (else they stay only counted)."""
+        if not now and not self.admin_budget.ready(self.admin_clock()):
+            return
+        if self.admin_held and self.state.paused != self.paused_written:
+            self.admin_budget.take(self.admin_clock())
+            self._write_admin_event(self.admin_by)
+        else:
+            self.admin_held = 0
+
     def stop_asked(self, query: Any, by: str) -> None:
         """`swarm stop`: a `stop` event (the launcher of `swarm up` watches for it and ends
         the run as on Ctrl-C), the reply, then SIGINT to this process: the run ends here as
-        on Ctrl-C, its results written (`stopped_by_signal` 2, `completed` false)."""
+        on Ctrl-C, its results written (`stopped_by_signal` 2, `completed` false). A stop
+        asked again meanwhile is answered the same, and neither recorded nor signalled again."""
         st = self.state
+        if self.stop_taken is not None:
+            reply = wire.encode_admin_reply(True, stopping=True, tick=self.stop_taken)
+            answer(query, wire.world_admin_key(st.cfg.run), reply)
+            return
+        self.stop_taken = st.core.tick
+        self.admin_due(now=True)  # the record ends with the clock's state as it was
         st.event(EventKind.STOP, None, f"asked by {by}")
         answer(query, wire.world_admin_key(st.cfg.run), wire.encode_admin_reply(True, stopping=True, tick=st.core.tick))
         os.kill(os.getpid(), signal.SIGINT)  # world/main.py's Stop, on this (the main) thread
@@ -366,6 +424,8 @@ class Inbox:
             self._due_drops(pending)
         if self.reports.exit_reports:
             self.reports.due()
+        if self.admin_held:
+            self.admin_due()
         if item is None:
             return False
         self.handle(item, pending)

@@ -281,6 +281,7 @@ class World:
 
     def finish(self) -> dict[str, Any] | None:
         """Record the final state row and write the results; returns the summary."""
+        self.inbox.admin_due(now=True)  # pauses and resumes held back by their budget (world/inbox.py)
         c = self.core
         if c.tick <= self.ticks and self.engine.rec.rows <= c.tick:
             self.engine.close()

@@ -17,6 +17,7 @@ import typer
 from swarm.api.live import connect as connect_run
 from swarm.cli.options import ConnectOpt, CredentialsOpt, JsonOpt, LiveRunOpt
 from swarm.contracts.errors import NoRunError
+from swarm.contracts.freetext import printable
 from swarm.contracts.vocabulary import ExitCode
 
 
@@ -85,12 +86,12 @@ def _show_logs(run_logs, src: str | None, follow: bool, lines: int | None, ended
     path = run_logs.path(src)
     text, offset = L.tail(path, lines)
     for line in text:
-        _out(line)
+        _out(printable(line, None, keep="\t"))  # a process's own output: no escape sequence reaches the terminal
     if not follow:
         return
     try:
         for line in L.follow(path, offset, ended):
-            _out(line)
+            _out(printable(line, None, keep="\t"))
     except KeyboardInterrupt:
         raise typer.Exit(ExitCode.OK) from None
 

@@ -38,6 +38,7 @@ from typing import NamedTuple
 
 from swarm.contracts.fastpath import compiled as _c
 from swarm.contracts.frames import Contact, SensorFrame
+from swarm.contracts.freetext import BY_CHARS, HOST_CHARS, TEXT_CHARS, printable
 from swarm.contracts.vocabulary import AgentState, Phase
 
 VERSION = 1
@@ -531,6 +532,9 @@ def decode_status(buf: bytes) -> dict:
     obj = decode_json(buf, "status")
     _field(obj, "id", int, "status")
     _field(obj, "role", str, "status")
+    for name, v in obj.items():  # an agent's own words, shown in terminals (`swarm agents`, `kill`)
+        if isinstance(v, str):
+            obj[name] = printable(v, HOST_CHARS if name == "host" else TEXT_CHARS)
     _field(obj, "out", int, "status", optional=True)
     _field(obj, "hops", int, "status", optional=True)
     _field(obj, "rooted", bool, "status")
@@ -546,7 +550,7 @@ def decode_join_request(buf: bytes) -> dict:
     if not 0 <= _field(obj, "id", int, "join request") <= MAX_AGENT_ID:
         raise WireError(f"join request: agent id {obj['id']} out of 0..{MAX_AGENT_ID}")
     _field(obj, "pid", int, "join request")
-    _field(obj, "host", str, "join request")
+    obj["host"] = printable(_field(obj, "host", str, "join request"), HOST_CHARS)  # into events and info
     _field(obj, "spec", dict, "join request", optional=True)
     return obj
 
@@ -635,7 +639,10 @@ def decode_admin(buf: bytes, cmds: tuple[str, ...] = ADMIN_CMDS + SUPERVISE_CMDS
     obj = decode_json(buf, "admin request")
     cmd = obj.get("cmd")
     if cmd not in cmds:
-        raise WireError(f"admin request: unknown cmd {cmd!r} ({', '.join(cmds)})")
+        raise WireError(f"admin request: unknown cmd {printable(cmd, 40)!r} ({', '.join(cmds)})")
+    if cmd in ADMIN_CMDS:  # who asked: free text, into the record and terminals (freetext.py)
+        by = _field(obj, "by", str, f"admin request: {cmd}", optional=True)
+        obj["by"] = "a client" if by is None else printable(by, BY_CHARS)
     if cmd == "fault_done":
         _field(obj, "index", int, "admin request: fault_done")
     elif cmd == "agent_exit":
@@ -651,6 +658,8 @@ def decode_admin(buf: bytes, cmds: tuple[str, ...] = ADMIN_CMDS + SUPERVISE_CMDS
         log = _field(obj, "log", list, what)
         if len(log) > EXIT_LOG_LINES or any(type(x) is not str or len(x) > EXIT_LINE_CHARS for x in log):
             raise WireError(f"{what}: log must be at most {EXIT_LOG_LINES} strings of {EXIT_LINE_CHARS} characters")
+        obj["cause"] = printable(obj["cause"], EXIT_LINE_CHARS)  # an agent's own words: escaped
+        obj["log"] = [printable(x, EXIT_LINE_CHARS, keep="\t") for x in log]
     return obj
 
 

@@ -35,6 +35,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from swarm.contracts import credentials, wire
+from swarm.contracts.freetext import printable
 from swarm.contracts.identities import ENV_SUPERVISOR, SUPERVISOR
 from swarm.contracts.laws import ENV_LAW_PATH, ENV_TRUSTED_LAWS, with_law_path, with_trusted_laws
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV
@@ -257,7 +258,8 @@ class Launcher:
             self.started = True
         elif ev["kind"] == EventKind.STOP and ev.get("agent") is None:
             # `swarm stop` (world/inbox.py): the world stops itself, and this run ends as on Ctrl-C
-            self.operator_stop = str(ev.get("reason", "asked by the operator"))
+            # escaped again here (swarm/contracts/freetext.py): it is printed on this terminal
+            self.operator_stop = printable(ev.get("reason", "asked by the operator"))
             self.stop(signal.SIGINT)
         elif ev["kind"] == EventKind.ADD and isinstance(ev.get("agent"), int):
             self.unknown_added.add(ev["agent"])
