@@ -84,6 +84,7 @@ TIERS = {
         "test_hub_door",
         "test_leader",
         "test_live_cli",
+        "test_live_hostile",
         "test_live_scale",
         "test_messages",
         "test_multihost",

@@ -5,17 +5,27 @@
 - where the world accepts text (swarm/contracts/wire.py): who asked a pause or a stop, an
   agent's host, its status, the log lines of a crash report;
 - the world's admin inbox against a fake session (tests/fakes.py): a flood of pauses and
-  resumes is written within a budget, counted, and the record ends with the clock's state.
+  resumes is written within a budget, counted, and the record ends with the clock's state;
+- the tap (swarm/live/tap.py): numbered streams' missing numbers counted, a backlog past its
+  bound counted, a count left at the end given, the final truth (u NaN) decoded; which
+  agent ids a run cannot have (`presence`).
 """
 
 from __future__ import annotations
+
+import json
+import math
+import queue
 
 import pytest
 from fakes import FakeQuery
 from test_shells import open_world
 
 from swarm.contracts import wire
+from swarm.contracts.errors import LiveError
 from swarm.contracts.freetext import BY_CHARS, HOST_CHARS, Budget, printable
+from swarm.contracts.vocabulary import AgentState
+from swarm.live.tap import Message, Tap, Topic, presence
 from swarm.world.inbox import ADMIN_BURST
 
 EVIL = "\x1b[2J\x1b[H\x1b]0;pwned\x07\nresults: /nonexistent\r\x9b31m\u202eevil\u2028\ud800"
@@ -143,3 +153,120 @@ def test_pauses_and_resumes_within_the_budget_are_each_written():
         _admin(world, "pause" if i % 2 == 0 else "resume", f"op {i}")
     assert [e["reason"] for e in _pause_resume(world)] == [f"asked by op {i}" for i in range(20)]
     assert "admin" not in world.state.over_limit
+
+
+# -- the tap -------------------------------------------------------------------------------------------------
+class _Ref:
+    run = "r1"
+
+
+class _Live:
+    ref = _Ref()
+
+    def gone(self) -> bool:
+        return True
+
+
+def _tap(leaf: str, max_backlog: int = 1 << 20) -> Tap:
+    return Tap(_Live(), Topic(leaf, leaf, None), max_backlog)
+
+
+def _truth(tick: int, seq: int, u: float = 0.5) -> bytes:
+    return wire.encode_truth(
+        tick, tick * 0.01, [1, 2], [0.0, 1.0], [0.0, 1.0], [0.0, 0.0], [u, u], [-1, 1], [AgentState.ACTIVE] * 2, seq
+    )
+
+
+def test_truth_numbers_and_the_final_state_decoded():
+    buf = _truth(7, 65535)
+    assert wire.truth_seq(buf) == 65535 and wire.decode_truth(buf)[0] == 7
+    assert wire.next_seq(65535) == 1 and wire.next_seq(0) == 1 and wire.next_seq(41) == 42
+    assert wire.truth_seq(_truth(7, 0)) == 0
+    with pytest.raises(wire.WireError):
+        _truth(7, 65536)
+    final = _tap("truth").decode("swarm/r1/truth", _truth(100, 3, math.nan))
+    assert final.error is None and [a["u"] for a in final.data["agents"]] == [None, None]
+    assert "u=-" in final.line() and json.loads(final.json())["agents"][0]["u"] is None
+    assert _tap("truth").decode("swarm/r1/truth", _truth(100, 3, math.inf)).error is not None
+
+
+def test_missing_numbers_of_truth_and_events_are_counted():
+    tap = _tap("truth")
+    for seq in (5, 6, 9, 9, 12, 65535, 2):  # 7-8 lost, a repeat, 10-11 lost, ..., 1 lost across the wrap
+        tap.receive("swarm/r1/truth", _truth(seq, seq))
+    got = list(tap.messages())
+    assert [m.dropped for m in got] == [0, 0, 2, 0, 2, 65535 - 12 - 1, 1]
+    assert tap.dropped == sum(m.dropped for m in got)
+    assert json.loads(got[2].json())["dropped"] == 2 and "dropped" not in json.loads(got[1].json())
+    tap = _tap("events")
+    for seq in (1, 2, 4):
+        tap.receive("swarm/r1/events", wire.encode_event({"kind": "join", "tick": seq, "agent": 1, "reason": "x"}, seq))
+    tap.receive("swarm/r1/events", wire.encode_event({"kind": "join", "tick": 9, "agent": 1, "reason": "old"}))
+    assert [m.dropped for m in tap.messages()] == [0, 0, 1, 0]  # unnumbered (an older world): nothing to count
+
+
+def test_a_backlog_past_its_bound_is_counted_and_said():
+    size = len(_truth(1, 1))
+    tap = _tap("truth", max_backlog=3 * size)
+    for seq in range(1, 11):  # nobody reads: 3 held, 7 not
+        tap.receive("swarm/r1/truth", _truth(seq, seq))
+    assert tap.queue.qsize() == 3
+    got = list(tap.messages(count=3))
+    assert [m.dropped for m in got] == [0, 0, 0] and tap.lost == 7
+    tap.receive("swarm/r1/truth", _truth(11, 11))  # the next one held says what was lost before it
+    (m,) = list(tap.messages(count=1))
+    assert m.dropped == 7 and m.data["tick"] == 11
+    for seq in range(12, 20):
+        tap.receive("swarm/r1/truth", _truth(seq, seq))
+    got = list(tap.messages())  # to the end: the last message only counts those lost at the end
+    assert [m.data["tick"] for m in got if m.is_data] == [12, 13, 14]
+    assert not got[-1].is_data and got[-1].dropped == 5 and got[-1].line() == "dropped 5 messages"
+    assert json.loads(got[-1].json()) == {"key": "swarm/r1/truth", "dropped": 5}
+    assert tap.dropped == 12
+
+
+def test_an_unnumbered_stream_counts_only_its_backlog():
+    tap = Tap(_Live(), Topic("agent/3/cmd", "cmd", "3"), 10)
+    buf = wire.encode_cmd(wire.Command(3, 1, 0.5, None, wire.PHASES[0], None, 1))
+    tap.receive("swarm/r1/agent/3/cmd", buf)  # 38 bytes: past a 10-byte backlog
+    assert tap.queue.empty() and tap.lost == 1
+    with pytest.raises(queue.Empty):
+        tap.queue.get_nowait()
+
+
+def test_a_message_line_never_carries_a_control_character():
+    ev = {"tick": 3, "time": 0.03, "agent": None, "kind": "stop", "reason": "asked by \x1b]0;t\x07\nresults: /x"}
+    m = _tap("events").decode("swarm/r1/events", wire.encode_event(ev, 1))
+    assert _raw_controls(m.line()) == [] and "\\x1b]0;t" in m.line()
+    assert _raw_controls(m.json()) == []
+    note = Message("k", "cmd", None, note="waiting\x1b[2J")
+    assert note.line() == "waiting\\x1b[2J" and not note.is_data
+
+
+# -- which agents a run can have ----------------------------------------------------------------------------
+INFO = {"run": "r1", "agents": {"1": {}, "2": {}}, "added_ids": [7, 30], "max_added": 24, "added": 0}
+
+
+@pytest.mark.parametrize("agent", [None, "*", "1", "2"])
+def test_agents_of_the_run_and_every_agent_are_heard(agent):
+    assert presence(INFO, Topic("x", "cmd", agent)) is None
+
+
+def test_an_agent_the_run_may_still_add_is_waited_for():
+    note = presence(INFO, Topic("agent/12/cmd", "cmd", "12"))
+    assert note is not None and "agent 12 is not in run r1 yet" in note and "swarm spawn --id 12" in note
+
+
+@pytest.mark.parametrize(
+    "agent,info,words",
+    [
+        ("99", INFO, "agent 99 is not in run r1 (ids: 1, 2; agents added at run time: 7..30)"),
+        ("3", INFO, "agent 3 is not in run r1 (ids: 1, 2; agents added at run time: 7..30)"),
+        ("12", {**INFO, "added": 24}, "agent 12 is not in run r1 (ids: 1, 2) and cannot be: 24 of 24 agents added"),
+        ("12", {"run": "r1", "agents": {"1": {}}}, "agent 12 is not in run r1 (ids: 1)"),
+    ],
+)
+def test_an_agent_the_run_cannot_have_is_one_line(agent, info, words):
+    with pytest.raises(LiveError) as e:
+        presence(info, Topic(f"agent/{agent}/cmd", "cmd", agent))
+    assert str(e.value) == words and LiveError.exit_code == 1

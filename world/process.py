@@ -82,6 +82,8 @@ class World:
         self.clock = Clock(self.state, self.inbox, self, cfg.deadline or s.run.lockstep_deadline)
         self.stopped_by: int | None = None  # the signal that stopped the run (-1: an error)
         self.truth_sent = 0.0
+        self.truth_seq = 0  # the last truth message's sequence number (wire.next_seq): a tap counts gaps
+        self.event_seq = 0  # the same for events
         self.frames_sent: dict[int, bytes] = {}  # this tick's encoded frames, by agent
         self.session: Any = None  # the zenoh session (`_open`)
 
@@ -165,7 +167,8 @@ class World:
         """Every event, as it happens: to observers over zenoh, and to the log."""
         kind, agent, reason = ev["kind"], ev["agent"], ev["reason"]
         try:
-            self.events_pub.put(wire.encode_event(ev))
+            self.event_seq = wire.next_seq(self.event_seq)
+            self.events_pub.put(wire.encode_event(ev, self.event_seq))
         except Exception:
             pass
         if self.cfg.progress:
@@ -247,10 +250,20 @@ class World:
             return
         c = self.core
         self.truth_sent = now
+        self.truth_seq = wire.next_seq(self.truth_seq)
         try:
             self.truth_pub.put(
                 wire.encode_truth(
-                    c.tick, c.time, c.ids, c.x, c.y, c.heading, u, self.engine.out, cast("list[str]", c.state)
+                    c.tick,
+                    c.time,
+                    c.ids,
+                    c.x,
+                    c.y,
+                    c.heading,
+                    u,
+                    self.engine.out,
+                    cast("list[str]", c.state),
+                    self.truth_seq,
                 )
             )
         except Exception:  # an observer's problem never stops the world

@@ -140,33 +140,48 @@ def echo(
     """Print the messages of one of a live run's streams, decoded, one line each.
 
     KEY is a key of the run without its swarm/<run>/ prefix: the world's ground truth
-    (`truth`, every tick), its events (`events`), its notices (`world/control`), an agent's
-    sensor frames (`agent/3/sense`), its commands (`agent/3/cmd`, without the claim key),
-    its status (`agent/3/status`) or the signals sent to it (`agent/3/ctl`). With --json,
-    one JSON object per line ({"key": ..., then the fields}; docs/reference/cli.md#echo). A
+    (`truth`: a sample, at most one message per 20 ms of wall time, and the final state),
+    its events (`events`), its notices (`world/control`), an agent's sensor frames
+    (`agent/3/sense`), its commands (`agent/3/cmd`, without the claim key), its status
+    (`agent/3/status`) or the signals sent to it (`agent/3/ctl`). With --json, one JSON
+    object per line ({"key": ..., then the fields}; docs/reference/cli.md#echo). A
     malformed message is said in its own line (`malformed message on KEY: ...`, on stderr;
-    {"key", "error"} with --json). Ends (exit 0) when the run ends, after --count
-    messages, or on Ctrl-C.
+    {"key", "error"} with --json). Messages that were lost (the world numbers truth and
+    events; this command holds at most 64 MB it has not printed yet) are counted: a line
+    `dropped N messages` on stderr ("dropped": N in the next JSON object) and the total at
+    the end. An agent the run does not have: one line, exit 1 (one it may still add with
+    `swarm spawn --id`: a line on stderr, and the tap waits). Ends (exit 0) when the run
+    ends, after --count messages, or on Ctrl-C.
 
     Example: swarm echo agent/3/cmd --json
     """
     # lazy: swarm.live.tap is for this command only
-    from swarm.live.tap import parse_topic
+    from swarm.live.tap import dropped_line, parse_topic
 
     parse_topic(key)  # an unknown key: exit 2 before looking for a run
+    dropped = 0
     with connect_run(run, connect, credentials) as live:
         try:
             for m in live.echo(key, count):
-                if as_json:
-                    _out(m.json())
-                elif m.data is None:
+                dropped += m.dropped
+                if m.note is not None:  # the tap's own word, never on stdout
                     typer.echo(m.line(), err=True)
+                elif as_json:
+                    _out(m.json())
                 else:
-                    _out(m.line())
+                    if m.dropped:
+                        typer.echo(dropped_line(m.dropped), err=True)
+                    if m.data is None and m.error is not None:
+                        typer.echo(m.line(), err=True)
+                    elif m.data is not None:
+                        _out(m.line())
         except KeyboardInterrupt:
             raise typer.Exit(ExitCode.OK) from None
         except NoRunError as e:  # the session went with the run: what came was all there was
             typer.echo(f"the world of run {live.run} ended ({e})", err=True)
+        finally:
+            if dropped:
+                typer.echo(f"{dropped_line(dropped)} in all", err=True)
 
 
 def register(app: typer.Typer) -> None:

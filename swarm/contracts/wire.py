@@ -130,8 +130,10 @@ CONTACT = struct.Struct("<idddh")  # id, bearing (rad), heading (rad), range (m)
 # cmd: kind, version, phase code, reserved, agent, tick, u (rad/s), out-neighbour (-1 none),
 #      advertised hops to a leader (-1 none), key (the claim key from the join reply)
 CMD = struct.Struct("<BBBBiqdihQ")
-# truth: kind, version, reserved x2, n agents, tick, time (s); then n agent records.
+# truth: kind, version, sequence number (u16 in bytes 2-3, low byte first; 0: not numbered),
+#        n agents, tick, time (s); then n agent records.
 TRUTH_HEAD = struct.Struct("<BBBBIqd")
+SEQ_MOD = 1 << 16  # truth and events are numbered 1, 2, ... 65535, 1, ... (0: not numbered)
 TRUTH_FIELDS = [
     ("id", "<i4"),
     ("x", "<f8"),
@@ -459,14 +461,30 @@ def decode_cmd(buf: bytes) -> Command:
     return _command((agent, tick, u, None if out < 0 else out, PHASES[phase], None if hops < 0 else hops, key))
 
 
-def encode_truth(tick: int, time: float, ids, x, y, heading, u, out, states: list[str]) -> bytes:
+def next_seq(seq: int) -> int:
+    """The sequence number after `seq` on a numbered stream (truth, events): 1 after 65535
+    (and after 0, not numbered), so that 0 never numbers a message."""
+    return seq % (SEQ_MOD - 1) + 1
+
+
+def encode_truth(tick: int, time: float, ids, x, y, heading, u, out, states: list[str], seq: int = 0) -> bytes:
+    """`seq`: the message's sequence number (`next_seq`; 0: not numbered), so that an observer
+    can count messages that did not reach it (`truth_seq`)."""
     import numpy as np  # lazy: agent processes import wire and never load numpy
 
     recs = np.empty(len(ids), dtype=np.dtype(TRUTH_FIELDS))
     recs["id"], recs["x"], recs["y"], recs["heading"] = ids, x, y, heading
     recs["u"], recs["out"] = u, out
     recs["state"] = [STATES.index(s) for s in states]
-    return TRUTH_HEAD.pack(KIND_TRUTH, VERSION, 0, 0, len(ids), tick, time) + recs.tobytes()
+    if not 0 <= seq < SEQ_MOD:
+        raise WireError(f"truth: sequence number {seq} out of 0..{SEQ_MOD - 1}")
+    return TRUTH_HEAD.pack(KIND_TRUTH, VERSION, seq & 0xFF, seq >> 8, len(ids), tick, time) + recs.tobytes()
+
+
+def truth_seq(buf: bytes) -> int:
+    """A truth message's sequence number (bytes 2-3; 0: not numbered, as by a world before
+    numbering). Not checked: decode_truth checks the message."""
+    return buf[2] | buf[3] << 8 if len(buf) >= 4 else 0
 
 
 def decode_truth(buf: bytes):
@@ -728,13 +746,22 @@ def decode_control(buf: bytes) -> int | FaultNotice:
     return FaultNotice(index, -1 if tick is None else tick, fkind, agent, f)
 
 
-def encode_event(event: dict) -> bytes:
-    """world -> events: one event of the run (as in summary.json)."""
-    return encode_json({"event": event})
+def encode_event(event: dict, seq: int = 0) -> bytes:
+    """world -> events: one event of the run (as in summary.json), with its sequence number
+    (`next_seq`; 0: not numbered) beside it, not in it."""
+    return encode_json({"event": event, **({"seq": seq} if seq else {})})
 
 
 def decode_event(buf: bytes) -> dict:
+    return decode_event_numbered(buf)[0]
+
+
+def decode_event_numbered(buf: bytes) -> tuple[dict, int]:
+    """(the event, its sequence number: 0 when not numbered)."""
     obj = decode_json(buf, "event")
     ev = _field(obj, "event", dict, "event")
     _field(ev, "kind", str, "event")
-    return ev
+    seq = _field(obj, "seq", int, "event", optional=True) or 0
+    if not 0 <= seq < SEQ_MOD:
+        raise WireError(f"event: sequence number {seq} out of 0..{SEQ_MOD - 1}")
+    return ev, seq

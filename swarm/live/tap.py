@@ -8,6 +8,22 @@ names them: `truth`, `events`, `world/control`, `agent/<id>/sense` (an agent's s
 frames), `agent/<id>/cmd` (its commands), `agent/<id>/status`, `agent/<id>/ctl`; `<id>` may
 be `*` for every agent. A name that is none of these is a `UsageError` naming it (exit 2).
 A command's claim key is never shown: it proves who sends, and is nobody's business.
+
+An agent key names an agent of the run: one that the run does not have is a `LiveError`
+(exit 1, as `swarm logs 9` says it), unless the run may still add it (`swarm spawn --id N`:
+an id in the world's `added_ids` range while fewer than `max_added` were added); then the
+tap says once that it waits for that agent (a `Message` with a `note`).
+
+Every message of the stream that reaches this process is given, or counted: the tap holds
+at most MAX_BACKLOG_BYTES of messages not yet taken (a slow reader, a terminal that cannot
+keep up), and counts those it could not hold; the world numbers its `truth` and `events`
+messages (swarm/contracts/wire.py `next_seq`), and the tap counts the numbers missing
+(messages lost on the way, e.g. dropped by zenoh's congestion control). A message says how
+many were lost just before it (`dropped`); a count left at the end comes as a message of its
+own (no data, `dropped` > 0). The other streams are not numbered: what zenoh drops on the
+way there cannot be counted. `truth` is a sample by design: the world publishes it at most
+every 20 ms of wall time (docs/reference/protocol.md#truth-record), so its ticks have gaps
+that are no loss.
 """
 
 from __future__ import annotations
@@ -15,17 +31,21 @@ from __future__ import annotations
 import json
 import math
 import queue
+import threading
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
 from swarm.contracts import wire
-from swarm.contracts.errors import UsageError
+from swarm.contracts.errors import LiveError, UsageError
+from swarm.contracts.freetext import printable
 
 TOPICS = ("truth", "events", "world/control", "agent/ID/sense", "agent/ID/cmd", "agent/ID/status", "agent/ID/ctl")
 AGENT_LEAVES = ("sense", "cmd", "status", "ctl")
 ALIASES = {"control": "world/control", "event": "events"}
 POLL_S = 0.25  # s between looks at whether the run has ended, while no message comes
+MAX_BACKLOG_BYTES = 64 << 20  # messages received but not yet taken, at most (beyond: counted as dropped)
+NUMBERED = ("truth", "events")  # the streams whose messages the world numbers (wire.next_seq)
 
 
 @dataclass(frozen=True)
@@ -70,11 +90,12 @@ def _truth(buf: bytes) -> dict[str, Any]:
         aid, x, y, heading, u, out, state = r
         if state >= len(wire.STATES):
             raise wire.WireError(f"truth: unknown state code {state} of agent {aid}")
-        vals = (x, y, heading, u)
-        if not all(math.isfinite(v) for v in vals):
+        if not all(math.isfinite(v) for v in (x, y, heading)) or math.isinf(u):
             raise wire.WireError(f"truth: non-finite number for agent {aid}")
+        # u is NaN for an agent that is gone, and for every agent in the final state (protocol 4.5)
+        u_ = None if math.isnan(u) else u
         agents.append(
-            {"id": aid, "x": x, "y": y, "heading": heading, "u": u, "out": _opt(out), "state": str(wire.STATES[state])}
+            {"id": aid, "x": x, "y": y, "heading": heading, "u": u_, "out": _opt(out), "state": str(wire.STATES[state])}
         )
     return {"tick": tick, "time": time, "agents": agents}
 
@@ -187,42 +208,129 @@ LINES: dict[str, Callable[[dict], str]] = {
 @dataclass(frozen=True)
 class Message:
     """One message of the tap: its full key, and what it says (`data`), or why it could not
-    be decoded (`error`, a WireError's line; `data` None)."""
+    be decoded (`error`, a WireError's line; `data` None). `dropped`: messages of the stream
+    lost just before this one (module docstring); a message with neither data nor error
+    only says that (`dropped` > 0, at the end) or says a `note` (the tap waits for an agent
+    the run may still add)."""
 
     key: str
     leaf: str
     data: dict[str, Any] | None
     error: str | None = None
+    dropped: int = 0
+    note: str | None = None
+
+    @property
+    def is_data(self) -> bool:
+        """A message of the stream (decoded or malformed), not a count or a note of the tap's."""
+        return self.data is not None or self.error is not None
 
     def line(self) -> str:
-        """One line of text (an agent key's messages carry the agent's id already)."""
+        """One line of text (an agent key's messages carry the agent's id already), control
+        characters escaped (swarm/contracts/freetext.py)."""
+        if self.note is not None:
+            return printable(self.note, None)
+        if self.data is None and self.error is None:
+            return dropped_line(self.dropped)
         if self.data is None:
-            return f"malformed message on {self.key}: {self.error}"
-        return LINES[self.leaf](self.data)
+            return printable(f"malformed message on {self.key}: {self.error}", None)
+        return printable(LINES[self.leaf](self.data), None)
 
     def json(self) -> str:
-        """One JSON object: {"key": ..., **data} (or "error")."""
-        body = {"error": self.error} if self.data is None else self.data
+        """One JSON object: {"key": ..., **data} (or "error"), with "dropped": N when N > 0
+        messages were lost just before it ({"key", "dropped"} alone for a count at the end)."""
+        body: dict[str, Any] = {"note": self.note} if self.note is not None else {}
+        if self.data is not None:
+            body = self.data
+        elif self.error is not None:
+            body = {"error": self.error}
+        if self.dropped:
+            body = {**body, "dropped": self.dropped}
         return json.dumps({"key": self.key, **body}, separators=(",", ":"), allow_nan=False)
+
+
+def dropped_line(n: int) -> str:
+    return f"dropped {n} message{'' if n == 1 else 's'}"
+
+
+def presence(info: dict, topic: Topic) -> str | None:
+    """Whether agent `topic.agent` can be heard in the run whose world info is `info`: None
+    (it is in the run, or the key is not one agent's), a note (not in the run, but the run
+    may still add it: the tap waits), or LiveError (it is not in the run and cannot be)."""
+    if topic.agent is None or topic.agent == "*":
+        return None
+    aid, run, agents = int(topic.agent), info.get("run"), info.get("agents") or {}
+    if str(aid) in agents:
+        return None
+    ids = ", ".join(sorted(agents, key=int)) or "none"
+    span, cap, added = info.get("added_ids"), info.get("max_added"), info.get("added")
+    if isinstance(span, list) and len(span) == 2 and all(type(v) is int for v in span):
+        lo, hi = span
+        if lo <= aid <= hi and type(cap) is int and type(added) is int:
+            if added < cap:
+                return f"agent {aid} is not in run {run} yet: waiting for it (swarm spawn --id {aid} adds it)"
+            raise LiveError(
+                f"agent {aid} is not in run {run} (ids: {ids}) and cannot be: {added} of {cap} agents added"
+            )
+        if lo <= hi:
+            raise LiveError(f"agent {aid} is not in run {run} (ids: {ids}; agents added at run time: {lo}..{hi})")
+    raise LiveError(f"agent {aid} is not in run {run} (ids: {ids})")
 
 
 class Tap:
     """A subscription to `topic` on an open LiveRun (`with Tap(live, topic) as tap:`); its
     messages as they come (`messages`), until the run ends."""
 
-    def __init__(self, live, topic: Topic):
+    def __init__(self, live, topic: Topic, max_backlog: int = MAX_BACKLOG_BYTES):
         self.live = live
         self.topic = topic
         self.key = topic.key(live.ref.run)
-        self.queue: queue.SimpleQueue[tuple[str, bytes]] = queue.SimpleQueue()
+        self.queue: queue.SimpleQueue[tuple[str, bytes, int]] = queue.SimpleQueue()
         self.sub = None
+        self.note: str | None = None  # said first (`presence`)
+        self.max_backlog = max_backlog
+        self.lock = threading.Lock()
+        self.backlog = 0  # bytes received and not yet taken
+        self.lost = 0  # messages lost since the last one queued (not held, or numbers missing)
+        self.dropped = 0  # messages lost in all (those given with a message, or at the end)
+        self.last_seq: dict[str, int] = {}  # key -> the last sequence number received on it
 
     def __enter__(self) -> Tap:
         self.live.watch_end()  # the end notice: the tap ends with the run
+        if self.topic.agent not in (None, "*"):
+            self.note = presence(self.live.info(), self.topic)  # LiveError: an agent the run cannot have
         self.sub = self.live.session.declare_subscriber(
-            self.key, lambda s: self.queue.put((str(s.key_expr), s.payload.to_bytes()))
+            self.key, lambda s: self.receive(str(s.key_expr), s.payload.to_bytes())
         )
         return self
+
+    def receive(self, key: str, payload: bytes) -> None:
+        """A message as it comes (on zenoh's callback thread): queued, with how many were lost
+        just before it; or, past the backlog, counted as lost."""
+        with self.lock:
+            self.lost += self._missing(key, payload)
+            if self.backlog + len(payload) > self.max_backlog:
+                self.lost += 1
+                return
+            self.backlog += len(payload)
+            lost, self.lost = self.lost, 0
+        self.queue.put((key, payload, lost))
+
+    def _missing(self, key: str, payload: bytes) -> int:
+        """Numbers missing before this message's on its key (numbered streams; 0 when either
+        number is unknown, or for a repeat)."""
+        if self.topic.leaf not in NUMBERED:
+            return 0
+        seq = 0
+        try:
+            seq = wire.truth_seq(payload) if self.topic.leaf == "truth" else wire.decode_event_numbered(payload)[1]
+        except wire.WireError:
+            pass  # a malformed one: said when it is decoded
+        if not seq:
+            return 0
+        last = self.last_seq.get(key, 0)
+        self.last_seq[key] = seq
+        return 0 if not last else max((seq - last) % (wire.SEQ_MOD - 1) - 1, 0)
 
     def __exit__(self, *exc) -> None:
         sub, self.sub = self.sub, None
@@ -232,25 +340,38 @@ class Tap:
             except Exception:  # the session went with the run
                 pass
 
-    def decode(self, key: str, payload: bytes) -> Message:
+    def decode(self, key: str, payload: bytes, dropped: int = 0) -> Message:
         try:
-            return Message(key, self.topic.leaf, DECODERS[self.topic.leaf](payload))
+            return Message(key, self.topic.leaf, DECODERS[self.topic.leaf](payload), dropped=dropped)
         except wire.WireError as e:
-            return Message(key, self.topic.leaf, None, str(e))
+            return Message(key, self.topic.leaf, None, str(e), dropped=dropped)
 
     def messages(self, count: int | None = None) -> Iterator[Message]:
         """Each message, decoded, until `count` of them (None: no limit) or the run's end
         (its end notice, or its endpoint refusing connections); the messages that came
-        before the end are all given first."""
+        before the end are all given first, then, if some were lost after the last one, a
+        message that only counts them. First, the tap's `note`, if it has one."""
+        if self.note is not None:
+            yield Message(self.key, self.topic.leaf, None, note=self.note)
         given = 0
         ending = False
         while count is None or given < count:
             try:
-                key, payload = self.queue.get(timeout=POLL_S)
+                key, payload, lost = self.queue.get(timeout=POLL_S)
             except queue.Empty:
                 if ending:
-                    return
+                    break
                 ending = self.live.gone()  # one more round for what is still on its way
                 continue
+            with self.lock:
+                self.backlog -= len(payload)
             given += 1
-            yield self.decode(key, payload)
+            self.dropped += lost
+            yield self.decode(key, payload, lost)
+        else:
+            return  # --count reached: what comes after is not this tap's business
+        with self.lock:
+            lost, self.lost = self.lost, 0
+        if lost:
+            self.dropped += lost
+            yield Message(self.key, self.topic.leaf, None, dropped=lost)
