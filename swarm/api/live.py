@@ -217,7 +217,9 @@ class Live:
         """The messages on `key` of the run (`truth`, `events`, `world/control`,
         `agent/<id>/sense|cmd|status|ctl`; `*` for every agent), decoded, as they come, until
         `count` of them or the run's end: `swarm.live.tap.Message`s (`data`: a dict as
-        `swarm echo --json` prints it; `error` for a malformed one). UsageError for an unknown key."""
+        `swarm echo --json` prints it; `error` for a malformed one; `dropped`: messages lost
+        just before it; a `note` first when the tap waits for an agent the run may still
+        add). UsageError for an unknown key; LiveError for an agent the run cannot have."""
         from swarm.live.tap import parse_topic  # lazy: for a tap only; other live commands start without it
 
         return self._echo(parse_topic(key), count)  # an unknown key: at once, not at the first message
