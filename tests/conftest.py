@@ -96,6 +96,7 @@ TIERS = {
         "test_runtime",
         "test_runtime_faults",
         "test_startup",
+        "test_stop_at_startup",
         "test_study",
         "test_supervision_runtime",
         "test_world_memory",

@@ -52,7 +52,7 @@ BANNER_RE = re.compile(r"^run (\S+)\s+endpoint (\S+)\s+agents", re.M)
 # `swarm up`, tied to this process first (it does not tie itself: it is the one others tie to)
 _BOOT = (
     "import sys; from swarm.contracts.lifeline import tie_to_launcher; tie_to_launcher(); "
-    "sys.argv[0] = 'swarm'; from swarm.cli.main import main; main()"
+    "sys.argv[0] = 'swarm'; from swarm.cli import main; main()"
 )
 _RUNNING: set[UpRun] = set()  # stopped at interpreter exit
 

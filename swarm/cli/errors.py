@@ -25,7 +25,11 @@ from typer._click.exceptions import BadParameter, MissingParameter, NoArgsIsHelp
 from typer.core import TyperCommand, TyperGroup
 
 from swarm.contracts.errors import SwarmError, one_line
+from swarm.contracts.stop_signals import CliStops, Stopped
 from swarm.contracts.vocabulary import Coded, ExitCode
+
+# the `swarm` process's stop handling (set by swarm/cli/__init__.py `main`; None in-process, e.g. under CliRunner)
+cli_stops: CliStops | None = None
 
 # parameters that are endpoints, checked before any command runs: name -> option, listening
 ENDPOINT_PARAMS = {"connect": ("--connect", False), "listen": ("--listen", True), "endpoint": ("--endpoint", False)}
@@ -58,14 +62,22 @@ def mapped(command):
 
     @functools.wraps(command)
     def run(*args, **kwargs):
+        stops = cli_stops
+        if stops is not None:
+            stops.running()  # SIGINT/SIGTERM from here on: Stopped, one line below
         try:
             check_endpoints(kwargs)
             return command(*args, **kwargs)
+        except Stopped as e:  # a stop the command does not end on by itself (swarm/contracts/stop_signals.py)
+            raise fail(stops.line(e.signum) if stops is not None else str(e), 128 + e.signum) from None
         except Exception as e:
             code = exit_code(e)
             if code is None:
                 raise
             raise fail(one_line(e) if isinstance(e, SwarmError) else str(e), code) from None
+        finally:
+            if stops is not None:
+                stops.ending()
 
     return run
 

@@ -38,6 +38,7 @@ from swarm.cli.output import _progress_bar, print_summary, render_run_plots
 from swarm.contracts import credentials as C
 from swarm.contracts.identities import CredentialsError
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV
+from swarm.contracts.stop_signals import signal_name
 from swarm.contracts.transport import default_endpoint
 from swarm.contracts.vocabulary import EventKind, ExitCode
 from swarm.contracts.wire import MAX_AGENT_ID, WireError, check_run_id
@@ -192,6 +193,8 @@ def world(
             plant=plant,
         )
     )
+    if code in (ExitCode.INTERRUPTED, ExitCode.TERMINATED):  # (its results, if it listened, are written)
+        typer.echo(f"swarm world: stopped by {signal_name(code - 128)}", err=True)
     summary = out / "summary.json" if out is not None else None
     # the table `swarm up` prints; not when the launcher runs us (it prints its own, and reads a
     # world's failure from the last line of its log)

@@ -280,10 +280,11 @@ class Launcher:
         session = None
         reaper = Reaper(self.group)  # a child killed from outside (`swarm kill`) is no zombie meanwhile
         try:
-            self.start_world()
-            self.start_starter()  # the fork server imports while the world starts
-            # agents start once the world listens: its own word on the pipe, then our session
-            session = self.connect() if self.wait_ready() else None
+            if self.stop_signal is None:  # (stopped before anything started: nothing to start)
+                self.start_world()
+                self.start_starter()  # the fork server imports while the world starts
+                # agents start once the world listens: its own word on the pipe, then our session
+                session = self.connect() if self.wait_ready() else None
             if session is not None:
                 self.listening = True
                 self._subs = [
@@ -294,6 +295,8 @@ class Launcher:
                     ),
                 ]
                 for a in self.cfg.scenario.agents:
+                    if self.stop_signal is not None:
+                        break  # stopped while the agents start: no more of them
                     self.start_agent(a.id)
             elif not self.failed and self.stop_signal is None and self.world_exit_code() is None:
                 self.failure = (
