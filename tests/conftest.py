@@ -23,6 +23,7 @@ import signal
 from pathlib import Path
 
 import pytest
+from deadlines import DEADLINE, DEFAULT
 
 # Tests Ctrl-C the processes they start (swarm up, watch, graph --watch, study). A shell
 # without job control starts `cmd &` with SIGINT ignored, and an ignored signal stays

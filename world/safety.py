@@ -1,0 +1,420 @@
+"""The safety filter: control barrier functions on the unicycle, one small QP per tick.
+
+Pure maths, no I/O: given every agent's pose, speed, the turn rate its law asked for and
+its limit, `safe_commands` returns the commands closest to the law's that keep every
+barrier's condition, and which barriers were active. The world applies it between the
+commands it latched and the integration (or the robots): world/safety_watch.py.
+docs/design/safety.md says what it promises and what not.
+
+The model. Agent i is a unicycle at position p_i, heading g_i, speed v_i, turn rate u_i.
+Its position's velocity v_i (cos g_i, sin g_i) does not depend on u_i, so a barrier on the
+position has relative degree 2 in u. The standard way round (Robotarium's
+`create_unicycle_barrier_certificate`) is a point `lookahead` l ahead of the agent,
+
+    q_i = p_i + l e_i,   dq_i/dt = v_i e_i + l u_i n_i,   e_i = (cos g_i, sin g_i), n_i = (-sin g_i, cos g_i),
+
+whose velocity is linear in (u_i, v_i). The barriers are distances of those points:
+
+- a pair:  h_ij = |q_i - q_j| - (radius + 2 l)   (>= 0 keeps |p_i - p_j| >= radius);
+- a wall:  h_ik = a_k . q_i - c_k - (radius / 2 + l), the arena being the convex polygon
+  a_k . p >= c_k (unit inward normals a_k): >= 0 keeps p_i radius / 2 inside every wall;
+
+and the condition on each is dh/dt >= -gamma h (gamma in 1/s: a barrier may shrink at most
+at the rate gamma times what is left of it, so it is approached, never crossed, in
+continuous time). Each condition is one linear inequality in the commands:
+
+    pair:  l (d . n_i) u_i - l (d . n_j) u_j + (d . e_i) v_i - (d . e_j) v_j >= -gamma h_ij
+           (d = (q_i - q_j) / |q_i - q_j|)
+    wall:  l (a_k . n_i) u_i + (a_k . e_i) v_i >= -gamma h_ik
+
+The QP: minimise sum (u_i - u_law_i)^2 (+ sum ((v_i - v_i0) / l)^2 when speed may change:
+both terms are then the change of the lookahead point's velocity, in (m/s)^2 / l^2) subject
+to those inequalities, |u_i| <= max_turn_rate_i and, when speed may change, 0 <= v_i <= v_i0.
+Agents that are not controlled (coasting: u = 0) are obstacles with known velocities.
+
+What is solved, and how:
+
+- the law's command is checked first (with numpy, exactly): when it keeps every condition
+  it is returned unchanged, bit for bit, and no QP is solved;
+- a condition that no command within the limits can break is left out (exact: it cannot
+  bind), and the agents are split into groups joined by the conditions left; only the
+  groups with a broken condition are solved, the others keep their law's commands;
+- each group's QP is solved by DAQP (a dual active-set method for small dense QPs:
+  MIT-licensed, exact active set, deterministic, simple bounds native; pyproject.toml says
+  why it and not another) and its answer checked again with numpy;
+- no command within the limits keeps every condition (an "infeasible" group, e.g. two
+  constant-speed agents head on): when speed may change, the group stops (v = 0, u = 0:
+  nothing of it moves closer); when it may not (the paper's agents only turn), the least
+  violating command is applied, from the same QP with a slack per condition weighted
+  SLACK_WEIGHT. Either way the agents are marked infeasible, for the record.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import daqp
+import numpy as np
+
+INF = 1e30  # DAQP's infinity (a bound at or beyond it is no bound)
+SLACK_WEIGHT = 1e6  # infeasible groups: cost of a unit of broken condition, per unit (rad/s)^2 of turn rate
+CHECK_TOL = 1e-9  # m/s: a solved command breaking a condition by more is refused (the solver is checked too)
+CHANGED_TOL = 1e-12  # rad/s and m/s: a solved command this close to the law's counts as unchanged
+
+
+@dataclass(frozen=True)
+class Arena:
+    """A convex polygon as half-planes: p is inside iff normals @ p >= offsets (each row
+    a unit inward normal); wall k runs from vertices[k] to vertices[k + 1]."""
+
+    vertices: tuple[tuple[float, float], ...]
+    normals: np.ndarray = field(repr=False, compare=False)
+    offsets: np.ndarray = field(repr=False, compare=False)
+
+    @classmethod
+    def polygon(cls, points) -> Arena:
+        """A convex polygon from its corners in either order (ValueError otherwise)."""
+        pts = [(float(x), float(y)) for x, y in points]
+        if len(pts) < 3:
+            raise ValueError(f"a polygon needs 3 corners or more, got {len(pts)}")
+        turns = polygon_turns(pts)
+        if not all(t > 0 for t in turns) and not all(t < 0 for t in turns):
+            raise ValueError("the polygon is not convex (or has repeated or collinear corners)")
+        if turns[0] < 0:  # clockwise: walk it the other way
+            pts = pts[::-1]
+        p = np.array(pts)
+        edge = np.roll(p, -1, axis=0) - p
+        normals = np.stack([-edge[:, 1], edge[:, 0]], axis=1) / np.hypot(edge[:, 0], edge[:, 1])[:, None]
+        offsets = np.einsum("ij,ij->i", normals, p)
+        return cls(tuple(pts), normals, offsets)
+
+    @classmethod
+    def rectangle(cls, xmin: float, ymin: float, xmax: float, ymax: float) -> Arena:
+        return cls.polygon([(xmin, ymin), (xmax, ymin), (xmax, ymax), (xmin, ymax)])
+
+    def depth(self, x, y) -> np.ndarray:
+        """(..., K) signed distance of each point inside each wall (negative: outside it)."""
+        return (
+            np.asarray(x)[..., None] * self.normals[:, 0] + np.asarray(y)[..., None] * self.normals[:, 1] - self.offsets
+        )
+
+    def inside(self, x, y) -> np.ndarray:
+        return np.asarray((self.depth(x, y) >= 0.0).all(axis=-1))
+
+
+def polygon_turns(pts) -> list[float]:
+    """The cross product of each pair of consecutive edges (all > 0: convex, counter-clockwise)."""
+    n = len(pts)
+    out = []
+    for k in range(n):
+        (x0, y0), (x1, y1), (x2, y2) = pts[k - 1], pts[k], pts[(k + 1) % n]
+        out.append((x1 - x0) * (y2 - y1) - (y1 - y0) * (x2 - x1))
+    return out
+
+
+@dataclass(frozen=True)
+class Barriers:
+    """The filter's parameters (a scenario's [safety] table, swarm/contracts/scenario_tables.py)."""
+
+    radius: float  # m: the least distance between two agents' positions
+    lookahead: float  # m: l, the point ahead of each agent the barriers are on
+    gamma: float  # 1/s: dh/dt >= -gamma h
+    arena: Arena | None = None
+    speed: bool = False  # may the filter change speeds (slow down, stop): robots that allow it
+
+    @property
+    def pair_distance(self) -> float:
+        """m: the least distance between two lookahead points."""
+        return self.radius + 2.0 * self.lookahead
+
+    @property
+    def wall_margin(self) -> float:
+        """m: the least distance of a lookahead point inside a wall."""
+        return 0.5 * self.radius + self.lookahead
+
+
+@dataclass
+class Conditions:
+    """The barrier conditions of one state as rows: cu @ u + cv @ v >= rhs.
+
+    kind[r] is "agent" (a pair: a = i, b = j) or "wall" (agent a, wall b); h[r] the
+    barrier's value (m)."""
+
+    kind: list[str]
+    a: np.ndarray
+    b: np.ndarray
+    h: np.ndarray
+    cu: np.ndarray  # (R, N)
+    cv: np.ndarray  # (R, N)
+    rhs: np.ndarray  # (R,)
+
+    def slack(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(R,) how far each condition holds with commands (u, v) (negative: broken)."""
+        return self.cu @ u + self.cv @ v - self.rhs
+
+
+def conditions(bar: Barriers, x, y, g, present: np.ndarray) -> Conditions:
+    """Every barrier condition between present agents (pairs i < j) and of each present
+    agent with each wall. x, y, g: (N,) poses (m, m, rad)."""
+    x, y, g = (np.asarray(a, dtype=float) for a in (x, y, g))
+    n = len(x)
+    la = bar.lookahead
+    c, s = np.cos(g), np.sin(g)
+    qx, qy = x + la * c, y + la * s
+    idx = np.flatnonzero(present)
+    ii, jj = np.triu_indices(len(idx), 1)
+    i, j = idx[ii], idx[jj]
+    dx, dy = qx[i] - qx[j], qy[i] - qy[j]
+    dist = np.hypot(dx, dy)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ux, uy = np.where(dist > 0, dx / dist, 1.0), np.where(dist > 0, dy / dist, 0.0)
+    h_pair = dist - bar.pair_distance
+    rows_p = len(i)
+    kinds = ["agent"] * rows_p
+    a_idx, b_idx, h = [i], [j], [h_pair]
+    if bar.arena is not None:
+        K = len(bar.arena.offsets)
+        wa = np.repeat(idx, K)
+        wk = np.tile(np.arange(K), len(idx))
+        depth = bar.arena.depth(qx[idx], qy[idx]).reshape(-1)
+        kinds += ["wall"] * len(wa)
+        a_idx.append(wa)
+        b_idx.append(wk)
+        h.append(depth - bar.wall_margin)
+    a_all, b_all, h_all = np.concatenate(a_idx), np.concatenate(b_idx), np.concatenate(h)
+    R = len(h_all)
+    cu, cv = np.zeros((R, n)), np.zeros((R, n))
+    r = np.arange(rows_p)
+    cu[r, i] = la * (-ux * s[i] + uy * c[i])
+    cu[r, j] = -la * (-ux * s[j] + uy * c[j])
+    cv[r, i] = ux * c[i] + uy * s[i]
+    cv[r, j] = -(ux * c[j] + uy * s[j])
+    if R > rows_p:
+        assert bar.arena is not None
+        w = np.arange(rows_p, R)
+        ax, ay = bar.arena.normals[b_all[rows_p:], 0], bar.arena.normals[b_all[rows_p:], 1]
+        k = a_all[rows_p:]
+        cu[w, k] = la * (-ax * s[k] + ay * c[k])
+        cv[w, k] = ax * c[k] + ay * s[k]
+    return Conditions(kinds, a_all, b_all, h_all, cu, cv, -bar.gamma * h_all)
+
+
+@dataclass
+class Filtered:
+    """What the filter did this tick: the commands to apply, per agent whether they differ
+    from the law's (`changed`) and whether no safe command existed (`infeasible`), and the
+    conditions that bound the answer (`active`: rows of `cond`)."""
+
+    u: np.ndarray
+    v: np.ndarray
+    changed: np.ndarray
+    infeasible: np.ndarray
+    cond: Conditions | None = None
+    active: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    solves: int = 0  # QPs solved (0: the law's commands were safe)
+
+    def reasons(self, k: int) -> list[str]:
+        """What bound agent k's command: "agent <column>" / "wall <k>" per active condition."""
+        if self.cond is None:
+            return []
+        c = self.cond
+        out = []
+        for r in self.active.tolist():
+            if c.kind[r] == "agent" and k in (c.a[r], c.b[r]):
+                out.append(("agent", int(c.b[r] if c.a[r] == k else c.a[r])))
+            elif c.kind[r] == "wall" and c.a[r] == k:
+                out.append(("wall", int(c.b[r])))
+        return [f"{kind} {other}" for kind, other in out]
+
+
+def safe_commands(
+    bar: Barriers,
+    x,
+    y,
+    g,
+    v0,
+    u_law,
+    u_max,
+    present: np.ndarray,
+    controlled: np.ndarray | None = None,
+) -> Filtered:
+    """The commands closest to the law's that keep every barrier's condition.
+
+    x, y, g, v0, u_law, u_max: (N,) poses, speeds (m/s), the law's turn rates (rad/s;
+    within their limits) and the limits (rad/s; inf: none). present: (N,) agents in the
+    world (the others are ignored); controlled: (N,) those whose commands may change (the
+    others, e.g. coasting, keep theirs and are obstacles; default: every present one).
+    Agents not present keep their (u_law, v0)."""
+    u_law = np.asarray(u_law, dtype=float)
+    v0 = np.asarray(v0, dtype=float)
+    n = len(u_law)
+    present = np.asarray(present, dtype=bool)
+    ctl = present.copy() if controlled is None else np.asarray(controlled, dtype=bool) & present
+    u, v = u_law.copy(), v0.copy()
+    none = np.zeros(n, dtype=bool)
+    if present.sum() == 0:
+        return Filtered(u, v, none, none.copy())
+    cond = conditions(bar, x, y, g, present)
+    # u_law of an agent not present may be NaN: it has no condition, so it counts as zero
+    u_in, v_in = np.where(present, u_law, 0.0), np.where(present, v0, 0.0)
+    slack = cond.slack(u_in, v_in)
+    broken = slack < 0.0
+    if not broken.any():
+        return Filtered(u, v, none, none.copy(), cond)
+    u_max = np.asarray(u_max, dtype=float)
+    # drop conditions that no command within the limits can break: their least left side
+    # over the box of commands still meets the right side
+    umax_c = np.where(ctl, u_max, 0.0)
+    with np.errstate(invalid="ignore"):  # 0 x inf, in the branch not taken
+        lo_u = np.where(cond.cu[:, ctl] != 0.0, -np.abs(cond.cu[:, ctl]) * umax_c[ctl], 0.0).sum(axis=1)
+    fixed_u = cond.cu[:, ~ctl] @ u_in[~ctl]
+    if bar.speed:
+        lo_v = np.minimum(0.0, cond.cv[:, ctl] * v_in[ctl]).sum(axis=1)
+        fixed_v = cond.cv[:, ~ctl] @ v_in[~ctl]
+    else:
+        lo_v = cond.cv @ v_in
+        fixed_v = 0.0
+    with np.errstate(invalid="ignore"):
+        may_bind = ~(lo_u + fixed_u + lo_v + fixed_v >= cond.rhs)
+    rows = np.flatnonzero(may_bind | broken)
+    groups = _groups(cond, rows, ctl, n)
+    changed, infeasible = none.copy(), none.copy()
+    active: list[int] = []
+    solves = 0
+    for members, grows in groups:
+        if not broken[grows].any():
+            continue
+        solves += 1
+        gu, gv, ok, act = _solve(bar, cond, grows, members, ctl, u_in, v_in, umax_c)
+        if not ok:
+            infeasible[members] = True
+        u[members], v[members] = gu, gv
+        active.extend(act)
+    changed = ctl & ((np.abs(u - u_law) > CHANGED_TOL) | (np.abs(v - v0) > CHANGED_TOL) | infeasible)
+    return Filtered(u, v, changed, infeasible, cond, np.array(sorted(active), dtype=np.int64), solves)
+
+
+def _groups(cond: Conditions, rows: np.ndarray, ctl: np.ndarray, n: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The controlled agents joined by the conditions `rows` (union-find), each group with
+    its conditions: [(agent columns, condition rows)]."""
+    parent = list(range(n))
+
+    def find(k: int) -> int:
+        while parent[k] != k:
+            parent[k] = parent[parent[k]]
+            k = parent[k]
+        return k
+
+    ctl_l = ctl.tolist()
+    for r in rows.tolist():
+        a = int(cond.a[r])
+        if cond.kind[r] == "agent":
+            b = int(cond.b[r])
+            if ctl_l[a] and ctl_l[b]:
+                ra, rb = find(a), find(b)
+                if ra != rb:
+                    parent[max(ra, rb)] = min(ra, rb)
+    by_root: dict[int, list[int]] = {}
+    for r in rows.tolist():
+        a = int(cond.a[r])
+        k = a if ctl_l[a] else (int(cond.b[r]) if cond.kind[r] == "agent" and ctl_l[int(cond.b[r])] else -1)
+        if k >= 0:  # a condition on no controlled agent cannot be helped: left to the record
+            by_root.setdefault(find(k), []).append(r)
+    out = []
+    for root in sorted(by_root):
+        members = np.array(sorted({k for k in range(n) if ctl_l[k] and find(k) == root}), dtype=np.int64)
+        out.append((members, np.array(by_root[root], dtype=np.int64)))
+    return out
+
+
+def _solve(bar: Barriers, cond: Conditions, rows, members, ctl, u_in, v_in, umax_c):
+    """One group's QP: (u, v) of its members, whether they keep every condition, and the
+    active rows. Falls back to the stop (speed may change) or the least violating command."""
+    m = len(members)
+    others = np.ones(len(u_in), dtype=bool)
+    others[members] = False
+    cu, cv = cond.cu[rows], cond.cv[rows]
+    rhs = cond.rhs[rows] - cu[:, others] @ u_in[others] - cv[:, others] @ v_in[others]
+    A_u = cu[:, members]
+    ud, vd, um = u_in[members], v_in[members], umax_c[members]
+    l2 = bar.lookahead**2
+    if bar.speed:
+        A = np.hstack([A_u, cv[:, members]])
+        H = np.diag(np.concatenate([np.full(m, 2.0), np.full(m, 2.0 / l2)]))
+        z0 = np.concatenate([ud, vd])
+        lo = np.concatenate([-um, np.zeros(m)])
+        hi = np.concatenate([um, vd])
+        b = rhs
+    else:
+        A = A_u
+        H = 2.0 * np.eye(m)
+        z0 = ud
+        lo, hi = -um, um
+        b = rhs - cv[:, members] @ vd
+    lo, hi = np.maximum(lo, -INF), np.minimum(hi, INF)
+    z, flag = _qp(H, z0, A, b, lo, hi)
+    nz = len(z0)
+    if flag == 1 and np.all(A @ z - b >= -CHECK_TOL) and np.all(z >= lo - CHECK_TOL) and np.all(z <= hi + CHECK_TOL):
+        z = np.clip(z, lo, hi)
+        act = rows[np.abs(A @ z - b) <= 1e-6 * (1.0 + np.abs(b))]
+        return z[:m], (z[m:] if bar.speed else vd.copy()), True, act.tolist()
+    if bar.speed:  # no safe command: stop (nothing of the group moves closer)
+        return np.zeros(m), np.zeros(m), False, rows.tolist()
+    # the least violating turn rates: a slack per condition, dearly paid
+    R = len(b)
+    H2 = np.zeros((nz + R, nz + R))
+    H2[:nz, :nz] = H
+    H2[nz:, nz:] = 2.0 * SLACK_WEIGHT * np.eye(R)
+    A2 = np.hstack([A, np.eye(R)])
+    z2, flag2 = _qp(
+        H2,
+        np.concatenate([z0, np.zeros(R)]),
+        A2,
+        b,
+        np.concatenate([lo, np.full(R, -INF)]),
+        np.concatenate([hi, np.full(R, INF)]),
+    )
+    gu = np.clip(z2[:m], -um, um) if flag2 == 1 else np.clip(ud, -um, um)
+    return gu, vd.copy(), False, rows.tolist()
+
+
+def _qp(H, z0, A, b, lo, hi) -> tuple[np.ndarray, int]:
+    """min 1/2 z'Hz - (H z0)'z s.t. A z >= b, lo <= z <= hi, by DAQP: (z, exit flag; 1 = optimal)."""
+    nz = len(z0)
+    bupper = np.concatenate([hi, np.full(len(b), INF)])
+    blower = np.concatenate([lo, b])
+    sense = np.zeros(nz + len(b), dtype=np.int32)
+    try:
+        z, _, flag, _ = daqp.solve(
+            np.ascontiguousarray(H, dtype=float),
+            np.ascontiguousarray(-(H @ z0), dtype=float),
+            np.ascontiguousarray(A, dtype=float),
+            np.ascontiguousarray(bupper, dtype=float),
+            np.ascontiguousarray(blower, dtype=float),
+            sense,
+            primal_tol=1e-12,
+        )
+    except Exception:  # a solver that fails is a solver that found nothing
+        return np.asarray(z0, dtype=float).copy(), -99
+    z = np.asarray(z, dtype=float)
+    if z.shape != (nz,) or not np.all(np.isfinite(z)):
+        return np.asarray(z0, dtype=float).copy(), -99
+    return z, int(flag)
+
+
+def distances(x, y, present: np.ndarray) -> np.ndarray:
+    """Distances (m) between every pair of present agents (i < j), as a flat array."""
+    idx = np.flatnonzero(present)
+    ii, jj = np.triu_indices(len(idx), 1)
+    i, j = idx[ii], idx[jj]
+    return np.hypot(np.asarray(x)[i] - np.asarray(x)[j], np.asarray(y)[i] - np.asarray(y)[j])
+
+
+def pairs(present: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The (i, j) columns of `distances`."""
+    idx = np.flatnonzero(present)
+    ii, jj = np.triu_indices(len(idx), 1)
+    return idx[ii], idx[jj]
+
+
+__all__ = ["Arena", "Barriers", "Conditions", "Filtered", "conditions", "distances", "pairs", "safe_commands"]
