@@ -106,10 +106,29 @@ TIERS = {
 TIER_OF = {module: tier for tier, modules in TIERS.items() for module in modules}
 
 
+def per_test_limit(config, item) -> float | None:
+    """pytest-timeout's limit for `item` (its marker's, else --timeout / pyproject's), scaled as
+    SWARM_TEST_DEADLINE scales the waits (tests/deadlines.py): the default deadline (120 s)
+    leaves the limits as they are; None when there is none."""
+    marker = item.get_closest_marker("timeout")
+    base = marker.args[0] if marker is not None and marker.args else marker.kwargs.get("timeout") if marker else None
+    if base is None:
+        try:
+            base = config.getoption("timeout") or config.getini("timeout")
+        except ValueError:  # (pytest-timeout not installed)
+            return None
+    return float(base) * DEADLINE / DEFAULT if base else None
+
+
 def pytest_collection_modifyitems(config, items):
-    """Mark every test with its tier; a test file missing from TIERS is an error (say its tier)."""
+    """Mark every test with its tier; a test file missing from TIERS is an error (say its tier).
+    With SWARM_TEST_DEADLINE set, every test's time limit grows with it (`per_test_limit`)."""
     missing = set()
     for item in items:
+        if DEADLINE != DEFAULT:
+            limit = per_test_limit(config, item)
+            if limit is not None:
+                item.add_marker(pytest.mark.timeout(limit), append=False)
         module = item.path.stem
         tier = "process" if "rt" in getattr(item, "fixturenames", ()) else TIER_OF.get(module)
         if tier is None:

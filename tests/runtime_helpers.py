@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 import psutil
 import pytest
+from deadlines import DEADLINE
 from typer.testing import CliRunner
 
 from swarm.cli.main import app
@@ -116,7 +117,7 @@ class Tracked:
                 f"{self.name} (pid {self.pid}) exited ({self.poll()}) while waiting for {what}:\n{self.text()[-3000:]}"
             )
 
-    def wait(self, timeout: float) -> int:
+    def wait(self, timeout: float = DEADLINE) -> int:
         try:
             return self.popen.wait(timeout)
         except subprocess.TimeoutExpired:
@@ -215,7 +216,7 @@ class ProcessTracker:
                 out[aid] = s.pid
         return out
 
-    def wait_agent_pids(self, root: Tracked, n: int, timeout: float = 10.0) -> dict[int, int]:
+    def wait_agent_pids(self, root: Tracked, n: int, timeout: float = DEADLINE) -> dict[int, int]:
         """{agent id: pid} once `n` agent processes run under `root`."""
 
         def found():
@@ -249,7 +250,9 @@ class ProcessTracker:
             seen = list(self.seen.values())
         return [f"pid {s.pid}: {' '.join(s.cmdline[:6])}" for s in seen if self._is_alive(s)]
 
-    def assert_none_left(self, timeout: float = 10.0) -> None:
+    def assert_none_left(self, timeout: float = DEADLINE) -> None:
+        """Fail if a process this tracker started or saw is still alive `timeout` s from now
+        (what is exiting is waited for: on a loaded machine that takes its time)."""
         left: list[str] = []
 
         def none_left() -> bool:
@@ -259,10 +262,12 @@ class ProcessTracker:
         if not wait_until(none_left, timeout, 0.02):
             raise AssertionError("processes left alive:\n  " + "\n  ".join(left))
 
-    def close(self) -> list[str]:
+    def close(self, wait: float = 0.0) -> list[str]:
         """Stop watching; kill what is left (only our groups and recorded descendants).
 
-        Returns what was still alive before killing it.
+        Returns what was still alive `wait` s after the observers closed (processes that are
+        exiting are given that long: on a loaded machine an exit takes its time), before
+        killing it.
         """
         for close in self.closing:
             try:
@@ -271,6 +276,7 @@ class ProcessTracker:
                 pass
         self._stop.set()
         self._thread.join(timeout=2)
+        wait_until(lambda: not self.living(), wait, 0.05)
         left = self.living()
         for r in self.roots:
             try:
@@ -286,7 +292,7 @@ class ProcessTracker:
                 except (ProcessLookupError, PermissionError):
                     pass
         for r in self.roots:
-            r.group.reap(timeout=10)
+            r.group.reap(timeout=DEADLINE)
         return left
 
 
@@ -310,9 +316,9 @@ class Runtime:
         self.env = make_env(self.dir)
         self.tracker = ProcessTracker(self.env, log_dir, cwd=cwd or log_dir)
 
-    def close(self) -> list[str]:
+    def close(self, wait: float = 0.0) -> list[str]:
         try:
-            return self.tracker.close()
+            return self.tracker.close(wait)
         finally:
             shutil.rmtree(self.dir, ignore_errors=True)
 
@@ -320,7 +326,9 @@ class Runtime:
         return self
 
     def __exit__(self, exc_type, *_) -> None:
-        left = self.close()
+        # After a passing test, what is still exiting gets DEADLINE s to go (a real leftover
+        # stays, and fails the test then); after a failing one, everything is killed at once.
+        left = self.close(DEADLINE if exc_type is None else 0.0)
         if exc_type is None:
             assert not left, "processes left alive after the test (now killed):\n  " + "\n  ".join(left)
 
@@ -345,7 +353,11 @@ def open_hub(rt: Runtime) -> None:
 
 
 def open_session(
-    endpoint: str, timeout: float = 15.0, check: Callable[[], None] | None = None, creds=None, user: str = "operator"
+    endpoint: str,
+    timeout: float = DEADLINE,
+    check: Callable[[], None] | None = None,
+    creds=None,
+    user: str = "operator",
 ):
     """A zenoh client session of this test process on `endpoint` (as `user` with `creds`;
     without, a stranger, which only an open hub lets in), retried until it listens.
@@ -381,7 +393,7 @@ class Observer:
         self,
         endpoint: str,
         run: str,
-        timeout: float = 30.0,
+        timeout: float = DEADLINE,
         check: Callable[[], None] | None = None,
         runtime_dir: str | None = None,
     ):
@@ -430,7 +442,9 @@ class Observer:
         self.live.__exit__(None, None, None)
 
 
-def observe_world(tracker: ProcessTracker, world: Tracked, endpoint: str, run: str, timeout: float = 30.0) -> Observer:
+def observe_world(
+    tracker: ProcessTracker, world: Tracked, endpoint: str, run: str, timeout: float = DEADLINE
+) -> Observer:
     """An observer of a world started by hand, once it listens (failing if the world exits
     first); the tracker closes it."""
     obs = Observer(
@@ -464,7 +478,7 @@ class UpRun:
 
     def banner(self) -> tuple[str, str]:
         """(run id, endpoint) printed by the launcher."""
-        m = wait_for(lambda: BANNER_RE.search(self.launcher.text()), 15, "the launcher's banner")
+        m = wait_for(lambda: BANNER_RE.search(self.launcher.text()), DEADLINE, "the launcher's banner")
         return m[1], m[2]
 
     def progress_tick(self) -> int:
@@ -479,7 +493,7 @@ class UpRun:
                 f"{self.launcher.text()[-3000:]}\n{self.world_text()[-3000:]}"
             )
 
-    def observe(self, timeout: float = 60.0) -> Observer:
+    def observe(self, timeout: float = DEADLINE) -> Observer:
         """The observer of this run (opened once the world listens; the tracker closes it)."""
         if self.observer is None:
             run, endpoint = self.banner()
@@ -501,7 +515,7 @@ class UpRun:
         """The world's info once `cond(info)` holds; fails at once if the launcher exits."""
         return self.observe().wait(cond, timeout, what, check=lambda: self.running(what))
 
-    def wait_started(self, timeout: float = 30.0) -> dict:
+    def wait_started(self, timeout: float = DEADLINE) -> dict:
         """Until the run has started (every agent joined; the world's info says so)."""
         info = self.wait_info(has_started, timeout, "the run to start (every agent joined)")
         self.tracker.poll_once()
@@ -510,11 +524,11 @@ class UpRun:
     def summary(self) -> dict:
         return json.loads((self.out / "summary.json").read_text())
 
-    def results(self, timeout: float) -> tuple[dict, dict[str, np.ndarray]]:
+    def results(self, timeout: float = DEADLINE) -> tuple[dict, dict[str, np.ndarray]]:
         """(summary, trajectory) once the run has ended by itself (exit 0) leaving no process."""
         rc = self.launcher.wait(timeout)
         assert rc == ExitCode.OK, self.launcher.text()[-3000:] + self.world_text()[-3000:]
-        self.tracker.assert_none_left(timeout=10)
+        self.tracker.assert_none_left()
         return self.summary(), self.trajectory()
 
     def trajectory(self) -> dict[str, np.ndarray]:
@@ -532,9 +546,9 @@ def start_ticking(
     """A lockstep `swarm up` of `scenario` for `duration` s, once every agent process is known
     and the world ticks: (the run, agent pids by id, the world's info at that moment)."""
     up = start_up(tracker, scenario, out, "--duration", str(duration), "--clock", "lockstep")
-    up.wait_started(60)
+    up.wait_started()
     pids = tracker.wait_agent_pids(up.launcher, len(load_scenario(scenario).agents))
-    info = up.wait_info(lambda i: i["tick"] > 0, 30, "the run to tick")
+    info = up.wait_info(lambda i: i["tick"] > 0, DEADLINE, "the run to tick")
     return up, pids, info
 
 
@@ -588,7 +602,7 @@ def load_trajectory(out: Path) -> dict[str, np.ndarray]:
         return {k: z[k] for k in z.files}
 
 
-def run_sim(tracker: ProcessTracker, scenario: Path | str, out: Path, *extra, timeout: float = 120.0):
+def run_sim(tracker: ProcessTracker, scenario: Path | str, out: Path, *extra, timeout: float = DEADLINE):
     """`swarm sim` as a process; returns (trajectory arrays, summary)."""
     p = tracker.spawn(swarm_cmd("sim", scenario, "--out", out, "--no-plots", *extra), f"sim-{Path(out).name}")
     rc = p.wait(timeout)
@@ -672,7 +686,7 @@ def check_time_column(traj: dict, ticks: int, dt: float) -> None:
 
 
 @contextmanager
-def live_swarm(base: Path, scenario: Path | str, n: int, *up_args, timeout: float = 40.0):
+def live_swarm(base: Path, scenario: Path | str, n: int, *up_args, timeout: float = DEADLINE):
     """`swarm up` of `scenario` (`n` agents, realtime) in a private runtime dir under `base`,
     once `swarm runs` shows all `n` live: yields a dict with run, endpoint, runtime dir, the
     up run, the tracker and `extra_pids` ((pid, create time) of agents a test starts outside
@@ -701,10 +715,10 @@ def live_swarm(base: Path, scenario: Path | str, n: int, *up_args, timeout: floa
         finally:
             if up.launcher.poll() is None:
                 os.kill(up.launcher.pid, signal.SIGINT)
-            code = up.launcher.wait(60)
+            code = up.launcher.wait(DEADLINE)
             # Agents started by `swarm spawn` are not the launcher's: they leave on their own when
             # the world ends (its "end" notice, or its token gone); give them a deadline to.
-            wait_until(lambda: not (rt.tracker.living() or still_running(state["extra_pids"])), 10, 0.05)
+            wait_until(lambda: not (rt.tracker.living() or still_running(state["extra_pids"])), DEADLINE, 0.05)
             left = rt.close()  # kills only our groups / recorded descendants, removes the runtime dir
             strays = still_running(state["extra_pids"])
             for proc in strays:

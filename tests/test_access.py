@@ -19,6 +19,7 @@ import time
 import psutil
 import pytest
 import zenoh
+from deadlines import DEADLINE
 from runtime_helpers import SCENARIOS, Runtime, UpRun, open_session, run_credentials, swarm_cmd, wait_for
 
 from swarm.contracts import credentials, wire
@@ -51,7 +52,7 @@ def run(tmp_path_factory):
             rt.tracker,
         )
         run_id, endpoint = up.banner()
-        up.wait_started(60)
+        up.wait_started(DEADLINE)
         pids = rt.tracker.wait_agent_pids(up.launcher, 6)
         creds = run_credentials(endpoint, run_id)
         operator = open_session(endpoint, creds=creds)
@@ -71,8 +72,8 @@ def run(tmp_path_factory):
             insider.close()
             operator.close()
             os.kill(up.launcher.pid, signal.SIGINT)
-            assert up.launcher.wait(60) == ExitCode.INTERRUPTED
-            rt.tracker.assert_none_left(timeout=15)
+            assert up.launcher.wait(DEADLINE) == ExitCode.INTERRUPTED
+            rt.tracker.assert_none_left(timeout=DEADLINE)
 
 
 def info(r) -> dict:
@@ -123,7 +124,7 @@ def test_another_local_user_reaches_nothing(run):
         user=NOBODY,
         capture_output=True,
         text=True,
-        timeout=30,
+        timeout=DEADLINE,
     )
     assert r.returncode == ExitCode.OK, r.stderr
     assert json.loads(r.stdout) == {"list": "PermissionError", "read": "PermissionError", "connect": "PermissionError"}
@@ -161,7 +162,7 @@ def test_insider_reads_nothing_but_its_own(run):
     own = []
     sub = run["insider"].declare_subscriber(wire.agent_key(run["run"], INSIDER, "sense"), lambda s: own.append(1))
     try:
-        wait_for(lambda: own, 5, "the insider's own frames (allowed)")
+        wait_for(lambda: own, DEADLINE, "the insider's own frames (allowed)")
     finally:
         sub.undeclare()
 

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from deadlines import DEADLINE
 
 import swarm
 from swarm.contracts.scenario import ScenarioError, load_scenario, parse_scenario
@@ -246,7 +247,7 @@ class Descendants:
                 pass
         return out
 
-    def assert_none_left(self, timeout: float = 10.0) -> None:
+    def assert_none_left(self, timeout: float = DEADLINE) -> None:
         """Nothing seen is alive within `timeout` s (a run that was seen whole: world + 6 agents)."""
         from swarm.runtime.procs import wait_until
 

@@ -12,6 +12,7 @@ import threading
 
 import psutil
 import pytest
+from deadlines import DEADLINE
 from test_api import SCENARIOS, TICK_KEYS, Descendants, private_runtime, same_arrays  # noqa: F401 (a fixture)
 
 import swarm
@@ -142,7 +143,7 @@ def test_launch_off_the_main_thread_leaves_the_signal_handlers_alone(tmp_path):
         daemon=True,
     )
     worker.start()
-    assert wait_until(lambda: handle, 30, 0.05)
+    assert wait_until(lambda: handle, DEADLINE, 0.05)
     assert wait_until(lambda: (tmp_path / "up" / "recording.mcap").exists() and len(seen.seen) >= 7, 120, 0.1)
     assert {s: signal.getsignal(s) for s in handlers} == handlers
     handle[0].stop()  # SIGTERM

@@ -13,6 +13,7 @@ import subprocess
 import sys
 
 import pytest
+from deadlines import DEADLINE
 from runtime_helpers import SCENARIOS, live_swarm, short_runtime_dir, swarm_cmd
 from typer.testing import CliRunner
 
@@ -121,7 +122,7 @@ def test_a_live_command_process_imports_only_its_group(empty_runtime):
         [sys.executable, "-c", code],
         capture_output=True,
         text=True,
-        timeout=30,
+        timeout=DEADLINE,
         env={**os.environ, "SWARM_RUNTIME_DIR": empty_runtime},
     )
     assert "no swarm is running" in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
@@ -202,6 +203,6 @@ def test_commands_exit_with_the_api_errors_codes(live):
         (["spawn", "--id", "3", "--x", "1"], 2, "only apply to a new id"),
         (["kill", "3", "--signal", "HUP"], 2, "use one of KILL"),
     ):
-        p = subprocess.run(swarm_cmd(*args), capture_output=True, text=True, timeout=30, stdin=subprocess.DEVNULL)
+        p = subprocess.run(swarm_cmd(*args), capture_output=True, text=True, timeout=DEADLINE, stdin=subprocess.DEVNULL)
         assert p.returncode == code and what in p.stderr, (args, p.returncode, p.stderr)
         assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr, p.stderr

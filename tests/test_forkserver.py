@@ -19,6 +19,7 @@ import time
 
 import psutil
 import pytest
+from deadlines import DEADLINE
 from runtime_helpers import SCENARIOS, events_of, start_up
 
 from swarm.agents.forkserver import REPARENT_WAIT, reparented
@@ -38,7 +39,7 @@ def _server():
 def test_a_bad_request_is_an_error_reply_and_the_end_of_stdin_ends_the_server():
     p = _server()
     try:
-        out, err = p.communicate(b'{"argv": ["1"]}\nnot json\n', timeout=30)
+        out, err = p.communicate(b'{"argv": ["1"]}\nnot json\n', timeout=DEADLINE)
     finally:
         p.kill() if p.poll() is None else None
     replies = [json.loads(line) for line in out.splitlines()]
@@ -58,7 +59,7 @@ def test_forked_reads_the_exit_code_once_from_two_threads():
     f = _child(7, sleep=0.2)
     assert f.poll() is None
     seen = []
-    threads = [threading.Thread(target=lambda: seen.append(f.wait(5))) for _ in range(2)]
+    threads = [threading.Thread(target=lambda: seen.append(f.wait(DEADLINE))) for _ in range(2)]
     for t in threads:
         t.start()
     for t in threads:
@@ -71,7 +72,7 @@ def test_forked_kill_is_a_negative_code_and_a_timeout_raises():
     with pytest.raises(subprocess.TimeoutExpired):
         f.wait(0.05)
     f.kill()
-    assert f.wait(5) == -signal.SIGKILL
+    assert f.wait(DEADLINE) == -signal.SIGKILL
     f.kill()  # already reaped: nothing to signal, no error
 
 
@@ -108,7 +109,7 @@ def test_agents_are_forked_and_a_dead_fork_server_falls_back_to_exec(rt, tmp_pat
     scenario.write_text((SCENARIOS / "case2.toml").read_text() + FAULTS)
     # realtime, so that the server is dead well before the scripted restart (t = 5 s of wall time)
     up = start_up(rt.tracker, scenario, tmp_path / "run", "--clock", "realtime", "--duration", "6")
-    up.wait_started(60)
+    up.wait_started(DEADLINE)
     pids = rt.tracker.wait_agent_pids(up.launcher, 6)
     for aid, pid in pids.items():
         proc = psutil.Process(pid)

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
+from deadlines import DEADLINE
 from typer.testing import CliRunner
 
 from swarm.cli.main import app, foxglove_argv
@@ -140,7 +141,7 @@ SUBPROTOCOLS = ("foxglove.sdk.v1", "foxglove.websocket.v1")
 
 
 class WsClient:
-    def __init__(self, port: int, subprotocols=SUBPROTOCOLS, timeout: float = 10.0):
+    def __init__(self, port: int, subprotocols=SUBPROTOCOLS, timeout: float = DEADLINE):
         self.sock = socket.create_connection(("127.0.0.1", port), timeout=timeout)
         key = base64.b64encode(os.urandom(16)).decode()
         self.sock.sendall(
@@ -248,7 +249,7 @@ def test_up_serves_the_run_live(rt, tmp_path):
         ws = connect(port, 60, lambda: up.running("the live view"))
     except BaseException:
         os.kill(up.launcher.pid, signal.SIGINT)
-        up.launcher.wait(60)
+        up.launcher.wait(DEADLINE)
         raise
     try:
         channels = {}
@@ -266,7 +267,7 @@ def test_up_serves_the_run_live(rt, tmp_path):
         ids = {a.id for a in load_scenario(CASE2).agents}
         seen: set[int] = set()
         got_scene = False
-        end = time.monotonic() + 60
+        end = time.monotonic() + DEADLINE
         while not (seen == ids and got_scene):
             assert time.monotonic() < end, f"poses seen of {sorted(seen)} only; scene: {got_scene}"
             msg = ws.recv()
@@ -283,7 +284,7 @@ def test_up_serves_the_run_live(rt, tmp_path):
     finally:
         ws.close()
         os.kill(up.launcher.pid, signal.SIGINT)
-    assert up.launcher.wait(60) == ExitCode.INTERRUPTED
+    assert up.launcher.wait(DEADLINE) == ExitCode.INTERRUPTED
     assert f"ws://127.0.0.1:{port}" in up.launcher.text()
     assert (tmp_path / "run" / "summary.json").exists()
 
@@ -316,10 +317,10 @@ def test_up_port_in_use_stops_at_once(rt, tmp_path):
     held, port = busy_port()
     try:
         up = start_up(rt.tracker, CASE2, tmp_path / "run", "--foxglove", port)
-        rc = up.launcher.wait(30)
+        rc = up.launcher.wait(DEADLINE)
     finally:
         held.close()
-    rt.tracker.assert_none_left(timeout=10)
+    rt.tracker.assert_none_left(timeout=DEADLINE)
     lines = up.launcher.text().strip().splitlines()
     assert rc == 2 and lines == [f"--foxglove: cannot serve on 127.0.0.1:{port}: Address already in use"], lines
 
@@ -332,11 +333,11 @@ def test_watch_serves_a_live_run(rt, tmp_path):
     from runtime_helpers import start_up, swarm_cmd
 
     up = start_up(rt.tracker, CASE2, tmp_path / "run", "--clock", "realtime", "--duration", "120")
-    up.wait_started(60)
+    up.wait_started(DEADLINE)
     held, busy = busy_port()
     try:
         refused = rt.tracker.spawn(swarm_cmd("watch", "--foxglove", busy), "watch-busy")
-        assert refused.wait(30) == ExitCode.USAGE
+        assert refused.wait(DEADLINE) == ExitCode.USAGE
     finally:
         held.close()
     assert refused.text().strip().splitlines() == [
@@ -367,7 +368,7 @@ def test_watch_serves_a_live_run(rt, tmp_path):
         seen: set[int] = set()
         got_scene = False
         stream = messages(ws, subs)
-        end = time.monotonic() + 30
+        end = time.monotonic() + DEADLINE
         while not (seen == ids and got_scene):
             assert time.monotonic() < end, f"poses seen of {sorted(seen)} only; scene: {got_scene}"
             topic, doc = next(stream)
@@ -379,9 +380,9 @@ def test_watch_serves_a_live_run(rt, tmp_path):
                 }
             got_scene = got_scene or (topic == "/swarm/scene" and len(doc) > 0)
         victim = 3
-        kill = rt.tracker.spawn(swarm_cmd("kill", victim), "kill")
-        assert kill.wait(30) == ExitCode.OK, kill.text()
-        end = time.monotonic() + 20
+        kill = rt.tracker.spawn(swarm_cmd("kill", victim, "--timeout", DEADLINE), "kill")
+        assert kill.wait(DEADLINE) == ExitCode.OK, kill.text()
+        end = time.monotonic() + DEADLINE
         dropped = dead = False
         while not (dropped and dead):
             assert time.monotonic() < end, f"after `swarm kill {victim}`: drop event {dropped}, shown dead {dead}"
@@ -393,15 +394,15 @@ def test_watch_serves_a_live_run(rt, tmp_path):
     finally:
         ws.close()
         os.kill(watcher.pid, signal.SIGINT)
-    assert watcher.wait(30) == ExitCode.INTERRUPTED, watcher.text()
+    assert watcher.wait(DEADLINE) == ExitCode.INTERRUPTED, watcher.text()
     assert watcher.text().strip().splitlines()[-1] == "stopped (Ctrl-C); the live view is closed", watcher.text()
     assert up.launcher.poll() is None  # the run goes on without its watcher
     os.kill(up.launcher.pid, signal.SIGINT)
-    assert up.launcher.wait(60) == ExitCode.INTERRUPTED
-    assert stays.wait(30) == ExitCode.OK, stays.text()  # the other watcher saw the run end
+    assert up.launcher.wait(DEADLINE) == ExitCode.INTERRUPTED
+    assert stays.wait(DEADLINE) == ExitCode.OK, stays.text()  # the other watcher saw the run end
     lines = stays.text().strip().splitlines()
     assert lines[0].startswith(f"run {up.banner()[0]}: live view: ws://127.0.0.1:{other}"), lines
     assert len(lines) == 2 and re.fullmatch(
         rf"run {up.banner()[0]} ended at tick \d+; the live view is closed", lines[1]
     ), lines
-    rt.tracker.assert_none_left(timeout=10)
+    rt.tracker.assert_none_left(timeout=DEADLINE)

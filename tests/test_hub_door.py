@@ -16,6 +16,7 @@ import threading
 from contextlib import contextmanager
 
 import pytest
+from deadlines import DEADLINE
 from runtime_helpers import REPO, SCENARIOS, live_swarm, swarm_cmd
 
 from swarm.contracts import credentials
@@ -65,7 +66,7 @@ def idle_crowd(port: int, n: int):
     t = threading.Thread(target=hold, daemon=True)
     t.start()
     try:
-        assert opened.wait(60), f"could not open {n} connections to port {port}"
+        assert opened.wait(DEADLINE), f"could not open {n} connections to port {port}"
         yield
     finally:
         stop.set()
@@ -79,7 +80,7 @@ def test_idle_connections_do_not_lock_the_run_out(tmp_path_factory):
     port = free_port()
     base = tmp_path_factory.mktemp("door")
     with live_swarm(
-        base, SCENARIOS / "case2.toml", 6, "--duration", "600", "--listen", f"tcp/127.0.0.1:{port}", timeout=60
+        base, SCENARIOS / "case2.toml", 6, "--duration", "600", "--listen", f"tcp/127.0.0.1:{port}", timeout=DEADLINE
     ) as state:
         env = {**os.environ, "SWARM_RUNTIME_DIR": str(state["runtime"])}
         for k in ("SWARM_RUN", "SWARM_CONNECT", "SWARM_CREDENTIALS"):
@@ -94,7 +95,7 @@ def test_idle_connections_do_not_lock_the_run_out(tmp_path_factory):
                     cwd=REPO,
                     capture_output=True,
                     text=True,
-                    timeout=60,
+                    timeout=DEADLINE,
                 )
                 assert res.returncode == ExitCode.OK, (
                     f"swarm agents {' '.join(extra)} exited {res.returncode}: {res.stderr}"

@@ -13,6 +13,7 @@ from pathlib import Path
 import cc_reference
 import numpy as np
 import pytest
+from deadlines import DEADLINE
 
 from swarm.agents.cc_plan import (
     CCPath,
@@ -351,7 +352,7 @@ def test_plan_cc_port_bit_exact_without_avx512_numpy():
 def test_importing_the_leader_does_not_load_numpy():
     """Leader processes stay as light as followers: swarm.agents.leader is numpy-free."""
     code = "import sys, swarm.agents.leader; sys.exit('numpy' in sys.modules)"
-    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT)
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=DEADLINE, cwd=ROOT)
     assert p.returncode == 0, p.stderr[-2000:] or "swarm.agents.leader imported numpy"
 
 

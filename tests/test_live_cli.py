@@ -29,6 +29,7 @@ import time
 
 import psutil
 import pytest
+from deadlines import DEADLINE
 from runtime_helpers import (
     SCENARIOS,
     live_swarm,
@@ -496,7 +497,7 @@ def test_pause_and_resume(live):
     )
     with LiveRun(RunRef(live["run"], live["endpoint"], run_credentials(live["endpoint"], live["run"]))) as lv:
         t0 = lv.info()["tick"]
-        wait_for(lambda: lv.info()["tick"] > t0 + 5, 3, "ticks after resume")
+        wait_for(lambda: lv.info()["tick"] > t0 + 5, DEADLINE, "ticks after resume")
         assert not lv.info()["paused"]
 
 
@@ -509,12 +510,12 @@ def test_kill_and_spawn(live):
     def watched():
         return [json.loads(ln) for ln in watcher.text().splitlines() if ln.startswith("{")]
 
-    wait_for(lambda: watched() and watched()[0]["dead"] == [], 10, "the first graph from graph --watch", 0.05)
+    wait_for(lambda: watched() and watched()[0]["dead"] == [], DEADLINE, "the first graph from graph --watch", 0.05)
 
     before = {r["id"]: r for r in _json("agents", "--json")["agents"]}
     old_pid = before[3]["pid"]
     t0 = time.monotonic()
-    res = invoke("kill", "3")
+    res = invoke("kill", "3", "--timeout", DEADLINE)
     assert res.exit_code == 0, res.output
     assert f"SIGKILL to agent 3 (pid {old_pid}" in res.stdout and "agent 3 dropped at tick" in res.stdout
 
@@ -522,10 +523,10 @@ def test_kill_and_spawn(live):
         rows = {r["id"]: r for r in _json("agents", "--json")["agents"]}
         return rows if not rows[3]["alive"] else None
 
-    rows = wait_for(dropped, 30.0, "swarm agents to show agent 3 dropped", interval=0.02)
+    rows = wait_for(dropped, DEADLINE, "swarm agents to show agent 3 dropped", interval=0.02)
     assert rows[3]["state"] == "gone" and rows[3]["out"] is None and not rows[3]["answered"]
     # the launcher reaps its child: no zombie left behind by `swarm kill`
-    wait_for(lambda: reaped(old_pid), 30.0, "the launcher to reap the killed agent", interval=0.02)
+    wait_for(lambda: reaped(old_pid), DEADLINE, "the launcher to reap the killed agent", interval=0.02)
     print(f"\n[timing] agent 3 killed and reaped {time.monotonic() - t0:.3f} s after `swarm kill` started")
     g = _json("graph", "--json")
     assert 3 not in g["nodes"] and g["dead"] == [3]
@@ -542,8 +543,8 @@ def test_kill_and_spawn(live):
         assert r.exit_code == code and what in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.output
 
     # bring it back as a real, detached process
-    sp = tr.spawn(swarm_cmd("spawn", "--id", "3"), "spawn-3")
-    assert sp.wait(20) == 0, sp.text()
+    sp = tr.spawn(swarm_cmd("spawn", "--id", "3", "--timeout", DEADLINE), "spawn-3")
+    assert sp.wait(DEADLINE) == 0, sp.text()
     m = re.search(r"agent 3 is live: pid (\d+)", sp.text())
     assert m, sp.text()
     new_pid = int(m[1])
@@ -569,13 +570,13 @@ def test_kill_and_spawn(live):
         g = _json("graph", "--json")
         return g if any(i == 3 for i, _ in g["edges"]) else None
 
-    g = wait_for(chosen, 30, "agent 3 to choose an out-neighbour again", 0.05)
+    g = wait_for(chosen, DEADLINE, "agent 3 to choose an out-neighbour again", 0.05)
     assert g["nodes"] == [1, 2, 3, 4, 5, 6] and 3 not in g["unrooted"] and g["cycles"] == []
 
     # graph --watch saw 3 go and come back, then stops on SIGINT (Ctrl-C) with exit 0
     wait_for(
         lambda: any(d["dead"] == [3] for d in watched()) and watched()[-1]["dead"] == [],
-        5,
+        DEADLINE,
         "graph --watch to print the graph without and with agent 3",
         0.05,
     )
@@ -584,7 +585,7 @@ def test_kill_and_spawn(live):
     assert all(3 not in e for e in gone["edges"]) and 3 not in gone["nodes"]
     assert all(set(d) == set(docs[0]) for d in docs)
     os.kill(watcher.pid, signal.SIGINT)
-    assert watcher.wait(5) == 0, watcher.text()[-2000:]
+    assert watcher.wait(DEADLINE) == 0, watcher.text()[-2000:]
     assert "Traceback" not in watcher.text()
 
 
@@ -592,18 +593,18 @@ def test_kill_and_spawn(live):
 def test_kill_stopped_and_remote(live, monkeypatch):
     tr = live["tracker"]
     # SIGSTOP: the world drops the frozen agent once its link lease (~1 s) runs out
-    res = invoke("kill", "4", "--signal", "STOP")
+    res = invoke("kill", "4", "--signal", "STOP", "--timeout", DEADLINE)
     assert res.exit_code == 0 and "SIGSTOP to agent 4" in res.stdout and "dropped at tick" in res.stdout, res.output
     rows = {r["id"]: r for r in _json("agents", "--json")["agents"]}
     assert not rows[4]["alive"] and not rows[4]["answered"]
     stopped = rows[4]["pid"]
     assert psutil.Process(stopped).status() == psutil.STATUS_STOPPED
     # a dropped agent whose process still exists can still be killed
-    res = invoke("kill", "4")
+    res = invoke("kill", "4", "--timeout", DEADLINE)
     assert res.exit_code == 0 and f"SIGKILL to agent 4 (pid {stopped}" in res.stdout, res.output
-    wait_for(lambda: reaped(stopped), 1.0, "the launcher to reap the stopped agent it killed")
-    sp = tr.spawn(swarm_cmd("spawn", "--id", "4"), "spawn-4")
-    assert sp.wait(20) == 0, sp.text()
+    wait_for(lambda: reaped(stopped), DEADLINE, "the launcher to reap the stopped agent it killed")
+    sp = tr.spawn(swarm_cmd("spawn", "--id", "4", "--timeout", DEADLINE), "spawn-4")
+    assert sp.wait(DEADLINE) == 0, sp.text()
     pid4 = int(re.search(r"pid (\d+)", sp.text())[1])
     live["extra_pids"].append((pid4, psutil.Process(pid4).create_time()))
 
@@ -614,12 +615,12 @@ def test_kill_stopped_and_remote(live, monkeypatch):
     res = invoke("kill", "5", "--signal", "CONT")
     assert res.exit_code == 1 and "cannot be delivered over zenoh" in res.stderr, res.output
     pid5 = {r["id"]: r for r in _json("agents", "--json")["agents"]}[5]["pid"]
-    res = invoke("kill", "5", "--signal", "TERM")
+    res = invoke("kill", "5", "--signal", "TERM", "--timeout", DEADLINE)
     assert res.exit_code == 0 and "over zenoh" in res.stdout and "dropped at tick" in res.stdout, res.output
-    wait_for(lambda: reaped(pid5), 3, "agent 5 to exit on its own SIGTERM (and be reaped)")
+    wait_for(lambda: reaped(pid5), DEADLINE, "agent 5 to exit on its own SIGTERM (and be reaped)")
     monkeypatch.undo()
-    sp = tr.spawn(swarm_cmd("spawn", "--id", "5"), "spawn-5")
-    assert sp.wait(20) == 0, sp.text()
+    sp = tr.spawn(swarm_cmd("spawn", "--id", "5", "--timeout", DEADLINE), "spawn-5")
+    assert sp.wait(DEADLINE) == 0, sp.text()
     pid5 = int(re.search(r"pid (\d+)", sp.text())[1])
     live["extra_pids"].append((pid5, psutil.Process(pid5).create_time()))
     rows = {r["id"]: r for r in _json("agents", "--json")["agents"]}
@@ -701,7 +702,7 @@ def test_environment_picks_one_of_two_runs(live, tmp_path, capsys):
             world.check_running("it to listen")
             or any(d["run"] == two for d in json.loads(invoke("runs", "--json").stdout or "[]"))
         ),
-        30,
+        DEADLINE,
         "the second run's world to answer",
         interval=0.1,
     )
@@ -727,16 +728,16 @@ def test_environment_picks_one_of_two_runs(live, tmp_path, capsys):
             text = invoke(cmd, "--help").stdout
             assert "SWARM_RUN" in text and "SWARM_CONNECT" in text, cmd
         watcher = tr.spawn(swarm_cmd("graph", "--watch", "--json"), "graph-watch-two", env={**tr.env, "SWARM_RUN": two})
-        wait_for(lambda: '"run": "' + two + '"' in watcher.text(), 15, "graph --watch of the second run")
-        wait_for(lambda: json.loads(env(SWARM_RUN=two).stdout)["time"] > 0.5, 20, "the second run to tick")
+        wait_for(lambda: '"run": "' + two + '"' in watcher.text(), DEADLINE, "graph --watch of the second run")
+        wait_for(lambda: json.loads(env(SWARM_RUN=two).stdout)["time"] > 0.5, DEADLINE, "the second run to tick")
     finally:
         t_int = time.monotonic()
         os.kill(world.pid, signal.SIGINT)
-    assert world.wait(30) == 130, world.text()[-3000:]
+    assert world.wait(DEADLINE) == 130, world.text()[-3000:]
     t_world = time.monotonic() - t_int
     # a world that is gone is seen at once (its end notice, its socket refusing), not after the
     # patience for a loaded one (ENDED_SILENT_S)
-    assert watcher.wait(5) == 0, watcher.text()[-2000:]
+    assert watcher.wait(DEADLINE) == 0, watcher.text()[-2000:]
     with capsys.disabled():
         print(
             f"\n[timing] SIGINT to the world: it exited after {t_world:.2f} s, graph --watch by "
@@ -744,7 +745,7 @@ def test_environment_picks_one_of_two_runs(live, tmp_path, capsys):
         )
     assert f"the world of run {two} ended" in watcher.text()
     for a in agents:
-        assert a.wait(10) in (0, 4), a.text()[-2000:]
+        assert a.wait(DEADLINE) in (0, 4), a.text()[-2000:]
     # `swarm world` prints the same table as `swarm up` (swarm.cli.run.print_summary, one function)
     from swarm.cli.output import print_summary
 
@@ -783,12 +784,12 @@ def test_agent_before_its_world(live, tmp_path):
         "agent-refused",
     )
     t0 = time.monotonic()
-    assert early.wait(30) == 6, early.text()
+    assert early.wait(DEADLINE) == 6, early.text()
     print(f"\n[timing] an agent with no world to join exited 6 after {time.monotonic() - t0:.1f} s")
     out = early.text().strip().splitlines()
     assert len(out) == 1 and "no world at" in out[0] and "later.sock" in out[0] and "for 2 s" in out[0], out
     tcp = early.text()
-    assert refused.wait(15) == 6 and len(refused.text().strip().splitlines()) == 1, refused.text()
+    assert refused.wait(DEADLINE) == 6 and len(refused.text().strip().splitlines()) == 1, refused.text()
     # a listener that never answers zenoh's handshake: the agent waits in its connection
     import socket
 
@@ -806,7 +807,7 @@ def test_agent_before_its_world(live, tmp_path):
         time.sleep(0.3)
         assert hang.poll() is None, hang.text()
         os.kill(hang.pid, signal.SIGTERM)
-        assert hang.wait(60) == 143, hang.text()  # a stop during zenoh.open waits for the open to return
+        assert hang.wait(DEADLINE) == 143, hang.text()  # a stop during zenoh.open waits for the open to return
     finally:
         lsn.close()
     text = hang.text().strip()
@@ -883,7 +884,7 @@ def test_watch_renders_in_a_terminal(live):
     finally:
         if p.poll() is None:
             p.kill()
-        p.wait(5)
+        p.wait(DEADLINE)
         os.close(master)
 
 
@@ -901,7 +902,7 @@ def test_a_stalled_world_is_not_an_ended_one(live):
     def ticks() -> list[int]:
         return [int(m) for m in re.findall(r"tick (\d+)/\d+", wt.text())]
 
-    wait_for(lambda: gw.text().startswith("{") and ticks(), 20, "graph --watch and watch to show the run", 0.05)
+    wait_for(lambda: gw.text().startswith("{") and ticks(), DEADLINE, "graph --watch and watch to show the run", 0.05)
     os.kill(wpid, signal.SIGSTOP)
     try:
         time.sleep(1.6)
@@ -909,7 +910,7 @@ def test_a_stalled_world_is_not_an_ended_one(live):
     finally:
         os.kill(wpid, signal.SIGCONT)
     t0 = time.monotonic()
-    wait_for(lambda: max(ticks()) > stalled_at + 10, 15, "swarm watch to show the run ticking again", 0.05)
+    wait_for(lambda: max(ticks()) > stalled_at + 10, DEADLINE, "swarm watch to show the run ticking again", 0.05)
     print(f"\n[timing] swarm watch showed new ticks {time.monotonic() - t0:.2f} s after the world went on")
     time.sleep(1.0)
     for p in (gw, wt):
@@ -917,7 +918,7 @@ def test_a_stalled_world_is_not_an_ended_one(live):
         assert "ended" not in p.text(), p.text()[-2000:]
     for p in (gw, wt):
         os.kill(p.pid, signal.SIGINT)
-        assert p.wait(5) == 0, p.text()[-2000:]
+        assert p.wait(DEADLINE) == 0, p.text()[-2000:]
         assert "Traceback" not in p.text()
 
 
@@ -951,19 +952,19 @@ def test_a_world_that_stops_answering_is_not_an_ended_one(live, tmp_path):
     env = {**tr.env, "SWARM_RUN": run}
     wait_for(
         lambda: world.check_running("it to listen") or invoke("runs", "--json", "--run", run).exit_code == 0,
-        30,
+        DEADLINE,
         "the world to answer",
         interval=0.1,
     )
     gw = tr.spawn(swarm_cmd("graph", "--watch", "--json"), "graph-watch-silent", env=env)
     wt = tr.spawn(swarm_cmd("watch", "--rate", "4"), "watch-silent", env=env)
-    wait_for(lambda: gw.text().startswith("{") and f"run {run}" in wt.text(), 20, "the watchers to show the run")
+    wait_for(lambda: gw.text().startswith("{") and f"run {run}" in wt.text(), DEADLINE, "the watchers to show the run")
     try:
         os.kill(world.pid, signal.SIGSTOP)
         t0 = time.monotonic()
         try:
             assert gw.wait(ENDED_SILENT_S + 10) == 1, gw.text()[-2000:]
-            assert wt.wait(10) == 1, wt.text()[-2000:]
+            assert wt.wait(DEADLINE) == 1, wt.text()[-2000:]
             print(f"\n[timing] the watchers gave up {time.monotonic() - t0:.1f} s after the world stopped")
         finally:
             os.kill(world.pid, signal.SIGCONT)
@@ -974,7 +975,7 @@ def test_a_world_that_stops_answering_is_not_an_ended_one(live, tmp_path):
         assert "world not answering" in wt.text()
     finally:
         os.kill(world.pid, signal.SIGINT)
-        assert world.wait(30) == 130, world.text()[-3000:]
+        assert world.wait(DEADLINE) == 130, world.text()[-3000:]
 
 
 @pytest.mark.slow
@@ -1009,7 +1010,7 @@ def test_no_swarm_as_processes():
             (["pause", "--run", "nope"], "run 'nope' not found"),
         ]:
             p = subprocess.run(
-                swarm_cmd(*args), env=env, capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL
+                swarm_cmd(*args), env=env, capture_output=True, text=True, timeout=DEADLINE, stdin=subprocess.DEVNULL
             )
             assert p.returncode == 1, (args, p.stdout, p.stderr)
             assert len(p.stderr.strip().splitlines()) == 1 and what in p.stderr, (args, p.stderr)

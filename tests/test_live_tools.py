@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from deadlines import DEADLINE
 from runtime_helpers import SCENARIOS, start_up, swarm_cmd, wait_for
 from typer.testing import CliRunner
 
@@ -210,11 +211,11 @@ def test_follow_prints_lines_as_written_and_the_last_one_at_the_end(tmp_path):
         with open(log, "a") as f:
             f.write(" done\n")
             f.flush()
-            wait_for(lambda: "half done" in seen, 10, "the follower to print the first line")
+            wait_for(lambda: "half done" in seen, DEADLINE, "the follower to print the first line")
             f.write("new 1\nnew 2\nno newline")
             f.flush()
         written.set()
-        wait_for(lambda: "new 2" in seen, 10, "the follower to print the new lines")
+        wait_for(lambda: "new 2" in seen, DEADLINE, "the follower to print the new lines")
         stop.set()
 
     t = threading.Thread(target=writer)
@@ -285,7 +286,7 @@ def test_logs_echo_and_stop_against_swarm_up(rt, tmp_path, monkeypatch):
     monkeypatch.delenv("SWARM_CONNECT", raising=False)
     out = tmp_path / "run"
     up = start_up(rt.tracker, chatty_scenario(tmp_path / "sc"), out, "--clock", "realtime", "--duration", "300")
-    up.wait_started(60)
+    up.wait_started(DEADLINE)
     run, endpoint = up.banner()
     ids = [1, 2, 3, 4, 5, 6]
 
@@ -321,8 +322,10 @@ def test_logs_echo_and_stop_against_swarm_up(rt, tmp_path, monkeypatch):
     assert res.exit_code == ExitCode.FAILED and "agent 9 is not in run" in one_line(res.stderr)
     follower = rt.tracker.spawn(swarm_cmd("logs", "3", "--follow", "--tail", "0"), "logs-follow")
     events = rt.tracker.spawn(swarm_cmd("echo", "events", "--json"), "echo-events")
-    first = wait_for(lambda: chatty_lines(follower.text()), 30, "swarm logs --follow to print agent 3's lines")
-    wait_for(lambda: len(chatty_lines(follower.text())) > len(first) + 1, 30, "more of agent 3's lines as written")
+    first = wait_for(lambda: chatty_lines(follower.text()), DEADLINE, "swarm logs --follow to print agent 3's lines")
+    wait_for(
+        lambda: len(chatty_lines(follower.text())) > len(first) + 1, DEADLINE, "more of agent 3's lines as written"
+    )
     got = chatty_lines(follower.text())
     assert got == sorted(got) and got[-1] > got[0]
 
@@ -343,18 +346,18 @@ def test_logs_echo_and_stop_against_swarm_up(rt, tmp_path, monkeypatch):
     monkeypatch.setenv("SWARM_RUNTIME_DIR", rt.dir)
     up.running("the strangers to be refused")
     t0 = up.info()["tick"]
-    wait_for(lambda: up.info()["tick"] > t0, 10, "the run to go on")
+    wait_for(lambda: up.info()["tick"] > t0, DEADLINE, "the run to go on")
 
     # the tap of the events hears them: a pause and a resume (so it listens before the stop)
     assert invoke("pause").exit_code == ExitCode.OK and invoke("resume").exit_code == ExitCode.OK
-    wait_for(lambda: '"kind":"resume"' in events.text(), 30, "swarm echo events to print the pause and resume")
+    wait_for(lambda: '"kind":"resume"' in events.text(), DEADLINE, "swarm echo events to print the pause and resume")
 
     # stop: as Ctrl-C, from here
     res = invoke("stop")
     assert res.exit_code == ExitCode.OK, res.output
     line = one_line(res.stdout)
     assert line.startswith(f"run {run} stopped at tick ") and line.endswith(f"results in {out.resolve()}")
-    assert up.launcher.wait(60) == ExitCode.INTERRUPTED
+    assert up.launcher.wait(DEADLINE) == ExitCode.INTERRUPTED
     assert "the run was stopped from another terminal (asked by swarm stop (" in up.launcher.text()
     summary = up.summary()
     assert summary["completed"] is False and summary["stopped_by_signal"] == 2
@@ -363,8 +366,8 @@ def test_logs_echo_and_stop_against_swarm_up(rt, tmp_path, monkeypatch):
     assert stops[0]["tick"] == int(line.split(" tick ")[1].split(";")[0])
 
     # the follower and the tap ended with the run, having seen it all
-    assert follower.wait(30) == ExitCode.OK
-    assert events.wait(30) == ExitCode.OK
+    assert follower.wait(DEADLINE) == ExitCode.OK
+    assert events.wait(DEADLINE) == ExitCode.OK
     seen = [json.loads(ln) for ln in events.text().splitlines() if ln.startswith("{")]
     assert [d["kind"] for d in seen][-3:] == ["pause", "resume", "stop"]
     assert all(d["key"] == f"swarm/{run}/events" for d in seen)

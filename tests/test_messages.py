@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from deadlines import DEADLINE
 from typer.testing import CliRunner
 
 from swarm.cli.main import app
@@ -115,7 +116,7 @@ def test_the_agent_of_the_issue_says_not_an_endpoint_as_a_process():
         [sys.executable, "-m", "swarm", "agent", "--id", "1", "--connect", "tcp/127.0.0.1:99999"],
         capture_output=True,
         text=True,
-        timeout=60,
+        timeout=DEADLINE,
         env=env,
         cwd=ROOT,
     )

@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from deadlines import DEADLINE
 from runtime_helpers import (
     SCENARIOS,
     events_of,
@@ -71,7 +72,7 @@ class Lan:
 
     @staticmethod
     def _ip(*args: str) -> None:
-        r = subprocess.run(["ip", *args], capture_output=True, text=True, timeout=20)
+        r = subprocess.run(["ip", *args], capture_output=True, text=True, timeout=DEADLINE)
         if r.returncode != ExitCode.OK:
             raise LanError(f"ip {' '.join(args)}: {r.stderr.strip() or f'exit code {r.returncode}'}")
 
@@ -101,7 +102,9 @@ class Lan:
     def down(self) -> list[str]:
         """Delete every namespace made here; returns the errors (none expected)."""
         errors = []
-        listed = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True, timeout=20).stdout.split()
+        listed = subprocess.run(
+            ["ip", "netns", "list"], capture_output=True, text=True, timeout=DEADLINE
+        ).stdout.split()
         for ns in reversed(self.made):
             if ns not in listed:
                 continue  # its add failed
@@ -186,7 +189,9 @@ class Machines:
         )
         self.world = self.rt.tracker.spawn(self.lan.cmd("w", args), "world", env=self.env["w"])
         cred = Path(self.dirs["w"]) / f"{self.run}.cred"
-        wait_for(lambda: self.world.check_running("its credentials") or cred.exists(), 30, "the world's credentials")
+        wait_for(
+            lambda: self.world.check_running("its credentials") or cred.exists(), DEADLINE, "the world's credentials"
+        )
         return self.world
 
     def start_hosts(self):
@@ -197,7 +202,7 @@ class Machines:
                 f"credentials-{h}",
                 env=self.env["w"],
             )
-            assert p.wait(30) == ExitCode.OK, p.text()
+            assert p.wait(DEADLINE) == ExitCode.OK, p.text()
             doc = json.loads(f.read_text())
             assert doc["user"] == "host" and "secret" not in doc and sorted(doc["agents"]) == sorted(map(str, ids))
             assert doc["endpoint"] == self.endpoint
@@ -215,12 +220,12 @@ class Machines:
             env=self.env["w"],
             capture_output=True,
             text=True,
-            timeout=30,
+            timeout=DEADLINE,
         )
         return json.loads(r.stdout) if r.returncode == ExitCode.OK else None
 
     def agent_pids(self) -> dict[str, dict[int, int]]:
-        return {h: self.rt.tracker.wait_agent_pids(t, len(HOSTS[h]), timeout=30) for h, t in self.hosts.items()}
+        return {h: self.rt.tracker.wait_agent_pids(t, len(HOSTS[h]), timeout=DEADLINE) for h, t in self.hosts.items()}
 
     def why(self) -> str:
         return "\n".join(f"--- {t.name}\n{t.text()[-2000:]}" for t in [self.world, *self.hosts.values()])
@@ -253,9 +258,9 @@ def test_lockstep_over_veth_links_equals_sim(machines):
     sim, _ = run_sim(m.rt.tracker, SCENARIOS / "case2.toml", m.tmp / "sim", "--duration", "20")
     assert m.world.wait(120) == ExitCode.OK, m.why()
     for h, t in m.hosts.items():
-        assert t.wait(30) == ExitCode.OK, m.why()
+        assert t.wait(DEADLINE) == ExitCode.OK, m.why()
         assert f"host {h}: agents {', '.join(map(str, HOSTS[h]))}: exit code 0" in t.text(), t.text()
-    m.rt.tracker.assert_none_left(timeout=15)
+    m.rt.tracker.assert_none_left(timeout=DEADLINE)
     traj = load_trajectory(m.out)
     assert len(traj["t"]) == len(sim["t"]) == 2001
     for key in ("t", "x", "y", "heading", "u", "out", "alive"):
@@ -281,7 +286,7 @@ def test_a_kill_on_one_host_is_noticed_by_the_world(machines):
     def all_live(doc):
         return doc is not None and doc["tick"] > 0 and all(a["alive"] and a["answered"] for a in doc["agents"])
 
-    doc = wait_for(lambda: all_live(m.agents_json()), 60, "every agent live and answering through its host")
+    doc = wait_for(lambda: all_live(m.agents_json()), DEADLINE, "every agent live and answering through its host")
     victim = 5  # on host b
     os.kill(pids["b"][victim], signal.SIGKILL)
 
@@ -289,20 +294,20 @@ def test_a_kill_on_one_host_is_noticed_by_the_world(machines):
         d = m.agents_json()
         return d if d is not None and not {a["id"]: a for a in d["agents"]}[victim]["alive"] else None
 
-    doc = wait_for(dropped, 30, f"the world to drop agent {victim}")
-    wait_for(lambda: (d := m.agents_json()) is not None and d["tick"] > doc["tick"], 30, "the world to tick on")
+    doc = wait_for(dropped, DEADLINE, f"the world to drop agent {victim}")
+    wait_for(lambda: (d := m.agents_json()) is not None and d["tick"] > doc["tick"], DEADLINE, "the world to tick on")
     wait_for(
         lambda: f"agent {victim} (pid {pids['b'][victim]}) exited (killed by SIGKILL)" in m.hosts["b"].text(),
-        10,
+        DEADLINE,
         "host b to report the kill",
     )
 
     os.kill(m.world.pid, signal.SIGINT)
-    assert m.world.wait(60) == ExitCode.INTERRUPTED, m.why()
+    assert m.world.wait(DEADLINE) == ExitCode.INTERRUPTED, m.why()
     for t in m.hosts.values():
-        code = t.wait(30)
+        code = t.wait(DEADLINE)
         assert code == ExitCode.OK, m.why()  # the world's end notice reached every agent still running
-    m.rt.tracker.assert_none_left(timeout=15)
+    m.rt.tracker.assert_none_left(timeout=DEADLINE)
     summary = json.loads((m.out / "summary.json").read_text())
     drops = events_of(summary, EventKind.DROP)
     assert [e["agent"] for e in drops] == [victim], drops
@@ -317,23 +322,23 @@ def test_a_host_stopped_and_a_world_killed(machines):
     pids = m.agent_pids()
     wait_for(
         lambda: (d := m.agents_json()) is not None and d["tick"] > 0 and all(a["alive"] for a in d["agents"]),
-        60,
+        DEADLINE,
         "every agent live",
     )
     os.kill(m.hosts["a"].pid, signal.SIGINT)  # Ctrl-C on host a
-    assert m.hosts["a"].wait(15) == ExitCode.INTERRUPTED, m.why()
+    assert m.hosts["a"].wait(DEADLINE) == ExitCode.INTERRUPTED, m.why()
     assert all(not _runs(p) for p in pids["a"].values())
     wait_for(
         lambda: (d := m.agents_json()) is not None and [a["id"] for a in d["agents"] if a["alive"]] == list(HOSTS["b"]),
-        15,
+        DEADLINE,
         "the world to drop a's agents",
     )
     os.kill(m.world.pid, signal.SIGKILL)
-    assert m.hosts["b"].wait(15) == ExitCode.FAILED, m.why()  # its agents saw the world gone: exit 4, at once
+    assert m.hosts["b"].wait(DEADLINE) == ExitCode.FAILED, m.why()  # its agents saw the world gone: exit 4, at once
     text = m.hosts["b"].text()
     assert "is gone" in text and "router closed" in text and "agents 4, 5, 6: exit code 4" in text, text
-    m.world.wait(5)
-    m.rt.tracker.assert_none_left(timeout=15)
+    m.world.wait(DEADLINE)
+    m.rt.tracker.assert_none_left(timeout=DEADLINE)
     m.host_dirs_empty()
 
 

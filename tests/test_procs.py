@@ -9,6 +9,7 @@ import subprocess
 import time
 
 import pytest
+from deadlines import DEADLINE
 
 from swarm.runtime.procs import Group, Reaper, group_runs, stop_groups, wait_until
 
@@ -116,7 +117,7 @@ def test_the_group_is_signalled_while_any_member_is_unreaped(groups):
     member = g.start(["sleep", "30"])
     leader.wait()  # reaped (as a caller of Popen may do): the sleep still holds the group id
     assert g.signal(signal.SIGTERM)
-    assert member.wait(2) == -signal.SIGTERM
+    assert member.wait(DEADLINE) == -signal.SIGTERM
     assert not g.signal(signal.SIGTERM) and not g.alive()
 
 

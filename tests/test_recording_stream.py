@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from deadlines import DEADLINE
 from typer.testing import CliRunner
 
 from swarm.cli.main import app
@@ -192,22 +193,19 @@ def test_sigkilled_world_loses_at_most_a_second(rt, tmp_path):
     the disk is rebuilt into a valid run directory covering every tick up to at most 1 s
     before the kill, and `swarm plot` renders it."""
     import signal
-    import time
 
     from runtime_helpers import start_up, swarm_cmd
 
     out = tmp_path / "run"
     up = start_up(rt.tracker, CASE2, out, "--clock", "realtime", "--duration", "60")
-    up.wait_started(60)
-    up.wait_info(lambda i: i["time"] >= 5.0, 30, "5 s of simulated time")
+    up.wait_started(DEADLINE)
+    up.wait_info(lambda i: i["time"] >= 5.0, DEADLINE, "5 s of simulated time")
     info = up.info()
     t_before = info["time"]  # the world has recorded at least up to here
     os.kill(info["pid"], signal.SIGKILL)
-    t_kill = time.monotonic()
-    rc = up.launcher.wait(30)
+    rc = up.launcher.wait(DEADLINE)
     assert rc != 0
-    assert time.monotonic() - t_kill < 30
-    rt.tracker.assert_none_left(timeout=15)
+    rt.tracker.assert_none_left(timeout=DEADLINE)
     said = up.launcher.text()
     assert "recovered" in said and "complete: false" in said, said[-3000:]  # swarm up rebuilt them
     for name in ("summary.json", "trajectory.npz", "overview.png"):
@@ -242,7 +240,7 @@ def test_full_disk_under_swarm_up(rt, tmp_path):
     )
     up = UpRun(p, out, rt.tracker)
     assert p.wait(180) == ExitCode.NO_SPACE, p.text()[-3000:]
-    rt.tracker.assert_none_left(timeout=10)
+    rt.tracker.assert_none_left(timeout=DEADLINE)
     said = [ln for ln in p.text().splitlines() if "cannot write" in ln]
     assert len(said) == 1 and str(out / "recording.mcap") in said[0], p.text()[-3000:]
     assert "Traceback" not in p.text()

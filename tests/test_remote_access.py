@@ -12,6 +12,7 @@ import stat
 from pathlib import Path
 
 import pytest
+from deadlines import DEADLINE
 from runtime_helpers import SCENARIOS, agent_info, make_env, start_up, swarm_cmd
 
 from swarm.contracts.vocabulary import ExitCode
@@ -43,7 +44,7 @@ def test_agent_elsewhere_rejoins_over_tls_with_an_exported_identity(rt, tmp_path
     )
     run_id, ep = up.banner()
     assert ep == listen
-    up.wait_started(60)
+    up.wait_started(DEADLINE)
     pids = rt.tracker.wait_agent_pids(up.launcher, 6)
 
     # the operator exports agent 3's identity (and the run's CA) for the other machine
@@ -51,14 +52,14 @@ def test_agent_elsewhere_rejoins_over_tls_with_an_exported_identity(rt, tmp_path
     p = rt.tracker.spawn(
         swarm_cmd("credentials", "--agent", "3", "--run", run_id, "--endpoint", endpoint, "-o", cred), "export"
     )
-    assert p.wait(30) == ExitCode.OK, p.text()
+    assert p.wait(DEADLINE) == ExitCode.OK, p.text()
     assert stat.S_IMODE(cred.stat().st_mode) == 0o600
     doc = json.loads(cred.read_text())
     assert doc["user"] == "agent-3" and "secret" not in doc and doc["tls_ca"].startswith("-----BEGIN CERTIFICATE")
     assert doc["endpoint"] == endpoint
 
     os.kill(pids[3], signal.SIGKILL)
-    up.wait_info(lambda i: not agent_info(i, 3)["alive"], 10, "agent 3 to drop")
+    up.wait_info(lambda i: not agent_info(i, 3)["alive"], DEADLINE, "agent 3 to drop")
 
     elsewhere = make_env(str(tmp_path / "elsewhere"))  # nothing of the run's there
     wrong = rt.tracker.spawn(
@@ -66,7 +67,7 @@ def test_agent_elsewhere_rejoins_over_tls_with_an_exported_identity(rt, tmp_path
         "agent-4-elsewhere",
         env=elsewhere,
     )
-    assert wrong.wait(30) == ExitCode.REFUSED
+    assert wrong.wait(DEADLINE) == ExitCode.REFUSED
     assert "are for 'agent-3' of run" in wrong.text() and "not 'agent-4'" in wrong.text()
 
     agent = rt.tracker.spawn(
@@ -74,13 +75,13 @@ def test_agent_elsewhere_rejoins_over_tls_with_an_exported_identity(rt, tmp_path
         "agent-3-elsewhere",
         env=elsewhere,
     )
-    info = up.wait_info(lambda i: agent_info(i, 3)["alive"], 30, "agent 3 to rejoin from elsewhere")
+    info = up.wait_info(lambda i: agent_info(i, 3)["alive"], DEADLINE, "agent 3 to rejoin from elsewhere")
     assert agent_info(info, 3)["pid"] == agent.pid and agent_info(info, 3)["joins"] == 2
 
     os.kill(up.launcher.pid, signal.SIGINT)
-    assert up.launcher.wait(60) == ExitCode.INTERRUPTED
-    assert agent.wait(30) == ExitCode.OK  # the world's end notice reached it over TLS
-    rt.tracker.assert_none_left(timeout=15)
+    assert up.launcher.wait(DEADLINE) == ExitCode.INTERRUPTED
+    assert agent.wait(DEADLINE) == ExitCode.OK  # the world's end notice reached it over TLS
+    rt.tracker.assert_none_left(timeout=DEADLINE)
     summ = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summ["agents"]["3"]["joins"] == 2 and summ["agents"]["3"]["pid"] == agent.pid
     # the run's credentials and certificates are gone with it

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zenoh
+from deadlines import DEADLINE
 from runtime_helpers import SCENARIOS, Tracked, start_up, swarm_cmd, wait_for
 from test_robots_fleet import client, free_port, robots_file, write_robots
 
@@ -101,7 +102,9 @@ def start_fleet(rt, tmp_path: Path, *extra: str, scenario: Path = TURTLEBOT) -> 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     robots = write_robots(tmp_path / "robots.toml", robots_file(endpoint))
     fleet = rt.tracker.spawn(swarm_cmd("robots", "sim", scenario, "--robots", robots, *extra), "fleet")
-    wait_for(lambda: fleet.check_running("the fleet") or "fleet ready" in fleet.text(), 30, "the fleet to be ready")
+    wait_for(
+        lambda: fleet.check_running("the fleet") or "fleet ready" in fleet.text(), DEADLINE, "the fleet to be ready"
+    )
     wire = Wire(endpoint)
     rt.tracker.closing.append(wire.close)
     return fleet, robots, wire
@@ -109,7 +112,7 @@ def start_fleet(rt, tmp_path: Path, *extra: str, scenario: Path = TURTLEBOT) -> 
 
 def stop_fleet(rt, fleet: Tracked) -> str:
     fleet.popen.send_signal(signal.SIGINT)
-    assert fleet.wait(30) == ExitCode.INTERRUPTED, fleet.text()[-3000:]
+    assert fleet.wait(DEADLINE) == ExitCode.INTERRUPTED, fleet.text()[-3000:]
     rt.tracker.assert_none_left()
     return fleet.text()
 
@@ -117,7 +120,9 @@ def stop_fleet(rt, fleet: Tracked) -> str:
 def wait_moving(up, wire: Wire, since: float = -math.inf) -> None:
     for ns in ROBOT.values():
         wait_for(
-            lambda ns=ns: up.running(f"{ns} to move") or wire.moving_since(ns, since), 60, f"a motion command for {ns}"
+            lambda ns=ns: up.running(f"{ns} to move") or wire.moving_since(ns, since),
+            DEADLINE,
+            f"a motion command for {ns}",
         )
 
 
@@ -132,7 +137,7 @@ def test_the_turtlebot_run_drives_the_fleet_and_records_its_poses(rt, tmp_path):
     assert up.launcher.wait(120) == ExitCode.OK, up.launcher.text()[-3000:] + up.world_text()[-3000:]
     ended = time.monotonic()
     for ns in ROBOT.values():  # the run's end: a zero twist to every robot
-        wait_for(lambda ns=ns: wire.stopped_after(ns, -math.inf), 10, f"a zero twist for {ns}")
+        wait_for(lambda ns=ns: wire.stopped_after(ns, -math.inf), DEADLINE, f"a zero twist for {ns}")
         last, zero = wire.report("the run's end (event: swarm up exited)", ns, ended, since=-math.inf)
         assert zero > last
     report = stop_fleet(rt, fleet)
@@ -174,9 +179,9 @@ def test_ctrl_c_of_swarm_up_stops_every_robot(rt, tmp_path):
     wait_moving(up, wire)
     event = time.monotonic()
     up.launcher.popen.send_signal(signal.SIGINT)
-    assert up.launcher.wait(60) == ExitCode.INTERRUPTED, up.launcher.text()[-3000:]
+    assert up.launcher.wait(DEADLINE) == ExitCode.INTERRUPTED, up.launcher.text()[-3000:]
     for ns in ROBOT.values():
-        wait_for(lambda ns=ns: wire.stopped_after(ns, event), 10, f"a zero twist for {ns}")
+        wait_for(lambda ns=ns: wire.stopped_after(ns, event), DEADLINE, f"a zero twist for {ns}")
         wire.report("Ctrl-C of swarm up", ns, event)
     assert stop_fleet(rt, fleet).count("stopped by a zero twist") == 2
 
@@ -193,9 +198,9 @@ def test_a_killed_agent_stops_its_robot_or_drives_it_straight_on(rt, tmp_path, o
     os.kill(pids[2], signal.SIGKILL)
     follower, leader = ROBOT[2], ROBOT[1]
     if on_dropout == "leave":
-        wait_for(lambda: up.running("the zero twist") or wire.stopped_after(follower, event), 30, "a zero twist")
+        wait_for(lambda: up.running("the zero twist") or wire.stopped_after(follower, event), DEADLINE, "a zero twist")
         _, zero = wire.report("SIGKILL of agent 2", follower, event)
-        wait_for(lambda: wire.moving_since(leader, zero), 30, "the leader's robot to go on")
+        wait_for(lambda: wire.moving_since(leader, zero), DEADLINE, "the leader's robot to go on")
     else:  # coasting: straight on at its speed (angular 0), its robot never stopped
         speed = load_scenario(scenario).agents[1].speed
 
@@ -203,13 +208,13 @@ def test_a_killed_agent_stops_its_robot_or_drives_it_straight_on(rt, tmp_path, o
             up.running("the coasting twists")
             return any(when > event and (vx, wz) == (speed, 0.0) for when, vx, wz in wire.twists_of(follower))
 
-        wait_for(coasting, 30, "a straight-on twist for the coasting agent's robot")
+        wait_for(coasting, DEADLINE, "a straight-on twist for the coasting agent's robot")
         print(f"SIGKILL of agent 2 (coast): {follower} goes straight on at {speed} m/s")
     event = time.monotonic()
     up.launcher.popen.send_signal(signal.SIGINT)
-    up.launcher.wait(60)
+    up.launcher.wait(DEADLINE)
     for ns in ROBOT.values():
-        wait_for(lambda ns=ns: wire.stopped_after(ns, event), 10, f"a zero twist for {ns}")
+        wait_for(lambda ns=ns: wire.stopped_after(ns, event), DEADLINE, f"a zero twist for {ns}")
     assert stop_fleet(rt, fleet).count("stopped by a zero twist") == 2
 
 
@@ -217,12 +222,16 @@ def test_stale_poses_stop_their_robot(rt, tmp_path):
     fleet, robots, wire = start_fleet(rt, tmp_path, "--stop-poses", "2:2")
     up = start_up(rt.tracker, TURTLEBOT, tmp_path / "run", "--robots", robots, "--duration", 8)
     follower, leader = ROBOT[2], ROBOT[1]
-    wait_for(lambda: up.running("the poses to stop") or "robot 2: poses stopped" in fleet.text(), 60, "poses to stop")
+    wait_for(
+        lambda: up.running("the poses to stop") or "robot 2: poses stopped" in fleet.text(), DEADLINE, "poses to stop"
+    )
     event = wire.poses_of(follower)[-1][0]  # the last pose of robot 2 to arrive
-    wait_for(lambda: up.running("the zero twist") or wire.stopped_after(follower, event), 30, "a zero twist")
+    wait_for(lambda: up.running("the zero twist") or wire.stopped_after(follower, event), DEADLINE, "a zero twist")
     _, zero = wire.report("stale poses", follower, event)
-    wait_for(lambda: up.running("the leader") or wire.moving_since(leader, zero), 30, "the leader's robot to go on")
-    assert up.launcher.wait(60) == ExitCode.OK, up.launcher.text()[-3000:]
+    wait_for(
+        lambda: up.running("the leader") or wire.moving_since(leader, zero), DEADLINE, "the leader's robot to go on"
+    )
+    assert up.launcher.wait(DEADLINE) == ExitCode.OK, up.launcher.text()[-3000:]
     summary = up.summary()
     stale = [e for e in summary["events"] if e["kind"] == EventKind.STALE]
     assert [e["agent"] for e in stale] == [2] and summary["robots"]["agents"]["2"]["stale_spells"] == 1

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 import zenoh
+from deadlines import DEADLINE
 from runtime_helpers import SCENARIOS, swarm_cmd, wait_for
 
 from swarm.contracts.orbits import wrap
@@ -295,7 +296,9 @@ def test_the_fleet_speaks_ros2_and_its_robots_follow_their_twists():
     data = robots_file(endpoint, cmd_type="TwistStamped", pose="mocap")
     with running_fleet(data, FleetOptions(rate=50)) as (fleet, session), Ros2Node(session, "tester") as node:
         # the graph: each robot's subscription and publisher, in its namespace, of its types
-        ents = wait_for(lambda: len(node.remote_entities(kind="MS")) == 2 and node.remote_entities(), 10, "the tokens")
+        ents = wait_for(
+            lambda: len(node.remote_entities(kind="MS")) == 2 and node.remote_entities(), DEADLINE, "the tokens"
+        )
         seen = {(e.kind, e.namespace, e.node, e.topic, e.dds_type) for e in ents if e.kind in ("MP", "MS")}
         assert seen == {
             ("MS", "/tb3_0", "sim_robot", "/tb3_0/cmd_vel", TWIST.dds),
@@ -308,7 +311,7 @@ def test_the_fleet_speaks_ros2_and_its_robots_follow_their_twists():
         odom, mocap = Samples(cdr.decode_odometry), Samples(cdr.decode_pose_stamped)
         node.subscriber("/tb3_0/odom", ODOMETRY, odom)
         node.subscriber("/tb3_1/pose", POSE_STAMPED, mocap)
-        wait_for(lambda: len(odom) and len(mocap), 10, "the first poses")
+        wait_for(lambda: len(odom) and len(mocap), DEADLINE, "the first poses")
         first = odom.last()
         assert (first.frame_id, first.x, first.y, first.yaw) == ("odom", 0.0, 0.0, 0.0)
         agent2 = load_scenario(TURTLEBOT).agents[1]
@@ -325,17 +328,17 @@ def test_the_fleet_speaks_ros2_and_its_robots_follow_their_twists():
             wrong.put(cdr.encode_twist(0.5, 0.0))
             return odom.last().x > 0.05
 
-        wait_for(drive_until_moved, 10, "robot 1 to move", interval=0.05)
+        wait_for(drive_until_moved, DEADLINE, "robot 1 to move", interval=0.05)
         p = mocap.last()
         assert close((p.x, p.y), (agent2.x, agent2.y), 1e-9)
         cmd1.put(cdr.encode_twist(0.0, 0.0))
-        wait_for(lambda: fleet.robots[0].stopped_at is not None, 10, "robot 1 to take its zero twist")
+        wait_for(lambda: fleet.robots[0].stopped_at is not None, DEADLINE, "robot 1 to take its zero twist")
         k = len(odom)
-        wait_for(lambda: len(odom) > k + 5, 10, "more poses")
+        wait_for(lambda: len(odom) > k + 5, DEADLINE, "more poses")
         after = odom.since(k)
         assert all(q.x == after[0].x for q in after) and after[0].x > 0.05
         cmd2.put(cdr.encode_twist_stamped(1, "", 0.1, 0.0))
-        wait_for(lambda: fleet.robots[1].commands == 1, 10, "robot 2's command")
+        wait_for(lambda: fleet.robots[1].commands == 1, DEADLINE, "robot 2's command")
     one, two = fleet.robots
     assert one.body.v == 0.0 and one.malformed == 0 and two.commands == 1
     assert two.last_command == (0.1, 0.0)
@@ -348,11 +351,11 @@ def test_the_fleet_saturates_what_it_is_told():
             odom = Samples(cdr.decode_odometry)
             node.subscriber("/tb3_0/odom", ODOMETRY, odom)
             cmd = node.publisher("/tb3_0/cmd_vel", TWIST)
-            wait_for(lambda: cmd.has_subscribers and len(odom), 10, "the robot's subscription and odometry")
+            wait_for(lambda: cmd.has_subscribers and len(odom), DEADLINE, "the robot's subscription and odometry")
             cmd.put(cdr.encode_twist(3.0, -9.0))
             cmd.put(b"\x00\x01\x00\x00 not a twist")
-            wait_for(lambda: fleet.robots[0].commands == 1 and fleet.robots[0].malformed == 1, 10, "both samples")
-            wait_for(lambda: odom.last().x != 0.0, 10, "robot 1 to move")
+            wait_for(lambda: fleet.robots[0].commands == 1 and fleet.robots[0].malformed == 1, DEADLINE, "both samples")
+            wait_for(lambda: odom.last().x != 0.0, DEADLINE, "robot 1 to move")
     assert fleet.robots[0].body.twist() == (0.22, -2.84)
 
 
@@ -362,7 +365,7 @@ def test_the_odometry_carries_rmw_zenohs_attachment():
         attachments = Samples(parse_attachment)
         key = "0/tb3_0/odom/" + ODOMETRY.dds + "/" + ODOMETRY.hash_for("jazzy")
         sub = session.declare_subscriber(key, lambda s: attachments(s.attachment.to_bytes()))
-        wait_for(lambda: len(attachments) >= 3, 10, "three odometry samples")
+        wait_for(lambda: len(attachments) >= 3, DEADLINE, "three odometry samples")
         sub.undeclare()
         seqs = [a[0] for a in attachments.since(0)]
         assert seqs == list(range(seqs[0], seqs[0] + len(seqs))) and len({a[2] for a in attachments.since(0)}) == 1
@@ -383,7 +386,9 @@ def test_swarm_robots_sim_runs_until_ctrl_c(rt, tmp_path):
     fleet = rt.tracker.spawn(
         swarm_cmd("robots", "sim", TURTLEBOT, "--robots", robots, "--latency", "0.03", "--pose-noise", "0.01"), "fleet"
     )
-    wait_for(lambda: fleet.check_running("its banner") or "fleet ready" in fleet.text(), 30, "the fleet to be ready")
+    wait_for(
+        lambda: fleet.check_running("its banner") or "fleet ready" in fleet.text(), DEADLINE, "the fleet to be ready"
+    )
     text = fleet.text()
     assert "robot 1: /tb3_0 odom -> cmd_vel Twist\n" in text
     assert "robot 2: /tb3_1 odom -> cmd_vel TwistStamped\n" in text
@@ -393,13 +398,13 @@ def test_swarm_robots_sim_runs_until_ctrl_c(rt, tmp_path):
         with Ros2Node(session, "tester") as node:
             odom = Samples(cdr.decode_odometry)
             node.subscriber("/tb3_1/odom", ODOMETRY, odom)
-            wait_for(lambda: len(odom) >= 3, 10, "odometry")
+            wait_for(lambda: len(odom) >= 3, DEADLINE, "odometry")
             assert all(p.frame_id == "odom" for p in odom.since(0))
             assert any(p.x != 0.0 for p in odom.since(0))  # the noise
     finally:
         session.close()
     fleet.popen.send_signal(signal.SIGINT)
-    assert fleet.wait(30) == ExitCode.INTERRUPTED
+    assert fleet.wait(DEADLINE) == ExitCode.INTERRUPTED
     assert "robot 1: 0 commands (0 malformed)" in fleet.text()
 
 
@@ -411,15 +416,15 @@ def test_swarm_robots_sim_ends_after_its_duration_and_refuses_what_it_cannot_do(
         taken = f"tcp/127.0.0.1:{busy.getsockname()[1]}"
         robots = write_robots(tmp_path / "robots.toml", robots_file(taken))
         refused = rt.tracker.spawn(swarm_cmd("robots", "sim", TURTLEBOT, "--robots", robots), "taken")
-        assert refused.wait(30) == ExitCode.USAGE
+        assert refused.wait(DEADLINE) == ExitCode.USAGE
         assert f"cannot listen on {taken}" in refused.text()
     finally:
         busy.close()
     bad = write_robots(tmp_path / "bad.toml", robots_file(cmd_type="Twisty"))
     wrong = rt.tracker.spawn(swarm_cmd("robots", "sim", TURTLEBOT, "--robots", bad), "bad")
-    assert wrong.wait(30) == ExitCode.USAGE and "cmd_type" in wrong.text()
+    assert wrong.wait(DEADLINE) == ExitCode.USAGE and "cmd_type" in wrong.text()
     stops = rt.tracker.spawn(swarm_cmd("robots", "sim", TURTLEBOT, "--robots", robots, "--stop-poses", "2"), "stops")
-    assert stops.wait(30) == ExitCode.USAGE and "--stop-poses 2: give AGENT:SECONDS" in stops.text()
+    assert stops.wait(DEADLINE) == ExitCode.USAGE and "--stop-poses 2: give AGENT:SECONDS" in stops.text()
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     timed = rt.tracker.spawn(
         swarm_cmd(
@@ -427,5 +432,5 @@ def test_swarm_robots_sim_ends_after_its_duration_and_refuses_what_it_cannot_do(
         ),
         "timed",
     )
-    assert timed.wait(60) == ExitCode.OK
+    assert timed.wait(DEADLINE) == ExitCode.OK
     assert f"router on {endpoint}" in timed.text() and "robot 2: 0 commands" in timed.text()

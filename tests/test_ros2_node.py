@@ -13,6 +13,7 @@ import pytest
 import zenoh
 import zenoh_ros2_sdk
 import zenoh_ros2_sdk.message_registry
+from deadlines import DEADLINE
 from ros2_sdk_offline import sdk_offline
 
 from swarm.ros2 import cdr
@@ -66,7 +67,7 @@ def _tokens(session: zenoh.Session, domain: int = 0):
     return q, sub
 
 
-def _drain_until(q: queue.Queue, want: set, timeout: float = 5.0) -> set:
+def _drain_until(q: queue.Queue, want: set, timeout: float = DEADLINE) -> set:
     """Take items from `q` until every one of `want` came (or `timeout`); what came."""
     seen: set = set()
     deadline = time.monotonic() + timeout
@@ -91,7 +92,7 @@ def test_samples_reach_the_subscriber_with_attachments_from_seq_1(net):
     )
     pub = world.publisher("/robot1/cmd_vel", TWIST_STAMPED)
     assert pub.key == "0/robot1/cmd_vel/geometry_msgs::msg::dds_::TwistStamped_/" + TS_HASH
-    assert wait_until(lambda: pub.has_subscribers, 5), "the subscription never reached the publisher"
+    assert wait_until(lambda: pub.has_subscribers, DEADLINE), "the subscription never reached the publisher"
     before = time.time_ns()
     payloads = [cdr.encode_twist_stamped(i, "base_link", 0.1 * i, -0.2 * i) for i in range(1, 6)]
     for p in payloads:
@@ -177,7 +178,7 @@ def test_remote_entities_finds_another_nodes_subscription(net):
         entities = world.remote_entities(timeout=0.5)
         return entities if len(entities) >= 5 else None
 
-    everything = wait_until(all_five, 5)
+    everything = wait_until(all_five, DEADLINE)
     assert everything is not None
     assert sorted((e.kind, e.namespace, e.node, e.topic) for e in everything) == [
         ("MP", "/tb3_0", "turtlebot3_node", "/tb3_0/odom"),
@@ -238,7 +239,7 @@ def test_samples_of_another_type_or_distro_are_not_delivered(net):
     other_topic = world.publisher("/tb3_1/cmd_vel", TWIST)
     humble = Ros2Node(a, "humble_world", distro="humble").publisher("/tb3_0/cmd_vel", TWIST)
     right = world.publisher("/tb3_0/cmd_vel", TWIST)
-    assert wait_until(lambda: right.has_subscribers, 5)
+    assert wait_until(lambda: right.has_subscribers, DEADLINE)
     assert not (stamped.has_subscribers or other_topic.has_subscribers or humble.has_subscribers)
     stamped.put(cdr.encode_twist_stamped(0, "", 9.0, 9.0))
     other_topic.put(cdr.encode_twist(8.0, 8.0))
@@ -262,7 +263,7 @@ def test_a_failing_callback_does_not_stop_the_subscription(net):
 
     Ros2Node(b, "robot").subscriber("/cmd_vel", TWIST, on_sample)
     pub = Ros2Node(a, "world").publisher("/cmd_vel", TWIST)
-    assert wait_until(lambda: pub.has_subscribers, 5)
+    assert wait_until(lambda: pub.has_subscribers, DEADLINE)
     pub.put(cdr.encode_twist(-1.0, 0.0))
     pub.put(cdr.encode_twist(1.0, 0.0))
     assert got.get(timeout=5) == 1.0
@@ -298,7 +299,7 @@ def test_a_node_on_the_router_session_itself(tmp_path):
         cmd = world.publisher("/tb3_0/cmd_vel", TWIST)
         [ms] = wait_until(lambda: world.remote_entities("/tb3_0/cmd_vel", "MS", timeout=0.5), 5)
         assert (ms.node, ms.rtype, ms.zid) == ("turtlebot3_node", TWIST, str(router.info.zid()))
-        assert wait_until(lambda: cmd.has_subscribers and odom.has_subscribers, 5)
+        assert wait_until(lambda: cmd.has_subscribers and odom.has_subscribers, DEADLINE)
         cmd.put(cdr.encode_twist(0.22, -1.0))
         odom.put(cdr.encode_odometry(1, "odom", "base_footprint", 0.5, 0.25, 0.0))
         assert cdr.decode_twist(cmds.get(timeout=5)) == (0.22, -1.0)
@@ -367,7 +368,7 @@ def test_interop_with_zenoh_ros2_sdk(sdk):
         except queue.Empty:
             return None
 
-    payload = wait_until(twist_came, 5, interval=0)
+    payload = wait_until(twist_came, DEADLINE, interval=0)
     assert payload is not None, "no TwistStamped from the SDK"
     assert cdr.decode_twist_stamped(payload) == (1 * NS + 2, "base_link", 0.22, 0.5)
     seq, _, gid = parse_attachment(raw.get(timeout=5))  # the SDK's attachment parses as rmw_zenoh's
@@ -381,7 +382,7 @@ def test_interop_with_zenoh_ros2_sdk(sdk):
         except queue.Empty:
             return None
 
-    msg = wait_until(pose_came, 5, interval=0)
+    msg = wait_until(pose_came, DEADLINE, interval=0)
     assert msg is not None, "no Odometry at the SDK"
     assert (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id, msg.child_frame_id) == (
         5,

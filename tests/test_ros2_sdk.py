@@ -20,6 +20,7 @@ import pytest
 import zenoh
 import zenoh_ros2_sdk
 import zenoh_ros2_sdk.message_registry
+from deadlines import DEADLINE
 from ros2_sdk_offline import sdk_offline
 from runtime_helpers import SCENARIOS, start_up, wait_for
 from test_robots_fleet import free_port, robots_file, write_robots
@@ -165,10 +166,10 @@ def test_our_robot_plant_drives_sdk_robots(sdk_robots):
         assert (figures["1"]["cmd_type"], figures["2"]["cmd_type"]) == ("TwistStamped", "Twist")
         # our node in the SDK's graph: the publisher of each robot's cmd_vel
         for ns in ("/tb3_0", "/tb3_1"):
-            assert wait_for(lambda ns=ns: (NODE_NAME, "/") in publishers_of(f"{ns}/cmd_vel"), 10, "our node")
+            assert wait_for(lambda ns=ns: (NODE_NAME, "/") in publishers_of(f"{ns}/cmd_vel"), DEADLINE, "our node")
         topics = dict(zenoh_ros2_sdk.get_topic_names_and_types(timeout=0.5))
         assert topics["/tb3_0/cmd_vel"] == [TWIST_STAMPED.name] and topics["/tb3_1/cmd_vel"] == [TWIST.name]
-        wait_for(lambda: sdk[1].received() and sdk[2].received(), 10, "the zero twists before tick 0")
+        wait_for(lambda: sdk[1].received() and sdk[2].received(), DEADLINE, "the zero twists before tick 0")
         assert sdk[1].received()[0] == sdk[2].received()[0] == (0.0, 0.0)
 
         core = WorldCore(scenario, plant=plant)
@@ -181,7 +182,7 @@ def test_our_robot_plant_drives_sdk_robots(sdk_robots):
             core.step()  # the commands out, the SDK robots' latest poses in
             return math.dist(core.pose(1)[:2], starts[1][:2]) > 0.02 and sdk[2].received()[-1] != (0.0, 0.0)
 
-        wait_for(moved, 20, "the SDK robots to move", interval=0.05)
+        wait_for(moved, DEADLINE, "the SDK robots to move", interval=0.05)
         assert sdk[1].received()[-1] == pytest.approx((0.105, 0.15))
         assert sdk[2].received()[-1] == pytest.approx((0.15, -2.84))
         for aid in (1, 2):  # our world's pose is one the SDK robot published, from the agent's start pose
@@ -191,8 +192,12 @@ def test_our_robot_plant_drives_sdk_robots(sdk_robots):
     finally:
         plant.stop()
     for aid in (1, 2):
-        wait_for(lambda aid=aid: sdk[aid].received()[-1] == (0.0, 0.0), 10, f"robot {aid}'s zero twist at the end")
-    assert wait_for(lambda: NODE_NAME not in dict(publishers_of("/tb3_0/cmd_vel")), 10, "our node to leave the graph")
+        wait_for(
+            lambda aid=aid: sdk[aid].received()[-1] == (0.0, 0.0), DEADLINE, f"robot {aid}'s zero twist at the end"
+        )
+    assert wait_for(
+        lambda: NODE_NAME not in dict(publishers_of("/tb3_0/cmd_vel")), DEADLINE, "our node to leave the graph"
+    )
 
 
 @pytest.mark.slow
@@ -204,7 +209,9 @@ def test_swarm_up_drives_sdk_robots(sdk_robots, rt, tmp_path):
     assert up.launcher.wait(120) == ExitCode.OK, up.launcher.text()[-3000:] + up.world_text()[-3000:]
     rt.tracker.assert_none_left()
     for aid in (1, 2):
-        wait_for(lambda aid=aid: sdk[aid].received()[-1] == (0.0, 0.0), 10, f"robot {aid}'s zero twist at the end")
+        wait_for(
+            lambda aid=aid: sdk[aid].received()[-1] == (0.0, 0.0), DEADLINE, f"robot {aid}'s zero twist at the end"
+        )
         moving = [t for t in sdk[aid].received() if t != (0.0, 0.0)]
         assert len(moving) > 100, f"robot {aid}: {len(moving)} motion commands"
     summary, traj = up.summary(), up.trajectory()

@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 import pytest
+from deadlines import DEADLINE
 from runtime_helpers import (
     SCENARIOS,
     Runtime,
@@ -71,7 +72,7 @@ def lockstep_runs(tmp_path_factory, shipped_sim):
             t0 = time.monotonic()
             rc = up.launcher.wait(240)
             wall = time.monotonic() - t0
-            r.tracker.assert_none_left(timeout=10)
+            r.tracker.assert_none_left(timeout=DEADLINE)
             cache[name] = {
                 "rc": rc,
                 "run": up,
@@ -217,7 +218,7 @@ STOP_TIMES: list[float] = []
 def _stop_up(rt: Runtime, out_dir, sig: int, expected: int) -> float:
     # A long run (4000 s of turtlebot is minutes of lockstep), stopped once it ticks.
     run = start_up(rt.tracker, SCENARIOS / "turtlebot.toml", out_dir / "run", "--duration", "4000")
-    run.wait_started(timeout=60)
+    run.wait_started(timeout=DEADLINE)
     agents = rt.tracker.wait_agent_pids(run.launcher, 2)
     desc = rt.tracker.descendants(run.launcher)
     assert sorted(agents) == [1, 2], f"agent processes under the launcher: {agents}"
@@ -228,11 +229,11 @@ def _stop_up(rt: Runtime, out_dir, sig: int, expected: int) -> float:
     # 30 s covers the launcher's escalation (10 s grace for the world, then SIGTERM and
     # SIGKILL to its group); a prompt stop is the normal case (~0.2-0.5 s measured), but see
     # test_world_honours_sigterm_while_publishing for why ~13 s stops happen now and then.
-    rc = run.launcher.wait(30)
+    rc = run.launcher.wait(DEADLINE)
     stop_s = time.monotonic() - t0
     assert rc == expected, f"swarm up exited {rc} on signal {sig}, expected {expected}:\n{run.launcher.text()[-2000:]}"
     # Every process the launcher started is gone.
-    rt.tracker.assert_none_left(timeout=5)
+    rt.tracker.assert_none_left(timeout=DEADLINE)
     assert len(desc) >= 3
     # Results were written, and say the run was stopped.
     assert (run.out / "summary.json").exists(), "no summary.json after the stop"
@@ -314,10 +315,10 @@ def test_world_honours_sigterm_while_publishing(rt, tmp_path):
     )
     observe_world(rt.tracker, w, endpoint, "sig")  # until it listens
     agents = [rt.tracker.spawn(agent_cmd(i, endpoint, "sig"), f"agent-{i}") for i in (1, 2)]
-    rc = w.wait(60)
+    rc = w.wait(DEADLINE)
     for a in agents:
-        a.wait(15)
-    rt.tracker.assert_none_left(timeout=5)
+        a.wait(DEADLINE)
+    rt.tracker.assert_none_left(timeout=DEADLINE)
     if "[test] SIGTERM to myself at tick 0" not in w.text():
         pytest.fail(f"the signal was not sent as planned:\n{w.text()[-2000:]}")
     summ = json.loads((tmp_path / "out" / "summary.json").read_text())
@@ -334,12 +335,12 @@ def test_two_runs_side_by_side(rt, tmp_path):
     b = start_up(rt.tracker, scen, tmp_path / "b", "--duration", duration, "--clock", "lockstep", name="up-b")
     # The agents' pids are taken while they run (a 10 s lockstep run can end in 2 s, so
     # waiting for the world's "started" could miss a run that already ended).
-    rt.tracker.wait_agent_pids(a.launcher, 6, timeout=60)
-    rt.tracker.wait_agent_pids(b.launcher, 6, timeout=60)
+    rt.tracker.wait_agent_pids(a.launcher, 6, timeout=DEADLINE)
+    rt.tracker.wait_agent_pids(b.launcher, 6, timeout=DEADLINE)
     ref, _ = run_sim(rt.tracker, scen, tmp_path / "sim", "--duration", duration)
     rc_a, rc_b = a.launcher.wait(120), b.launcher.wait(120)
     assert (rc_a, rc_b) == (0, 0), (a.launcher.text()[-2000:], b.launcher.text()[-2000:])
-    rt.tracker.assert_none_left(timeout=10)
+    rt.tracker.assert_none_left(timeout=DEADLINE)
     pids_a = {d.pid for d in rt.tracker.descendants(a.launcher)}
     pids_b = {d.pid for d in rt.tracker.descendants(b.launcher)}
     assert pids_a and pids_b and not pids_a & pids_b

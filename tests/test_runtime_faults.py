@@ -13,6 +13,7 @@ import time
 
 import numpy as np
 import pytest
+from deadlines import DEADLINE
 from runtime_helpers import (
     SCENARIOS,
     Runtime,
@@ -53,22 +54,22 @@ def fault_run(tmp_path_factory):
             tr, SCENARIOS / "case2-fixed.toml", base / "run", "--duration", FAULT_DURATION, "--clock", "lockstep"
         )
         run_id, endpoint = up.banner()
-        up.wait_started(60)
+        up.wait_started(DEADLINE)
         pids = tr.wait_agent_pids(up.launcher, 6)
         # Mid-run: the world ticks, and nobody was dropped.
-        info = up.wait_info(lambda i: i["tick"] > 0, 30, "the run to tick")
+        info = up.wait_info(lambda i: i["tick"] > 0, DEADLINE, "the run to tick")
         assert not [a for a in info["agents"].values() if a["drops"]], info["agents"]
         res = {"up": up, "run_id": run_id, "endpoint": endpoint, "pids": dict(pids), "kill_time": {}}
 
         for victim in (4, 1):
             res["kill_time"][victim] = time.time()
             os.kill(pids[victim], signal.SIGKILL)
-            up.wait_info(lambda i, v=victim: agent_info(i, v)["drops"], 10, f"the world to drop agent {victim}")
+            up.wait_info(lambda i, v=victim: agent_info(i, v)["drops"], DEADLINE, f"the world to drop agent {victim}")
         assert up.launcher.poll() is None, "the run ended before the faults were done: make it longer"
         # The clock goes on after the drops before agent 4 comes back (lockstep: had the world
         # still been waiting on this tick, the drop and the rejoin would share it).
         k = up.info()["tick"]
-        up.wait_info(lambda i: i["tick"] > k + 2, 30, "the clock to go on after the drops")
+        up.wait_info(lambda i: i["tick"] > k + 2, DEADLINE, "the clock to go on after the drops")
 
         t_again = time.monotonic()
         again = tr.spawn(agent_cmd(4, endpoint, run_id), "agent-4-again")
@@ -76,7 +77,7 @@ def fault_run(tmp_path_factory):
         try:
             up.wait_info(
                 lambda i: agent_info(i, 4)["joins"] == 2 and agent_info(i, 4)["alive"],
-                60,
+                DEADLINE,
                 "the restarted agent 4 to rejoin",
             )
         except AssertionError as e:
@@ -84,8 +85,8 @@ def fault_run(tmp_path_factory):
         res["restart_to_rejoin_s"] = time.monotonic() - t_again
         print(f"\n[timing] restart of agent 4 -> rejoin seen live: {res['restart_to_rejoin_s']:.2f} s")
         res["rc"] = up.launcher.wait(120)
-        res["again_rc"] = again.wait(15)
-        tr.assert_none_left(timeout=10)
+        res["again_rc"] = again.wait(DEADLINE)
+        tr.assert_none_left(timeout=DEADLINE)
         res["summary"] = up.summary()
         res["traj"] = up.trajectory()
         yield res
@@ -223,19 +224,21 @@ def _world_by_hand(rt, tmp_path, scenario: str, *extra):
 def test_duplicate_and_unknown_ids_are_refused(rt, tmp_path):
     w, ep, run_id, world = _world_by_hand(rt, tmp_path, "case2.toml", "--join-timeout", "600")
     first = rt.tracker.spawn(agent_cmd(1, ep, run_id), "agent-1")
-    world.wait(lambda i: agent_info(i, 1)["alive"], 30, "agent 1 to join", check=lambda: w.check_running("a join"))
+    world.wait(
+        lambda i: agent_info(i, 1)["alive"], DEADLINE, "agent 1 to join", check=lambda: w.check_running("a join")
+    )
 
     dup = rt.tracker.spawn(agent_cmd(1, ep, run_id), "agent-1-dup")
-    rc = dup.wait(20)
+    rc = dup.wait(DEADLINE)
     assert rc == ExitCode.REFUSED, f"second agent 1 exited {rc}: {dup.text()}"
     assert "already live" in dup.text() and f"pid {first.pid}" in dup.text(), dup.text()
 
     # The same through the CLI, and with the run id looked up on the endpoint.
     dup2 = rt.tracker.spawn(swarm_cmd("agent", "--id", 1, "--connect", ep), "agent-1-dup-cli")
-    assert dup2.wait(20) == ExitCode.REFUSED and "already live" in dup2.text(), dup2.text()
+    assert dup2.wait(DEADLINE) == ExitCode.REFUSED and "already live" in dup2.text(), dup2.text()
 
     unknown = rt.tracker.spawn(agent_cmd(99, ep, run_id), "agent-99")
-    rc = unknown.wait(20)
+    rc = unknown.wait(DEADLINE)
     assert rc == ExitCode.REFUSED, f"agent 99 exited {rc}: {unknown.text()}"
     assert "not in scenario" in unknown.text(), unknown.text()
 
@@ -247,11 +250,11 @@ def test_duplicate_and_unknown_ids_are_refused(rt, tmp_path):
     assert [a["id"] for a in info["agents"].values() if a["joins"]] == [1] and "99" not in info["agents"]
 
     w.group.signal(signal.SIGTERM)
-    assert w.wait(20) == ExitCode.TERMINATED, w.text()[-2000:]
-    rc1 = first.wait(10)
+    assert w.wait(DEADLINE) == ExitCode.TERMINATED, w.text()[-2000:]
+    rc1 = first.wait(DEADLINE)
     print(f"\n[info] agent 1 exited {rc1} after the world was stopped with SIGTERM")
     assert rc1 in (0, 4), f"agent 1 exited {rc1} when the world stopped: {first.text()}"
-    rt.tracker.assert_none_left(timeout=5)
+    rt.tracker.assert_none_left(timeout=DEADLINE)
     summ = json.loads((tmp_path / "world-out" / "summary.json").read_text())
     assert [e["agent"] for e in events_of(summ, EventKind.JOIN)] == [1] and not events_of(summ, EventKind.DROP, 1), (
         summ["events"]
@@ -264,7 +267,7 @@ def test_agents_exit_when_the_world_vanishes(rt, tmp_path):
     agents = {i: rt.tracker.spawn(agent_cmd(i, ep, run_id), f"agent-{i}") for i in (1, 2)}
     world.wait(
         lambda i: has_started(i) and i["tick"] > 0,
-        60,
+        DEADLINE,
         "the run to start and tick",
         check=lambda: w.check_running("the run to start"),
     )
@@ -279,17 +282,17 @@ def test_agents_exit_when_the_world_vanishes(rt, tmp_path):
                 exits[i] = time.monotonic() - t0
         return len(exits) == len(agents)
 
-    wait_until(all_exited, 10, interval=0.005)
+    wait_until(all_exited, DEADLINE, interval=0.005)
     print(
         "\n[timing] world SIGKILL -> agents exit: "
         + ", ".join(f"{i}: {1000 * s:.0f} ms" for i, s in sorted(exits.items()))
     )
-    assert w.wait(5) == -signal.SIGKILL
+    assert w.wait(DEADLINE) == -signal.SIGKILL
     for i, a in agents.items():
-        assert i in exits, f"agent {i} still running 10 s after the world died"
+        assert i in exits, f"agent {i} still running {DEADLINE:g} s after the world died"
         assert a.poll() == ExitCode.WORLD_GONE, f"agent {i} exited {a.poll()}: {a.text()}"
         assert "vanished" in a.text(), a.text()  # the lifeline, not the grace of a silent world
-    rt.tracker.assert_none_left(timeout=5)
+    rt.tracker.assert_none_left(timeout=DEADLINE)
 
 
 # --- a frozen world: lockstep stays lockstep (docs/guides/faults.md#lockstep-under-stalls) ---------------
@@ -322,7 +325,7 @@ def test_frozen_agent_is_dropped(rt, tmp_path):
     os.kill(victim, signal.SIGSTOP)
     try:
         # lockstep holds a lost token LINK_GRACE s (a starved link may come back) before the drop
-        up.wait_info(lambda i: agent_info(i, 3)["drops"], 60, "the world to drop the frozen agent 3")
+        up.wait_info(lambda i: agent_info(i, 3)["drops"], DEADLINE, "the world to drop the frozen agent 3")
         t_seen = time.time()
     finally:
         os.kill(victim, signal.SIGCONT)

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import psutil
 import pytest
+from deadlines import DEADLINE
 from runtime_helpers import SCENARIOS, Runtime, agent_cmd, live_swarm, short_runtime_dir, swarm_cmd, wait_for
 from typer.testing import CliRunner
 
@@ -34,7 +35,7 @@ from swarm.contracts.vocabulary import ExitCode
 from swarm.runtime.procs import wait_until
 
 REPO = Path(__file__).resolve().parents[1]
-EXIT_DEADLINE = 30.0  # s for a stopped process to exit: an outcome, not a timing
+EXIT_DEADLINE = DEADLINE  # s for a stopped process to exit: an outcome, not a timing
 
 
 # --- the parts, in this process -----------------------------------------------------------------
@@ -49,7 +50,7 @@ def test_held_signal_is_raised_when_the_block_ends():
         with pytest.raises(Stopped):
             with stops.held():
                 os.kill(os.getpid(), signal.SIGTERM)
-                wait_until(lambda: stops.pending, 5.0)
+                wait_until(lambda: stops.pending, DEADLINE)
                 reached = True  # the signal did not interrupt the block
         assert reached and stops.fired
         os.kill(os.getpid(), signal.SIGTERM)  # `once`: a second signal is ignored
@@ -65,12 +66,12 @@ def test_ready_pipe_steps_and_end():
     tell.say("listening")
     assert not wait.poll(1.0) and wait.doing() == "opening its hub (zenoh.open)"
     tell.ready()  # closes its end
-    assert wait.wait(5.0) and wait.step == READY
+    assert wait.wait(DEADLINE) and wait.step == READY
     wait.close()
     r, w = os.pipe()
     wait = ReadyWait(r)
     os.close(w)  # a world that exits before it is ready
-    assert not wait.wait(5.0) and wait.ended and wait.doing().startswith("starting")
+    assert not wait.wait(DEADLINE) and wait.ended and wait.doing().startswith("starting")
     wait.close()
 
 
@@ -154,9 +155,9 @@ def test_world_stopped_in_its_first_second_exits_and_leaves_no_files(when):
     try:
         with world_process(rt) as (p, wait):
             if when == "step":
-                wait_for(lambda: wait.poll(0.05) or wait.step or wait.ended, 60, "the world's first word")
+                wait_for(lambda: wait.poll(0.05) or wait.step or wait.ended, DEADLINE, "the world's first word")
             elif when == "ready":
-                assert wait.wait(60), f"the world did not get ready (last word {wait.step!r})"
+                assert wait.wait(DEADLINE), f"the world did not get ready (last word {wait.step!r})"
             else:
                 time.sleep(float(when))
             p.send_signal(signal.SIGTERM)
@@ -176,7 +177,7 @@ def test_killed_world_files_are_swept_by_swarm_runs(monkeypatch):
     monkeypatch.setenv("SWARM_RUNTIME_DIR", rt)
 
     with world_process(rt, "dead") as (p, wait), world_process(rt, "alive") as (q, qwait):
-        assert wait.wait(60) and qwait.wait(60)
+        assert wait.wait(DEADLINE) and qwait.wait(DEADLINE)
         os.killpg(p.pid, signal.SIGKILL)
         p.wait()
         assert {"dead.cred", "dead.sock", "dead.sock.lock"} <= set(os.listdir(rt))
@@ -198,7 +199,7 @@ def test_agent_stopped_in_its_first_second_exits():
     env = {**os.environ, "SWARM_RUNTIME_DIR": rt}
     try:
         with world_process(rt, "ag") as (w, wait):
-            assert wait.wait(60)
+            assert wait.wait(DEADLINE)
             endpoint = f"unixsock-stream/{rt}/ag.sock"
             for delay in (0.0, 0.15, 0.3, 0.6, 1.0):
                 a = subprocess.Popen(
@@ -275,11 +276,25 @@ def test_spawned_agent_logs_in_the_runs_logs(tmp_path):
         up, tr = state["up"], state["tracker"]
         sp = tr.spawn(
             swarm_cmd(
-                "spawn", "--id", "7", "--x", "10", "--y", "-5", "--heading", "0", "--speed", "20", "--follow", "1"
+                "spawn",
+                "--id",
+                "7",
+                "--x",
+                "10",
+                "--y",
+                "-5",
+                "--heading",
+                "0",
+                "--speed",
+                "20",
+                "--follow",
+                "1",
+                "--timeout",
+                DEADLINE,
             ),
             "spawn-7",
         )
-        assert sp.wait(60) == ExitCode.OK, sp.text()
+        assert sp.wait(DEADLINE) == ExitCode.OK, sp.text()
         m = re.search(r"agent 7 is live: pid (\d+) \(log (.+)\)", sp.text())
         assert m, sp.text()
         pid = int(m[1])
@@ -288,6 +303,6 @@ def test_spawned_agent_logs_in_the_runs_logs(tmp_path):
         assert Path(m[2]) == log and log.exists()
         assert not (Path(state["runtime"]) / "logs").exists()
         again = tr.spawn(swarm_cmd("spawn", "--id", "3"), "spawn-3")
-        assert again.wait(60) == ExitCode.FAILED
+        assert again.wait(DEADLINE) == ExitCode.FAILED
         lines = again.text().strip().splitlines()
         assert len(lines) == 1 and "agent 3 is already live" in lines[0], lines

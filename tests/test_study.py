@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import psutil
 import pytest
+from deadlines import DEADLINE
 from typer.testing import CliRunner
 
 from swarm.cli.main import app
@@ -217,7 +218,7 @@ def interrupt_study(args: list[str], out: Path) -> tuple[str, list]:
         workers = psutil.Process(proc.pid).children(recursive=True)
         assert workers, "the study should run on worker processes"
         group.signal(signal.SIGINT)  # what a terminal's Ctrl-C does
-        output, _ = proc.communicate(timeout=60)
+        output, _ = proc.communicate(timeout=DEADLINE)
     finally:
         group.kill()
     assert proc.returncode == ExitCode.INTERRUPTED, output

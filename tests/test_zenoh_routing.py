@@ -19,6 +19,7 @@ import time
 
 import pytest
 import zenoh
+from deadlines import DEADLINE
 
 from swarm.contracts import access
 from swarm.contracts import credentials as C
@@ -42,7 +43,7 @@ def _open(settings: dict):
     return zenoh.open(cfg)
 
 
-def _wait(cond, timeout=3.0):
+def _wait(cond, timeout=DEADLINE):
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         if cond():

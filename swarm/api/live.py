@@ -258,15 +258,18 @@ class Live:
         done = self.signal(agent_id, signal)
         return self.wait_dropped(done) if done.drops else None
 
-    def spawn(self, agent_id: int, trust_law: Iterable[str] = (), **spec):
-        """Start agent `agent_id` on this machine and wait until it is live: a dropped id
-        rejoins; a new one needs x, y, heading, speed (role, orbit_radius, direction, follow,
-        max_turn_rate optional). A `swarm.live.control.Spawned` (pid, log)."""
+    def spawn(self, agent_id: int, trust_law: Iterable[str] = (), timeout: float | None = None, **spec):
+        """Start agent `agent_id` on this machine and wait until it is live (LiveError after
+        `timeout` s, default 10): a dropped id rejoins; a new one needs x, y, heading, speed
+        (role, orbit_radius, direction, follow, max_turn_rate optional). A
+        `swarm.live.control.Spawned` (pid, log)."""
         # lazy: swarm.live.control brings swarm.runtime.procs (~4 ms), and every command imports this module
-        from swarm.live.control import spawn_agent
+        from swarm.live.control import SPAWN_DEADLINE, spawn_agent
 
         with talking():
-            return spawn_agent(self._lr, agent_id, spec, tuple(trust_law))
+            return spawn_agent(
+                self._lr, agent_id, spec, tuple(trust_law), SPAWN_DEADLINE if timeout is None else timeout
+            )
 
 
 def connect(run: str | None = None, connect: str | None = None, credentials: str | Path | None = None) -> Live:

@@ -25,6 +25,10 @@ def kill(
     connect: ConnectOpt = None,
     run: LiveRunOpt = None,
     credentials: CredentialsOpt = None,
+    timeout: Annotated[
+        Optional[float],
+        typer.Option(help="s to wait for the world to drop the agent [default: 3]", min=0.0, show_default=False),
+    ] = None,
 ) -> None:
     """Send a signal (default KILL) to an agent's process.
 
@@ -42,7 +46,7 @@ def kill(
         done = live.signal(agent_id, name)
         typer.echo(done.line())
         if done.drops:
-            typer.echo(f"agent {agent_id} dropped at tick {live.wait_dropped(done)}")
+            typer.echo(f"agent {agent_id} dropped at tick {live.wait_dropped(done, timeout)}")
 
 
 def spawn(
@@ -80,6 +84,10 @@ def spawn(
     run: LiveRunOpt = None,
     credentials: CredentialsOpt = None,
     trust_law: TrustLawOpt = None,
+    timeout: Annotated[
+        Optional[float],
+        typer.Option(help="s to wait for the agent to be live in the world [default: 10]", min=0.0, show_default=False),
+    ] = None,
 ) -> None:
     """Start an agent process on this machine (detached) and wait until it is live.
 
@@ -101,7 +109,7 @@ def spawn(
         max_turn_rate=max_turn_rate,
     )
     with connect_run(run, connect, credentials) as live:
-        typer.echo(live.spawn(agent_id, trust_law or (), **spec).line())
+        typer.echo(live.spawn(agent_id, trust_law or (), timeout, **spec).line())
 
 
 def _clock(connect: str | None, run: str | None, credentials: Path | None, cmd: str, done: str) -> None:
