@@ -244,3 +244,16 @@ def test_memory_does_not_grow_with_the_run_length(tmp_path, monkeypatch):
     assert big < 1.1 * small, peaks
     assert peaks["memory", 6000] > 3 * peaks["memory", 1500], peaks  # the test sees growth where there is some
     assert big * 4 < peaks["memory", 6000], peaks
+
+
+def test_force_removes_a_temporary_directory_left_behind(tmp_path):
+    """A world killed while it wrote its results leaves its `.results-*` directory; `--force`
+    clears it with the old results."""
+    from swarm.offline.results import claim_out_dir
+
+    (tmp_path / RECORDING_FILE).write_bytes(b"")
+    left = tmp_path / (results_stream.RESULTS_TMP + "abc")
+    left.mkdir()
+    (left / "x.npy").write_bytes(b"0" * 10)
+    claim_out_dir(tmp_path, force=True)
+    assert not left.exists() and not (tmp_path / RECORDING_FILE).exists()

@@ -53,6 +53,7 @@ COPY_BLOCK = 1 << 20  # bytes per read when a .npy file is copied into the zip
 CACHE_MAX = 4096  # graphs (out, alive) whose expected radii relative_errors keeps
 PER_TICK = ("t", "missed", "x", "y", "heading", "u", "out", "alive")  # after the static arrays, in this order
 _TIME_HEAD = 32  # bytes of a tick message's head (tick, time, n, missed)
+RESULTS_TMP = ".results-"  # the temporary directory's prefix (swarm/offline/results.py removes one left behind)
 
 
 @dataclass
@@ -575,7 +576,7 @@ def streamed(path: Path, work_in: Path, sc: Scan | None = None) -> Iterator[tupl
     if sc is None:
         sc = scan(path)
     try:
-        work = Path(tempfile.mkdtemp(prefix=".results-", dir=work_in))
+        work = Path(tempfile.mkdtemp(prefix=RESULTS_TMP, dir=work_in))
     except OSError as e:
         raise RecordingError(f"cannot write {work_in}: {e.strerror or e}") from None
     try:

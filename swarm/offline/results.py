@@ -10,11 +10,13 @@
 
 from __future__ import annotations
 
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
 from swarm.contracts.vocabulary import Coded, ExitCode
 from swarm.world.recording import RECORDING_FILE, RESULT_FILES, SUMMARY_FILE, TRAJECTORY_FILE, recover_run
+from swarm.world.results_stream import RESULTS_TMP
 
 PLOT_NAMES = ("trajectories.png", "distance.png", "control.png", "graph.png", "overview.png", "neighbours.png")
 PLOT_SUFFIXES = (".png", ".pdf", ".svg")  # `swarm plot --format`
@@ -57,6 +59,8 @@ def claim_out_dir(out: Path, force: bool) -> None:
             (out / name).unlink(missing_ok=True)
         for path in derived_files(out):  # never an old run's figures next to a new run's data
             path.unlink(missing_ok=True)
+        for tmp in out.glob(RESULTS_TMP + "*"):  # left by a world killed while it wrote its results
+            shutil.rmtree(tmp, ignore_errors=True)
         if force:  # a crash's cause is read from the log's last line: never the old run's
             for log in (out / "logs").glob("*.log"):
                 log.unlink()
