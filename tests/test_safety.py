@@ -274,7 +274,7 @@ def test_a_wall_turns_an_agent_heading_out():
     x, y, g = np.array([5.0]), np.array([2.0]), np.array([-np.pi / 2 + 0.6])
     f = safe_commands(bar, x, y, g, np.array([1.0]), np.array([0.0]), np.array([3.0]), np.ones(1, dtype=bool))
     assert f.changed[0] and not f.infeasible[0] and 0 < f.u[0] <= 3.0
-    assert f.reasons(0) == ["wall 0"]
+    assert f.reasons(0) == [("wall", 0)]
     assert kept(bar, x, y, g, np.array([1.0]), f.u).all()
 
 

@@ -151,8 +151,12 @@ class BatchWorld:
             self.u, self.hops = np.where(ok, u, self.u), np.where(ok, hops, self.hops)
         return ok
 
-    def step(self) -> None:
-        self.x, self.y, self.heading = step(self.x, self.y, self.heading, self.speed, self.u, self.dt)
+    def step(self, u: np.ndarray | None = None, speed: np.ndarray | None = None) -> None:
+        """One exact arc step of everybody with the latched turn rates, or with `u` and `speed`
+        ((B, N): the safety filter's, swarm/offline/batch.py) instead."""
+        u = self.u if u is None else u
+        v = self.speed if speed is None else speed
+        self.x, self.y, self.heading = step(self.x, self.y, self.heading, v, u, self.dt)
         self.tick += 1
 
     def switch_reason(

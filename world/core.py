@@ -142,6 +142,7 @@ class WorldCore:
         self.tick = 0
         self.rejected = 0  # non-finite commands refused
         self._sensing: _Sensed | None = None  # this tick's sensing, until poses or presence change
+        self._step_speed: np.ndarray | None = None  # during a plant's step: the safety filter's speeds
 
     @property
     def time(self) -> float:
@@ -269,29 +270,46 @@ class WorldCore:
             out[k] = math.nan
         return out
 
-    def step(self) -> None:
+    def step(self, u: np.ndarray | None = None, speed: np.ndarray | None = None) -> None:
         """Advance every agent in the world by one dt with the latched commands (agent by
         agent in a small swarm, where that is faster; the same bits either way), or let the
-        plant move them (it sends `applied()` and reads the poses back)."""
+        plant move them (it sends `applied()` and reads the poses back). `u`, `speed`: this
+        step's turn rates and speeds instead of `applied()` and each agent's own (the safety
+        filter's, world/safety_watch.py; `u` as `applied()` gives it: 0.0 coasting, NaN gone)."""
         self._sensing = None
         if self.plant is not None:
-            self.plant.step(self, self.applied())
+            self._step_speed = speed
+            try:
+                self.plant.step(self, self.applied() if u is None else u)
+            finally:
+                self._step_speed = None
             self.tick += 1
             return
         if len(self.ids) <= STEP_ONE_BY_ONE:
-            self._step_one_by_one()
+            self._step_one_by_one(u, speed)
             return
-        u = self.applied()
+        if u is None:
+            u = self.applied()
         moving = ~np.isnan(u)
-        nx, ny, ng = step(self.x, self.y, self.heading, self.speed, np.where(moving, u, 0.0), self.dt)
+        v = self.speed if speed is None else speed
+        nx, ny, ng = step(self.x, self.y, self.heading, v, np.where(moving, u, 0.0), self.dt)
         self.x = np.where(moving, nx, self.x)
         self.y = np.where(moving, ny, self.y)
         self.heading = np.where(moving, ng, self.heading)
         self.tick += 1
 
-    def _step_one_by_one(self) -> None:
+    def speeds(self) -> np.ndarray:
+        """The speeds (m/s) of the step under way: the safety filter's when it may change them,
+        else each agent's own (what a plant drives its robots at, world/plant.py)."""
+        return self.speed if self._step_speed is None else self._step_speed
+
+    def _step_one_by_one(self, u_now: np.ndarray | None = None, speed: np.ndarray | None = None) -> None:
         x, y, g = self.x.tolist(), self.y.tolist(), self.heading.tolist()
-        u, v, dt = self.u.tolist(), self.speed.tolist(), self.dt
+        u, v, dt = (
+            (self.u if u_now is None else u_now).tolist(),
+            (self.speed if speed is None else speed).tolist(),
+            self.dt,
+        )
         for k, s in enumerate(self.state):
             if s != GONE:  # a coasting agent moves straight on (u = 0), as `applied` says
                 x[k], y[k], g[k] = step_one(x[k], y[k], g[k], v[k], u[k] if s == ACTIVE else 0.0, dt)

@@ -16,6 +16,10 @@ thaw) are due here; carrying them out is the shell's job, and both end in `drop`
 dropped when its link lease runs out, and the lockstep clock holds until it is), a
 restart or a thaw brings it back (a restart with a fresh brain, a thaw with the one it had).
 
+A scenario's [safety] table puts the safety filter (world/safety_watch.py) between the
+commands latched and step 6: the turn rates (and speeds) it gives are the ones recorded and
+integrated (or sent to the robots), and it counts what it changed and what came too close.
+
 A plant (world/plant.py: real robots) replaces the integration of step 6; the world
 process starts it before tick 0 (`start_plant`) and stops it however the run ends
 (`stop_plant`). Without one nothing differs.
@@ -36,6 +40,7 @@ from swarm.world.core import ACTIVE, WorldCore
 from swarm.world.faults import FaultPlan, fault_event
 from swarm.world.plant import Plant
 from swarm.world.recording import Recorder, RunResult, StreamRecorder, TickRecorder
+from swarm.world.safety_watch import SafetyWatch
 
 # What became of a command (`Engine.command`).
 LATCHED, LOST, REFUSED = "latched", "lost", "refused"
@@ -73,6 +78,8 @@ class Engine:
         self.missed_now = 0  # live agents whose command is held at this tick
         self.wall_clock = wall_clock
         self.on_event = on_event
+        # [safety]: the filter between the latched commands and the integration, and its figures
+        self.safety = None if scenario.safety is None else SafetyWatch(scenario.safety, scenario.ids)
 
     @property
     def tick(self) -> int:
@@ -157,6 +164,8 @@ class Engine:
         self.core.add_agent(spec)
         self.rec.add_agent(self.core.scenario)
         self.out = np.append(self.out, -1)
+        if self.safety is not None:
+            self.safety.add_agent(spec.id)
 
     # -- 2. frames -------------------------------------------------------------------------------
     def frames(self) -> dict[int, SensorFrame]:
@@ -221,17 +230,35 @@ class Engine:
         the turn rates about to be integrated (the world publishes it as ground truth)."""
         c = self.core
         u = c.applied()
+        speed = None
+        if self.safety is not None:  # the safety filter: the turn rates (and speeds) to apply instead
+            alive, present = c.alive_mask(), c.present_mask()
+            u, speed = self.safety.command(c.x, c.y, c.heading, c.speed, u, c.limit, present, alive, self.event)
+            self.safety.measure(c.tick, c.x, c.y, present, alive, u, c.limit)
         self.rec.record(c.tick, c.time, c.x, c.y, c.heading, u, self.out, c.alive_mask(), self.missed_now)
         self.missed_now = 0
         if observe is not None:
             observe(u)
-        c.step()
+        if self.safety is None:
+            c.step()
+        else:
+            c.step(u, speed)
 
     def close(self) -> None:
         """Record the final state (no command: u is NaN), once."""
         c = self.core
         if c.tick <= self.ticks and self.rec.rows <= c.tick:
-            self.rec.record(c.tick, c.time, c.x, c.y, c.heading, np.full(len(c.ids), np.nan), self.out, c.alive_mask())
+            nan = np.full(len(c.ids), np.nan)
+            if self.safety is not None:
+                self.safety.measure(c.tick, c.x, c.y, c.present_mask(), c.alive_mask(), nan, c.limit)
+            self.rec.record(c.tick, c.time, c.x, c.y, c.heading, nan, self.out, c.alive_mask())
 
     def result(self, extra: dict, agent_extra: dict | None = None) -> RunResult:
-        return RunResult(self.core.scenario, self.rec, self.events, extra, agent_extra or {})
+        """The run's results; with [safety], its figures in summary.json ("safety", and each
+        agent's) whatever the shell."""
+        agent_extra = dict(agent_extra or {})
+        if self.safety is not None:
+            extra = {**extra, "safety": self.safety.figures()}
+            for aid, figs in self.safety.agent_figures().items():
+                agent_extra[aid] = {**agent_extra.get(aid, {}), **figs}
+        return RunResult(self.core.scenario, self.rec, self.events, extra, agent_extra)

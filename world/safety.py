@@ -52,9 +52,12 @@ What is solved, and how:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import daqp
 import numpy as np
+
+from swarm.contracts.scenario_tables import SafetySpec, polygon_turns
 
 INF = 1e30  # DAQP's infinity (a bound at or beyond it is no bound)
 SLACK_WEIGHT = 1e6  # infeasible groups: cost of a unit of broken condition, per unit (rad/s)^2 of turn rate
@@ -102,16 +105,6 @@ class Arena:
         return np.asarray((self.depth(x, y) >= 0.0).all(axis=-1))
 
 
-def polygon_turns(pts) -> list[float]:
-    """The cross product of each pair of consecutive edges (all > 0: convex, counter-clockwise)."""
-    n = len(pts)
-    out = []
-    for k in range(n):
-        (x0, y0), (x1, y1), (x2, y2) = pts[k - 1], pts[k], pts[(k + 1) % n]
-        out.append((x1 - x0) * (y2 - y1) - (y1 - y0) * (x2 - x1))
-    return out
-
-
 @dataclass(frozen=True)
 class Barriers:
     """The filter's parameters (a scenario's [safety] table, swarm/contracts/scenario_tables.py)."""
@@ -131,6 +124,18 @@ class Barriers:
     def wall_margin(self) -> float:
         """m: the least distance of a lookahead point inside a wall."""
         return 0.5 * self.radius + self.lookahead
+
+
+def barriers_of(spec: SafetySpec) -> Barriers:
+    """A scenario's [safety] table as the filter's parameters."""
+    corners = spec.corners
+    return Barriers(
+        radius=spec.radius,
+        lookahead=spec.lookahead_m,
+        gamma=spec.gamma,
+        arena=None if corners is None else Arena.polygon(corners),
+        speed=spec.speed,
+    )
 
 
 @dataclass
@@ -162,8 +167,7 @@ def conditions(bar: Barriers, x, y, g, present: np.ndarray) -> Conditions:
     c, s = np.cos(g), np.sin(g)
     qx, qy = x + la * c, y + la * s
     idx = np.flatnonzero(present)
-    ii, jj = np.triu_indices(len(idx), 1)
-    i, j = idx[ii], idx[jj]
+    i, j = pairs(present)
     dx, dy = qx[i] - qx[j], qy[i] - qy[j]
     dist = np.hypot(dx, dy)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -213,8 +217,8 @@ class Filtered:
     active: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     solves: int = 0  # QPs solved (0: the law's commands were safe)
 
-    def reasons(self, k: int) -> list[str]:
-        """What bound agent k's command: "agent <column>" / "wall <k>" per active condition."""
+    def reasons(self, k: int) -> list[tuple[str, int]]:
+        """What bound agent k's command: ("agent", its column) / ("wall", its index) per active condition."""
         if self.cond is None:
             return []
         c = self.cond
@@ -224,7 +228,7 @@ class Filtered:
                 out.append(("agent", int(c.b[r] if c.a[r] == k else c.a[r])))
             elif c.kind[r] == "wall" and c.a[r] == k:
                 out.append(("wall", int(c.b[r])))
-        return [f"{kind} {other}" for kind, other in out]
+        return out
 
 
 def safe_commands(
@@ -402,19 +406,34 @@ def _qp(H, z0, A, b, lo, hi) -> tuple[np.ndarray, int]:
     return z, int(flag)
 
 
-def distances(x, y, present: np.ndarray) -> np.ndarray:
-    """Distances (m) between every pair of present agents (i < j), as a flat array."""
-    idx = np.flatnonzero(present)
-    ii, jj = np.triu_indices(len(idx), 1)
-    i, j = idx[ii], idx[jj]
+def distances(x, y, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """Distances (m) between the agents of columns i and j (`pairs`)."""
     return np.hypot(np.asarray(x)[i] - np.asarray(x)[j], np.asarray(y)[i] - np.asarray(y)[j])
 
 
 def pairs(present: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The (i, j) columns of `distances`."""
+    """The columns (i, j), i < j, of every pair of present agents."""
     idx = np.flatnonzero(present)
-    ii, jj = np.triu_indices(len(idx), 1)
+    ii, jj = _triu(len(idx))
     return idx[ii], idx[jj]
 
 
-__all__ = ["Arena", "Barriers", "Conditions", "Filtered", "conditions", "distances", "pairs", "safe_commands"]
+@lru_cache(maxsize=64)
+def _triu(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """np.triu_indices(n, 1), made once per n (it costs tens of microseconds)."""
+    ii, jj = np.triu_indices(n, 1)
+    ii.flags.writeable = jj.flags.writeable = False
+    return ii, jj
+
+
+__all__ = [
+    "Arena",
+    "Barriers",
+    "Conditions",
+    "Filtered",
+    "barriers_of",
+    "conditions",
+    "distances",
+    "pairs",
+    "safe_commands",
+]

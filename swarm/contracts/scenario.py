@@ -24,6 +24,7 @@ from swarm.contracts.scenario_tables import (
     GainsSpec,
     LawSpec,
     RunSpec,
+    SafetySpec,
     SensingSpec,
     Strict,
     TargetSpec,
@@ -47,6 +48,9 @@ class Scenario(Strict):
     sensing: SensingSpec = SensingSpec()
     agents: list[AgentSpec] = Field(min_length=1)
     faults: list[FaultSpec] = Field(default_factory=list, description="scripted faults, by time")
+    safety: SafetySpec | None = Field(
+        default=None, description="the safety filter and its figures (docs/design/safety.md); none: neither"
+    )
 
     @field_validator("agents", mode="before")
     @classmethod
@@ -94,6 +98,14 @@ class Scenario(Strict):
                         cycle = " -> ".join(str(i) for i in seen[seen.index(cur.id) :] + [cur.id])
                         raise ValueError(f"agents[{k}].follow: follower-only cycle in the fixed graph: {cycle}")
                     seen.append(cur.id)
+        return self
+
+    @model_validator(mode="after")
+    def _in_the_arena(self) -> Scenario:
+        if self.safety is not None:
+            for k, a in enumerate(self.agents):
+                if not self.safety.inside(a.x, a.y):
+                    raise ValueError(f"agents[{k}]: agent {a.id} starts at ({a.x:g}, {a.y:g}), outside safety.arena")
         return self
 
     @model_validator(mode="after")

@@ -244,3 +244,83 @@ class FaultSpec(Strict):
         if needs and getattr(self, needs) is None:
             raise ValueError(f"{needs}: a {self.kind} fault needs it")
         return self
+
+
+def polygon_turns(points) -> list[float]:
+    """The cross product of each pair of consecutive edges of a polygon (corners (x, y)):
+    all > 0, a convex polygon walked counter-clockwise; all < 0, clockwise."""
+    n = len(points)
+    out = []
+    for k in range(n):
+        (x0, y0), (x1, y1), (x2, y2) = points[k - 1], points[k], points[(k + 1) % n]
+        out.append((x1 - x0) * (y2 - y1) - (y1 - y0) * (x2 - x1))
+    return out
+
+
+class SafetySpec(Strict):
+    """[safety]: the safety filter between every law and every actuator (docs/design/safety.md):
+    control barrier functions on the distance between agents and on the arena's walls, one
+    small QP per tick in the world. Its figures (collisions, boundary exits, saturations)
+    are measured whenever the table is there, filtering or not (`enabled = false`)."""
+
+    enabled: bool = Field(default=True, description="filter the commands; false: only measure")
+    radius: Length = Field(description="the least distance between two agents' positions (m); closer is a collision")
+    lookahead: Length | None = Field(
+        default=None, description="the point ahead of each agent the barriers are on (m); default radius / 4"
+    )
+    gamma: Rate = Field(default=2.0, description="dh/dt >= -gamma h (1/s): how fast a barrier may be approached")
+    speed: bool = Field(
+        default=False, description="may the filter change speeds (slow down, stop): false for the paper's agents"
+    )
+    arena: list[Coord] | list[list[Coord]] | None = Field(
+        default=None,
+        description="[xmin, ymin, xmax, ymax], or a convex polygon's corners [[x, y], ...] (m); none: no walls",
+    )
+
+    @field_validator("arena")
+    @classmethod
+    def _arena(cls, arena):
+        if arena is None or not arena or not isinstance(arena[0], list):
+            if arena is not None and len(arena) != 4:
+                raise ValueError(f"a rectangle is [xmin, ymin, xmax, ymax], got {len(arena)} numbers")
+            if arena is not None and not (arena[0] < arena[2] and arena[1] < arena[3]):
+                raise ValueError(f"a rectangle needs xmin < xmax and ymin < ymax, got {arena}")
+            return arena
+        for k, p in enumerate(arena):
+            if len(p) != 2:
+                raise ValueError(f"corner {k}: a corner is [x, y], got {len(p)} numbers")
+        if len(arena) < 3:
+            raise ValueError(f"a polygon needs 3 corners or more, got {len(arena)}")
+        turns = polygon_turns(arena)
+        if not (all(t > 0 for t in turns) or all(t < 0 for t in turns)):
+            raise ValueError("the polygon is not convex (or has repeated or collinear corners): the walls are its edges")
+        return arena
+
+    @property
+    def lookahead_m(self) -> float:
+        return self.lookahead if self.lookahead is not None else 0.25 * self.radius
+
+    @property
+    def corners(self) -> list[tuple[float, float]] | None:
+        """The arena as corners (a rectangle's counter-clockwise from (xmin, ymin)); None: no arena."""
+        a = self.arena
+        if a is None:
+            return None
+        if isinstance(a[0], list):
+            return [(float(p[0]), float(p[1])) for p in a]
+        x0, y0, x1, y1 = (float(v) for v in a)
+        return [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+
+    def inside(self, x: float, y: float) -> bool:
+        """Whether the point (x, y) is in the arena (on a wall counts as in)."""
+        pts = self.corners
+        if pts is None:
+            return True
+        ccw = polygon_turns(pts)[0] > 0
+        n = len(pts)
+        for k in range(n):
+            (x0, y0), (x1, y1) = pts[k], pts[(k + 1) % n]
+            cross = (x1 - x0) * (y - y0) - (y1 - y0) * (x - x0)
+            if (cross < 0) if ccw else (cross > 0):
+                return False
+        return True

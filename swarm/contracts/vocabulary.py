@@ -69,6 +69,7 @@ class EventKind(StrEnum):
     STALE = "stale"  # robots: an agent's robot's pose is older than the robots file's stale_after (zero twist)
     FRESH = "fresh"  # robots: its poses come again
     LATE = "late"  # realtime: the world fell a tick or more behind and re-anchored its clock (no burst)
+    SAFETY = "safety"  # [safety]: the filter changed an agent's command (the first tick of each spell)
 
 
 class SwitchReason(StrEnum):

@@ -8,6 +8,10 @@ swarm.offline.sim.run_sim's, with the same trajectory (to the bit on this projec
 machines; tests/test_batch.py checks 1e-9 m), the same "switch" events with the same
 reasons, and the same summary, "engine" excepted ("sim-batch").
 
+A member with a [safety] table has its own `SafetyWatch` (world/safety_watch.py), called as
+Engine.end_tick calls it (after the switch events, before the record and the step), so its
+filtered turn rates, "safety" events and figures are sim's too.
+
 What it runs: the built-in "bearing" law, every selection rule, sensing range and field
 of view, turn-rate limits, leaders' CC paths and orbit hold. What it refuses (`refusal`
 says why, and `run_batch` raises BatchRefused): scripted faults, follower or leader laws of
@@ -29,6 +33,7 @@ from swarm.contracts.scenario import Scenario
 from swarm.contracts.vocabulary import EventKind
 from swarm.world.batch import BatchWorld
 from swarm.world.recording import RunResult, StreamRecorder, static_arrays
+from swarm.world.safety_watch import SafetyWatch
 
 ENGINE = "sim-batch"
 
@@ -115,6 +120,32 @@ def run_batch(
     alive = np.ones(n, dtype=bool)
     rows = np.arange(B)[:, None]
     every = max(1, ticks // 200)
+    watches = {b: SafetyWatch(s.safety, s.ids) for b, s in enumerate(scenarios) if s.safety is not None}
+
+    def safety(k: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """Each member's safety filter, as Engine.end_tick runs it: the (B, N) turn rates (and
+        speeds, None when no member's may change) to record and step."""
+        if not watches:
+            return world.u, None
+        u, v = world.u.copy(), None
+        for b, w in watches.items():
+            ub, vb = w.command(
+                world.x[b],
+                world.y[b],
+                world.heading[b],
+                world.speed[b],
+                world.u[b],
+                world.limit[b],
+                alive,
+                alive,
+                _sink(k, dt, world.ids[b], events[b], rec),
+            )
+            w.measure(k, world.x[b], world.y[b], alive, alive, ub, world.limit[b])
+            u[b] = ub
+            if vb is not None:
+                v = world.speed.copy() if v is None else v
+                v[b] = vb
+        return u, v
 
     def record(k: int, u: np.ndarray) -> None:
         out_ids = np.where(out >= 0, world.ids[rows, np.maximum(out, 0)], -1)
@@ -137,14 +168,31 @@ def run_batch(
                 if rec is not None:
                     rec.event(ev)
         out = new
-        record(k, world.u)
-        world.step()
+        u, v = safety(k)
+        record(k, u)
+        world.step(u, v)
         if progress is not None and k % every == 0:
             progress(k, ticks)
-    record(ticks, np.full((B, n), np.nan))
+    nan = np.full((B, n), np.nan)
+    for b, w in watches.items():
+        w.measure(ticks, world.x[b], world.y[b], alive, alive, nan[b], world.limit[b])
+    record(ticks, nan)
     if progress is not None:
         progress(ticks, ticks)
-    return [_result(s, b, rec, hist, events[b], world, brains, ticks) for b, s in enumerate(scenarios)]
+    return [_result(s, b, rec, hist, events[b], world, brains, ticks, watches.get(b)) for b, s in enumerate(scenarios)]
+
+
+def _sink(k: int, dt: float, ids: np.ndarray, events: list[dict], rec):
+    """An event sink of member events at tick k, as Engine.event writes them (no wall time)."""
+
+    def event(kind: str, agent: int | None, reason: str, **more) -> dict:
+        ev = {"tick": k, "time": k * dt, "agent": agent, "kind": kind, "reason": reason, **more}
+        events.append(ev)
+        if rec is not None:
+            rec.event(ev)
+        return ev
+
+    return event
 
 
 def _switches(k: int, dt: float, world: BatchWorld, frames, out, new, changed, pinned):
@@ -169,10 +217,22 @@ def _switches(k: int, dt: float, world: BatchWorld, frames, out, new, changed, p
 
 
 def _result(
-    s: Scenario, b: int, rec, hist: dict, events: list[dict], world: BatchWorld, brains: BatchBrains, ticks: int
+    s: Scenario,
+    b: int,
+    rec,
+    hist: dict,
+    events: list[dict],
+    world: BatchWorld,
+    brains: BatchBrains,
+    ticks: int,
+    watch: SafetyWatch | None = None,
 ) -> RunResult:
-    extra = {"engine": ENGINE, "rejected_commands": int(world.rejected[b]), "lost_frames": 0, "lost_commands": 0}
+    extra: dict = {"engine": ENGINE, "rejected_commands": int(world.rejected[b]), "lost_frames": 0, "lost_commands": 0}
     agent_extra = {str(a.id): brains.figures(b, i) for i, a in enumerate(s.agents)}
+    if watch is not None:  # as Engine.result adds them
+        extra["safety"] = watch.figures()
+        for aid, figs in watch.agent_figures().items():
+            agent_extra[aid] = {**agent_extra.get(aid, {}), **figs}
     if rec is None:
         shape = (ticks + 1, len(s.agents))
         arrays = {k: hist[k][b] if k in hist else np.broadcast_to(np.nan, shape) for k in ("x", "y", "heading", "u")}

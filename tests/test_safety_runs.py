@@ -1,0 +1,167 @@
+"""The safety filter in runs: `swarm sim` with a [safety] table, the batch engine, summary.json,
+and `swarm up --clock lockstep` equal to `swarm sim` to the bit with the filter at work.
+
+The scenario: two leaders on one orbit (r = 10 m, ccw), the faster one behind: without the
+filter it runs through the slower one (a collision); with it, it passes beside it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+
+import numpy as np
+import pytest
+from runtime_helpers import run_sim as run_sim_process
+from runtime_helpers import start_up
+
+from swarm.contracts.scenario import ScenarioError, parse_scenario
+from swarm.contracts.vocabulary import EventKind, ExitCode
+from swarm.offline.batch import run_batch
+from swarm.offline.sim import run_sim
+from swarm.world.recording import write_run
+
+OVERTAKE = """
+name = "overtake"
+description = "Two leaders on one orbit, the faster behind the slower: it runs through it without [safety]"
+
+[run]
+dt = 0.01
+duration = {duration}
+
+[gains]
+c1 = 0.5
+c2 = 0.25
+
+[[agents]]
+id = 1
+role = "leader"
+x = 10.0
+y = 0.0
+heading = 1.5707963
+speed = 5.0
+orbit_radius = 10.0
+max_turn_rate = 2.0
+
+[[agents]]
+id = 2
+role = "leader"
+x = 0.0
+y = -10.0
+heading = 0.0
+speed = 6.0
+orbit_radius = 10.0
+max_turn_rate = 2.0
+"""
+RADIUS = 1.0
+
+
+def overtake(safety: dict | None = None, duration: float = 40.0):
+    data = tomllib.loads(OVERTAKE.format(duration=duration))
+    if safety is not None:
+        data["safety"] = safety
+    return parse_scenario(data, "overtake")
+
+
+def distance(arrays) -> np.ndarray:
+    return np.hypot(arrays["x"][:, 0] - arrays["x"][:, 1], arrays["y"][:, 0] - arrays["y"][:, 1])
+
+
+def test_without_the_filter_they_collide_and_with_it_they_do_not():
+    bare = run_sim(overtake())
+    assert "safety" not in bare.summary()
+    assert distance(bare.recorder.arrays()).min() < RADIUS
+    measured = run_sim(overtake({"radius": RADIUS, "enabled": False})).summary()
+    a = run_sim(overtake()).recorder.arrays()
+    # enabled = false: the same run, measured: one collision spell, no intervention
+    np.testing.assert_array_equal(
+        run_sim(overtake({"radius": RADIUS, "enabled": False})).recorder.arrays()["x"], a["x"]
+    )
+    s = measured["safety"]
+    assert s["collisions"] == 1 and s["collision_ticks"] > 0 and s["min_distance"] < RADIUS
+    assert s["interventions"] == 0 and not any(e["kind"] == EventKind.SAFETY for e in measured["events"])
+
+    filtered = run_sim(overtake({"radius": RADIUS}))
+    summ = filtered.summary()
+    s = summ["safety"]
+    assert s["collisions"] == 0 and s["collision_ticks"] == 0
+    assert s["min_distance"] >= RADIUS
+    assert distance(filtered.recorder.arrays()).min() == pytest.approx(s["min_distance"])
+    assert s["interventions"] > 0 and s["infeasible"] == 0 and s["boundary_exits"] == 0
+    events = [e for e in summ["events"] if e["kind"] == EventKind.SAFETY]
+    assert len(events) == s["spells"] == sum(a["safety"]["spells"] for a in summ["agents"].values())
+    assert sum(a["safety"]["interventions"] for a in summ["agents"].values()) == s["interventions"]
+    for e in events:  # the first tick of a spell: what the law asked, what was applied, and why
+        assert e["u"] != e["u_law"] and e["by"] and e["infeasible"] is False
+        assert e["reason"].startswith("turn rate ")
+    # the recorded turn rates are the ones applied (the filter's), within the limits
+    u = filtered.recorder.arrays()["u"][:-1]
+    assert np.all(np.abs(u) <= 2.0)
+
+
+def test_an_arena_is_kept_and_exits_are_counted_without_the_filter():
+    """An arena whose west wall cuts the orbit (x = -9 m, the orbit reaches -10 m): without the
+    filter both leaders leave it on every lap (each spell one exit); with it they stay in, turned
+    by the wall, sometimes with no safe turn rate at their constant speed (recorded) and at
+    their turn-rate limit (saturations)."""
+    arena = [-9.0, -11.0, 11.0, 11.0]
+    out = run_sim(overtake({"radius": RADIUS, "arena": arena, "enabled": False})).summary()["safety"]
+    kept = run_sim(overtake({"radius": RADIUS, "arena": arena})).summary()["safety"]
+    assert out["boundary_exits"] >= 4 and out["outside_ticks"] > 0 and out["saturations"] == 0
+    assert kept["boundary_exits"] == 0 and kept["outside_ticks"] == 0 and kept["collisions"] == 0
+    assert kept["infeasible"] > 0 and kept["saturations"] > 0
+    assert kept["arena"] == [[-9.0, -11.0], [11.0, -11.0], [11.0, 11.0], [-9.0, 11.0]]
+
+
+def test_the_batch_engine_equals_sim_with_the_filter():
+    scens = [overtake({"radius": RADIUS}), overtake({"radius": RADIUS, "arena": [-9.0, -11.0, 11.0, 11.0]})]
+    for s, b in zip(scens, run_batch(scens)):
+        r = run_sim(s)
+        ra, ba = r.recorder.arrays(), b.recorder.arrays()
+        for key in ("x", "y", "heading", "u"):
+            np.testing.assert_array_equal(ba[key], ra[key], err_msg=key)
+        rs, bs = r.summary(), b.summary()
+        assert bs["events"] == rs["events"]
+        assert bs["safety"] == rs["safety"]
+        assert {k: v["safety"] for k, v in bs["agents"].items()} == {k: v["safety"] for k, v in rs["agents"].items()}
+
+
+def test_summary_json_carries_the_figures(tmp_path):
+    summ = write_run(run_sim(overtake({"radius": RADIUS}, duration=20.0)), tmp_path)
+    on_disk = json.loads((tmp_path / "summary.json").read_text())
+    assert on_disk["safety"]["collisions"] == summ["safety"]["collisions"] == 0
+    for key in ("min_distance", "collisions", "boundary_exits", "saturations", "interventions", "infeasible"):
+        assert key in on_disk["safety"]
+    assert set(on_disk["agents"]["1"]["safety"]) >= {"interventions", "spells", "saturations", "boundary_exits"}
+
+
+def test_the_table_is_checked():
+    with pytest.raises(ScenarioError, match="safety.arena"):
+        overtake({"radius": RADIUS, "arena": [[0.0, 0.0], [1.0, 0.0]]})
+    with pytest.raises(ScenarioError, match="outside safety.arena"):
+        overtake({"radius": RADIUS, "arena": [-5.0, -5.0, 5.0, 5.0]})
+    with pytest.raises(ScenarioError, match="safety.radius"):
+        overtake({"radius": -1.0})
+    with pytest.raises(ScenarioError, match="safety.gama: unknown key"):
+        overtake({"radius": RADIUS, "gama": 1.0})
+    assert overtake({"radius": RADIUS}).safety.lookahead_m == pytest.approx(0.25 * RADIUS)
+
+
+@pytest.mark.slow
+def test_lockstep_up_equals_sim_with_the_filter(rt, tmp_path):
+    """`swarm up --clock lockstep` runs the filter in the world process: the same turn rates,
+    poses, "safety" events and figures as `swarm sim`, to the bit."""
+    scen = tmp_path / "overtake.toml"
+    scen.write_text(OVERTAKE.format(duration=20.0) + f"\n[safety]\nradius = {RADIUS}\narena = [-9, -11, 11, 11]\n")
+    sim, sim_summ = run_sim_process(rt.tracker, scen, tmp_path / "sim")
+    up = start_up(rt.tracker, scen, tmp_path / "up", "--clock", "lockstep")
+    rc = up.launcher.wait(120)
+    assert rc == ExitCode.OK, up.launcher.text()[-3000:]
+    traj, summ = up.trajectory(), up.summary()
+    for key in ("t", "x", "y", "heading", "u", "out", "alive"):
+        np.testing.assert_array_equal(traj[key], sim[key], err_msg=key)
+    strip = lambda evs: [{k: v for k, v in e.items() if k != "wall_time"} for e in evs if e["kind"] == "safety"]  # noqa: E731
+    assert strip(summ["events"]) == strip(sim_summ["events"]) != []
+    assert summ["safety"] == sim_summ["safety"]
+    assert summ["safety"]["collisions"] == 0 and math.isfinite(summ["safety"]["min_distance"])
