@@ -293,7 +293,9 @@ class SafetySpec(Strict):
             raise ValueError(f"a polygon needs 3 corners or more, got {len(arena)}")
         turns = polygon_turns(arena)
         if not (all(t > 0 for t in turns) or all(t < 0 for t in turns)):
-            raise ValueError("the polygon is not convex (or has repeated or collinear corners): the walls are its edges")
+            raise ValueError(
+                "the polygon is not convex (or has repeated or collinear corners): the walls are its edges"
+            )
         return arena
 
     @property
