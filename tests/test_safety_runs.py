@@ -165,3 +165,49 @@ def test_lockstep_up_equals_sim_with_the_filter(rt, tmp_path):
     assert strip(summ["events"]) == strip(sim_summ["events"]) != []
     assert summ["safety"] == sim_summ["safety"]
     assert summ["safety"]["collisions"] == 0 and math.isfinite(summ["safety"]["min_distance"])
+
+
+class _Plant:
+    """A plant (world/plant.py) that moves its unicycles itself, at the speeds the core gives."""
+
+    def __init__(self):
+        self.sent: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def prepare(self): ...
+
+    def start(self, core, event): ...
+
+    def hold(self): ...
+
+    def stop(self): ...
+
+    def figures(self):
+        return {}
+
+    def step(self, core, u):
+        from swarm.world.kinematics import step
+
+        self.sent.append((np.array(u), np.array(core.speed)))
+        core.x, core.y, core.heading = step(core.x, core.y, core.heading, core.speed, u, core.dt)
+
+
+def test_a_plant_gets_the_filtered_turn_rates_and_speeds():
+    """Robots mode: the plant is handed the filter's turn rates and, with speed = true, drives
+    at its speeds (slowed for the overtake), the agents' own speeds untouched."""
+    from swarm.world.engine import Engine
+
+    s = overtake({"radius": RADIUS, "speed": True}, duration=20.0)
+    plant = _Plant()
+    e = Engine(s, 2000, plant=plant)
+    e.start_plant()
+    for k in range(2000):
+        for aid in e.frames():
+            e.command(aid, k, 0.5 if aid == 1 else 0.6, None, 0)  # both orbit (v / r) and close in
+        e.end_tick()
+    res = e.result({})
+    speeds = np.array([v for _, v in plant.sent])
+    assert (speeds < [5.0, 6.0]).any() and np.all(speeds <= [5.0, 6.0]) and np.all(speeds >= 0.0)
+    np.testing.assert_array_equal(e.core.speed, [5.0, 6.0])
+    summ = res.summary()["safety"]
+    assert summ["speed_cuts"] > 0 and summ["collisions"] == 0
+    np.testing.assert_array_equal(np.array([u for u, _ in plant.sent]), res.recorder.arrays()["u"][:2000])

@@ -142,7 +142,6 @@ class WorldCore:
         self.tick = 0
         self.rejected = 0  # non-finite commands refused
         self._sensing: _Sensed | None = None  # this tick's sensing, until poses or presence change
-        self._step_speed: np.ndarray | None = None  # during a plant's step: the safety filter's speeds
 
     @property
     def time(self) -> float:
@@ -278,11 +277,13 @@ class WorldCore:
         filter's, world/safety_watch.py; `u` as `applied()` gives it: 0.0 coasting, NaN gone)."""
         self._sensing = None
         if self.plant is not None:
-            self._step_speed = speed
+            own = self.speed
+            if speed is not None:  # the plant drives each robot at core.speed: the filter's, for this step
+                self.speed = speed
             try:
                 self.plant.step(self, self.applied() if u is None else u)
             finally:
-                self._step_speed = None
+                self.speed = own
             self.tick += 1
             return
         if len(self.ids) <= STEP_ONE_BY_ONE:
@@ -297,11 +298,6 @@ class WorldCore:
         self.y = np.where(moving, ny, self.y)
         self.heading = np.where(moving, ng, self.heading)
         self.tick += 1
-
-    def speeds(self) -> np.ndarray:
-        """The speeds (m/s) of the step under way: the safety filter's when it may change them,
-        else each agent's own (what a plant drives its robots at, world/plant.py)."""
-        return self.speed if self._step_speed is None else self._step_speed
 
     def _step_one_by_one(self, u_now: np.ndarray | None = None, speed: np.ndarray | None = None) -> None:
         x, y, g = self.x.tolist(), self.y.tolist(), self.heading.tolist()
