@@ -158,6 +158,13 @@ class Launch:
         )
         self.launcher = Launcher(cfg) if say is None else Launcher(cfg, say)
         self.endpoint, self.dial = self.launcher.endpoint, self.launcher.dial
+        if robots is not None:  # every robot zero-twisted as soon as the world exits, whatever ends it
+            from swarm.robots.halt import WorldExitStop  # lazy: zenoh and swarm.ros2, for --robots only
+
+            la = self.launcher
+            la.world_exit = WorldExitStop(
+                load_robots(robots), Path(robots), self.run_id, la.say, ran=lambda: la.started
+            )
         for w in self.warnings:
             self.launcher.say(f"warning: robots: {w}")
 

@@ -33,6 +33,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 from swarm.contracts import credentials, wire
 from swarm.contracts.freetext import printable
@@ -108,6 +109,10 @@ class Launcher:
         # The supervisor's password (swarm/contracts/access.py): this process and its world
         # alone have it; only with it may the world be told of agent exits and faults done.
         self.supervisor_password = secrets.token_hex(16)
+        # --robots: `started(world pid)` once the world runs, `join()` once it has ended: a zero
+        # twist to every robot as soon as the world exits (swarm/robots/halt.py WorldExitStop,
+        # set by swarm/api/launch.py; this layer does not import the robots')
+        self.world_exit: Any = None
 
     # -- processes --------------------------------------------------------------------------
     def _env(self) -> dict:
@@ -163,6 +168,8 @@ class Launcher:
         finally:
             os.close(w)
         self.ready_wait = ReadyWait(r)
+        if self.world_exit is not None:
+            self.world_exit.started(self.world.pid)
 
     def wait_ready(self, timeout: float = READY_DEADLINE) -> bool:
         """Wait for the world's own word that it listens (swarm/contracts/startup.py): True.
@@ -315,6 +322,8 @@ class Launcher:
                         break
                     time.sleep(0.05 if self.cfg.scenario.faults else 0.25)
                 show(self.progress(session), time.monotonic() - t0)
+            if self.world_exit is not None and self.world_exit_code() is not None:
+                self.world_exit.join()  # the robots' zero twist (and its line) before anything else
             if self.stop_signal is None and not self.failed:
                 self.supervise(None)  # exits just before the world ended (the world has ended)
             if self.operator_stop is not None:
@@ -328,6 +337,8 @@ class Launcher:
             if session is not None:
                 session.close()
             self.stop_all()
+            if self.world_exit is not None:
+                self.world_exit.join()
         if self.failed or self.world is None:
             return ExitCode.FAILED  # the world failed
         return self.world.returncode

@@ -1,0 +1,52 @@
+"""Stops that do not depend on the world (docs/guides/robots.md#stops), with real processes on
+real zenoh: `swarm up --robots` zero-twists every robot when its world exits (SIGKILL here),
+`swarm estop` from a second terminal (world running, stalled with SIGSTOP, killed), and
+`swarm robots guard` next to the fleet's router when the world's commands stop. The fleet
+(`swarm robots sim`) is the robots; the wire (a client of its router, test_robots_e2e.Wire)
+sees each twist as it arrives. The tests assert outcomes (the last twist each robot got is
+zero, and came after the fault; the run ended; nothing left); the delays are
+benchmarks/robots_stops.py's.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import time
+
+import pytest
+from deadlines import DEADLINE
+from runtime_helpers import start_up, swarm_cmd, wait_for
+from test_robots_e2e import ROBOT, TURTLEBOT, start_fleet, stop_fleet, wait_moving
+
+from swarm.contracts.vocabulary import ExitCode
+
+pytestmark = pytest.mark.slow
+
+
+def last_is_zero_after(wire, ns: str, event: float) -> bool:
+    """Whether the last twist `ns` received is zero and arrived after `event`."""
+    twists = wire.twists_of(ns)
+    return bool(twists) and twists[-1][0] > event and twists[-1][1:] == (0.0, 0.0)
+
+
+def world_pid_of(rt, up) -> int:
+    return wait_for(lambda: rt.tracker.world_pid(up.launcher), DEADLINE, "the world's pid")
+
+
+def test_a_killed_world_leaves_every_robot_zero_twisted_by_swarm_up(rt, tmp_path):
+    fleet, robots, wire = start_fleet(rt, tmp_path, "--cmd-timeout", "3600")  # no watchdog on the robots
+    up = start_up(rt.tracker, TURTLEBOT, tmp_path / "run", "--robots", robots, "--duration", 120)
+    wait_moving(up, wire)
+    world = world_pid_of(rt, up)
+    event = time.monotonic()
+    os.kill(world, signal.SIGKILL)
+    code = up.launcher.wait(DEADLINE)
+    assert code != ExitCode.OK, up.launcher.text()[-3000:]
+    for ns in ROBOT.values():
+        wait_for(lambda ns=ns: last_is_zero_after(wire, ns, event), DEADLINE, f"a zero twist for {ns}")
+        wire.report("SIGKILL of the world", ns, event)
+    text = up.launcher.text()
+    assert "robots: zero twist sent to 2 robots (the world exited: killed by SIGKILL)" in text, text[-3000:]
+    assert stop_fleet(rt, fleet).count("stopped by a zero twist") == 2
