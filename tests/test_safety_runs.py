@@ -211,3 +211,22 @@ def test_a_plant_gets_the_filtered_turn_rates_and_speeds():
     summ = res.summary()["safety"]
     assert summ["speed_cuts"] > 0 and summ["collisions"] == 0
     np.testing.assert_array_equal(np.array([u for u, _ in plant.sent]), res.recorder.arrays()["u"][:2000])
+
+
+@pytest.mark.parametrize("engine", ["per-agent", "batch"])
+def test_a_study_row_carries_the_figures_and_the_filter_may_be_swept(engine):
+    """`swarm study scenario --safety 0,1`: the same starts with the filter off (measured) and
+    on; every row has collisions, boundary exits, saturations and the least distance."""
+    from swarm.study.scenario import Jitter, Template, run_chunk, run_one, settings_of, summarise
+
+    template = Template(overtake({"radius": RADIUS, "arena": [-9.0, -11.0, 11.0, 11.0]}).model_dump(), "overtake")
+    settings = settings_of({"safety": [0.0, 1.0]})
+    work = run_one if engine == "per-agent" else run_chunk
+    rows = [r for st in settings for r in work((template, st, Jitter(positions=0.5), (0, 1)))]
+    assert len(rows) == 4
+    off, on = rows[:2], rows[2:]
+    assert all(r["collisions"] >= 1 and r["boundary_exits"] >= 1 and r["interventions"] == 0 for r in off)
+    assert all(r["collisions"] == 0 and r["boundary_exits"] == 0 and r["interventions"] > 0 for r in on)
+    assert all(r["min_distance"] >= RADIUS for r in on) and all(r["min_distance"] < RADIUS for r in off)
+    summary = summarise(rows, settings)
+    assert [s["safe_runs"] for s in summary] == [0, 2] and summary[1]["collisions"] == 0

@@ -403,6 +403,13 @@ def scenario(
     ] = None,
     loss: Annotated[Optional[str], typer.Option(help="message loss probability (list), as --noise")] = None,
     delay: Annotated[Optional[str], typer.Option(help="sensor-frame delay in s (list), as --noise")] = None,
+    safety: Annotated[
+        Optional[str],
+        typer.Option(
+            help="the scenario's [safety] filter: 1 = on, 0 = off, measuring only (list, e.g. 0,1: what safety costs)"
+        ),
+    ] = None,
+    gamma: Annotated[Optional[str], typer.Option(help="the [safety] filter's gamma in 1/s (list)")] = None,
     duration: Annotated[
         Optional[float], typer.Option(help="simulated s per run (default: the scenario's)", min=0.1)
     ] = None,
@@ -420,7 +427,7 @@ def scenario(
     The scenario file is the template. Every seed draws its own jitter of positions,
     headings and speeds (and is the run's seed, run.seed, which drives loss and noise); every
     combination of the lists (--c1, --c2, --param, --range, --fov, --noise, --loss,
-    --delay) is one setting, run over the same seeds. Any law runs: a follower law that
+    --delay, --safety, --gamma) is one setting, run over the same seeds. Any law runs: a follower law that
     declares itself vectorised goes through the batch engine, any other through swarm
     sim's per-agent engine on every core (the engine used is printed; docs/design/studies.md).
 
@@ -462,9 +469,16 @@ def scenario(
         "noise": _sweep("--noise", noise, lo=0.0, hi=math.pi),
         "loss": _sweep("--loss", loss, lo=0.0, hi=1.0),
         "delay": _sweep("--delay", delay, lo=0.0, hi=math.inf),
+        "safety": _sweep("--safety", safety, lo=0.0, hi=1.0),
+        "gamma": _sweep("--gamma", gamma, lo=1e-9, hi=1e6),
     }
     sweeps = {k: v for k, v in sweeps.items() if v}
+    if any(v not in (0.0, 1.0) for v in sweeps.get("safety", [])):
+        raise _fail("--safety: 0 (off, measuring only) or 1 (on)")
     spec = load_scenario(path)
+    for opt in ("safety", "gamma"):
+        if opt in sweeps and spec.safety is None:
+            raise _fail(f"--{opt}: {path} has no [safety] table (docs/guides/scenarios.md#safety)")
     template = Template(spec.model_dump(), str(path), (str(path.resolve().parent),), duration)
     jitter = Jitter(positions, spin, speeds)
     settings = settings_of(sweeps)
@@ -514,6 +528,20 @@ def scenario(
             ("crashes", "crashes", str),
         ],
     )
+    if any("collisions" in r for r in summary):  # the scenario has a [safety] table
+        _table(
+            summary,
+            [
+                ("setting", "setting", str),
+                ("safe runs", "safe_runs", str),
+                ("collisions", "collisions", str),
+                ("exits", "boundary_exits", str),
+                ("saturations", "saturations", str),
+                ("min dist m", "min_distance", _num(".3g")),
+                ("interventions", "interventions", str),
+                ("no safe cmd", "infeasible", str),
+            ],
+        )
     typer.echo(
         f"wall time {wall:.1f} s. converged: every agent ends within 1% of its expected radius; settle: the "
         "last agent into the 2% band, over the converged runs; switches: per follower"

@@ -8,12 +8,15 @@ a leader's orbit radius scaled with its speed so its angular rate stays); the ru
 `[run] seed` is the study's seed (it drives the random faults: loss, noise).
 
 Per setting (one per combination of the lists): gains C1, C2, `[law.params]` entries,
-sensing range and field of view, and the fault parameters: the noise std, loss probability
-and delay of the scenario's noise / loss / delay faults (0: those faults removed; where the
-scenario has none, one on every agent for the whole run is added).
+sensing range and field of view, the safety filter on or off and its gamma (a scenario with
+a [safety] table: what safety costs a law, docs/design/safety.md), and the fault
+parameters: the noise std, loss probability and delay of the scenario's noise / loss /
+delay faults (0: those faults removed; where the scenario has none, one on every agent for
+the whole run is added).
 
 Each run gives one row (the setting's values, the seed, and what `swarm study swarms`
-records of a run: converged, settling time, switches, ...). `engine_for` says which engine
+records of a run: converged, settling time, switches, ..., and Robotarium's figures:
+collisions, boundary exits, saturations, the least distance). `engine_for` says which engine
 runs a study: the batch engine (swarm/offline/batch.py) when it runs every setting's
 scenario (a follower law of one's own only if it declares `vectorised = True`: swarm/agents/
 batch.py `follower_law_of`), else `swarm sim`'s per-agent engine, one run per job.
@@ -36,10 +39,10 @@ from swarm.contracts.scenario import Scenario, parse_scenario
 from swarm.contracts.vocabulary import EventKind
 from swarm.offline.batch import refusal, run_batch
 from swarm.offline.sim import run_sim
-from swarm.study.swarms import is_true, run_outcome
+from swarm.study.swarms import SAFETY_COLUMNS, is_true, run_outcome, safety_totals
 
 # the axes a setting may sweep, in the order of the CSV's columns ("param.<name>" for [law.params])
-AXES = ("c1", "c2", "range", "fov", "noise", "loss", "delay")
+AXES = ("c1", "c2", "range", "fov", "noise", "loss", "delay", "safety", "gamma")
 FAULT_FIELD = {"noise": "std", "loss": "probability", "delay": "delay"}
 
 
@@ -117,6 +120,11 @@ def varied(template: Template, setting: Setting, jitter: Jitter, seed: int) -> S
             d["sensing"]["fov"] = None if v >= 2 * math.pi else v
         elif key in FAULT_FIELD:
             faults = _faults(faults, key, v, run["duration"])
+        elif key in ("safety", "gamma"):  # [safety]: filtering on (1) or measuring only (0); its gamma
+            if d.get("safety") is None:
+                raise ValueError(f"axis {key!r}: the scenario has no [safety] table")
+            name = {"safety": "enabled", "gamma": "gamma"}[key]
+            d["safety"] = {**d["safety"], name: bool(v) if key == "safety" else v}
         elif key.startswith("param."):
             law["params"][key.removeprefix("param.")] = v
         else:
@@ -233,6 +241,7 @@ def columns(settings: Sequence[Setting]) -> list[str]:
         "searching_max_s",
         "losses",
         "loss_switches_max",
+        *SAFETY_COLUMNS,
         "crashes",
         "wall_s",
     ]
@@ -265,6 +274,7 @@ def summarise(rows: list[dict], settings: Sequence[Setting]) -> list[dict]:
                 "switches_median": statistics.median(per_agent) if per_agent else math.nan,
                 "switches_max": max(per_agent, default=0),
                 "crashes": sum(int(r.get("crashes", 0)) for r in rs),
+                **safety_totals(rs),
             }
         )
     return out

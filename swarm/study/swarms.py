@@ -123,6 +123,14 @@ class SwarmRow:
     searching_max_s: float  # ... the most any one follower spent
     losses: int  # all followers' losses of a committed out-neighbour (selection "sticky")
     loss_switches_max: int  # the most changes of out-neighbour any one loss cost
+    # Robotarium's figures, from summary.json's "safety" (a scenario with a [safety] table; else
+    # None, an empty cell): `safety_outcome`
+    collisions: int | None
+    boundary_exits: int | None
+    saturations: int | None
+    min_distance: float | None
+    interventions: int | None
+    infeasible: int | None
     wall_s: float
 
 
@@ -164,6 +172,35 @@ def run_outcome(res) -> dict:
         "searching_max_s": float(searching.max(initial=0.0)),
         "losses": sum(v.get("losses", 0) for v in fol),
         "loss_switches_max": max((v.get("loss_switches_max", 0) for v in fol), default=0),
+        **safety_outcome(summary),
+    }
+
+
+SAFETY_COLUMNS = ("collisions", "boundary_exits", "saturations", "min_distance", "interventions", "infeasible")
+
+
+def safety_outcome(summary: dict) -> dict:
+    """A run's safety figures for its row (docs/reference/outputs.md#safety): collisions (pair
+    spells closer than the radius), boundary exits, saturations (agent-ticks at the turn-rate
+    limit), the least distance between two agents (m), the filter's interventions and its
+    agent-ticks with no safe command; None each without a [safety] table."""
+    safety = summary.get("safety") or {}
+    return {k: safety.get(k) for k in SAFETY_COLUMNS}
+
+
+def safety_totals(rows: list[dict]) -> dict:
+    """A setting's safety figures over its runs (runs without them left out): the sums, the
+    least distance, and `safe_runs` (runs without a collision or a boundary exit); {} when no
+    run was measured."""
+    measured = [r for r in rows if r.get("collisions") not in (None, "")]
+    if not measured:
+        return {}
+    total = {k: sum(int(r[k]) for r in measured) for k in SAFETY_COLUMNS if k != "min_distance"}
+    dmin = [float(r["min_distance"]) for r in measured if r.get("min_distance") not in (None, "")]
+    return {
+        **total,
+        "min_distance": min(dmin, default=math.nan),
+        "safe_runs": sum(1 for r in measured if int(r["collisions"]) == 0 and int(r["boundary_exits"]) == 0),
     }
 
 
@@ -212,6 +249,7 @@ def summarise_swarms(rows: list[dict]) -> list[dict]:
                 "searching_max_s": max((float(r.get("searching_max_s", math.nan)) for r in rs), default=math.nan),
                 "losses": sum(int(r.get("losses", 0)) for r in rs),
                 "loss_switches_max": max((int(r.get("loss_switches_max", 0)) for r in rs), default=0),
+                **safety_totals(rs),
                 **{k: getattr(setting, k) for k in ("n", "leaders", "selection", "range", "fov")},
             }
         )
