@@ -83,7 +83,7 @@ def info(r) -> dict:
 def ticks_on(r, seconds: float = 0.5) -> None:
     """The world keeps ticking (not paused, not stalled)."""
     t0 = info(r)["tick"]
-    wait_for(lambda: info(r)["tick"] > t0, 5 + seconds, "the world to keep ticking")
+    wait_for(lambda: info(r)["tick"] > t0, DEADLINE + seconds, "the world to keep ticking")
 
 
 def all_alive(r) -> bool:
@@ -222,7 +222,7 @@ def test_insider_cannot_answer_for_another_agent(run):
     )
     try:
         time.sleep(0.3)
-        replies = [r for r in run["operator"].get(wire.agent_key(run["run"], 1, "status"), timeout=1.0) if r.ok]
+        replies = [r for r in run["operator"].get(wire.agent_key(run["run"], 1, "status"), timeout=DEADLINE) if r.ok]
         pids = {json.loads(r.ok.payload.to_bytes())["pid"] for r in replies}
         assert pids == {run["pids"][1]}
         assert query_statuses(run["operator"], run["run"])[1]["pid"] == run["pids"][1]
@@ -244,7 +244,7 @@ def test_insider_cannot_answer_join_claims(run):
             replies = [
                 wire.decode_join_reply(r.ok.payload.to_bytes())
                 for r in a2.get(
-                    wire.agent_key(run["run"], 2, "join"), payload=wire.encode_join_request(2, 1, "h"), timeout=2.0
+                    wire.agent_key(run["run"], 2, "join"), payload=wire.encode_join_request(2, 1, "h"), timeout=DEADLINE
                 )
                 if r.ok
             ]
@@ -266,7 +266,9 @@ def test_insider_cannot_claim_another_id(run):
     replies = [
         wire.decode_join_reply(r.ok.payload.to_bytes())
         for r in run["insider"].get(
-            wire.agent_key(run["run"], INSIDER, "join"), payload=wire.encode_join_request(3, 1, "evil"), timeout=2.0
+            wire.agent_key(run["run"], INSIDER, "join"),
+            payload=wire.encode_join_request(3, 1, "evil"),
+            timeout=DEADLINE,
         )
         if r.ok
     ]
@@ -311,7 +313,7 @@ def test_operator_can_pause_and_resume(run):
         replies = [
             wire.decode_admin_reply(r.ok.payload.to_bytes())
             for r in run["operator"].get(
-                wire.world_admin_key(run["run"]), payload=wire.encode_admin(cmd, by="test"), timeout=2.0
+                wire.world_admin_key(run["run"]), payload=wire.encode_admin(cmd, by="test"), timeout=DEADLINE
             )
             if r.ok
         ]
@@ -346,7 +348,7 @@ def test_operator_cannot_write_the_record(run):
     ):
         admin = [
             wire.decode_admin_reply(x.ok.payload.to_bytes())
-            for x in run["operator"].get(wire.world_admin_key(r), payload=payload, timeout=2.0)
+            for x in run["operator"].get(wire.world_admin_key(r), payload=payload, timeout=DEADLINE)
             if x.ok
         ]
         assert admin and not admin[0]["ok"] and "unknown cmd" in admin[0]["error"], admin

@@ -116,7 +116,7 @@ def test_stop_from_another_thread_ends_the_run_with_the_signals_code(tmp_path):
             going.set()
 
     def stopper():  # once the run goes and every process of it has been seen
-        if going.wait(120) and wait_until(lambda: len(seen.seen) >= 7, 30, 0.05):
+        if going.wait(120) and wait_until(lambda: len(seen.seen) >= 7, DEADLINE, 0.05):
             handle[0].stop(signal.SIGINT)
 
     seen = Descendants(os.getpid())

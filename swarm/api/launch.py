@@ -269,6 +269,9 @@ def ending(launcher, code: int, out: Path) -> tuple[int, str | None, bool]:
     if launcher.stop_signal is not None:
         who = getattr(launcher, "operator_stop", None)  # `swarm stop` from another terminal
         how = f"stopped by `swarm stop` ({who})" if who else f"stopped by signal {launcher.stop_signal}"
+        if not (out / "summary.json").exists() and not (out / "recording.mcap").exists():  # stopped as it started
+            logs = f" (logs in {out / 'logs'})" if (out / "logs").is_dir() else ""
+            return signal_exit(launcher.stop_signal), f"{how} before the run started: no results{logs}", False
         return signal_exit(launcher.stop_signal), f"{how}; partial results in {out}", False
     if launcher.failure is not None:  # an agent could not start (said live), or no world to reach
         failed = ExitCode.AGENT_FAILED if launcher.exits else ExitCode.FAILED
