@@ -41,6 +41,12 @@ def fail(message: str, code: int = ExitCode.FAILED) -> typer.Exit:
     return typer.Exit(code)
 
 
+def stop_code() -> int:
+    """The exit code of a command that ended on Ctrl-C by itself: 130, or 143 when SIGTERM it was."""
+    signum = cli_stops.signum if cli_stops is not None else None
+    return 128 + signum if signum is not None else ExitCode.INTERRUPTED
+
+
 def exit_code(e: BaseException) -> int | None:
     """The exit code of an API error, None for any other exception."""
     return int(e.exit_code) if isinstance(e, Coded) else None

@@ -14,6 +14,7 @@ from typing import Annotated, Any, Optional
 
 import typer
 
+from swarm.cli.errors import stop_code
 from swarm.contracts.vocabulary import ExitCode
 
 study_app = typer.Typer(
@@ -126,10 +127,10 @@ def _study(
 
 
 def _done(out: Path, stopped: bool) -> None:
-    """The last line; exit 130 when Ctrl-C cut the study short."""
+    """The last line; exit 130 when Ctrl-C cut the study short (143: SIGTERM)."""
     typer.echo(f"results: {out}")
     if stopped:
-        raise typer.Exit(ExitCode.INTERRUPTED)
+        raise typer.Exit(stop_code())
 
 
 def _table(rows: list[dict], columns: list[tuple[str, str, Callable]]) -> None:
