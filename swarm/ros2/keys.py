@@ -12,7 +12,7 @@ fully-qualified name. `@ros2_lv` is a hermetic chunk: only `@ros2_lv/<domain>/**
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from swarm.ros2.types import BY_NAME, RosType
 
@@ -139,6 +139,7 @@ class EntityInfo:
     node_id: int = 0
     entity_id: int = 0
     enclave: str = "/"
+    key: str = field(default="", compare=False)  # the whole token (its XXH3-128 is a publisher's GID)
 
     @property
     def rtype(self) -> RosType | None:
@@ -180,4 +181,5 @@ def parse_entity_token(key: str) -> EntityInfo | None:
         node_id=int(node_id),
         entity_id=int(entity_id),
         enclave=unmangle(enclave),
+        key=key,
     )

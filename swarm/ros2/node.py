@@ -135,11 +135,24 @@ class Ros2Publisher(_Entity):
             self._pub.undeclare()
 
 
+def _attachment_of(sample: zenoh.Sample) -> bytes | None:
+    att = sample.attachment
+    return None if att is None else att.to_bytes()
+
+
 class Ros2Subscriber(_Entity):
-    """Calls `on_sample(payload)` for each sample of its topic and type, in zenoh's thread."""
+    """Calls `on_sample(payload)` for each sample of its topic and type, in zenoh's thread;
+    `on_sample(payload, attachment)` with `with_attachment` (the attachment's bytes, None for a
+    sample without: swarm/ros2/attachment.py parses them)."""
 
     def __init__(
-        self, node: Ros2Node, topic: str, rtype: RosType, on_sample: Callable[[bytes], None], qos: QoS
+        self,
+        node: Ros2Node,
+        topic: str,
+        rtype: RosType,
+        on_sample: Callable[..., None],
+        qos: QoS,
+        with_attachment: bool = False,
     ) -> None:
         import zenoh  # lazy: only a process that opens a session loads zenoh's native library
 
@@ -151,7 +164,10 @@ class Ros2Subscriber(_Entity):
             if sample.kind != put:
                 return
             try:
-                on_sample(sample.payload.to_bytes())
+                if with_attachment:
+                    on_sample(sample.payload.to_bytes(), _attachment_of(sample))
+                else:
+                    on_sample(sample.payload.to_bytes())
             except Exception:  # zenoh's thread must go on: report and drop the sample
                 log.exception("ROS 2 subscriber on %s: on_sample failed", self.topic)
 
@@ -183,6 +199,7 @@ class Ros2Node:
         self.node_id = _next_id()
         self.token_key = node_token(domain, self.zid, self.node_id, self.namespace, name)
         self._entities: list[_Entity] = []
+        self._others: list[Any] = []  # listeners and watchers: zenoh subscribers without a token
         self._lock = threading.Lock()
         self._closed = False
         self._token = session.liveliness().declare_token(self.token_key)
@@ -219,13 +236,70 @@ class Ros2Node:
         return pub
 
     def subscriber(
-        self, topic: str, rtype: RosType, on_sample: Callable[[bytes], None], qos: QoS = DEFAULT_QOS
+        self,
+        topic: str,
+        rtype: RosType,
+        on_sample: Callable[..., None],
+        qos: QoS = DEFAULT_QOS,
+        *,
+        with_attachment: bool = False,
     ) -> Ros2Subscriber:
-        """A subscription to `rtype` on `topic`: `on_sample(cdr_bytes)` runs in zenoh's callback
-        thread, for samples of this topic and type only (the type and its hash are in the key)."""
+        """A subscription to `rtype` on `topic`: `on_sample(cdr_bytes)` (with `with_attachment`:
+        `on_sample(cdr_bytes, attachment_bytes_or_None)`) runs in zenoh's callback thread, for
+        samples of this topic and type only (the type and its hash are in the key)."""
         self._check_open()
-        sub = Ros2Subscriber(self, topic, rtype, on_sample, qos)
+        sub = Ros2Subscriber(self, topic, rtype, on_sample, qos, with_attachment)
         self._add(sub)
+        return sub
+
+    def listen(self, topic: str, on_sample: Callable[[str, bytes, bytes | None], None]) -> Any:
+        """Every sample on `topic`, of any type, without a subscription in the ROS graph (no
+        token: `ros2 topic info` does not show it, a robot's `cmd_type = "auto"` does not read
+        it): `on_sample(key, payload, attachment_or_None)` in zenoh's thread. What a watcher
+        uses to see who else publishes on a topic; undeclared by `close()`."""
+        import zenoh  # lazy: only a process that opens a session loads zenoh's native library
+
+        self._check_open()
+        _check_topic(topic)
+        name = resolve(self.namespace, topic).strip("/")
+        put = zenoh.SampleKind.PUT
+
+        def deliver(sample: zenoh.Sample) -> None:
+            if sample.kind != put:
+                return
+            try:
+                on_sample(str(sample.key_expr), sample.payload.to_bytes(), _attachment_of(sample))
+            except Exception:  # zenoh's thread must go on
+                log.exception("ROS 2 listener on %s: on_sample failed", topic)
+
+        sub = self.session.declare_subscriber(f"{self.domain}/{name}/*/*", deliver)
+        with self._lock:
+            self._others.append(sub)
+        return sub
+
+    def watch(self, on_token: Callable[[str, EntityInfo, bool], None]) -> Any:
+        """The ROS graph of this node's domain as it changes: `on_token(key, info, alive)` for
+        every node, publisher, subscription or service token there is (history: the ones that
+        exist already) and that comes (alive) or goes (not alive), ours excepted, in zenoh's
+        thread. Undeclared by `close()`."""
+        import zenoh  # lazy: only a process that opens a session loads zenoh's native library
+
+        self._check_open()
+        put = zenoh.SampleKind.PUT
+
+        def deliver(sample: zenoh.Sample) -> None:
+            key = str(sample.key_expr)
+            info = parse_entity_token(key)
+            if info is None or key in self.own_tokens():
+                return
+            try:
+                on_token(key, info, sample.kind == put)
+            except Exception:  # zenoh's thread must go on
+                log.exception("ROS 2 graph watcher: on_token failed")
+
+        sub = self.session.liveliness().declare_subscriber(f"{LIVELINESS}/{self.domain}/**", deliver, history=True)
+        with self._lock:
+            self._others.append(sub)
         return sub
 
     def own_tokens(self) -> set[str]:
@@ -261,7 +335,13 @@ class Ros2Node:
                 return
             self._closed = True
             entities = list(self._entities)
+            others, self._others = self._others, []
         try:
+            for other in others:
+                try:
+                    other.undeclare()
+                except Exception:  # a closed session: nothing left to undeclare
+                    pass
             for e in entities:
                 e.undeclare()
         finally:
