@@ -70,6 +70,7 @@ TIERS = {
         "test_ros2_node",
         "test_ros2_sdk",
         "test_robots_world",
+        "test_robots_trust",
     },
     "process": {
         "test_docs_examples",

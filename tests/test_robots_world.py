@@ -46,6 +46,7 @@ from swarm.robots.plant import (
     twist_for,
 )
 from swarm.ros2 import cdr
+from swarm.ros2.attachment import attachment, gid_for
 from swarm.ros2.keys import EntityInfo
 from swarm.ros2.node import Ros2Node
 from swarm.ros2.types import ODOMETRY, POSE_STAMPED, TWIST, TWIST_STAMPED
@@ -215,10 +216,10 @@ class FakeNode:
         self.pubs[topic] = FakePub(topic, rtype)
         return self.pubs[topic]
 
-    def subscriber(self, topic, rtype, on_sample):
+    def subscriber(self, topic, rtype, on_sample, *, with_attachment=False):
         self.subs[topic] = (rtype, on_sample)
         if topic in self.poses:
-            on_sample(self.poses[topic])
+            self.feed(topic, self.poses[topic])
 
     def remote_entities(self, topic=None, kind=None, timeout=1.0):
         return [e for e in self.entities if (kind is None or e.kind == kind) and (topic is None or e.topic == topic)]
@@ -226,8 +227,9 @@ class FakeNode:
     def close(self):
         self.closed = True
 
-    def feed(self, topic: str, payload: bytes) -> None:
-        self.subs[topic][1](payload)
+    def feed(self, topic: str, payload: bytes, gid: bytes | None = None) -> None:
+        """A pose from the robot's publisher (its GID: gid_for(topic)), or from `gid`'s."""
+        self.subs[topic][1](payload, attachment(1, 0, gid_for(topic) if gid is None else gid))
 
 
 class Clock:
@@ -277,7 +279,8 @@ def test_the_plant_prepares_stops_every_robot_and_steps_them_from_their_poses():
 
     core.set_command(1, 0.15)
     core.set_command(2, -4.0)  # within the agent's own limit (5), above its robot's (2.84)
-    clock.t += 0.05
+    clock.t += 1.0  # 0.2 m and 0.5 rad: plausible in 1 s (not in 0.05 s: tests of Plausible)
+    node.feed("/tb3_0/odom", odom(0.1, 0.0, 0.0))
     node.feed("/tb3_1/odom", odom(0.2, 0.0, 0.5))
     core.step()
     assert core.tick == 1
@@ -334,12 +337,12 @@ def test_a_stale_robot_gets_zero_twists_and_one_stale_event_then_one_fresh():
     clock.t += 0.2
     core.step()  # still stale: zero, no second event
     assert node.pubs["/tb3_0/cmd_vel"].sent[-1] == (0.0, 0.0) and len(events) == 1
-    node.feed("/tb3_0/odom", odom(0.5, 0.0, 0.0))
+    node.feed("/tb3_0/odom", odom(0.3, 0.0, 0.0))  # 0.3 m in 0.8 s: plausible
     clock.t += 0.05
     core.step()
     assert events[-1][:2] == (EventKind.FRESH, 1)
     assert node.pubs["/tb3_0/cmd_vel"].sent[-1] == pytest.approx((0.105, 0.2))
-    assert core.pose(1) == pytest.approx((0.7, 0.5, math.pi / 2))
+    assert core.pose(1) == pytest.approx((0.7, 0.3, math.pi / 2))
     f = plant.figures()
     assert f["stale_after"] == 0.5
     one = f["agents"]["1"]
@@ -680,7 +683,8 @@ def test_the_robot_world_builds_frames_from_the_robots_poses_and_sends_them_the_
         world.engine.start_plant()
 
         # tick 0's frames come from the robots' poses: the odom frame starts at each agent's start pose
-        p1 = odom_to_world((0.7, 0.0, math.pi / 2), (0.3, 0.1, 0.2))
+        # (odometry rebased to the robot's first pose: a robot that has not moved is at its start pose)
+        p1 = (0.7, 0.0, math.pi / 2)
         p2 = (0.87, 0.16, 2.426)
         assert world.core.pose(1) == pytest.approx(p1) and world.core.pose(2) == pytest.approx(p2)
         world.publish_frames()
@@ -743,13 +747,13 @@ def test_a_robots_file_that_does_not_fit_the_scenario_is_one_line_and_exit_2(com
 
 def test_launch_with_robots_runs_realtime_passes_the_file_to_its_world_and_says_its_warnings_once(tmp_path):
     fast = tmp_path / "fast.toml"
-    fast.write_text(TURTLEBOT_ROBOTS.read_text().replace("max_linear = 0.22", "max_linear = 0.1", 1))
+    fast.write_text(TURTLEBOT_ROBOTS.read_text().replace("max_linear = 0.22", "max_linear = 0.05", 1))
     said: list[str] = []
     run = Launch(TURTLEBOT, tmp_path / "o", robots=fast, say=said.append)
     cfg = run.launcher.cfg
     assert cfg.clock == "realtime" and cfg.robots == fast
     assert said == [
-        "warning: robots: agent 1: speed 0.105 m/s is above its robot's max_linear 0.1 m/s (the robot will be "
+        "warning: robots: agent 1: speed 0.1 m/s is above its robot's max_linear 0.05 m/s (the robot will be "
         "saturated and the law's constant speed will not hold)"
     ]
     with pytest.raises(UsageError, match="realtime clock only"):

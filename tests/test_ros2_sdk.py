@@ -183,7 +183,7 @@ def test_our_robot_plant_drives_sdk_robots(sdk_robots):
             return math.dist(core.pose(1)[:2], starts[1][:2]) > 0.02 and sdk[2].received()[-1] != (0.0, 0.0)
 
         wait_for(moved, DEADLINE, "the SDK robots to move", interval=0.05)
-        assert sdk[1].received()[-1] == pytest.approx((0.105, 0.15))
+        assert sdk[1].received()[-1] == pytest.approx((0.10, 0.15))
         assert sdk[2].received()[-1] == pytest.approx((0.15, -2.84))
         for aid in (1, 2):  # our world's pose is one the SDK robot published, from the agent's start pose
             seen = [world_pose(starts[aid], p) for p in sdk[aid].poses()]

@@ -40,6 +40,28 @@ def _progress_bar(label: str):
     )
 
 
+def robots_trust_line(robots: dict | None) -> str | None:
+    """A robot run's refusals in one line (summary.json's `robots`), None when there were none:
+    poses refused (another publisher's, or beyond a robot's limits), commands of another
+    publisher on a robot's topic, the other publishers the world named."""
+    if not robots:
+        return None
+    agents = robots.get("agents", {}).values()
+    foreign = sum(a.get("refused_poses", {}).get("foreign", 0) for a in agents)
+    implausible = sum(a.get("refused_poses", {}).get("implausible", 0) for a in agents)
+    commands, others = robots.get("foreign_commands", 0), robots.get("other_publishers", [])
+    if not (foreign or implausible or commands or others):
+        return None
+    parts = [
+        f"{foreign + implausible} poses refused ({foreign} of another publisher, {implausible} beyond a robot's limits)"
+    ]
+    if commands:
+        parts.append(f"{commands} commands of another publisher on a robot's topic")
+    if others:
+        parts.append("other publishers: " + ", ".join(others))
+    return "robots: " + "; ".join(parts) + " (summary.json: robots; the world's log names them)"
+
+
 def print_summary(summary: dict, out: Path) -> None:
     typer.echo(
         f"converged: {summary['converged']}  ticks: {summary['ticks']}  "
@@ -62,6 +84,9 @@ def print_summary(summary: dict, out: Path) -> None:
             f"{f(a['angular_rate'], '8.4f'):>8} {f(a['settling_time'], '8.2f'):>8} "
             f"{f(a.get('switches'), 'd'):>8}" + ("" if a["alive"] else "  (dropped)")
         )
+    robots_line = robots_trust_line(summary.get("robots"))
+    if robots_line is not None:
+        typer.secho(robots_line, fg=typer.colors.YELLOW)
     why = summary.get("not_reproducible") or []
     if summary.get("clock") == "lockstep" and summary.get("reproducible") is False and why:
         more = f" (and {len(why) - 1} more: summary.json, not_reproducible)" if len(why) > 1 else ""

@@ -70,6 +70,22 @@ def sim(
         ),
     ] = 1.0,
     seed: Annotated[int, typer.Option(help="the pose noise's seed")] = 0,
+    quantize: Annotated[
+        float,
+        typer.Option(
+            help="m/s and rad/s: each command truncated toward zero to whole steps, as a TurtleBot3's "
+            "turtlebot3_node does (0.01); 0: none",
+            min=0.0,
+        ),
+    ] = 0.0,
+    router_config: Annotated[
+        Optional[Path],
+        typer.Option(
+            help="a zenoh config file (JSON5) for the fleet's router, as rmw_zenohd takes it "
+            "(ZENOH_ROUTER_CONFIG_URI): e.g. transport/auth/usrpwd and access_control to close it",
+            show_default=False,
+        ),
+    ] = None,
     duration: Annotated[
         Optional[float],
         typer.Option(help="stop after this many fleet seconds (default: at Ctrl-C)", min=0.0, show_default=False),
@@ -117,11 +133,15 @@ def sim(
             cmd_timeout=cmd_timeout,
             time_scale=time_scale,
             seed=seed,
+            quantize=quantize,
             stop_poses=parse_stop_poses(stop_poses or []),
         )
     except ValueError as e:
         raise fail(str(e), ExitCode.USAGE) from None
-    raise typer.Exit(run_fleet(fleet_robots, spec, options, listen=listen, duration=duration))
+    if router_config is not None and not router_config.is_file():
+        raise fail(f"--router-config {router_config}: no such file", ExitCode.USAGE)
+    config_file = str(router_config) if router_config is not None else None
+    raise typer.Exit(run_fleet(fleet_robots, spec, options, listen=listen, duration=duration, config_file=config_file))
 
 
 def register(app: typer.Typer) -> None:

@@ -231,7 +231,7 @@ def _robot_world(s, robots: Path, clock: str | None, time_scale: float, launched
     def say(line: str) -> None:
         print(f"[world] {line}", file=sys.stderr, flush=True)
 
-    s = robot_scenario(s)
+    s = robot_scenario(s, file)
     return s, RobotPlant(file, s, str(robots), time_scale=time_scale, say=say)
 
 

@@ -11,6 +11,13 @@ file and the field (exit 2).
     predict = false                    # true: each pose carried forward from its stamp to the tick
                                        # with the robot's last twist (latency compensation; needs the
                                        # robots' clocks synchronised with this machine's, e.g. chrony)
+    user = "swarm"                     # a router closed with usrpwd: our user ...
+    password_file = "robots.password"  # ... and a file holding its password (relative: to this file)
+    root_ca = "ca.pem"                 # a tls/ connect: the CA that signed the router's certificate
+    tls_cert = "swarm.pem"             # mutual TLS: our certificate and key (both or neither)
+    tls_key = "swarm.key"
+    pose_margin = 0.5                  # a pose implying motion above (1 + margin) x the robot's limits ...
+    pose_slack = 0.1                   # ... plus this many m (and 5x as many rad) is refused
 
     [[robots]]
     agent = 1                # the scenario's agent id
@@ -22,10 +29,13 @@ file and the field (exit 2).
     cmd_type = "auto"        # auto (the type the robot's own subscription announces) | Twist | TwistStamped
     max_linear = 0.22        # m/s (TurtleBot3 Burger)
     max_angular = 2.84       # rad/s
+    quantize = 0.01          # the step of the robot's firmware (TurtleBot3: 0.01 m/s and rad/s;
+                             # 0: none): the world sends and plans with whole steps
 """
 
 from __future__ import annotations
 
+import math
 import tomllib
 from pathlib import Path
 from typing import Literal
@@ -34,6 +44,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from swarm.contracts.endpoints import EndpointError, check_endpoint
 from swarm.contracts.scenario import Scenario, format_validation_error
+from swarm.contracts.tls import TLS
 from swarm.contracts.vocabulary import Coded, ExitCode
 
 MAX_ROBOTS_BYTES = 1 << 20
@@ -56,6 +67,13 @@ class Ros2Spec(_Strict):
     distro: Literal["jazzy", "humble"] = "jazzy"
     stale_after: float = Field(default=0.5, gt=0.0, le=60.0, description="s; an older pose stops the robot")
     predict: bool = Field(default=False, description="carry each pose forward from its stamp to the tick")
+    user: str | None = Field(default=None, min_length=1, description="usrpwd user on a closed router")
+    password_file: Path | None = Field(default=None, description="the user's password, the file's first line")
+    root_ca: Path | None = Field(default=None, description="tls/: the CA of the router's certificate")
+    tls_cert: Path | None = Field(default=None, description="mutual TLS: our certificate")
+    tls_key: Path | None = Field(default=None, description="mutual TLS: our private key")
+    pose_margin: float = Field(default=0.5, ge=0.0, le=10.0, description="over the limits before refusing a pose")
+    pose_slack: float = Field(default=0.1, ge=0.0, le=10.0, description="m of noise a pose may jump besides")
 
     @model_validator(mode="after")
     def _endpoint(self) -> Ros2Spec:
@@ -63,7 +81,50 @@ class Ros2Spec(_Strict):
             check_endpoint(self.connect)
         except EndpointError as e:
             raise ValueError(f"connect: {e}") from None
+        if (self.user is None) != (self.password_file is None):
+            raise ValueError("user and password_file: give both (a router closed with usrpwd) or neither")
+        if (self.tls_cert is None) != (self.tls_key is None):
+            raise ValueError("tls_cert and tls_key: give both (mutual TLS) or neither")
+        if (self.root_ca or self.tls_cert) and not self.connect.startswith("tls/"):
+            raise ValueError(f"root_ca, tls_cert: TLS needs a tls/HOST:PORT connect, not {self.connect}")
         return self
+
+    def relative_to(self, base: Path) -> Ros2Spec:
+        """The file paths made relative to `base` (the robots file's folder) when not absolute."""
+        update = {
+            name: base / p
+            for name in ("password_file", "root_ca", "tls_cert", "tls_key")
+            if (p := getattr(self, name)) is not None and not p.is_absolute()
+        }
+        return self.model_copy(update=update)
+
+    def password(self) -> str | None:
+        """The password of `user` (the first line of password_file); RobotsError when unreadable."""
+        if self.password_file is None:
+            return None
+        try:
+            lines = self.password_file.read_text(encoding="utf-8").splitlines()
+        except OSError as e:
+            raise RobotsError(
+                f"{self.password_file}: cannot read the password ([ros2] password_file): {e.strerror}"
+            ) from None
+        if not lines or not lines[0]:
+            raise RobotsError(f"{self.password_file}: no password on its first line ([ros2] password_file)")
+        return lines[0]
+
+    def zenoh_settings(self) -> tuple[tuple[str, str] | None, dict]:
+        """(usrpwd identity, TLS settings) for a zenoh client of the robots' router."""
+        identity = (self.user, self.password() or "") if self.user is not None else None
+        tls: dict = {}
+        if self.root_ca is not None:
+            tls[f"{TLS}/root_ca_certificate"] = str(self.root_ca)
+        if self.tls_cert is not None:
+            tls |= {
+                f"{TLS}/connect_certificate": str(self.tls_cert),
+                f"{TLS}/connect_private_key": str(self.tls_key),
+                f"{TLS}/enable_mtls": True,
+            }
+        return identity, tls
 
 
 class RobotSpec(_Strict):
@@ -75,6 +136,7 @@ class RobotSpec(_Strict):
     cmd_type: Literal["auto", "Twist", "TwistStamped"] = "auto"
     max_linear: float = Field(default=TURTLEBOT3_BURGER[0], gt=0.0)
     max_angular: float = Field(default=TURTLEBOT3_BURGER[1], gt=0.0)
+    quantize: float = Field(default=0.0, ge=0.0, le=1.0, description="the firmware's step (0: none)")
 
     @model_validator(mode="after")
     def _names(self) -> RobotSpec:
@@ -140,7 +202,8 @@ def load_robots(path: str | Path) -> RobotsFile:
         data = tomllib.loads(raw.decode("utf-8-sig"))
     except (UnicodeDecodeError, tomllib.TOMLDecodeError, ValueError) as e:
         raise RobotsError(f"{p}: cannot parse: {e}") from None
-    return parse_robots(data, str(p))
+    robots = parse_robots(data, str(p))
+    return robots.model_copy(update={"ros2": robots.ros2.relative_to(p.parent)})
 
 
 def check_against(robots: RobotsFile, scenario: Scenario, source: str) -> list[str]:
@@ -163,6 +226,13 @@ def check_against(robots: RobotsFile, scenario: Scenario, source: str) -> list[s
             warnings.append(
                 f"agent {a.id}: speed {a.speed:g} m/s is above its robot's max_linear {r.max_linear:g} m/s "
                 "(the robot will be saturated and the law's constant speed will not hold)"
+            )
+        if r.quantize > 0.0 and abs(a.speed / r.quantize - round(a.speed / r.quantize)) > 1e-6:
+            steps = min(round(a.speed / r.quantize), math.floor(r.max_linear / r.quantize + 1e-9))
+            warnings.append(
+                f"agent {a.id}: speed {a.speed:g} m/s is not a whole number of its robot's steps "
+                f"(quantize {r.quantize:g}): its motors get {steps * r.quantize:g} m/s, which the world "
+                "sends and plans with (expected radii)"
             )
         if a.max_turn_rate is None or a.max_turn_rate > r.max_angular:
             warnings.append(

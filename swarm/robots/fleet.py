@@ -72,12 +72,15 @@ class FleetOptions:
     cmd_timeout: float = DEFAULT_CMD_TIMEOUT  # s: an older command stops the robot
     time_scale: float = 1.0  # fleet seconds per wall second
     seed: int = 0
+    # the firmware's step (m/s and rad/s; 0: none): each command truncated toward zero to a whole
+    # number of steps, as turtlebot3_node does (static_cast<int32_t>(linear.x * 100) for 0.01)
+    quantize: float = 0.0
     # agent -> fleet s after the fleet's first motion command (the run's start) when that robot
     # stops publishing its poses (to rehearse stale poses)
     stop_poses: Mapping[int, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        for name in ("latency", "pose_noise", "cmd_timeout"):
+        for name in ("latency", "pose_noise", "cmd_timeout", "quantize"):
             if not (getattr(self, name) >= 0.0 and math.isfinite(getattr(self, name))):
                 raise ValueError(f"{name} must be a finite number >= 0")
         for name in ("rate", "time_scale"):
@@ -147,6 +150,15 @@ class Unicycle:
         return self.x, self.y, self.yaw
 
 
+def truncated(value: float, quantum: float) -> float:
+    """What a TurtleBot3's firmware makes of a command: `value` truncated toward zero to whole
+    steps of `quantum` (turtlebot3_node: `static_cast<int32_t>(value * 100)` for 0.01, on
+    linear.x and angular.z alike); `value` itself for quantum 0."""
+    if quantum <= 0.0 or not math.isfinite(value):
+        return value
+    return math.trunc(value * (1.0 / quantum)) * quantum
+
+
 def odom_pose(start: tuple[float, float, float], pose: tuple[float, float, float]) -> tuple[float, float, float]:
     """A world-frame pose in the odom frame of a robot that started at `start` (the odom frame's
     origin and x axis are the robot's start position and heading)."""
@@ -210,8 +222,10 @@ class FleetError(Coded):
     exit_code = ExitCode.USAGE
 
 
-def router_config(listen: str) -> zenoh.Config:
-    """A zenoh router listening on `listen`, the stand-in for the robots' rmw_zenohd."""
+def router_config(listen: str, config_file: str | None = None) -> zenoh.Config:
+    """A zenoh router listening on `listen`, the stand-in for the robots' rmw_zenohd; with
+    `config_file`, a zenoh config (JSON5) as rmw_zenohd takes it (ZENOH_ROUTER_CONFIG_URI) under
+    ours: e.g. its transport/auth/usrpwd and access_control close the router."""
     settings: dict[str, object] = {
         "mode": "router",
         "listen/endpoints": [listen],
@@ -219,7 +233,7 @@ def router_config(listen: str) -> zenoh.Config:
         "transport/shared_memory/enabled": False,
         **ROUTER_QUEUE,
     }
-    cfg = zenoh.Config()
+    cfg = zenoh.Config.from_file(config_file) if config_file is not None else zenoh.Config()
     for key, value in settings.items():
         cfg.insert_json5(key, json.dumps(value))
     return cfg
@@ -363,7 +377,8 @@ class Fleet:
         for r in self.robots:
             while r.inbox:
                 t, vx, wz = r.inbox.popleft()
-                r.take(min(t, now), vx, wz)
+                q = self.options.quantize
+                r.take(min(t, now), truncated(vx, q), truncated(wz, q))
                 if self.first_motion_at is None and r.last_moving_at is not None:
                     self.first_motion_at = r.last_moving_at
             r.body.advance(now)
@@ -412,6 +427,7 @@ def run_fleet(
     listen: str | None = None,
     duration: float | None = None,
     out: Callable[[str], None] = say,
+    config_file: str | None = None,
 ) -> int:
     """`swarm robots sim`: open the router, declare the robots, step them until Ctrl-C /
     SIGTERM (exit 130 / 143) or `duration` fleet seconds (exit 0); one line per robot at start
@@ -419,7 +435,7 @@ def run_fleet(
     fleet = Fleet(robots, scenario, options, out)
     endpoint = listen or robots.ros2.connect
     try:
-        session = zenoh.open(router_config(endpoint))
+        session = zenoh.open(router_config(endpoint, config_file))
     except zenoh.ZError as e:
         raise FleetError(f"cannot listen on {endpoint} (give another with --listen): {e}") from None
     stop, caught = threading.Event(), []
@@ -436,6 +452,8 @@ def run_fleet(
             f"fleet: {len(fleet.robots)} robots, router on {endpoint} (domain {robots.ros2.domain}, "
             f"{robots.ros2.distro}); poses at {o.rate:g} Hz, latency {o.latency:g} s, noise {o.pose_noise:g} m / "
             f"{o.yaw_sigma:g} rad, command timeout {o.cmd_timeout:g} s, time scale {o.time_scale:g}"
+            + (f", commands truncated to steps of {o.quantize:g}" if o.quantize > 0 else "")
+            + (f"; router config {config_file}" if config_file is not None else "")
         )
         for r in fleet.robots:
             out(r.describe())

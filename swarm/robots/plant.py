@@ -44,8 +44,9 @@ from swarm.contracts.orbits import wrap
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.transport import client_config
 from swarm.contracts.vocabulary import EventKind
-from swarm.robots.config import RobotsError, RobotsFile, RobotSpec
+from swarm.robots.config import RobotsError, RobotsFile, RobotSpec, Ros2Spec
 from swarm.ros2 import cdr
+from swarm.ros2.attachment import gid_for, parse_attachment
 from swarm.ros2.keys import EntityInfo
 from swarm.ros2.types import ODOMETRY, POSE_STAMPED, TWIST, TWIST_STAMPED, RosType
 from swarm.world.core import WorldCore
@@ -65,11 +66,22 @@ Pose = tuple[float, float, float]  # x (m), y (m), yaw (rad)
 ROBOTS_CLOCK = "realtime"
 
 
-def robot_scenario(scenario: Scenario) -> Scenario:
+def robot_scenario(scenario: Scenario, robots: RobotsFile | None = None) -> Scenario:
     """`scenario` as the robot world runs it: the realtime clock, and no agent added while it
-    runs (`swarm spawn`: every agent needs a robot of the robots file)."""
+    runs (`swarm spawn`: every agent needs a robot of the robots file); with `robots`, each
+    agent's speed the one its robot's motors get (`planned_speed`: a whole number of the
+    robot's `quantize` steps, within its max_linear), which the world plans with (its
+    expected radii) and sends."""
     run = scenario.run.model_copy(update={"clock": ROBOTS_CLOCK, "max_added_agents": 0})
-    return scenario.model_copy(update={"run": run})
+    update: dict[str, Any] = {"run": run}
+    if robots is not None:
+        agents = []
+        for a in scenario.agents:
+            spec = robots.robot(a.id)
+            speed = a.speed if spec is None else planned_speed(a.speed, spec)
+            agents.append(a if speed == a.speed else a.model_copy(update={"speed": speed}))
+        update["agents"] = agents
+    return scenario.model_copy(update=update)
 
 
 # -- the pure parts -------------------------------------------------------------------------------
@@ -91,16 +103,93 @@ def predicted(pose: Pose, twist: tuple[float, float], age: float, horizon: float
     return step_one(pose[0], pose[1], pose[2], twist[0], twist[1], dt)
 
 
+def rebase(origin: Pose, odom: Pose) -> Pose:
+    """An odometry pose relative to `origin`, the robot's first odometry pose: its odom frame
+    moved to where the robot was when the world first heard of it (a robot whose odometry did
+    not start at zero, e.g. its node ran before, or it was carried to its start pose)."""
+    x0, y0, h0 = origin
+    dx, dy = odom[0] - x0, odom[1] - y0
+    c, s = math.cos(h0), math.sin(h0)
+    return c * dx + s * dy, -s * dx + c * dy, float(wrap(odom[2] - h0))
+
+
 def saturate(value: float, limit: float) -> float:
     return max(-limit, min(limit, value))
 
 
-def twist_for(speed: float, u: float, max_linear: float, max_angular: float) -> tuple[float, float]:
+def motor_steps(value: float, quantum: float) -> int:
+    """The whole steps a robot's firmware makes of a commanded `value`: turtlebot3_node
+    writes `static_cast<int32_t>(linear.x * 100)` (and angular.z the same) to its board, i.e.
+    truncates toward zero, for quantum 0.01."""
+    return math.trunc(value * (1.0 / quantum))
+
+
+def quantized(value: float, quantum: float, limit: float) -> float:
+    """`value` as the nearest whole number of `quantum` steps within +-`limit`, written so that
+    the firmware's truncation (`motor_steps`) gives exactly that step (0.29 * 100 is
+    28.999999999999996 in floating point: sent as is, the robot would drive 0.28). `quantum`
+    0: `value` saturated at the limit."""
+    if quantum <= 0.0:
+        return saturate(value, limit)
+    inv = 1.0 / quantum
+    top = math.floor(limit * inv + 1e-9)
+    n = max(-top, min(top, round(value * inv)))
+    sent = n * quantum
+    toward = math.inf if n > 0 else -math.inf
+    for _ in range(16):  # a few ulps at most
+        if motor_steps(sent, quantum) == n:
+            break
+        sent = math.nextafter(sent, toward)
+    return sent
+
+
+def planned_speed(speed: float, spec: RobotSpec) -> float:
+    """The speed an agent's robot really drives at: its scenario speed as whole `quantize`
+    steps within max_linear (unchanged for a robot that does not quantize)."""
+    if spec.quantize <= 0.0:
+        return speed
+    return round(quantized(speed, spec.quantize, spec.max_linear) / spec.quantize) * spec.quantize
+
+
+def twist_for(
+    speed: float, u: float, max_linear: float, max_angular: float, quantum: float = 0.0
+) -> tuple[float, float]:
     """(linear.x, angular.z) for an agent of constant `speed` turning at `u` (`WorldCore.applied`:
-    NaN when the agent is not in the world, which stops its robot), saturated at the robot's limits."""
+    NaN when the agent is not in the world, which stops its robot), saturated at the robot's limits
+    and, with a `quantum`, the nearest whole steps of the robot's firmware (`quantized`)."""
     if not math.isfinite(u):
         return 0.0, 0.0
-    return saturate(speed, max_linear), saturate(u, max_angular)
+    return quantized(speed, quantum, max_linear), quantized(u, quantum, max_angular)
+
+
+YAW_PER_M = 5.0  # rad of pose_slack per m: 0.1 m of slack allows 0.5 rad of yaw
+
+
+@dataclass(frozen=True)
+class Plausible:
+    """How far a robot may move between two poses: its limits times (1 + margin), plus slack
+    for the noise of the measurement (m; YAW_PER_M times as many rad for the yaw)."""
+
+    max_linear: float
+    max_angular: float
+    margin: float = 0.5
+    slack: float = 0.1
+
+    def why_not(self, last: Pose, pose: Pose, dt: float) -> str | None:
+        """None when `pose` can follow `last` after `dt` run seconds; else why not, in words."""
+        dt = max(dt, 0.0)
+        dist = math.hypot(pose[0] - last[0], pose[1] - last[1])
+        turn = abs(float(wrap(pose[2] - last[2])))
+        k = 1.0 + self.margin
+        reach = self.max_linear * k * dt + self.slack
+        swing = self.max_angular * k * dt + self.slack * YAW_PER_M
+        if dist <= reach and turn <= swing:
+            return None
+        return (
+            f"{dist:.3f} m and {turn:.2f} rad from the last pose in {dt:.3f} s "
+            f"(at most {reach:.3f} m and {swing:.2f} rad: {self.max_linear:g} m/s and {self.max_angular:g} rad/s "
+            f"x {k:g}, + {self.slack:g} m)"
+        )
 
 
 def label(spec: RobotSpec) -> str:
@@ -143,6 +232,7 @@ def cmd_type_from(spec: RobotSpec, entities: Sequence[EntityInfo], distro: str, 
     return rtype
 
 
+MAX_SAID = 100  # notices kept for summary.json (its latest 20)
 KEPT = 20_000  # the latest pose ages and delays kept per robot for their medians (~0.6 MB each)
 
 
@@ -212,7 +302,9 @@ class Publisher(Protocol):
 class Node(Protocol):
     def publisher(self, topic: str, rtype: RosType) -> Any: ...
 
-    def subscriber(self, topic: str, rtype: RosType, on_sample: Callable[[bytes], None]) -> Any: ...
+    def subscriber(
+        self, topic: str, rtype: RosType, on_sample: Callable[..., None], *, with_attachment: bool = False
+    ) -> Any: ...
 
     def remote_entities(
         self, topic: str | None = None, kind: str | None = None, timeout: float = 1.0
@@ -221,11 +313,13 @@ class Node(Protocol):
     def close(self) -> None: ...
 
 
-def open_robots_session(connect: str) -> Any:
-    """A zenoh session in client mode on the robots' router (rmw_zenohd forwards only to clients)."""
+def open_robots_session(connect: str, ros2: Ros2Spec | None = None) -> Any:
+    """A zenoh session in client mode on the robots' router (rmw_zenohd forwards only to clients),
+    with the robots file's credentials (usrpwd user and password, TLS) for a closed router."""
     import zenoh  # lazy: zenoh's native library, for a world that drives robots only
 
-    return zenoh.open(client_config(connect))
+    identity, tls = ros2.zenoh_settings() if ros2 is not None else (None, {})
+    return zenoh.open(client_config(connect, identity=identity, tls=tls))
 
 
 def ros2_node(session: Any, robots: RobotsFile) -> Node:
@@ -234,20 +328,42 @@ def ros2_node(session: Any, robots: RobotsFile) -> Node:
     return Ros2Node(session, NODE_NAME, domain=robots.ros2.domain, distro=robots.ros2.distro)
 
 
+def gid_text(gid: bytes | None) -> str:
+    return "no rmw_zenoh attachment" if gid is None else f"GID {gid.hex()[:12]}"
+
+
 class Robot:
     """One robot as the plant sees it: its spec, start pose, command type and publisher, and its
-    latest pose (written by the subscription's callback, in zenoh's thread)."""
+    latest pose (written by the subscription's callback, in zenoh's thread).
 
-    def __init__(self, spec: RobotSpec, start: Pose, source: str):
+    Trust: the poses of one publisher only, the one whose GID the first pose carried (checked
+    against the graph by the plant: rmw_zenoh's GID is the XXH3 of its token); a pose from any
+    other GID, or without an attachment, is refused (`foreign`). A pose that implies motion beyond
+    the robot's limits since the last accepted one (`Plausible`) is refused (`implausible`): the
+    robot then goes stale, and stops, until its poses are plausible again. What the plant must
+    say about it goes to `notices` (zenoh's thread appends, the plant's threads say it)."""
+
+    def __init__(
+        self,
+        spec: RobotSpec,
+        start: Pose,
+        source: str,
+        *,
+        time_scale: float = 1.0,
+        margin: float = 0.5,
+        slack: float = 0.1,
+    ):
         self.spec = spec
         self.start = start
         self.source = source
+        self.time_scale = time_scale
         self.cmd_type: RosType | None = (
             None if spec.cmd_type == "auto" else (TWIST if spec.cmd_type == "Twist" else TWIST_STAMPED)
         )
         self.pose_type = ODOMETRY if spec.pose == "odom" else POSE_STAMPED
         self.cmd_topic = spec.topic(spec.cmd_topic)
         self.pose_topic = spec.topic(spec.pose_topic_name)
+        self.plausible = Plausible(spec.max_linear, spec.max_angular, margin, slack)
         self.publisher: Any = None
         self.latest: tuple[float, Pose] | None = None  # (monotonic s received, world pose)
         self.stamp_ns = 0  # the latest pose's stamp (the robot's wall clock; 0: none)
@@ -257,6 +373,17 @@ class Robot:
         self.twists = 0  # sent
         self.delays = Spread()  # s from each pose's stamp to its reception (wall clocks)
         self.ages = PoseAges()
+        self.odom_origin: Pose | None = None  # the first odometry pose: the odom frame's rebased origin
+        self.gid: bytes | None = None  # the robot's pose publisher's (its first pose's)
+        self.gid_checked: str | None = None  # how the graph vouched for it (the plant's words)
+        self.foreign = 0  # poses refused: another publisher's GID, or no attachment
+        self.implausible = 0  # poses refused: beyond the robot's limits
+        self.foreign_commands = 0  # samples on its command topic from anyone but us
+        self.strangers: dict[bytes | None, int] = {}  # GID -> poses refused of it
+        self.cmd_strangers: dict[bytes | None, int] = {}  # GID -> commands of it seen
+        self.other_publishers: list[str] = []  # named in the log (their nodes or GIDs)
+        self.notices: deque[str] = deque()
+        self._refusing = False  # in a spell of implausible poses (said once per spell)
         self._lock = threading.Lock()
 
     @property
@@ -265,28 +392,75 @@ class Robot:
 
     def world_pose(self, pose: cdr.Pose2D) -> Pose:
         if self.spec.pose == "odom":
-            return odom_to_world(self.start, (pose.x, pose.y, pose.yaw))
+            odom = (pose.x, pose.y, pose.yaw)
+            origin = self.odom_origin if self.odom_origin is not None else odom
+            return odom_to_world(self.start, rebase(origin, odom))
         return pose.x, pose.y, float(wrap(pose.yaw))
 
-    def on_pose(self, payload: bytes, now: float) -> None:
-        decode = cdr.decode_odometry if self.spec.pose == "odom" else cdr.decode_pose_stamped
+    def on_pose(self, payload: bytes, now: float, att: bytes | None = None) -> None:
         try:
-            msg = decode(payload)
-            pose = self.world_pose(msg)
-        except cdr.CdrError:
-            with self._lock:
-                self.malformed += 1
-            return
-        if not all(math.isfinite(v) for v in pose):
-            with self._lock:
-                self.malformed += 1
-            return
+            gid: bytes | None = parse_attachment(att)[2] if att is not None else None
+        except ValueError:
+            gid = None
+        decode = cdr.decode_odometry if self.spec.pose == "odom" else cdr.decode_pose_stamped
         with self._lock:
+            if gid is None or (self.gid is not None and gid != self.gid):
+                self.foreign += 1
+                seen = self.strangers.get(gid, 0)
+                self.strangers[gid] = seen + 1
+                if seen == 0:
+                    self.notices.append(
+                        f"{self.label()}: a pose on {self.pose_topic} from another publisher than the robot's "
+                        f"({gid_text(gid)}): refused, as every one from it will be"
+                    )
+                return
+            try:
+                msg = decode(payload)
+                first = self.spec.pose == "odom" and self.odom_origin is None
+                if first:
+                    self.odom_origin = (msg.x, msg.y, msg.yaw)
+                pose = self.world_pose(msg)
+            except cdr.CdrError:
+                self.malformed += 1
+                return
+            if not all(math.isfinite(v) for v in pose):
+                if first:
+                    self.odom_origin = None
+                self.malformed += 1
+                return
+            if self.latest is not None:
+                why = self.plausible.why_not(self.latest[1], pose, (now - self.latest[0]) * self.time_scale)
+                if why is not None:
+                    self.implausible += 1
+                    if not self._refusing:
+                        self._refusing = True
+                        self.notices.append(f"{self.label()}: a pose on {self.pose_topic} refused: {why}")
+                    return
+            self._refusing = False
+            self.gid = gid
             self.latest = (now, pose)
             self.stamp_ns = msg.stamp_ns
             self.poses += 1
             if msg.stamp_ns > 0:
                 self.delays.add((time.time_ns() - msg.stamp_ns) / 1e9)
+
+    def on_command_seen(self, gid: bytes | None, ours: bytes | None) -> None:
+        """A sample on the robot's command topic (any type) with `gid` in its attachment: not
+        ours, the robot obeys someone else too."""
+        if gid is not None and gid == ours:
+            return
+        with self._lock:
+            self.foreign_commands += 1
+            seen = self.cmd_strangers.get(gid, 0)
+            self.cmd_strangers[gid] = seen + 1
+            if seen == 0:
+                self.notices.append(
+                    f"{self.label()}: commands on {self.cmd_topic} from another publisher ({gid_text(gid)}): "
+                    "the robot obeys them as well as ours"
+                )
+
+    def label(self) -> str:
+        return f"robot {self.spec.agent} ({self.spec.namespace or '/'})"
 
     def send(self, vx: float, wz: float) -> None:
         if self.publisher is None or self.cmd_type is None:
@@ -299,6 +473,10 @@ class Robot:
         self.last_twist = (vx, wz)
         self.twists += 1
 
+    @property
+    def refused(self) -> int:
+        return self.foreign + self.implausible
+
     def figures(self) -> dict[str, Any]:
         return {
             "namespace": self.spec.namespace,
@@ -306,8 +484,17 @@ class Robot:
             "pose_topic": self.pose_topic,
             "cmd_topic": self.cmd_topic,
             "cmd_type": self.cmd_type.short if self.cmd_type is not None else None,
+            "quantize": self.spec.quantize,
             "poses": self.poses,
             "malformed_poses": self.malformed,
+            # poses refused: from another publisher than the robot's (foreign), or implying motion
+            # beyond the robot's limits (implausible)
+            "refused_poses": {"foreign": self.foreign, "implausible": self.implausible},
+            "foreign_commands": self.foreign_commands,
+            "other_publishers": list(self.other_publishers),
+            "pose_gid": self.gid.hex() if self.gid is not None else None,
+            "pose_gid_checked": self.gid_checked,
+            "odom_origin": list(self.odom_origin) if self.odom_origin is not None else None,
             "twists": self.twists,
             **self.ages.figures(),
             # from the poses' stamps to their reception: the transport's latency, plus any offset
@@ -330,7 +517,7 @@ class RobotPlant:
         source: str = "<robots>",
         *,
         time_scale: float = 1.0,
-        open_session: Callable[[str], Any] = open_robots_session,
+        open_session: Callable[[str], Any] | None = None,
         make_node: Callable[[Any], Node] | None = None,
         clock: Callable[[], float] = time.monotonic,
         cmd_wait: float = CMD_WAIT,
@@ -343,7 +530,7 @@ class RobotPlant:
         self.stale_after = robots.ros2.stale_after
         self.predict = robots.ros2.predict
         self.time_scale = time_scale
-        self.open_session = open_session
+        self.open_session = open_session or (lambda connect: open_robots_session(connect, robots.ros2))
         self.make_node = make_node or (lambda session: ros2_node(session, robots))
         self.clock = clock
         self.cmd_wait, self.pose_wait = cmd_wait, pose_wait
@@ -352,7 +539,14 @@ class RobotPlant:
         for a in scenario.agents:
             spec = robots.robot(a.id)
             if spec is not None:
-                self.robots[a.id] = Robot(spec, (a.x, a.y, a.heading), source)
+                self.robots[a.id] = Robot(
+                    spec,
+                    (a.x, a.y, a.heading),
+                    source,
+                    time_scale=time_scale,
+                    margin=robots.ros2.pose_margin,
+                    slack=robots.ros2.pose_slack,
+                )
         self.session: Any = None
         self.node: Node | None = None
         self.event: EventSink | None = None
@@ -363,6 +557,10 @@ class RobotPlant:
         self._moving_since: float | None = None  # clock() of the last commands, None once all were zero
         self._quit = threading.Event()
         self._watch: threading.Thread | None = None
+        self._robot_keys: set[str] = set()  # the robots' own pose publishers' tokens
+        self._names: dict[bytes, str] = {}  # GID -> node, for the publishers the graph showed
+        self.notices: deque[str] = deque()  # the graph watcher's (zenoh's thread), said by ours
+        self.said: list[str] = []  # every notice said (the latest MAX_SAID)
 
     # -- prepare: before the world listens ---------------------------------------------------------
     def prepare(self) -> None:
@@ -372,10 +570,14 @@ class RobotPlant:
         connect = self.file.ros2.connect
         try:
             self.session = self.open_session(connect)
+        except RobotsError:
+            raise
         except Exception as e:  # zenoh.ZError: nothing answers there (its text ends with a source path)
             why = str(e).split(" at /", 1)[0]
+            closed = " (a router closed with usrpwd refuses a wrong or missing [ros2] user and password_file)"
             raise RobotsError(
                 f"{self.source}: cannot reach the robots' zenoh router at {connect} ([ros2] connect): {why}"
+                + (closed if self.file.ros2.user is not None else "")
             ) from None
         self.node = self.make_node(self.session)
         self._learn_cmd_types()
@@ -383,10 +585,12 @@ class RobotPlant:
         for r in self.robots.values():
             assert r.cmd_type is not None
             r.publisher = node.publisher(r.cmd_topic, r.cmd_type)
-            node.subscriber(r.pose_topic, r.pose_type, self._receiver(r))
+            node.subscriber(r.pose_topic, r.pose_type, self._receiver(r), with_attachment=True)
         for r in self.robots.values():
             r.send(0.0, 0.0)  # standing still until the first tick
         self._wait_for_poses()
+        self._check_pose_publishers()
+        self._watch_the_graph()
         for aid, r in self.robots.items():
             assert r.cmd_type is not None
             self.say(
@@ -394,9 +598,109 @@ class RobotPlant:
                 f"{r.cmd_topic} {r.cmd_type.short}"
             )
 
-    def _receiver(self, r: Robot) -> Callable[[bytes], None]:
+    def _receiver(self, r: Robot) -> Callable[..., None]:
         """The subscription's callback for robot `r` (zenoh's thread): its pose, stamped now."""
-        return lambda payload: r.on_pose(payload, self.clock())
+        return lambda payload, att=None: r.on_pose(payload, self.clock(), att)
+
+    def _check_pose_publishers(self) -> None:
+        """The publisher of each robot's poses in the ROS graph: one at most (RobotsError naming
+        them when there are more: whose poses would the robot be?), whose GID, the XXH3 of its
+        token as rmw_zenoh makes it, the robot's first pose should carry."""
+        assert self.node is not None
+        pubs = self.node.remote_entities(kind="MP", timeout=1.0)
+        for r in self.robots.values():
+            mine = [e for e in pubs if e.topic == r.pose_topic]
+            if len(mine) > 1:
+                names = ", ".join(sorted(self._name(e) for e in mine))
+                raise RobotsError(
+                    f"{self.source}: {label(r.spec)}: {len(mine)} publishers on {r.pose_topic} ({names}): "
+                    "one robot's poses come from one publisher (stop the others, or set its pose_topic)"
+                )
+            if not mine:
+                r.gid_checked = "first pose (no publisher token on the topic)"
+                self._notice(
+                    f"{r.label()}: no publisher of {r.pose_topic} in the ROS graph: trusting the GID of its first pose"
+                )
+                continue
+            e = mine[0]
+            self._robot_keys.add(e.key)
+            self._names[gid_for(e.key)] = self._name(e)
+            if r.gid is not None and r.gid == gid_for(e.key):
+                r.gid_checked = f"token of {self._name(e)}"
+            else:
+                r.gid_checked = f"first pose (not the XXH3 of {self._name(e)}'s token)"
+                self._notice(
+                    f"{r.label()}: the poses on {r.pose_topic} do not carry the GID of {self._name(e)}'s token "
+                    "(XXH3-128, as rmw_zenoh on Jazzy makes it): trusting the GID of its first pose"
+                )
+
+    def _watch_the_graph(self) -> None:
+        """From now on, name at once every other publisher on a robot's pose or command topic
+        (the ROS graph's tokens), and every sample on a command topic that is not ours."""
+        node = self.node
+        watch, listen = getattr(node, "watch", None), getattr(node, "listen", None)
+        if watch is not None:
+            watch(self._on_token)
+        if listen is not None:
+            for r in self.robots.values():
+                listen(r.cmd_topic, self._command_watcher(r))
+
+    def _command_watcher(self, r: Robot) -> Callable[[str, bytes, bytes | None], None]:
+        def seen(_key: str, _payload: bytes, att: bytes | None) -> None:
+            try:
+                gid: bytes | None = parse_attachment(att)[2] if att is not None else None
+            except ValueError:
+                gid = None
+            r.on_command_seen(gid, getattr(r.publisher, "gid", None))
+
+        return seen
+
+    @staticmethod
+    def _name(e: EntityInfo) -> str:
+        ns = e.namespace.rstrip("/")
+        return f"{ns}/{e.node} (zid {e.zid})"
+
+    def _on_token(self, key: str, e: EntityInfo, alive: bool) -> None:
+        """The graph watcher (zenoh's thread): a publisher on a robot's topic that is not the robot's."""
+        if not alive or e.kind != "MP" or key in self._robot_keys:
+            return
+        name = self._name(e)
+        self._names[gid_for(key)] = name
+        for r in self.robots.values():
+            if e.topic == r.pose_topic:
+                what = "its poses are refused"
+            elif e.topic == r.cmd_topic:
+                what = "the robot obeys it as well as us"
+            else:
+                continue
+            with r._lock:
+                if name not in r.other_publishers:
+                    r.other_publishers.append(name)
+            self._notice(f"{r.label()}: another publisher on {e.topic}: {name}, {e.dds_type}: {what}")
+
+    def _notice(self, line: str) -> None:
+        self.notices.append(line)
+
+    def flush_notices(self) -> None:
+        """Say what the robots' callbacks and the graph watcher noticed (main or watchdog thread)."""
+        for queue in (self.notices, *(r.notices for r in self.robots.values())):
+            while True:
+                try:
+                    line = queue.popleft()
+                except IndexError:
+                    break
+                line = self._named(line)
+                self.said.append(line)
+                del self.said[:-MAX_SAID]
+                self.say(line)
+
+    def _named(self, line: str) -> str:
+        """A notice's "GID 0123456789ab" with the name of its node when the graph told us."""
+        for gid, name in list(self._names.items()):
+            text = f"GID {gid.hex()[:12]}"
+            if text in line:
+                return line.replace(text, f"{text}, {name}")
+        return line
 
     def _learn_cmd_types(self) -> None:
         """cmd_type = "auto": the type of the robot's own subscription on its command topic."""
@@ -457,19 +761,23 @@ class RobotPlant:
             if change is not None and self.event is not None:
                 self._announce(change, aid, r, age)
             stale = r.ages.stale
-            twists[aid] = (0.0, 0.0) if stale else twist_for(float(core.speed[k]), float(u[k]), *r.limits)
+            twists[aid] = (
+                (0.0, 0.0) if stale else twist_for(float(core.speed[k]), float(u[k]), *r.limits, r.spec.quantize)
+            )
         with self._send_lock:
             for aid, (vx, wz) in twists.items():
                 self.robots[aid].send(vx, wz)
             moving = any(t != (0.0, 0.0) for t in twists.values())
             self._moving_since = self.clock() if moving else None
         self._read_poses(core)
+        self.flush_notices()
 
     def _watchdog(self) -> None:
         """Every robot stopped when the world has sent no command for stale_after (wall s: the
         run's over the time scale) while they were moving; the next step drives them again."""
         limit = self.stale_after / self.time_scale
         while not self._quit.wait(WATCHDOG_PERIOD):
+            self.flush_notices()
             with self._send_lock:
                 since = self._moving_since
                 if since is None or self.clock() - since <= limit:
@@ -515,6 +823,7 @@ class RobotPlant:
             for r in self.robots.values():
                 self._quietly(r.send, 0.0, 0.0)
             self._moving_since = None
+        self.flush_notices()
 
     def stop(self) -> None:
         """Every robot stopped (zero twists, STOP_REPEAT times), then our node and session closed;
@@ -530,6 +839,7 @@ class RobotPlant:
                 self._quietly(r.send, 0.0, 0.0)
             if i < STOP_REPEAT - 1 and any(r.publisher is not None for r in self.robots.values()):
                 time.sleep(STOP_GAP)
+        self._quietly(self.flush_notices)
         if self.node is not None:
             self._quietly(self.node.close)
         if self.session is not None:
@@ -550,5 +860,11 @@ class RobotPlant:
             "distro": self.file.ros2.distro,
             "stale_after": self.stale_after,
             "watchdog_stops": self.watchdog_stops,
+            # poses refused (another publisher's, or beyond a robot's limits), commands of another
+            # publisher seen on a robot's topic, and other publishers named: 0, 0, [] in a clean run
+            "refusals": sum(r.refused for r in self.robots.values()),
+            "foreign_commands": sum(r.foreign_commands for r in self.robots.values()),
+            "other_publishers": sorted({n for r in self.robots.values() for n in r.other_publishers}),
+            "notices": list(self.said[-20:]),
             "agents": {str(aid): r.figures() for aid, r in self.robots.items()},
         }
