@@ -230,3 +230,30 @@ def test_a_study_row_carries_the_figures_and_the_filter_may_be_swept(engine):
     assert all(r["min_distance"] >= RADIUS for r in on) and all(r["min_distance"] < RADIUS for r in off)
     summary = summarise(rows, settings)
     assert [s["safe_runs"] for s in summary] == [0, 2] and summary[1]["collisions"] == 0
+
+
+def test_a_robots_file_carries_the_table_for_its_robots():
+    """robots mode: the robots file's [safety] replaces the scenario's; a bad one is refused
+    naming the field."""
+    from swarm.robots.config import RobotsError, parse_robots
+    from swarm.robots.plant import robot_scenario
+
+    robots = {"robots": [{"agent": 1}, {"agent": 2, "namespace": "/tb3_1"}]}
+    s = overtake({"radius": 5.0})
+    assert robot_scenario(s, parse_robots(robots)).safety == s.safety  # none in the file: the scenario's
+    file = parse_robots({**robots, "safety": {"radius": 0.3, "speed": True, "arena": [-12, -12, 12, 12]}})
+    got = robot_scenario(s, file).safety
+    assert (
+        got is not None
+        and got.radius == 0.3
+        and got.speed
+        and got.corners
+        == [
+            (-12.0, -12.0),
+            (12.0, -12.0),
+            (12.0, 12.0),
+            (-12.0, 12.0),
+        ]
+    )
+    with pytest.raises(RobotsError, match="safety.gamma"):
+        parse_robots({**robots, "safety": {"radius": 0.3, "gamma": 0}})

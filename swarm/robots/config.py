@@ -31,6 +31,11 @@ file and the field (exit 2).
     max_angular = 2.84       # rad/s
     quantize = 0.01          # the step of the robot's firmware (TurtleBot3: 0.01 m/s and rad/s;
                              # 0: none): the world sends and plans with whole steps
+
+    [safety]                 # optional: the safety filter for these robots, as a scenario's [safety]
+    radius = 0.3             # (docs/guides/scenarios.md#safety); replaces the scenario's table
+    arena = [-2, -2, 2, 2]
+    speed = true             # robots may slow down and stop
 """
 
 from __future__ import annotations
@@ -44,6 +49,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from swarm.contracts.endpoints import EndpointError, check_endpoint
 from swarm.contracts.scenario import Scenario, format_validation_error
+from swarm.contracts.scenario_tables import SafetySpec
 from swarm.contracts.tls import TLS
 from swarm.contracts.vocabulary import Coded, ExitCode
 
@@ -160,6 +166,9 @@ class RobotSpec(_Strict):
 class RobotsFile(_Strict):
     ros2: Ros2Spec = Ros2Spec()
     robots: list[RobotSpec] = Field(min_length=1)
+    # the safety filter for these robots (docs/design/safety.md), as a scenario's [safety];
+    # it replaces the scenario's own table in robots mode (swarm/robots/plant.py `robot_scenario`)
+    safety: SafetySpec | None = None
 
     @model_validator(mode="after")
     def _unique(self) -> RobotsFile:

@@ -71,7 +71,8 @@ def robot_scenario(scenario: Scenario, robots: RobotsFile | None = None) -> Scen
     runs (`swarm spawn`: every agent needs a robot of the robots file); with `robots`, each
     agent's speed the one its robot's motors get (`planned_speed`: a whole number of the
     robot's `quantize` steps, within its max_linear), which the world plans with (its
-    expected radii) and sends."""
+    expected radii) and sends, and its [safety] table, if it has one, in place of the
+    scenario's (docs/design/safety.md)."""
     run = scenario.run.model_copy(update={"clock": ROBOTS_CLOCK, "max_added_agents": 0})
     update: dict[str, Any] = {"run": run}
     if robots is not None:
@@ -81,6 +82,8 @@ def robot_scenario(scenario: Scenario, robots: RobotsFile | None = None) -> Scen
             speed = a.speed if spec is None else planned_speed(a.speed, spec)
             agents.append(a if speed == a.speed else a.model_copy(update={"speed": speed}))
         update["agents"] = agents
+        if robots.safety is not None:  # the robots file's [safety] table: the filter for these robots
+            update["safety"] = robots.safety
     return scenario.model_copy(update=update)
 
 
