@@ -257,3 +257,18 @@ def test_a_robots_file_carries_the_table_for_its_robots():
     )
     with pytest.raises(RobotsError, match="safety.gamma"):
         parse_robots({**robots, "safety": {"radius": 0.3, "gamma": 0}})
+
+
+def test_swarm_check_shows_the_table_and_warns_of_unbounded_turn_rates(tmp_path):
+    from typer.testing import CliRunner
+
+    from swarm.cli.main import app
+
+    path = tmp_path / "s.toml"
+    text = OVERTAKE.format(duration=20.0).replace("max_turn_rate = 2.0\n", "", 1)
+    path.write_text(text + "\n[safety]\nradius = 1.0\narena = [[-20, -15], [20, -15], [0, 25]]\n")
+    res = CliRunner().invoke(app, ["check", str(path)])
+    assert res.exit_code == 0, res.output
+    assert "safety: filter, radius=1 m, lookahead=0.25 m, gamma=2/s, speed may not change" in res.output
+    assert "arena: (-20, -15) (20, -15) (0, 25)" in res.output
+    assert "agents 1 have no max_turn_rate" in res.output

@@ -41,6 +41,20 @@ def check(scenario: ScenarioArg) -> None:
         f"fov={'all round' if sens.fov is None else f'{sens.fov} rad'}, "
         f"selection={sens.selection}, hysteresis={sens.hysteresis}"
     )
+    if s.safety is not None:
+        sf = s.safety
+        arena = "none" if sf.corners is None else " ".join(f"({x:g}, {y:g})" for x, y in sf.corners)
+        typer.echo(
+            f"  safety: {'filter' if sf.enabled else 'measured only (enabled = false)'}, radius={sf.radius:g} m, "
+            f"lookahead={sf.lookahead_m:g} m, gamma={sf.gamma:g}/s, speed {'may' if sf.speed else 'may not'} "
+            f"change, arena: {arena}"
+        )
+        unbounded = [a.id for a in s.agents if a.max_turn_rate is None]
+        if unbounded and sf.enabled:
+            typer.echo(
+                f"  warning: agents {', '.join(map(str, unbounded))} have no max_turn_rate: the safety filter's "
+                "turn rates for them are unbounded"
+            )
     for a in s.agents:
         extra = (
             f"R={a.orbit_radius} m {a.direction}"
