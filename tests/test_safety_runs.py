@@ -107,10 +107,17 @@ def test_an_arena_is_kept_and_exits_are_counted_without_the_filter():
     their turn-rate limit (saturations)."""
     arena = [-9.0, -11.0, 11.0, 11.0]
     out = run_sim(overtake({"radius": RADIUS, "arena": arena, "enabled": False})).summary()["safety"]
-    kept = run_sim(overtake({"radius": RADIUS, "arena": arena})).summary()["safety"]
+    summ = run_sim(overtake({"radius": RADIUS, "arena": arena})).summary()
+    kept = summ["safety"]
     assert out["boundary_exits"] >= 4 and out["outside_ticks"] > 0 and out["saturations"] == 0
     assert kept["boundary_exits"] == 0 and kept["outside_ticks"] == 0 and kept["collisions"] == 0
     assert kept["infeasible"] > 0 and kept["saturations"] > 0
+    # an event on the first tick of each spell of changes, and of each spell with no safe command
+    events = [e for e in summ["events"] if e["kind"] == EventKind.SAFETY]
+    assert len(events) == kept["spells"] + kept["infeasible_spells"]
+    stuck = [e for e in events if e["infeasible"]]
+    assert len(stuck) == kept["infeasible_spells"] > 0
+    assert all(e["reason"].startswith("no safe turn rate: the least violating applied") for e in stuck)
     assert kept["arena"] == [[-9.0, -11.0], [11.0, -11.0], [11.0, 11.0], [-9.0, 11.0]]
 
 

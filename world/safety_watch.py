@@ -8,7 +8,8 @@ the batch engine all filter and count alike. Each tick:
 - `command`: the filter (world/safety.py) on every agent in the world: the turn rates (and,
   with `speed = true`, the speeds) to apply instead of the laws'. Every change is counted;
   the first tick of each agent's spell of changes is a "safety" event (what it asked, what it
-  got, which barriers bound it, whether no safe command existed). `enabled = false`: the
+  got, which barriers bound it, whether no safe command existed), and so is the first tick of
+  each spell with no safe command within a spell of changes. `enabled = false`: the
   laws' commands go through and only the figures below are kept.
 - `measure`: Robotarium's figures of the recorded poses (ticks 0..T, the final pose too):
   the least distance between two agents, collisions (a pair closer than `radius`, counted
@@ -52,7 +53,9 @@ class SafetyWatch:
         self.saturations = np.zeros(n, dtype=np.int64)  # agent-ticks at the turn-rate limit
         self.exits = np.zeros(n, dtype=np.int64)  # boundary exits (spells outside the arena)
         self.outside_ticks = np.zeros(n, dtype=np.int64)
+        self.infeasible_spells = np.zeros(n, dtype=np.int64)  # spells with no safe command (an event each)
         self.in_spell = np.zeros(n, dtype=bool)
+        self.stuck = np.zeros(n, dtype=bool)  # no safe command at the last tick
         self.outside = np.zeros(n, dtype=bool)
         self.touching: set[tuple[int, int]] = set()  # id pairs closer than radius at the last measure
         self.collisions = 0
@@ -66,9 +69,19 @@ class SafetyWatch:
     def add_agent(self, aid: int) -> None:
         """One more agent (added at run time): its counts start at zero."""
         self.ids.append(int(aid))
-        for name in ("interventions", "spells", "infeasible", "speed_cuts", "saturations", "exits", "outside_ticks"):
+        for name in (
+            "interventions",
+            "spells",
+            "infeasible",
+            "infeasible_spells",
+            "speed_cuts",
+            "saturations",
+            "exits",
+            "outside_ticks",
+        ):
             setattr(self, name, np.append(getattr(self, name), 0))
         self.in_spell = np.append(self.in_spell, False)
+        self.stuck = np.append(self.stuck, False)
         self.outside = np.append(self.outside, False)
 
     # -- the filter ------------------------------------------------------------------------------
@@ -100,10 +113,13 @@ class SafetyWatch:
             self.speed_cuts += cut
             new = changed & ~self.in_spell
             self.spells += new
+            stuck = f.infeasible & ~self.stuck  # no safe command, for the first tick in a while
+            self.infeasible_spells += stuck
             if event is not None:
-                for k in np.flatnonzero(new).tolist():
+                for k in np.flatnonzero(new | stuck).tolist():
                     self._event(event, k, f, float(u[k]), float(speed[k]))
         self.in_spell = changed
+        self.stuck = f.infeasible
         return f.u, (f.v if self.bar.speed else None)
 
     def _event(self, event: EventSink, k: int, f: Filtered, u_law: float, v_law: float) -> None:
@@ -177,6 +193,7 @@ class SafetyWatch:
             "interventions": int(self.interventions.sum()),
             "spells": int(self.spells.sum()),
             "infeasible": int(self.infeasible.sum()),
+            "infeasible_spells": int(self.infeasible_spells.sum()),
             "speed_cuts": int(self.speed_cuts.sum()),
             "filtered_ticks": self.filtered_ticks,
             "solves": self.solves,
@@ -190,6 +207,7 @@ class SafetyWatch:
                     "interventions": int(self.interventions[k]),
                     "spells": int(self.spells[k]),
                     "infeasible": int(self.infeasible[k]),
+                    "infeasible_spells": int(self.infeasible_spells[k]),
                     "speed_cuts": int(self.speed_cuts[k]),
                     "saturations": int(self.saturations[k]),
                     "boundary_exits": int(self.exits[k]),
