@@ -2,8 +2,9 @@
 
 `import swarm` is the Python API (swarm/api/runs.py; docs/reference/api.md): `swarm.load`,
 `swarm.from_dict`, `swarm.Builder`, `swarm.simulate`, `swarm.open_run`, `swarm.up`,
-`swarm.launch`, `swarm.Results`..., and a live run: `swarm.connect`, `swarm.runs` (swarm/api/live.py); the
-errors are swarm/contracts/errors.py's. Every name is imported on first use (module `__getattr__`), so
+`swarm.launch`, `swarm.Results`..., and a live run: `swarm.connect`, `swarm.runs` (swarm/api/live.py);
+every robot stopped at once: `swarm.estop` (swarm/api/estop.py); the errors are
+swarm/contracts/errors.py's. Every name is imported on first use (module `__getattr__`), so
 `import swarm.contracts.wire` in an agent process still costs nothing more than it did.
 """
 
@@ -29,6 +30,7 @@ _EXPORTS = {
     "api.launch": ("Launch", "UpOutcome", "launch"),
     "api.scenario": ("from_dict", "load", "to_toml"),
     "api.live": ("Live", "LiveState", "connect", "runs"),
+    "api.estop": ("Estopped", "estop"),
     "api.up": ("UpRun", "up"),
     "contracts.errors": ("LiveError", "NoRunError", "StoppedAnswering", "SwarmError", "UpError", "UsageError"),
 }

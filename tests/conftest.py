@@ -79,6 +79,7 @@ TIERS = {
         "test_peers_smoke",
         "test_live_tools",
         "test_robots_fleet",
+        "test_robots_stops",
         "test_api",
         "test_api_launch",
         "test_api_live",

@@ -50,3 +50,49 @@ def test_a_killed_world_leaves_every_robot_zero_twisted_by_swarm_up(rt, tmp_path
     text = up.launcher.text()
     assert "robots: zero twist sent to 2 robots (the world exited: killed by SIGKILL)" in text, text[-3000:]
     assert stop_fleet(rt, fleet).count("stopped by a zero twist") == 2
+
+
+@pytest.mark.parametrize("world_state", ["running", "stalled", "killed"])
+def test_estop_from_another_terminal_zero_twists_every_robot_and_ends_the_run(rt, tmp_path, world_state):
+    fleet, robots, wire = start_fleet(rt, tmp_path, "--cmd-timeout", "3600")
+    up = start_up(rt.tracker, TURTLEBOT, tmp_path / "run", "--robots", robots, "--duration", 120)
+    wait_moving(up, wire)
+    world = world_pid_of(rt, up)
+    if world_state == "stalled":
+        os.kill(world, signal.SIGSTOP)
+    elif world_state == "killed":
+        os.kill(world, signal.SIGKILL)
+    event = time.monotonic()
+    estop = rt.tracker.spawn(swarm_cmd("estop"), "estop")  # the run's robots file: from its record
+    assert estop.wait(DEADLINE) == ExitCode.OK, estop.text()[-3000:]
+    for ns in ROBOT.values():
+        wait_for(lambda ns=ns: last_is_zero_after(wire, ns, event), DEADLINE, f"a zero twist for {ns}")
+        wire.report(f"swarm estop, world {world_state}", ns, event)
+    out = estop.text()
+    assert "estop: zero twist sent to 2 robots" in out, out
+    code = up.launcher.wait(DEADLINE)  # the run has ended
+    if world_state == "running":  # through the world, as `swarm stop` ends it
+        assert code == ExitCode.INTERRUPTED and "stopped at tick" in out, out + up.launcher.text()[-3000:]
+    elif world_state == "stalled":
+        assert "killed with SIGKILL" in out and "has ended the run" in out, out
+    else:
+        assert "its world was gone" in out or "had ended" in out, out
+    # and no robot moved again after the run ended
+    ended = time.monotonic()
+    for ns in ROBOT.values():
+        assert last_is_zero_after(wire, ns, event) and not wire.moving_since(ns, ended)
+    assert stop_fleet(rt, fleet).count("stopped by a zero twist") == 2
+
+
+def test_estop_with_a_robots_file_and_no_run(rt, tmp_path):
+    fleet, robots, wire = start_fleet(rt, tmp_path, "--cmd-timeout", "3600")
+    event = time.monotonic()
+    estop = rt.tracker.spawn(swarm_cmd("estop", "--robots", robots), "estop")
+    assert estop.wait(DEADLINE) == ExitCode.OK, estop.text()[-3000:]
+    for ns in ROBOT.values():
+        wait_for(lambda ns=ns: last_is_zero_after(wire, ns, event), DEADLINE, f"a zero twist for {ns}")
+    assert estop.text().count("\n") == 1, estop.text()  # the robots only: no run to end
+    nothing = rt.tracker.spawn(swarm_cmd("estop"), "estop-none")
+    assert nothing.wait(DEADLINE) == ExitCode.USAGE
+    assert "give --robots FILE" in nothing.text() and nothing.text().count("\n") == 1, nothing.text()
+    stop_fleet(rt, fleet)

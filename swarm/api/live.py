@@ -213,6 +213,14 @@ class Live:
         with talking():
             return stop_run(self._lr, wait=wait, timeout=STOP_DEADLINE if timeout is None else timeout)
 
+    def estop(self, robots: str | Path | None = None, end: bool = True):
+        """Every robot of this run zero-twisted straight onto the robots' network, then the run
+        ended (`swarm estop`; swarm/api/estop.py): `robots` the robots file (default: the run's
+        record on this machine); `end` False leaves the run alone. A `swarm.Estopped`."""
+        from swarm.api.estop import estop  # lazy: the robots' protocol, for an e-stop only
+
+        return estop(robots=robots, end=end, live=self._lr)
+
     def echo(self, key: str, count: int | None = None):
         """The messages on `key` of the run (`truth`, `events`, `world/control`,
         `agent/<id>/sense|cmd|status|ctl`; `*` for every agent), decoded, as they come, until

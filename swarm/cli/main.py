@@ -33,7 +33,7 @@ import typer
 from swarm import __version__
 from swarm.cli.errors import OneLineErrors, map_app
 
-GROUPS = ("up", "run", "offline", "plot", "live", "watch", "control", "access", "host", "robots", "tools")
+GROUPS = ("up", "run", "offline", "plot", "live", "watch", "control", "access", "host", "robots", "tools", "estop")
 # command -> the group modules that are enough to run it (several commands in all: a typer app
 # of one command would run it without its name)
 LAZY = {
@@ -42,6 +42,7 @@ LAZY = {
         (("live", "watch"), ("runs", "agents", "graph", "watch")),
         (("control",), ("kill", "spawn", "pause", "resume")),
         (("tools",), ("logs", "stop", "echo")),
+        (("estop", "tools"), ("estop",)),  # (one command alone would run without its name)
     )
     for name in names
 }

@@ -380,9 +380,9 @@ class WorldExitStop:
     every robot (STOP_REPEAT times), then one line: "robots: zero twist sent to N robots (the
     world exited: killed by SIGKILL)". The session to the robots' router is opened when the
     world starts (`started`), so nothing is left to do at the exit but send; a thread waits for
-    the exit (waitid without reaping: the launcher reaps the world). Meanwhile the run's record
-    is in the runtime dir (`swarm estop`); `join()` (the launcher, once the world has ended)
-    waits for the line and removes the record."""
+    the exit (waitid without reaping: the launcher reaps the world). The run's record is in the
+    runtime dir (`swarm estop`) from the world's start on, and stays after the run (the next
+    run's replaces it); `join()` (the launcher, once the world has ended) waits for the line."""
 
     def __init__(
         self,
@@ -410,6 +410,13 @@ class WorldExitStop:
             self.record = write_record(RunRecord(self.run, os.getpid(), world_pid, str(self.robots_file), plan))
         except OSError:
             self.record = None
+            return
+        for path, rec, up in read_records():  # the records of runs ended before: this one is the latest
+            if not up and rec.run != self.run:
+                try:
+                    path.unlink()
+                except OSError:
+                    pass
 
     def _watch(self, pid: int) -> None:
         halt: Halt | None = None
@@ -440,14 +447,10 @@ class WorldExitStop:
             self.done.set()
 
     def join(self, timeout: float = 10.0) -> None:
+        """Until the zero twists were sent and said (at most `timeout` s). The record stays: an
+        estop after the run still finds its robots (the next run's record replaces it)."""
         if self.thread is not None:
             self.done.wait(timeout)
-        if self.record is not None:
-            try:
-                self.record.unlink()
-            except OSError:
-                pass
-            self.record = None
 
 
 def _wait_exit(pid: int) -> int | None:
