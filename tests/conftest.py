@@ -89,6 +89,7 @@ TIERS = {
         "test_leader",
         "test_live_cli",
         "test_live_hostile",
+        "test_leftovers",
         "test_live_scale",
         "test_messages",
         "test_multihost",
