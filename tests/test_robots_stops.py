@@ -10,7 +10,6 @@ benchmarks/robots_stops.py's.
 
 from __future__ import annotations
 
-import math
 import os
 import signal
 import time
@@ -96,3 +95,48 @@ def test_estop_with_a_robots_file_and_no_run(rt, tmp_path):
     assert nothing.wait(DEADLINE) == ExitCode.USAGE
     assert "give --robots FILE" in nothing.text() and nothing.text().count("\n") == 1, nothing.text()
     stop_fleet(rt, fleet)
+
+
+def test_the_guard_zero_twists_a_robot_whose_commands_stopped_and_lets_it_go_again(rt, tmp_path):
+    fleet, robots, wire = start_fleet(rt, tmp_path, "--cmd-timeout", "3600")
+    guard = rt.tracker.spawn(swarm_cmd("robots", "guard", "--robots", robots, "--cmd-timeout", "0.3"), "guard")
+    wait_for(lambda: guard.check_running("the guard") or "Ctrl-C stops it" in guard.text(), DEADLINE, "the guard")
+    up = start_up(rt.tracker, TURTLEBOT, tmp_path / "run", "--robots", robots, "--duration", 120)
+    wait_moving(up, wire)
+    assert "zero twist sent" not in guard.text(), guard.text()  # while commands flow: nothing
+    world = world_pid_of(rt, up)
+    os.kill(world, signal.SIGSTOP)  # its commands stop (its own watchdog with it)
+    event = time.monotonic()
+    for ns in ROBOT.values():
+        wait_for(lambda ns=ns: last_is_zero_after(wire, ns, event), DEADLINE, f"the guard's zero twist for {ns}")
+        wire.report("the world's commands stopped (SIGSTOP), the guard", ns, event)
+    wait_for(lambda: guard.text().count("zero twist sent") == 2, DEADLINE, "the guard's lines")
+    os.kill(world, signal.SIGCONT)  # commands again: the guard lets them through
+    wait_moving(up, wire, since=time.monotonic())
+    wait_for(lambda: guard.text().count("commands again") == 2, DEADLINE, "the guard to see commands again")
+    up.launcher.popen.send_signal(signal.SIGINT)
+    assert up.launcher.wait(DEADLINE) == ExitCode.INTERRUPTED
+    guard.popen.send_signal(signal.SIGINT)
+    assert guard.wait(DEADLINE) == ExitCode.INTERRUPTED, guard.text()
+    assert guard.text().count("zero twist sent") == 2, guard.text()  # the run's own end stopped the robots
+    assert stop_fleet(rt, fleet).count("stopped by a zero twist") == 2
+
+
+@pytest.mark.parametrize(
+    ("guard", "field"),
+    [
+        ({"cmd_timeout": 0}, "guard.cmd_timeout"),
+        ({"cmd_timeout": 61}, "guard.cmd_timeout"),
+        ({"connect": "nowhere"}, "guard"),
+        ({"cmd_timeout": 0.5, "extra": 1}, "guard.extra"),
+    ],
+)
+def test_a_bad_guard_table_is_refused_naming_its_field(guard, field):
+    from test_robots_fleet import robots_file
+
+    from swarm.robots.config import RobotsError, parse_robots
+
+    assert parse_robots({**robots_file(), "guard": {"cmd_timeout": 0.25}}).guard.cmd_timeout == 0.25
+    assert parse_robots(robots_file()).guard.cmd_timeout == 0.5
+    with pytest.raises(RobotsError, match=field.replace(".", r"\.")):
+        parse_robots({**robots_file(), "guard": guard}, "robots.toml")

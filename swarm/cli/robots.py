@@ -144,5 +144,60 @@ def sim(
     raise typer.Exit(run_fleet(fleet_robots, spec, options, listen=listen, duration=duration, config_file=config_file))
 
 
+@robots_app.command("guard")
+def guard(
+    robots: Annotated[
+        Path,
+        typer.Option("--robots", help="the robots file (the robots to guard)", show_default=False),
+    ],
+    connect: Annotated[
+        Optional[str],
+        typer.Option(
+            help="the robots' router from this machine (default: the robots file's guard.connect, else ros2.connect)",
+            show_default=False,
+        ),
+    ] = None,
+    cmd_timeout: Annotated[
+        Optional[float],
+        typer.Option(
+            help="s without a command before a moving robot gets a zero twist (default: the robots file's "
+            "guard.cmd_timeout, 0.5)",
+            min=0.001,
+            max=60.0,
+            show_default=False,
+        ),
+    ] = None,
+    duration: Annotated[
+        Optional[float],
+        typer.Option(help="stop after this many s (default: at Ctrl-C)", min=0.0, show_default=False),
+    ] = None,
+) -> None:
+    """Zero-twist every robot whose commands stopped: run it next to the robots' router.
+
+    A zenoh client of the robots' router watches every robot's command topic. When a robot's
+    last command was a motion command and none came for --cmd-timeout s (the world's machine
+    lost its link to the robots, or its world died with nothing left to stop them), the guard
+    sends it zero twists, as twist_mux's topic timeout does; nothing while commands flow, so
+    it never fights the world. One line per stop, and when the robot moves again.
+
+    Exit codes: 0 --duration reached, 1 the router cannot be reached, 2 a bad robots file or
+    option, 130/143 stopped by Ctrl-C/SIGTERM.
+
+    Example (on the robots' machine): swarm robots guard --robots robots.toml --connect tcp/127.0.0.1:7447
+    """
+    # lazy: zenoh and the robots' protocol, which `swarm --help` must not pay
+    from swarm.robots.config import load_robots
+    from swarm.robots.guard import run_guard
+    from swarm.robots.halt import HaltError, HaltPlan
+
+    spec = load_robots(robots)
+    plan = HaltPlan.from_robots(spec, connect or spec.guard.connect)
+    try:
+        code = run_guard(plan, cmd_timeout or spec.guard.cmd_timeout, lambda line: typer.echo(line), duration)
+    except HaltError as e:
+        raise fail(f"swarm robots guard: {e}", ExitCode.FAILED) from None
+    raise typer.Exit(code)
+
+
 def register(app: typer.Typer) -> None:
     app.add_typer(robots_app, name="robots")

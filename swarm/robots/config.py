@@ -36,6 +36,10 @@ file and the field (exit 2).
     radius = 0.3             # (docs/guides/scenarios.md#safety); replaces the scenario's table
     arena = [-2, -2, 2, 2]
     speed = true             # robots may slow down and stop
+
+    [guard]                            # optional: swarm robots guard, on the robots' machine
+    cmd_timeout = 0.5                  # s: a robot whose last command is older gets a zero twist
+    connect = "tcp/127.0.0.1:7447"     # the router from there (default: [ros2] connect)
 """
 
 from __future__ import annotations
@@ -163,8 +167,25 @@ class RobotSpec(_Strict):
         return f"/{ns}/{name}" if ns else f"/{name}"
 
 
+class GuardSpec(_Strict):
+    """`swarm robots guard` (swarm/robots/guard.py), next to the robots' router."""
+
+    cmd_timeout: float = Field(default=0.5, gt=0.0, le=60.0, description="s without a command: zero twist")
+    connect: str | None = Field(default=None, description="the router, from the guard's machine (default [ros2])")
+
+    @model_validator(mode="after")
+    def _endpoint(self) -> GuardSpec:
+        if self.connect is not None:
+            try:
+                check_endpoint(self.connect)
+            except EndpointError as e:
+                raise ValueError(f"connect: {e}") from None
+        return self
+
+
 class RobotsFile(_Strict):
     ros2: Ros2Spec = Ros2Spec()
+    guard: GuardSpec = GuardSpec()  # swarm robots guard: its cmd_timeout, and the router from its machine
     robots: list[RobotSpec] = Field(min_length=1)
     # the safety filter for these robots (docs/design/safety.md), as a scenario's [safety];
     # it replaces the scenario's own table in robots mode (swarm/robots/plant.py `robot_scenario`)
