@@ -2,8 +2,8 @@
 
 For N = 6, 10, 20 agents, `safe_commands` on states of two kinds, each drawn afresh:
 
-- "spread": a swarm on a circle of 3 N m round a target, each agent headed round it at
-  1 m/s (the laws' commands are safe): the check alone, no QP;
+- "spread": a swarm evenly spaced on a circle of 3 N m round a target, each agent headed
+  round it at 1 m/s (the laws' commands are safe): the check alone, no QP;
 - "crowded": the agents in a 6 m x 6 m arena (a cluster by a wall), random headings and
   commands, radius 0.5 m: the filter at work, its QPs solved (counted).
 
@@ -29,7 +29,7 @@ from swarm.world.safety import Arena, Barriers, safe_commands
 
 
 def spread(rng, n: int):
-    a = np.sort(rng.uniform(0, 2 * math.pi, n))
+    a = np.linspace(0, 2 * math.pi, n, endpoint=False) + rng.uniform(0, 2 * math.pi)  # evenly spaced: 18.8 m
     r = 3.0 * n
     x, y = r * np.cos(a), r * np.sin(a)
     g = a + math.pi / 2

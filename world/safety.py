@@ -140,67 +140,91 @@ def barriers_of(spec: SafetySpec) -> Barriers:
 
 @dataclass
 class Conditions:
-    """The barrier conditions of one state as rows: cu @ u + cv @ v >= rhs.
+    """The barrier conditions of one state, one row each, each on at most two agents:
 
-    kind[r] is "agent" (a pair: a = i, b = j) or "wall" (agent a, wall b); h[r] the
-    barrier's value (m)."""
+        ua u[a] + va v[a] + ub u[b] + vb v[b] >= rhs     (a pair: agents a < b)
+        ua u[a] + va v[a] >= rhs                         (a wall: agent a, wall b; ub = vb = 0)
 
-    kind: list[str]
-    a: np.ndarray
-    b: np.ndarray
+    h[r] is the barrier's value (m). Kept per row, not as (rows x agents) matrices: with N
+    agents there are N (N - 1) / 2 pairs."""
+
+    wall: np.ndarray  # (R,) bool
+    a: np.ndarray  # (R,) int: an agent's column
+    b: np.ndarray  # (R,) int: the other agent's column (a pair), the wall's index (a wall)
     h: np.ndarray
-    cu: np.ndarray  # (R, N)
-    cv: np.ndarray  # (R, N)
-    rhs: np.ndarray  # (R,)
+    ua: np.ndarray
+    va: np.ndarray
+    ub: np.ndarray
+    vb: np.ndarray
+    rhs: np.ndarray
+
+    @property
+    def other(self) -> np.ndarray:
+        """(R,) the second agent's column of each row (a wall's: its own agent, with ub = vb = 0)."""
+        return np.where(self.wall, self.a, self.b)
 
     def slack(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """(R,) how far each condition holds with commands (u, v) (negative: broken)."""
-        return self.cu @ u + self.cv @ v - self.rhs
+        o = self.other
+        return self.ua * u[self.a] + self.va * v[self.a] + self.ub * u[o] + self.vb * v[o] - self.rhs
+
+    def dense(self, rows: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """(cu, cv), each (len(rows), n): the rows as matrices on the commands of n agents."""
+        r = np.arange(len(rows))
+        a, o = self.a[rows], self.other[rows]
+        cu, cv = np.zeros((len(rows), n)), np.zeros((len(rows), n))
+        cu[r, a], cv[r, a] = self.ua[rows], self.va[rows]
+        cu[r, o] += self.ub[rows]
+        cv[r, o] += self.vb[rows]
+        return cu, cv
 
 
 def conditions(bar: Barriers, x, y, g, present: np.ndarray) -> Conditions:
     """Every barrier condition between present agents (pairs i < j) and of each present
     agent with each wall. x, y, g: (N,) poses (m, m, rad)."""
     x, y, g = (np.asarray(a, dtype=float) for a in (x, y, g))
-    n = len(x)
     la = bar.lookahead
     c, s = np.cos(g), np.sin(g)
     qx, qy = x + la * c, y + la * s
-    idx = np.flatnonzero(present)
     i, j = pairs(present)
     dx, dy = qx[i] - qx[j], qy[i] - qy[j]
     dist = np.hypot(dx, dy)
     with np.errstate(invalid="ignore", divide="ignore"):
         ux, uy = np.where(dist > 0, dx / dist, 1.0), np.where(dist > 0, dy / dist, 0.0)
-    h_pair = dist - bar.pair_distance
-    rows_p = len(i)
-    kinds = ["agent"] * rows_p
-    a_idx, b_idx, h = [i], [j], [h_pair]
+    parts = [
+        (
+            np.zeros(len(i), dtype=bool),
+            i,
+            j,
+            dist - bar.pair_distance,
+            la * (-ux * s[i] + uy * c[i]),
+            ux * c[i] + uy * s[i],
+            -la * (-ux * s[j] + uy * c[j]),
+            -(ux * c[j] + uy * s[j]),
+        )
+    ]
     if bar.arena is not None:
+        idx = np.flatnonzero(present)
         K = len(bar.arena.offsets)
-        wa = np.repeat(idx, K)
-        wk = np.tile(np.arange(K), len(idx))
+        k = np.repeat(idx, K)
+        w = np.tile(np.arange(K), len(idx))
+        ax, ay = bar.arena.normals[w, 0], bar.arena.normals[w, 1]
         depth = bar.arena.depth(qx[idx], qy[idx]).reshape(-1)
-        kinds += ["wall"] * len(wa)
-        a_idx.append(wa)
-        b_idx.append(wk)
-        h.append(depth - bar.wall_margin)
-    a_all, b_all, h_all = np.concatenate(a_idx), np.concatenate(b_idx), np.concatenate(h)
-    R = len(h_all)
-    cu, cv = np.zeros((R, n)), np.zeros((R, n))
-    r = np.arange(rows_p)
-    cu[r, i] = la * (-ux * s[i] + uy * c[i])
-    cu[r, j] = -la * (-ux * s[j] + uy * c[j])
-    cv[r, i] = ux * c[i] + uy * s[i]
-    cv[r, j] = -(ux * c[j] + uy * s[j])
-    if R > rows_p:
-        assert bar.arena is not None
-        w = np.arange(rows_p, R)
-        ax, ay = bar.arena.normals[b_all[rows_p:], 0], bar.arena.normals[b_all[rows_p:], 1]
-        k = a_all[rows_p:]
-        cu[w, k] = la * (-ax * s[k] + ay * c[k])
-        cv[w, k] = ax * c[k] + ay * s[k]
-    return Conditions(kinds, a_all, b_all, h_all, cu, cv, -bar.gamma * h_all)
+        zero = np.zeros(len(k))
+        parts.append(
+            (
+                np.ones(len(k), dtype=bool),
+                k,
+                w,
+                depth - bar.wall_margin,
+                la * (-ax * s[k] + ay * c[k]),
+                ax * c[k] + ay * s[k],
+                zero,
+                zero,
+            )
+        )
+    wall, a, b, h, ua, va, ub, vb = (np.concatenate(col) for col in zip(*parts))
+    return Conditions(wall, a, b, h, ua, va, ub, vb, -bar.gamma * h)
 
 
 @dataclass
@@ -224,9 +248,9 @@ class Filtered:
         c = self.cond
         out = []
         for r in self.active.tolist():
-            if c.kind[r] == "agent" and k in (c.a[r], c.b[r]):
+            if not c.wall[r] and k in (c.a[r], c.b[r]):
                 out.append(("agent", int(c.b[r] if c.a[r] == k else c.a[r])))
-            elif c.kind[r] == "wall" and c.a[r] == k:
+            elif c.wall[r] and c.a[r] == k:
                 out.append(("wall", int(c.b[r])))
         return out
 
@@ -269,17 +293,17 @@ def safe_commands(
     # drop conditions that no command within the limits can break: their least left side
     # over the box of commands still meets the right side
     umax_c = np.where(ctl, u_max, 0.0)
-    with np.errstate(invalid="ignore"):  # 0 x inf, in the branch not taken
-        lo_u = np.where(cond.cu[:, ctl] != 0.0, -np.abs(cond.cu[:, ctl]) * umax_c[ctl], 0.0).sum(axis=1)
-    fixed_u = cond.cu[:, ~ctl] @ u_in[~ctl]
-    if bar.speed:
-        lo_v = np.minimum(0.0, cond.cv[:, ctl] * v_in[ctl]).sum(axis=1)
-        fixed_v = cond.cv[:, ~ctl] @ v_in[~ctl]
-    else:
-        lo_v = cond.cv @ v_in
-        fixed_v = 0.0
+    o = cond.other
+
+    def least(cu, cv, col):
+        """The least of cu u[col] + cv v[col] over the box (fixed commands: their value)."""
+        with np.errstate(invalid="ignore"):  # 0 x inf, in the branch not taken
+            lu = np.where(ctl[col], np.where(cu != 0.0, -np.abs(cu) * umax_c[col], 0.0), cu * u_in[col])
+        lv = cv * v_in[col]
+        return lu + (np.where(ctl[col], np.minimum(0.0, lv), lv) if bar.speed else lv)
+
     with np.errstate(invalid="ignore"):
-        may_bind = ~(lo_u + fixed_u + lo_v + fixed_v >= cond.rhs)
+        may_bind = ~(least(cond.ua, cond.va, cond.a) + least(cond.ub, cond.vb, o) >= cond.rhs)
     rows = np.flatnonzero(may_bind | broken)
     groups = _groups(cond, rows, ctl, n)
     changed, infeasible = none.copy(), none.copy()
@@ -312,7 +336,7 @@ def _groups(cond: Conditions, rows: np.ndarray, ctl: np.ndarray, n: int) -> list
     ctl_l = ctl.tolist()
     for r in rows.tolist():
         a = int(cond.a[r])
-        if cond.kind[r] == "agent":
+        if not cond.wall[r]:
             b = int(cond.b[r])
             if ctl_l[a] and ctl_l[b]:
                 ra, rb = find(a), find(b)
@@ -321,7 +345,7 @@ def _groups(cond: Conditions, rows: np.ndarray, ctl: np.ndarray, n: int) -> list
     by_root: dict[int, list[int]] = {}
     for r in rows.tolist():
         a = int(cond.a[r])
-        k = a if ctl_l[a] else (int(cond.b[r]) if cond.kind[r] == "agent" and ctl_l[int(cond.b[r])] else -1)
+        k = a if ctl_l[a] else (int(cond.b[r]) if not cond.wall[r] and ctl_l[int(cond.b[r])] else -1)
         if k >= 0:  # a condition on no controlled agent cannot be helped: left to the record
             by_root.setdefault(find(k), []).append(r)
     out = []
@@ -337,7 +361,7 @@ def _solve(bar: Barriers, cond: Conditions, rows, members, ctl, u_in, v_in, umax
     m = len(members)
     others = np.ones(len(u_in), dtype=bool)
     others[members] = False
-    cu, cv = cond.cu[rows], cond.cv[rows]
+    cu, cv = cond.dense(rows, len(u_in))
     rhs = cond.rhs[rows] - cu[:, others] @ u_in[others] - cv[:, others] @ v_in[others]
     A_u = cu[:, members]
     ud, vd, um = u_in[members], v_in[members], umax_c[members]
