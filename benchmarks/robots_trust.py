@@ -7,6 +7,8 @@ s it publishes nav_msgs/Odometry on robot 1's pose topic (a pose metres away fro
 and twists on robot 1's cmd_vel (full speed, full turn). Three runs of `--duration` s each:
 
   open     the fleet's router open to anyone (rmw_zenohd's default), the stranger on it;
+  copycat  the open router, a stranger with no token in the graph that copies the GIDs of the
+           robot's poses and of the world's commands from their attachments;
   closed   the router closed with usrpwd and an ACL (`--router-config`, what rmw_zenohd
            accepts), the world joining with the robots file's user and password_file; the
            stranger tries to connect without credentials;
@@ -143,6 +145,54 @@ def stranger(connect: str, namespace: str, rate: float, seconds: float, out: Pat
     return 0
 
 
+def copycat(connect: str, namespace: str, rate: float, seconds: float, out: Path) -> int:
+    """A stranger that copies GIDs: no token in the graph; it reads the robot's pose attachment
+    and our world's command attachment, then publishes with their GIDs."""
+    import zenoh
+
+    from swarm.contracts.transport import client_config
+    from swarm.ros2 import cdr
+    from swarm.ros2.attachment import attachment, parse_attachment
+
+    note: dict = {"connect": connect, "opened": True, "copycat": True}
+    session = zenoh.open(client_config(connect, timeout_ms=3000))
+    seen: dict[str, tuple[str, int, bytes]] = {}  # topic -> (key, seq, gid)
+
+    def grab(topic: str):
+        def on(sample: zenoh.Sample) -> None:
+            if sample.attachment is not None and topic not in seen:
+                seq, _, gid = parse_attachment(sample.attachment.to_bytes())
+                seen[topic] = (str(sample.key_expr), seq, gid)
+
+        return on
+
+    ns = namespace.strip("/")
+    subs = [session.declare_subscriber(f"0/{ns}/{t}/*/*", grab(t)) for t in ("odom", "cmd_vel")]
+    try:
+        wait_until(lambda: len(seen) == 2, 10, 0.01)
+        (pose_key, pose_seq, pose_gid), (cmd_key, cmd_seq, cmd_gid) = seen["odom"], seen["cmd_vel"]
+        pose_pub, cmd_pub = session.declare_publisher(pose_key), session.declare_publisher(cmd_key)
+        note["first_sample_wall"] = time.time()
+        t0, n = time.monotonic(), 0
+        while time.monotonic() - t0 < seconds:
+            n += 1
+            now = time.time_ns()
+            pose_pub.put(
+                cdr.encode_odometry(now, "odom", "base_footprint", 4.0, 5.0, 0.0),
+                attachment=attachment(pose_seq + n, now, pose_gid),
+            )
+            cmd_pub.put(cdr.encode_twist(0.22, 2.84), attachment=attachment(cmd_seq + 10_000 + n, now, cmd_gid))
+            time.sleep(max(0.0, t0 + n / rate - time.monotonic()))
+        note["samples"] = n
+        note["gid"] = pose_gid.hex()
+    finally:
+        for sub in subs:
+            sub.undeclare()
+        session.close()
+    out.write_text(json.dumps(note))
+    return 0
+
+
 # -- one run ----------------------------------------------------------------------------------------
 def one_run(name: str, args: argparse.Namespace, work: Path) -> dict:
     d = work / name
@@ -211,6 +261,7 @@ def one_run(name: str, args: argparse.Namespace, work: Path) -> dict:
                         str(args.seconds),
                         "--note",
                         str(note_path),
+                        *(["--copycat"] if name == "copycat" else []),
                     ],
                     stdout=subprocess.DEVNULL,
                     stderr=subprocess.STDOUT,
@@ -301,13 +352,16 @@ def main() -> int:
     ap.add_argument("--stranger-at", type=float, default=10.0, help="s after the world is ready (default 10)")
     ap.add_argument("--rate", type=float, default=100.0, help="the stranger's samples per second (default 100)")
     ap.add_argument("--seconds", type=float, default=5.0, help="how long the stranger publishes (default 5)")
-    ap.add_argument("--runs", default="open,closed,clean", help="which runs, comma-separated")
+    ap.add_argument("--runs", default="open,copycat,closed,clean", help="which runs, comma-separated")
     ap.add_argument("--swarm-root", type=Path, default=None, help="another checkout's swarm for the world and fleet")
     ap.add_argument("--json", type=Path, default=None, help="also write the figures there")
     ap.add_argument("--stranger", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--note", type=Path, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--namespace", default="/tb3_0", help=argparse.SUPPRESS)
+    ap.add_argument("--copycat", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.stranger is not None and args.copycat:
+        return copycat(args.stranger, args.namespace, args.rate, args.seconds, args.note)
     if args.stranger is not None:
         return stranger(args.stranger, args.namespace, args.rate, args.seconds, args.note)
     work = Path(tempfile.mkdtemp(prefix="robots-trust-"))

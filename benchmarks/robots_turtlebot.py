@@ -75,6 +75,12 @@ def main() -> int:
     ap.add_argument("--latency", type=float, default=0.03, help="s from a pose's measurement to its publication")
     ap.add_argument("--pose-noise", type=float, default=0.01, help="m (yaw: / 0.2 m rad); default 0.01")
     ap.add_argument("--seed", type=int, default=0, help="the noise's seed")
+    ap.add_argument(
+        "--quantize",
+        type=float,
+        default=0.0,
+        help="the fleet truncates commands to steps of this (TurtleBot3's firmware: 0.01); default 0: none",
+    )
     ap.add_argument("--tail", type=float, default=50.0, help="s at the end for the radius statistics")
     ap.add_argument("--tolerance", type=float, default=0.05, help="relative, of each follower's expected radius")
     ap.add_argument("--out", type=Path, default=None, help="the run's directory (default: a temporary one)")
@@ -105,6 +111,8 @@ def main() -> int:
         str(args.seed),
         "--time-scale",
         str(args.time_scale),
+        "--quantize",
+        str(args.quantize),
     ]
     up_cmd = [
         *swarm_cmd,
@@ -158,7 +166,7 @@ def main() -> int:
     tail, sim_tail = t >= t[-1] - args.tail, st >= st[-1] - args.tail
     print(
         f"\n{scenario.name}: {duration:g} s at time scale {args.time_scale:g}, latency {args.latency:g} s, "
-        f"pose noise {args.pose_noise:g} m; robots world vs swarm sim "
+        f"pose noise {args.pose_noise:g} m, fleet quantize {args.quantize:g}; robots world vs swarm sim "
         f"(radius in m; last {args.tail:g} s: mean [min, max])"
     )
     ok = True

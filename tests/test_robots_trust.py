@@ -114,6 +114,23 @@ def test_the_robot_refuses_poses_of_another_publisher_and_beyond_its_limits_and_
     assert f["refused_poses"] == {"foreign": 7, "implausible": 4} and f["pose_gid"] == OWN.hex()
 
 
+def test_poses_that_arrive_bunched_are_judged_by_their_stamps_within_a_grace():
+    """After a stall, poses measured 1 s apart can arrive 2 ms apart: their stamps say how far
+    the robot could go; a forged stamp buys at most `grace` s."""
+    r = Robot(parse_robots(ROBOTS).robots[0], (0.0, 0.0, 0.0), "r.toml", grace=1.0)
+
+    def at(stamp_s: float, x: float) -> bytes:
+        return cdr.encode_odometry(round(stamp_s * 1e9), "odom", "base_footprint", x, 0.0, 0.0)
+
+    r.on_pose(at(100.0, 0.0), 10.0, attachment(1, 0, OWN))
+    r.on_pose(at(101.0, 0.2), 10.002, attachment(2, 0, OWN))  # 0.2 m in 1 s of stamps: plausible
+    assert (r.poses, r.implausible) == (2, 0)
+    r.on_pose(at(1000.0, 1.0), 10.004, attachment(3, 0, OWN))  # 900 s of stamps: only 1 s of grace
+    assert (r.poses, r.implausible) == (2, 1)
+    r.on_pose(at(102.0, 0.35), 11.0, attachment(4, 0, OWN))  # stamps say 1 s, reception 1 s: plausible
+    assert r.poses == 3
+
+
 def test_commands_of_another_publisher_are_counted_and_said_once_per_publisher():
     r = robot()
     for _ in range(3):
@@ -123,6 +140,15 @@ def test_commands_of_another_publisher_are_counted_and_said_once_per_publisher()
     r.on_command_seen(None, OWN)
     assert r.foreign_commands == 5 and len(r.notices) == 2
     assert r.notices[0].endswith("the robot obeys them as well as ours")
+    # ours carry our GID and our sequence numbers, in order; a copy of our GID does not
+    for seq in (1, 2, 3):
+        r.on_command_seen(OWN, OWN, seq, 3)
+    assert r.foreign_commands == 5
+    r.on_command_seen(OWN, OWN, 2, 3)  # a sequence number already seen
+    r.on_command_seen(OWN, OWN, 99, 4)  # one we never sent
+    r.on_command_seen(OWN, OWN, 4, 4)  # ours, the next
+    assert r.foreign_commands == 7 and len(r.notices) == 3
+    assert "a copy of ours (its sequence numbers are not ours)" in r.notices[2]
 
 
 def test_odometry_is_rebased_to_the_robots_first_pose():

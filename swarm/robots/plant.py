@@ -355,8 +355,10 @@ class Robot:
         time_scale: float = 1.0,
         margin: float = 0.5,
         slack: float = 0.1,
+        grace: float = 1.0,
     ):
         self.spec = spec
+        self.grace = grace  # run s that stamps may add to the time between two poses' receptions
         self.start = start
         self.source = source
         self.time_scale = time_scale
@@ -386,6 +388,7 @@ class Robot:
         self.cmd_strangers: dict[bytes | None, int] = {}  # GID -> commands of it seen
         self.other_publishers: list[str] = []  # named in the log (their nodes or GIDs)
         self.notices: deque[str] = deque()
+        self._our_seq = 0  # the last sequence number of ours seen on the command topic
         self._refusing = False  # in a spell of implausible poses (said once per spell)
         self._lock = threading.Lock()
 
@@ -432,7 +435,7 @@ class Robot:
                 self.malformed += 1
                 return
             if self.latest is not None:
-                why = self.plausible.why_not(self.latest[1], pose, (now - self.latest[0]) * self.time_scale)
+                why = self.plausible.why_not(self.latest[1], pose, self.elapsed(now, msg.stamp_ns))
                 if why is not None:
                     self.implausible += 1
                     if not self._refusing:
@@ -447,18 +450,40 @@ class Robot:
             if msg.stamp_ns > 0:
                 self.delays.add((time.time_ns() - msg.stamp_ns) / 1e9)
 
-    def on_command_seen(self, gid: bytes | None, ours: bytes | None) -> None:
-        """A sample on the robot's command topic (any type) with `gid` in its attachment: not
-        ours, the robot obeys someone else too."""
-        if gid is not None and gid == ours:
-            return
+    def elapsed(self, now: float, stamp_ns: int) -> float:
+        """Run seconds since the last accepted pose, for the plausibility of the next: the time
+        between their receptions, or between their stamps when that is longer (poses that
+        arrive bunched after a stall of the network or of this process), but never more than
+        `grace` s longer (a forged stamp buys no more)."""
+        assert self.latest is not None
+        received = (now - self.latest[0]) * self.time_scale
+        if stamp_ns <= 0 or self.stamp_ns <= 0:
+            return received
+        stamped = (stamp_ns - self.stamp_ns) / 1e9 * self.time_scale
+        return max(received, min(stamped, received + self.grace))
+
+    def on_command_seen(
+        self, gid: bytes | None, ours: bytes | None, seq: int | None = None, sent: int | None = None
+    ) -> None:
+        """A sample on the robot's command topic (any type) with `gid` and `seq` in its
+        attachment: not ours (`ours`, of which we have sent `sent` samples), the robot obeys
+        someone else too. One that carries our GID with a sequence number we did not send next
+        (repeated, or beyond ours) is a copy of our GID."""
         with self._lock:
+            if gid is not None and gid == ours:
+                if seq is None or sent is None or self._our_seq < seq <= sent:
+                    self._our_seq = max(self._our_seq, seq or 0)
+                    return
+                gid_shown: bytes | None = gid
+            else:
+                gid_shown = gid
             self.foreign_commands += 1
-            seen = self.cmd_strangers.get(gid, 0)
-            self.cmd_strangers[gid] = seen + 1
+            seen = self.cmd_strangers.get(gid_shown, 0)
+            self.cmd_strangers[gid_shown] = seen + 1
             if seen == 0:
+                copy = ", a copy of ours (its sequence numbers are not ours)" if gid == ours else ""
                 self.notices.append(
-                    f"{self.label()}: commands on {self.cmd_topic} from another publisher ({gid_text(gid)}): "
+                    f"{self.label()}: commands on {self.cmd_topic} from another publisher ({gid_text(gid)}{copy}): "
                     "the robot obeys them as well as ours"
                 )
 
@@ -549,6 +574,7 @@ class RobotPlant:
                     time_scale=time_scale,
                     margin=robots.ros2.pose_margin,
                     slack=robots.ros2.pose_slack,
+                    grace=2.0 * robots.ros2.stale_after,
                 )
         self.session: Any = None
         self.node: Node | None = None
@@ -651,10 +677,10 @@ class RobotPlant:
     def _command_watcher(self, r: Robot) -> Callable[[str, bytes, bytes | None], None]:
         def seen(_key: str, _payload: bytes, att: bytes | None) -> None:
             try:
-                gid: bytes | None = parse_attachment(att)[2] if att is not None else None
+                seq, _, gid = parse_attachment(att) if att is not None else (None, 0, None)
             except ValueError:
-                gid = None
-            r.on_command_seen(gid, getattr(r.publisher, "gid", None))
+                seq, gid = None, None
+            r.on_command_seen(gid, getattr(r.publisher, "gid", None), seq, getattr(r.publisher, "seq", None))
 
         return seen
 
