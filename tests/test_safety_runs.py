@@ -279,3 +279,17 @@ def test_swarm_check_shows_the_table_and_warns_of_unbounded_turn_rates(tmp_path)
     assert "safety: filter, radius=1 m, lookahead=0.25 m, gamma=2/s, speed may not change" in res.output
     assert "arena: (-20, -15) (20, -15) (0, 25)" in res.output
     assert "agents 1 have no max_turn_rate" in res.output
+
+
+def test_swarm_sim_prints_the_figures(tmp_path):
+    from typer.testing import CliRunner
+
+    from swarm.cli.main import app
+
+    path = tmp_path / "s.toml"
+    path.write_text(OVERTAKE.format(duration=20.0) + "\n[safety]\nradius = 1.0\nenabled = false\n")
+    res = CliRunner().invoke(app, ["sim", str(path), "--no-plots", "-o", str(tmp_path / "run")])
+    assert res.exit_code == 0, res.output
+    line = next(ln for ln in res.output.splitlines() if ln.startswith("safety"))
+    assert line.startswith("safety (measured only, radius 1 m): collisions 1, boundary exits 0, saturations 0")
+    assert json.loads((tmp_path / "run" / "summary.json").read_text())["safety"]["collisions"] == 1

@@ -62,6 +62,20 @@ def robots_trust_line(robots: dict | None) -> str | None:
     return "robots: " + "; ".join(parts) + " (summary.json: robots; the world's log names them)"
 
 
+def safety_line(safety: dict | None) -> str | None:
+    """One line of a run's safety figures (summary.json's `safety`; None without a [safety] table)."""
+    if not safety:
+        return None
+    d = safety.get("min_distance")
+    what = "filter" if safety.get("enabled") else "measured only"
+    return (
+        f"safety ({what}, radius {safety['radius']:g} m): collisions {safety['collisions']}, "
+        f"boundary exits {safety['boundary_exits']}, saturations {safety['saturations']}, "
+        f"least distance {'-' if d is None else format(d, '.3g')} m, interventions {safety['interventions']}"
+        + (f", no safe command {safety['infeasible']} agent-ticks" if safety.get("infeasible") else "")
+    )
+
+
 def print_summary(summary: dict, out: Path) -> None:
     typer.echo(
         f"converged: {summary['converged']}  ticks: {summary['ticks']}  "
@@ -84,6 +98,9 @@ def print_summary(summary: dict, out: Path) -> None:
             f"{f(a['angular_rate'], '8.4f'):>8} {f(a['settling_time'], '8.2f'):>8} "
             f"{f(a.get('switches'), 'd'):>8}" + ("" if a["alive"] else "  (dropped)")
         )
+    safety = safety_line(summary.get("safety"))
+    if safety is not None:
+        typer.echo(safety)
     robots_line = robots_trust_line(summary.get("robots"))
     if robots_line is not None:
         typer.secho(robots_line, fg=typer.colors.YELLOW)
