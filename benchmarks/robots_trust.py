@@ -127,6 +127,7 @@ def stranger(connect: str, namespace: str, rate: float, seconds: float, out: Pat
     note["opened"] = True
     try:
         with Ros2Node(session, "intruder") as node:
+            note["declared_wall"] = time.time()  # its publishers' tokens go out now
             pose = node.publisher(f"{namespace}/odom", ODOMETRY)
             cmd = node.publisher(f"{namespace}/cmd_vel", TWIST)
             time.sleep(0.5)  # its tokens reach the router
@@ -307,6 +308,11 @@ def one_run(name: str, args: argparse.Namespace, work: Path) -> dict:
         "robot2_malformed": summary.get("robots", {}).get("agents", {}).get("2", {}).get("malformed_poses"),
         "refusals": summary.get("robots", {}).get("refusals"),
         "log_lines": [(round(w - first, 3) if first else None, line) for w, line in seen],
+        "graph_notice_after_tokens_s": next(
+            (round(w - note["declared_wall"], 3) for w, line in seen if "another publisher on" in line), None
+        )
+        if "declared_wall" in note
+        else None,
         "follower_final_m": float(radius[-1]),
         "follower_tail_m": [float(radius[tail].mean()), float(radius[tail].min()), float(radius[tail].max())],
         "terminal": [
@@ -334,6 +340,8 @@ def show(r: dict) -> None:
         f" (robot 2 malformed {r['robot2_malformed']}); foreign commands seen {r['robot1_foreign_commands']}"
     )
     print(f"  other publishers named: {r['robot1_other_publishers']}; refusals in summary: {r['refusals']}")
+    if r["graph_notice_after_tokens_s"] is not None:
+        print(f"  the stranger named in the log {r['graph_notice_after_tokens_s']} s after its tokens went out")
     for delay, line in r["log_lines"][:6]:
         print(f"  log (+{delay} s after the stranger's first sample): {line}")
     if not r["log_lines"]:

@@ -96,12 +96,14 @@ def test_the_robot_refuses_poses_of_another_publisher_and_beyond_its_limits_and_
     r.on_pose(odom(0.02, 0.0, 0.0), 10.07, b"short")  # not one: refused
     assert (r.foreign, r.poses, r.strangers[OTHER], r.strangers[None]) == (7, 2, 5, 2)
     assert r.latest[1][0] == pytest.approx(0.01)
-    for k in range(3):  # the robot's GID, 6 m away in a tick: refused, one notice for the spell
+    for k in range(3):  # the robot's GID, 6 m away in a tick: refused, said once in 5 s
         r.on_pose(odom(4.0, 5.0, 0.0), 10.1 + k / 20, attachment(3 + k, 0, OWN))
     assert (r.implausible, r.poses) == (3, 2)
     r.on_pose(odom(0.03, 0.0, 0.0), 10.3, attachment(6, 0, OWN))
-    r.on_pose(odom(4.0, 5.0, 0.0), 10.35, attachment(7, 0, OWN))  # a new spell: said again
-    assert (r.implausible, r.poses, r.refused) == (4, 3, 11)
+    r.on_pose(odom(4.0, 5.0, 0.0), 10.35, attachment(7, 0, OWN))  # within 5 s: counted, not said
+    assert (r.implausible, r.poses, r.refused, len(r.notices)) == (4, 3, 11, 3)
+    r.on_pose(odom(4.0, 5.0, 0.0), 15.2, attachment(8, 0, OWN))  # 5 s on: said, with the count
+    assert r.implausible == 5 and r.notices[-1].endswith("(3 more since the last said)")
     notices = list(r.notices)
     assert len(notices) == 4
     assert notices[0] == (
@@ -111,7 +113,7 @@ def test_the_robot_refuses_poses_of_another_publisher_and_beyond_its_limits_and_
     assert "no rmw_zenoh attachment" in notices[1]
     assert notices[2].startswith("robot 1 (/tb3_0): a pose on /tb3_0/odom refused: 6.397 m and 0.00 rad")
     f = r.figures()
-    assert f["refused_poses"] == {"foreign": 7, "implausible": 4} and f["pose_gid"] == OWN.hex()
+    assert f["refused_poses"] == {"foreign": 7, "implausible": 5} and f["pose_gid"] == OWN.hex()
 
 
 def test_poses_that_arrive_bunched_are_judged_by_their_stamps_within_a_grace():

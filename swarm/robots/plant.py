@@ -235,6 +235,7 @@ def cmd_type_from(spec: RobotSpec, entities: Sequence[EntityInfo], distro: str, 
     return rtype
 
 
+NOTICE_EVERY = 5.0  # s between two notices of implausible poses of one robot (the others counted)
 MAX_SAID = 100  # notices kept for summary.json (its latest 20)
 KEPT = 20_000  # the latest pose ages and delays kept per robot for their medians (~0.6 MB each)
 
@@ -389,7 +390,8 @@ class Robot:
         self.other_publishers: list[str] = []  # named in the log (their nodes or GIDs)
         self.notices: deque[str] = deque()
         self._our_seq = 0  # the last sequence number of ours seen on the command topic
-        self._refusing = False  # in a spell of implausible poses (said once per spell)
+        self._said_implausible: float | None = None  # when an implausible pose was last said (clock s)
+        self._implausible_said = 0  # how many had been refused then
         self._lock = threading.Lock()
 
     @property
@@ -438,11 +440,12 @@ class Robot:
                 why = self.plausible.why_not(self.latest[1], pose, self.elapsed(now, msg.stamp_ns))
                 if why is not None:
                     self.implausible += 1
-                    if not self._refusing:
-                        self._refusing = True
-                        self.notices.append(f"{self.label()}: a pose on {self.pose_topic} refused: {why}")
+                    if self._said_implausible is None or now - self._said_implausible >= NOTICE_EVERY:
+                        more = self.implausible - self._implausible_said - 1
+                        since = f" ({more} more since the last said)" if more > 0 else ""
+                        self._said_implausible, self._implausible_said = now, self.implausible
+                        self.notices.append(f"{self.label()}: a pose on {self.pose_topic} refused: {why}{since}")
                     return
-            self._refusing = False
             self.gid = gid
             self.latest = (now, pose)
             self.stamp_ns = msg.stamp_ns
