@@ -293,3 +293,19 @@ def test_swarm_sim_prints_the_figures(tmp_path):
     line = next(ln for ln in res.output.splitlines() if ln.startswith("safety"))
     assert line.startswith("safety (measured only, radius 1 m): collisions 1, boundary exits 0, saturations 0")
     assert json.loads((tmp_path / "run" / "summary.json").read_text())["safety"]["collisions"] == 1
+
+
+def test_the_world_info_carries_the_figures_so_far():
+    from swarm.world.engine import Engine
+    from swarm.world.report import run_info
+    from swarm.world.roster import AgentBook
+
+    s = overtake({"radius": RADIUS, "enabled": False})
+    e = Engine(s, 10)
+    for k in range(10):
+        for aid in e.frames():
+            e.command(aid, k, 0.5, None, 0)
+        e.end_tick()
+    info = run_info(e, {a.id: AgentBook() for a in s.agents}, {"run": "r"})
+    assert info["safety"]["enabled"] is False and info["safety"]["min_distance"] > RADIUS
+    assert "safety" not in run_info(Engine(overtake(), 1), {1: AgentBook(), 2: AgentBook()}, {"run": "r"})

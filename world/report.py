@@ -73,6 +73,8 @@ def run_info(engine: Engine, books: dict, header: dict, sensing: bool = False) -
         "target": [c.target[0], c.target[1]],
         "agents": agents,
     }
+    if engine.safety is not None:  # the [safety] filter's figures so far (docs/reference/outputs.md#safety)
+        info["safety"] = engine.safety.figures()
     if sensing:
         sensed, _, _ = c.sensing()
         info["sensing"] = [[int(c.ids[i]), int(c.ids[j])] for i, j in zip(*np.nonzero(sensed))]
