@@ -294,3 +294,26 @@ def test_far_apart_agents_pass_unchanged_to_the_bit(dist, bearing, g0, g1, u0, u
     u_law = np.array([u0, u1])
     f = safe_commands(bar, x, y, np.array([g0, g1]), np.ones(2), u_law, np.full(2, 1.0), np.ones(2, dtype=bool))
     assert np.array_equal(f.u, u_law) and not f.changed.any()
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    k=st.integers(3, 8),
+    r=st.floats(1.0, 50.0),
+    turn=st.floats(0.0, 2 * math.pi),
+    cw=st.booleans(),
+    px=st.floats(-60.0, 60.0),
+    py=st.floats(-60.0, 60.0),
+)
+def test_the_scenario_and_the_world_agree_on_inside(k, r, turn, cw, px, py):
+    """The start check (swarm/contracts/scenario_tables.py) and the exits the world counts
+    (world/safety.py) say the same of a point, away from the walls."""
+    from swarm.contracts.scenario_tables import SafetySpec
+
+    angles = turn + np.linspace(0, 2 * np.pi, k, endpoint=False)
+    pts = [[float(r * math.cos(a)), float(r * math.sin(a))] for a in (angles[::-1] if cw else angles)]
+    spec = SafetySpec(radius=1.0, arena=pts)
+    arena = Arena.polygon(spec.corners)
+    if np.min(np.abs(arena.depth(px, py))) < 1e-9:
+        return  # on a wall: either answer
+    assert spec.inside(px, py) == bool(arena.inside(px, py))
