@@ -309,3 +309,16 @@ def test_the_world_info_carries_the_figures_so_far():
     info = run_info(e, {a.id: AgentBook() for a in s.agents}, {"run": "r"})
     assert info["safety"]["enabled"] is False and info["safety"]["min_distance"] > RADIUS
     assert "safety" not in run_info(Engine(overtake(), 1), {1: AgentBook(), 2: AgentBook()}, {"run": "r"})
+
+
+def test_the_builder_makes_the_table():
+    import swarm
+
+    b = swarm.Builder("demo", dt=0.05, duration=5.0, c1=1.0, c2=0.5)
+    b.leader(1, x=2, y=0, heading=1.57, speed=1.0, orbit_radius=2.0, max_turn_rate=1.0)
+    b.follower(2, x=0, y=-3, heading=0.0, speed=1.5, max_turn_rate=2.0)
+    s = b.safety(0.3, arena=[-5, -5, 5, 5], speed=True).build()
+    assert s.safety is not None and s.safety.radius == 0.3 and s.safety.speed
+    assert swarm.simulate(s).summary.safety.collisions == 0
+    with pytest.raises(swarm.ScenarioError, match="outside safety.arena"):
+        b.safety(0.3, arena=[-1, -1, 1, 1]).build()

@@ -88,6 +88,7 @@ class Builder:
         b = Builder("demo", dt=0.05, duration=20.0, c1=1.0, c2=0.5)
         b.leader(1, x=2, y=0, heading=1.57, speed=1.0, orbit_radius=2.0)
         b.follower(2, x=0, y=-3, heading=0.0, speed=1.5)
+        b.safety(0.3, arena=[-5, -5, 5, 5])  # optional: the safety filter
         scenario = b.build()
     """
 
@@ -132,6 +133,12 @@ class Builder:
         if agent is not None:
             entry["agent"] = agent
         self.data["faults"].append(entry)
+        return self
+
+    def safety(self, radius: float, **more: Any) -> Builder:
+        """The [safety] table: the safety filter and its figures (more: arena, lookahead,
+        gamma, speed, enabled; docs/guides/scenarios.md#safety)."""
+        self.data["safety"] = {"radius": radius, **more}
         return self
 
     def to_dict(self) -> dict:
