@@ -168,6 +168,35 @@ def _ask(live: Any, timeout: float) -> str:
     return done.line()
 
 
+def which(
+    run: str | None = None, robots: str | Path | None = None, live: Any = None
+) -> tuple[RunRecord | None, HaltPlan]:
+    """The robots to stop and the run's record: (record or None, plan); see the module's doc.
+    UsageError when no robots are known."""
+    if robots is None:
+        record = find_record(run or (live.ref.run if live is not None else None))
+        return record, record.plan
+    from swarm.robots.config import load_robots  # lazy: pydantic, for a robots file given only
+
+    plan = HaltPlan.from_robots(load_robots(robots))
+    here = Path(robots).resolve()
+    records = read_records()
+    if run is not None:
+        return next((rec for _p, rec, _up in records if rec.run == run), None), plan
+    mine = [rec for _p, rec, up in records if up and Path(rec.robots_file) == here]
+    if live is None and len(mine) == 1:
+        return mine[0], plan  # the run of this robots file on this machine: ended too
+    return None, plan
+
+
+def arm(run: str | None = None, robots: str | Path | None = None) -> tuple[RunRecord | None, Halt]:
+    """The session to the robots' router open, nothing sent yet (`swarm estop --ready`):
+    (record or None, Halt); `estop(..., sent_first=...)` after the zero twists. HaltError when
+    the router cannot be reached."""
+    record, plan = which(run, robots)
+    return record, Halt(plan, learn=any(len(t.types) > 1 for t in plan.targets), name="swarm_estop")
+
+
 def estop(
     run: str | None = None,
     robots: str | Path | None = None,
@@ -178,37 +207,29 @@ def estop(
     say: Callable[[str], None] | None = None,
     live: Any = None,
     timeout: float = END_DEADLINE,
+    sent_first: tuple[RunRecord | None, Halt, int, float] | None = None,
 ) -> Estopped:
     """Zero-twist every robot, then end the run (see the module's doc). `robots`: a robots
     file (default: the run's record on this machine); `run`, `connect`, `credentials`: which
     run to end, as `swarm.connect` takes them (or `live`, an open swarm.live.client.LiveRun:
-    `Live.estop`); `end` False: the robots only. `say(line)` gets
-    the first line as soon as the robots are stopped. UsageError when no robots are known;
-    EstopError when their router cannot be reached (the run is still ended)."""
+    `Live.estop`); `end` False: the robots only. `say(line)` gets the first line as soon as
+    the robots are stopped. `sent_first`: (record or None, open Halt, robots, s taken) of zero
+    twists sent already (swarm/cli/estop_first.py, `arm`). UsageError when no robots are
+    known; EstopError when their router cannot be reached (the run is still ended)."""
     t0 = time.monotonic()
-    record: RunRecord | None = None
-    if robots is not None:
-        from swarm.robots.config import load_robots  # lazy: pydantic, for a robots file given only
-
-        plan = HaltPlan.from_robots(load_robots(robots))
-        learn = True
-        here = Path(robots).resolve()
-        mine = [rec for _p, rec, up in read_records() if up and Path(rec.robots_file) == here]
-        if run is None and live is None and len(mine) == 1:
-            record = mine[0]  # the run of this robots file on this machine: ended too
-        elif run is not None:
-            record = next((rec for _p, rec, _up in read_records() if rec.run == run), None)
-    else:
-        record = find_record(run or (live.ref.run if live is not None else None))
-        plan, learn = record.plan, any(len(t.types) > 1 for t in record.plan.targets)
     halt: Halt | None = None
     failed: str | None = None
-    try:
-        halt = Halt(plan, learn=learn, name="swarm_estop")
-        sent = halt.zero()
-    except HaltError as e:
-        failed, sent = str(e), 0
-    took = time.monotonic() - t0
+    if sent_first is not None:
+        record, halt, sent, took = sent_first
+        plan = halt.plan
+    else:
+        record, plan = which(run, robots, live)
+        try:
+            halt = Halt(plan, learn=any(len(t.types) > 1 for t in plan.targets), name="swarm_estop")
+            sent = halt.zero()
+        except HaltError as e:
+            failed, sent = str(e), 0
+        took = time.monotonic() - t0
     if halt is not None and say is not None:
         say(Estopped(sent, plan.connect, took, None, None).lines()[0])
     quit = threading.Event()

@@ -24,6 +24,10 @@ def main() -> None:
     from swarm.contracts.stop_signals import CliStops  # lazy: after the first handler (see the module)
 
     stops = CliStops(prog).install()
+    if sys.argv[1:2] == ["estop"]:  # the robots first: zero twists before typer and the commands load
+        from swarm.cli.estop_first import first as zero_first  # lazy: (see the module)
+
+        zero_first(sys.argv[2:])
     from importlib import import_module  # lazy: (see the module)
 
     cli = import_module("swarm.cli.main")  # (the heavy imports: typer, the commands' modules)

@@ -30,6 +30,14 @@ def estop(
     robots_only: Annotated[
         bool, typer.Option("--robots-only", help="zero-twist the robots and leave the run alone")
     ] = False,
+    ready: Annotated[
+        bool,
+        typer.Option(
+            "--ready",
+            help="connect to the robots' router now and wait: Enter stops every robot (an e-stop kept ready "
+            "in a terminal: no start-up time when it counts)",
+        ),
+    ] = False,
     connect: ConnectOpt = None,
     run: LiveRunOpt = None,
     credentials: CredentialsOpt = None,
@@ -44,6 +52,8 @@ def estop(
     `swarm stop` does (the run's operator credentials); a world stopped with SIGSTOP is
     killed (SIGKILL), and its swarm up ends the run; a world that is gone: its swarm up ends
     the run by itself. The first line comes as soon as the robots were sent their zero twist.
+    With --ready it connects first and waits: Enter stops them (keep it open in a terminal
+    during a hardware run).
 
     Exit codes: 0 every robot sent a zero twist, 1 the robots' router cannot be reached (the
     run is still ended), 2 no robots file known (give --robots FILE).
@@ -51,10 +61,41 @@ def estop(
     Example: swarm estop
     """
     from swarm.api.estop import estop as do_estop  # lazy: zenoh and the robots' protocol, for this command only
+    from swarm.cli.estop_first import taken  # lazy: as above
 
-    done = do_estop(run, robots, connect, credentials, end=not robots_only, say=_out)
+    sent = taken()  # the zero twists sent before the command line loaded (swarm/cli/__init__.py)
+    if ready:
+        sent = _when_asked(run, robots)
+
+    done = do_estop(run, robots, connect, credentials, end=not robots_only, say=_out, sent_first=sent)
     for line in done.lines()[1:]:
         _out(line)
+
+
+def _when_asked(run: str | None, robots: Path | None):
+    """--ready: the session open, one line, then the zero twists as soon as Enter comes (or
+    stdin ends): (record, Halt, robots, s taken)."""
+    import sys
+    import time
+
+    from swarm.api.estop import arm  # lazy: as in `estop`
+    from swarm.robots.halt import HaltError  # lazy: as in `estop`
+
+    try:
+        record, halt = arm(run, robots)
+    except HaltError as e:
+        from swarm.cli.errors import fail  # lazy: an error's path
+
+        raise fail(f"swarm estop: {e}") from None
+    where = f"run {record.run}'s " if record is not None else ""
+    _out(f"estop ready: {where}{halt.robots} robots via {halt.plan.connect}; Enter stops them all (Ctrl-C leaves)")
+    try:
+        sys.stdin.readline()
+    except BaseException:  # Ctrl-C: nothing sent, the session closed
+        halt.close()
+        raise
+    t0 = time.monotonic()
+    return record, halt, halt.zero(), time.monotonic() - t0
 
 
 def register(app: typer.Typer) -> None:
