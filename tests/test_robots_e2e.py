@@ -29,6 +29,7 @@ import swarm
 from swarm.contracts.scenario import load_scenario
 from swarm.contracts.vocabulary import EventKind, ExitCode
 from swarm.robots.fleet import world_pose
+from swarm.robots.plant import rebase
 from swarm.ros2 import cdr
 from swarm.ros2.types import TWIST, TWIST_STAMPED
 
@@ -148,12 +149,17 @@ def test_the_turtlebot_run_drives_the_fleet_and_records_its_poses(rt, tmp_path):
         fig = summary["robots"]["agents"][str(aid)]
         assert fig["namespace"] == ns and fig["cmd_type"] == "Twist" and fig["poses"] > 0 and fig["twists"] > 0
     # the recording has the robots' poses: every recorded pose is one the fleet published (its
-    # odometry, in the world frame from the agent's start pose)
+    # odometry since the origin the world took before tick 0, in the world frame from the agent's
+    # start pose)
     scenario = load_scenario(TURTLEBOT)
     for k, aid in enumerate(int(i) for i in traj["ids"]):
         a = next(a for a in scenario.agents if a.id == aid)
+        origin = summary["robots"]["agents"][str(aid)]["odom_origin"]
         published = np.array(
-            [world_pose((a.x, a.y, a.heading), (p.x, p.y, p.yaw))[:2] for _, p in wire.poses_of(ROBOT[aid])]
+            [
+                world_pose((a.x, a.y, a.heading), rebase(origin, (p.x, p.y, p.yaw)))[:2]
+                for _, p in wire.poses_of(ROBOT[aid])
+            ]
         )
         recorded = np.stack([traj["x"][:, k], traj["y"][:, k]], axis=1)
         gap = np.min(np.hypot(*(recorded[:, None, :] - published[None, :, :]).transpose(2, 0, 1)), axis=1)

@@ -87,6 +87,7 @@ def test_a_pose_beyond_the_robots_limits_is_implausible():
 def test_the_robot_refuses_poses_of_another_publisher_and_beyond_its_limits_and_counts_them():
     r = robot()
     r.on_pose(odom(0.0, 0.0, 0.0), 10.0, attachment(1, 0, OWN))
+    r.freeze_origin()  # tick 0
     assert r.gid == OWN and r.poses == 1
     r.on_pose(odom(0.01, 0.0, 0.0), 10.05, attachment(2, 0, OWN))
     assert r.poses == 2 and r.latest is not None and r.latest[1][0] == pytest.approx(0.01)
@@ -116,6 +117,20 @@ def test_the_robot_refuses_poses_of_another_publisher_and_beyond_its_limits_and_
     assert f["refused_poses"] == {"foreign": 7, "implausible": 5} and f["pose_gid"] == OWN.hex()
 
 
+def test_the_origin_is_the_mean_of_the_odometry_before_tick_0():
+    """Noisy odometry of a robot standing still: the origin is the mean of the poses before
+    tick 0 (its noise averaged out), fixed from tick 0 on."""
+    r = Robot(parse_robots(ROBOTS).robots[0], (0.0, 0.0, 0.0), "r.toml")
+    for k, (x, yaw) in enumerate([(0.01, 0.1), (-0.01, -0.1), (0.03, 0.3), (-0.03, -0.3)]):
+        r.on_pose(odom(x, 0.0, yaw), 10.0 + k / 30, attachment(k + 1, 0, OWN))
+    assert r.odom_origin == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
+    assert r.latest is not None and r.latest[1] == pytest.approx((-0.03, 0.0, -0.3))
+    r.freeze_origin()
+    r.on_pose(odom(0.05, 0.0, 0.0), 11.0, attachment(9, 0, OWN))
+    assert r.odom_origin == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)  # unchanged from tick 0 on
+    assert r.latest[1] == pytest.approx((0.05, 0.0, 0.0))
+
+
 def test_poses_that_arrive_bunched_are_judged_by_their_stamps_within_a_grace():
     """After a stall, poses measured 1 s apart can arrive 2 ms apart: their stamps say how far
     the robot could go; a forged stamp buys at most `grace` s."""
@@ -125,6 +140,7 @@ def test_poses_that_arrive_bunched_are_judged_by_their_stamps_within_a_grace():
         return cdr.encode_odometry(round(stamp_s * 1e9), "odom", "base_footprint", x, 0.0, 0.0)
 
     r.on_pose(at(100.0, 0.0), 10.0, attachment(1, 0, OWN))
+    r.freeze_origin()
     r.on_pose(at(101.0, 0.2), 10.002, attachment(2, 0, OWN))  # 0.2 m in 1 s of stamps: plausible
     assert (r.poses, r.implausible) == (2, 0)
     r.on_pose(at(1000.0, 1.0), 10.004, attachment(3, 0, OWN))  # 900 s of stamps: only 1 s of grace
@@ -161,6 +177,7 @@ def test_odometry_is_rebased_to_the_robots_first_pose():
     r = Robot(parse_robots(ROBOTS).robots[0], (0.7, 0.0, math.pi / 2), "r.toml")
     r.on_pose(odom(1.0, 2.0, 0.5), 10.0, attachment(1, 0, OWN))  # a robot whose odometry did not start at 0
     assert r.latest is not None and r.latest[1] == pytest.approx((0.7, 0.0, math.pi / 2))  # at its start pose
+    r.freeze_origin()  # tick 0
     r.on_pose(odom(*ahead), 20.0, attachment(2, 0, OWN))
     assert r.latest[1] == pytest.approx((0.7, 1.0, math.pi / 2 + 0.2))  # 1 m north of the start
     assert r.figures()["odom_origin"] == [1.0, 2.0, 0.5]

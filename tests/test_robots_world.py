@@ -274,7 +274,8 @@ def test_the_plant_prepares_stops_every_robot_and_steps_them_from_their_poses():
     events: list[tuple] = []
     node.feed("/tb3_0/odom", odom(0.1, 0.0, 0.0))  # agent 1 moved 0.1 m along its start heading (north)
     plant.start(core, lambda kind, agent, reason, **more: events.append((kind, agent, reason, more)))
-    assert core.pose(1) == pytest.approx((0.7, 0.1, math.pi / 2))
+    # before tick 0 the odometry origin is the mean of the poses so far (0.05): 0.05 m north of the start
+    assert core.pose(1) == pytest.approx((0.7, 0.05, math.pi / 2))
     assert core.pose(2) == pytest.approx((0.87, 0.16, 2.426))
 
     core.set_command(1, 0.15)

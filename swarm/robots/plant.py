@@ -107,13 +107,21 @@ def predicted(pose: Pose, twist: tuple[float, float], age: float, horizon: float
 
 
 def rebase(origin: Pose, odom: Pose) -> Pose:
-    """An odometry pose relative to `origin`, the robot's first odometry pose: its odom frame
-    moved to where the robot was when the world first heard of it (a robot whose odometry did
-    not start at zero, e.g. its node ran before, or it was carried to its start pose)."""
+    """An odometry pose relative to `origin`, where the robot was before tick 0 (the mean of
+    its odometry poses until then, the robot standing still): its odom frame moved to there
+    (a robot whose odometry did not start at zero, e.g. its node ran before, or it was driven
+    to its start pose)."""
     x0, y0, h0 = origin
     dx, dy = odom[0] - x0, odom[1] - y0
     c, s = math.cos(h0), math.sin(h0)
     return c * dx + s * dy, -s * dx + c * dy, float(wrap(odom[2] - h0))
+
+
+def mean_pose(poses: Sequence[Pose]) -> Pose:
+    """The mean of `poses`: positions averaged, headings by their unit vectors."""
+    n = len(poses)
+    yaw = math.atan2(sum(math.sin(p[2]) for p in poses), sum(math.cos(p[2]) for p in poses))
+    return sum(p[0] for p in poses) / n, sum(p[1] for p in poses) / n, yaw
 
 
 def saturate(value: float, limit: float) -> float:
@@ -236,6 +244,7 @@ def cmd_type_from(spec: RobotSpec, entities: Sequence[EntityInfo], distro: str, 
 
 
 NOTICE_EVERY = 5.0  # s between two notices of implausible poses of one robot (the others counted)
+ORIGIN_SAMPLES = 200  # odometry poses before tick 0 averaged into the origin (at most)
 MAX_SAID = 100  # notices kept for summary.json (its latest 20)
 KEPT = 20_000  # the latest pose ages and delays kept per robot for their medians (~0.6 MB each)
 
@@ -379,7 +388,7 @@ class Robot:
         self.twists = 0  # sent
         self.delays = Spread()  # s from each pose's stamp to its reception (wall clocks)
         self.ages = PoseAges()
-        self.odom_origin: Pose | None = None  # the first odometry pose: the odom frame's rebased origin
+        self.odom_origin: Pose | None = None  # the mean odometry pose before tick 0: the odom frame's origin
         self.gid: bytes | None = None  # the robot's pose publisher's (its first pose's)
         self.gid_checked: str | None = None  # how the graph vouched for it (the plant's words)
         self.foreign = 0  # poses refused: another publisher's GID, or no attachment
@@ -389,6 +398,8 @@ class Robot:
         self.cmd_strangers: dict[bytes | None, int] = {}  # GID -> commands of it seen
         self.other_publishers: list[str] = []  # named in the log (their nodes or GIDs)
         self.notices: deque[str] = deque()
+        self._origin_samples: list[Pose] = []  # odometry before tick 0: its mean is the origin
+        self._origin_frozen = False
         self._our_seq = 0  # the last sequence number of ours seen on the command topic
         self._said_implausible: float | None = None  # when an implausible pose was last said (clock s)
         self._implausible_said = 0  # how many had been refused then
@@ -398,12 +409,20 @@ class Robot:
     def limits(self) -> tuple[float, float]:
         return self.spec.max_linear, self.spec.max_angular
 
-    def world_pose(self, pose: cdr.Pose2D) -> Pose:
+    def world_pose(self, pose: cdr.Pose2D, origin: Pose | None = None) -> Pose:
+        """The world pose of a pose message: odometry rebased to `origin` (default: the robot's
+        odom_origin) and put at the agent's start pose; a mocap pose as it is."""
         if self.spec.pose == "odom":
             odom = (pose.x, pose.y, pose.yaw)
-            origin = self.odom_origin if self.odom_origin is not None else odom
+            origin = origin or self.odom_origin or odom
             return odom_to_world(self.start, rebase(origin, odom))
         return pose.x, pose.y, float(wrap(pose.yaw))
+
+    def freeze_origin(self) -> None:
+        """Tick 0: the odometry origin is the mean of the poses received so far (the robot
+        standing still before the run), and stays so."""
+        with self._lock:
+            self._origin_frozen = True
 
     def on_pose(self, payload: bytes, now: float, att: bytes | None = None) -> None:
         try:
@@ -424,18 +443,16 @@ class Robot:
                 return
             try:
                 msg = decode(payload)
-                first = self.spec.pose == "odom" and self.odom_origin is None
-                if first:
-                    self.odom_origin = (msg.x, msg.y, msg.yaw)
-                pose = self.world_pose(msg)
             except cdr.CdrError:
                 self.malformed += 1
                 return
-            if not all(math.isfinite(v) for v in pose):
-                if first:
-                    self.odom_origin = None
+            if not all(math.isfinite(v) for v in (msg.x, msg.y, msg.yaw)):
                 self.malformed += 1
                 return
+            odom = (msg.x, msg.y, msg.yaw)
+            settling = self.spec.pose == "odom" and not self._origin_frozen
+            origin = mean_pose([*self._origin_samples, odom]) if settling else None
+            pose = self.world_pose(msg, origin)
             if self.latest is not None:
                 why = self.plausible.why_not(self.latest[1], pose, self.elapsed(now, msg.stamp_ns))
                 if why is not None:
@@ -447,6 +464,9 @@ class Robot:
                         self.notices.append(f"{self.label()}: a pose on {self.pose_topic} refused: {why}{since}")
                     return
             self.gid = gid
+            if settling and origin is not None and len(self._origin_samples) < ORIGIN_SAMPLES:
+                self._origin_samples.append(odom)
+                self.odom_origin = origin
             self.latest = (now, pose)
             self.stamp_ns = msg.stamp_ns
             self.poses += 1
@@ -773,6 +793,8 @@ class RobotPlant:
     def start(self, core: WorldCore, event: EventSink) -> None:
         """Before tick 0: the poses of tick 0 are the robots' latest; the watchdog starts."""
         self.event = event
+        for r in self.robots.values():
+            r.freeze_origin()
         self._read_poses(core)
         if self.watchdog and self._watch is None:
             self._watch = threading.Thread(target=self._watchdog, name="robots-watchdog", daemon=True)
