@@ -96,6 +96,7 @@ TIERS = {
         "test_packaging",
         "test_procs",
         "test_recording_stream",
+        "test_rehearsal",
         "test_remote_access",
         "test_resilience",
         "test_runtime",
