@@ -157,26 +157,33 @@ class Conditions:
     ub: np.ndarray
     vb: np.ndarray
     rhs: np.ndarray
+    other: np.ndarray = field(init=False)  # (R,) the second agent's column (a wall's: its own, ub = vb = 0)
 
-    @property
-    def other(self) -> np.ndarray:
-        """(R,) the second agent's column of each row (a wall's: its own agent, with ub = vb = 0)."""
-        return np.where(self.wall, self.a, self.b)
+    def __post_init__(self) -> None:
+        self.other = np.where(self.wall, self.a, self.b)
 
     def slack(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """(R,) how far each condition holds with commands (u, v) (negative: broken)."""
         o = self.other
         return self.ua * u[self.a] + self.va * v[self.a] + self.ub * u[o] + self.vb * v[o] - self.rhs
 
-    def dense(self, rows: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """(cu, cv), each (len(rows), n): the rows as matrices on the commands of n agents."""
-        r = np.arange(len(rows))
+    def on(self, rows: np.ndarray, members: np.ndarray, n: int, u: np.ndarray, v: np.ndarray):
+        """The rows as matrices on the commands of `members` (of n agents): (cu, cv), each
+        (len(rows), len(members)), and the rows' right sides less the terms of the agents
+        that are not members, whose commands are (u, v)."""
+        col = np.full(n, -1)
+        col[members] = np.arange(len(members))
         a, o = self.a[rows], self.other[rows]
-        cu, cv = np.zeros((len(rows), n)), np.zeros((len(rows), n))
-        cu[r, a], cv[r, a] = self.ua[rows], self.va[rows]
-        cu[r, o] += self.ub[rows]
-        cv[r, o] += self.vb[rows]
-        return cu, cv
+        ca, co = col[a], col[o]
+        ua, va, ub, vb = self.ua[rows], self.va[rows], self.ub[rows], self.vb[rows]
+        fixed = np.where(ca < 0, ua * u[a] + va * v[a], 0.0) + np.where(co < 0, ub * u[o] + vb * v[o], 0.0)
+        cu, cv = np.zeros((len(rows), len(members))), np.zeros((len(rows), len(members)))
+        ra, ro = np.flatnonzero(ca >= 0), np.flatnonzero(co >= 0)
+        cu[ra, ca[ra]] += ua[ra]
+        cv[ra, ca[ra]] += va[ra]
+        cu[ro, co[ro]] += ub[ro]
+        cv[ro, co[ro]] += vb[ro]
+        return cu, cv, self.rhs[rows] - fixed
 
 
 def conditions(bar: Barriers, x, y, g, present: np.ndarray) -> Conditions:
@@ -313,7 +320,7 @@ def safe_commands(
         if not broken[grows].any():
             continue
         solves += 1
-        gu, gv, ok, act = _solve(bar, cond, grows, members, ctl, u_in, v_in, umax_c)
+        gu, gv, ok, act = _solve(bar, cond, grows, members, u_in, v_in, umax_c)
         if not ok:
             infeasible[members] = True
         u[members], v[members] = gu, gv
@@ -355,19 +362,15 @@ def _groups(cond: Conditions, rows: np.ndarray, ctl: np.ndarray, n: int) -> list
     return out
 
 
-def _solve(bar: Barriers, cond: Conditions, rows, members, ctl, u_in, v_in, umax_c):
+def _solve(bar: Barriers, cond: Conditions, rows, members, u_in, v_in, umax_c):
     """One group's QP: (u, v) of its members, whether they keep every condition, and the
     active rows. Falls back to the stop (speed may change) or the least violating command."""
     m = len(members)
-    others = np.ones(len(u_in), dtype=bool)
-    others[members] = False
-    cu, cv = cond.dense(rows, len(u_in))
-    rhs = cond.rhs[rows] - cu[:, others] @ u_in[others] - cv[:, others] @ v_in[others]
-    A_u = cu[:, members]
+    A_u, A_v, rhs = cond.on(rows, members, len(u_in), u_in, v_in)
     ud, vd, um = u_in[members], v_in[members], umax_c[members]
     l2 = bar.lookahead**2
     if bar.speed:
-        A = np.hstack([A_u, cv[:, members]])
+        A = np.hstack([A_u, A_v])
         H = np.diag(np.concatenate([np.full(m, 2.0), np.full(m, 2.0 / l2)]))
         z0 = np.concatenate([ud, vd])
         lo = np.concatenate([-um, np.zeros(m)])
@@ -378,7 +381,7 @@ def _solve(bar: Barriers, cond: Conditions, rows, members, ctl, u_in, v_in, umax
         H = 2.0 * np.eye(m)
         z0 = ud
         lo, hi = -um, um
-        b = rhs - cv[:, members] @ vd
+        b = rhs - A_v @ vd
     lo, hi = np.maximum(lo, -INF), np.minimum(hi, INF)
     z, flag = _qp(H, z0, A, b, lo, hi)
     nz = len(z0)
