@@ -303,7 +303,8 @@ def bench_guard(work: Path, runs: int, cmd_timeout: float) -> tuple[list[float],
     b = guard = p = None
     from_last, from_cut = [], []
     try:
-        b = Bench(work, HOST_IP)
+        (work / "guard").mkdir(exist_ok=True)
+        b = Bench(work / "guard", HOST_IP)
         glog = open(work / "guard.log", "wb")
         guard = subprocess.Popen(
             SWARM + ["robots", "guard", "--robots", str(b.robots), "--cmd-timeout", str(cmd_timeout)],

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
 import time
 
 import pytest
@@ -19,6 +20,7 @@ from deadlines import DEADLINE
 from runtime_helpers import start_up, swarm_cmd, wait_for
 from test_robots_e2e import ROBOT, TURTLEBOT, start_fleet, stop_fleet, wait_moving
 
+import swarm
 from swarm.contracts.vocabulary import ExitCode
 
 pytestmark = pytest.mark.slow
@@ -140,3 +142,37 @@ def test_a_bad_guard_table_is_refused_naming_its_field(guard, field):
     assert parse_robots(robots_file()).guard.cmd_timeout == 0.5
     with pytest.raises(RobotsError, match=field.replace(".", r"\.")):
         parse_robots({**robots_file(), "guard": guard}, "robots.toml")
+
+
+def test_estop_ready_stops_every_robot_on_enter_and_the_api_stops_them_too(rt, tmp_path, monkeypatch):
+    fleet, robots, wire = start_fleet(rt, tmp_path, "--cmd-timeout", "3600")
+    up = start_up(rt.tracker, TURTLEBOT, tmp_path / "run", "--robots", robots, "--duration", 120)
+    wait_moving(up, wire)
+    ready = subprocess.Popen(
+        swarm_cmd("estop", "--ready"), env=rt.tracker.env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert ready.stdout is not None and ready.stdin is not None
+        assert "estop ready: run " in ready.stdout.readline()
+        wait_moving(up, wire, since=time.monotonic())  # connected, nothing sent: the robots drive on
+        event = time.monotonic()
+        ready.stdin.write("\n")
+        ready.stdin.close()
+        assert ready.wait(DEADLINE) == ExitCode.OK
+        out = ready.stdout.read()
+    finally:
+        if ready.poll() is None:
+            ready.kill()
+            ready.wait()
+    assert "estop: zero twist sent to 2 robots" in out and "stopped at tick" in out, out
+    for ns in ROBOT.values():
+        wait_for(lambda ns=ns: last_is_zero_after(wire, ns, event), DEADLINE, f"a zero twist for {ns}")
+    assert up.launcher.wait(DEADLINE) == ExitCode.INTERRUPTED
+    # the Python API, with the robots file and no run: the robots only
+    monkeypatch.setenv("SWARM_RUNTIME_DIR", rt.tracker.env["SWARM_RUNTIME_DIR"])
+    event = time.monotonic()
+    done = swarm.estop(robots=robots, end=False)
+    assert done.robots == 2 and done.run is None and done.ended is None
+    for ns in ROBOT.values():
+        wait_for(lambda ns=ns: last_is_zero_after(wire, ns, event), DEADLINE, f"the API's zero twist for {ns}")
+    stop_fleet(rt, fleet)

@@ -83,14 +83,20 @@ def find_record(run: str | None) -> RunRecord:
     raise UsageError(f"{len(alive)} runs drive robots ({names}): pick one with --run, or give --robots FILE")
 
 
-def _stopped(pid: int) -> bool | None:
-    """Whether process `pid` is stopped (SIGSTOP, a debugger); None when it is gone or unknown."""
+def _stat(pid: int) -> list[bytes] | None:
+    """/proc/PID/stat's fields after the command's name (state, ppid, ...); None when gone."""
     try:
         with open(f"/proc/{pid}/stat", "rb") as f:
-            state = f.read().rsplit(b")", 1)[1].split()[0]
+            return f.read().rsplit(b")", 1)[1].split()
     except (OSError, IndexError):
         return None
-    return state in (b"T", b"t")
+
+
+def _stopped_child(pid: int, parent: int | None) -> bool:
+    """Whether process `pid` is stopped (SIGSTOP, a debugger) and a child of `parent` (the
+    record's world still, not another process that got its pid)."""
+    st = _stat(pid)
+    return st is not None and len(st) > 1 and st[0] in (b"T", b"t") and parent is not None and st[1] == b"%d" % parent
 
 
 def _alive(pid: int) -> bool:
@@ -133,7 +139,7 @@ def end_run(
     launcher = record.launcher_pid if record is not None else None
     if launcher is not None and not _alive(launcher):
         return run, f"run {run} had ended (its swarm up, pid {launcher}, is gone)"
-    if world is not None and _stopped(world):
+    if world is not None and _stopped_child(world, launcher):
         os.kill(world, signal.SIGKILL)
         how = f"its world (pid {world}) was stopped (SIGSTOP): killed with SIGKILL"
         if launcher is not None and _wait_gone(launcher, timeout):

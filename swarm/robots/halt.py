@@ -428,6 +428,8 @@ class WorldExitStop:
             except Exception as e:  # unreachable now: tried again at the exit
                 why = str(e)
             status = _wait_exit(pid)
+            if halt is None and not self.ran():  # the world could not start (e.g. no router): said by it
+                return
             if halt is None:
                 try:
                     halt = Halt(self.plan, name="swarm_up")
