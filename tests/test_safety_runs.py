@@ -322,3 +322,21 @@ def test_the_builder_makes_the_table():
     assert swarm.simulate(s).summary.safety.collisions == 0
     with pytest.raises(swarm.ScenarioError, match="outside safety.arena"):
         b.safety(0.3, arena=[-1, -1, 1, 1]).build()
+
+
+def test_a_swarms_study_measures_collisions_at_a_radius():
+    """`swarm study swarms --safety-radius R`: random swarms with a measuring [safety] table,
+    the same rows through either engine, the law unchanged."""
+    from swarm.study.batch import run_swarm_chunk
+    from swarm.study.swarms import SwarmSetting, random_swarm, run_swarm
+
+    setting = SwarmSetting(n=6, duration=30.0, safety_radius=2.0)
+    assert random_swarm(setting, 0).safety is not None and not random_swarm(setting, 0).safety.enabled
+    one = run_swarm((setting, 0))
+    (batched,) = run_swarm_chunk((setting, (0,)))
+    for key in ("collisions", "boundary_exits", "saturations", "min_distance", "interventions", "converged"):
+        assert one[key] == batched[key], key
+    assert one["interventions"] == 0 and one["min_distance"] > 0
+    bare = run_swarm((SwarmSetting(n=6, duration=30.0), 0))  # the same swarm, not measured
+    assert bare["collisions"] is None and bare["min_distance"] is None
+    assert (bare["converged"], bare["switches"]) == (one["converged"], one["switches"])  # the law unchanged

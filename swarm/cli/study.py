@@ -140,6 +140,25 @@ def _table(rows: list[dict], columns: list[tuple[str, str, Callable]]) -> None:
         typer.echo("  ".join(fmt(r[k]).rjust(w) for (_, k, fmt), w in zip(columns, widths)))
 
 
+def _safety_table(summary: list[dict]) -> None:
+    """The safety figures per setting, when the runs measured them (a [safety] table)."""
+    if not any("collisions" in r for r in summary):
+        return
+    _table(
+        summary,
+        [
+            ("setting", "setting", str),
+            ("safe runs", "safe_runs", str),
+            ("collisions", "collisions", str),
+            ("exits", "boundary_exits", str),
+            ("saturations", "saturations", str),
+            ("min dist m", "min_distance", _num(".3g")),
+            ("interventions", "interventions", str),
+            ("no safe cmd", "infeasible", str),
+        ],
+    )
+
+
 def _num(fmt: str) -> Callable:
     return lambda v: "-" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, fmt)
 
@@ -179,6 +198,14 @@ def swarms(
     c2: Annotated[float, typer.Option(help="gain C2", min=1e-9)] = 0.5,
     duration: Annotated[float, typer.Option(help="simulated s per run: converged means by then", min=0.1)] = 500.0,
     dt: DtOpt = 0.05,
+    safety_radius: Annotated[
+        float,
+        typer.Option(
+            help="measure collisions at this radius (m; a [safety] table with enabled = false: "
+            "collisions, least distance, saturations in every row); 0: not measured",
+            min=0.0,
+        ),
+    ] = 0.0,
     jobs: JobsOpt = 0,
     out: OutOpt = None,
     plot: Annotated[bool, typer.Option(help="write study.png")] = True,
@@ -224,6 +251,7 @@ def swarms(
             c2=c2,
             duration=duration,
             dt=dt,
+            safety_radius=safety_radius,
         )
         for a in ns
         for b in ls
@@ -271,6 +299,7 @@ def swarms(
             ("per loss max", "loss_switches_max", _num("g")),
         ],
     )
+    _safety_table(summary)
     typer.echo(
         "converged: share of all runs in which every agent ends within 1% of its expected radius; "
         "cut off: runs with a follower that has no sensing path to a leader at t = 0; switches: "
@@ -529,20 +558,7 @@ def scenario(
             ("crashes", "crashes", str),
         ],
     )
-    if any("collisions" in r for r in summary):  # the scenario has a [safety] table
-        _table(
-            summary,
-            [
-                ("setting", "setting", str),
-                ("safe runs", "safe_runs", str),
-                ("collisions", "collisions", str),
-                ("exits", "boundary_exits", str),
-                ("saturations", "saturations", str),
-                ("min dist m", "min_distance", _num(".3g")),
-                ("interventions", "interventions", str),
-                ("no safe cmd", "infeasible", str),
-            ],
-        )
+    _safety_table(summary)
     typer.echo(
         f"wall time {wall:.1f} s. converged: every agent ends within 1% of its expected radius; settle: the "
         "last agent into the 2% band, over the converged runs; switches: per follower"

@@ -49,6 +49,7 @@ class SwarmSetting:
     c2: float = 0.5
     duration: float = 500.0  # s
     dt: float = 0.05  # s
+    safety_radius: float = 0.0  # m: a [safety] table measuring collisions at this radius (no filter); 0: none
 
     def label(self) -> str:
         rng = "unlimited" if math.isinf(self.range) else f"{self.range:g} m"
@@ -82,16 +83,16 @@ def random_swarm(setting: SwarmSetting, seed: int) -> Scenario:
         sensing["range"] = setting.range
     if setting.fov < 2 * math.pi:
         sensing["fov"] = setting.fov
-    return parse_scenario(
-        {
-            "name": f"study-{seed}",
-            "run": {"dt": setting.dt, "duration": setting.duration, "seed": seed},
-            "gains": {"c1": setting.c1, "c2": setting.c2},
-            "sensing": sensing,
-            "agents": agents,
-        },
-        f"random swarm (seed {seed})",
-    )
+    data = {
+        "name": f"study-{seed}",
+        "run": {"dt": setting.dt, "duration": setting.duration, "seed": seed},
+        "gains": {"c1": setting.c1, "c2": setting.c2},
+        "sensing": sensing,
+        "agents": agents,
+    }
+    if setting.safety_radius > 0:  # measured only: these agents have no turn-rate limit to filter within
+        data["safety"] = {"radius": setting.safety_radius, "enabled": False}
+    return parse_scenario(data, f"random swarm (seed {seed})")
 
 
 def cut_off_at_start(s: Scenario) -> bool:
