@@ -10,9 +10,9 @@ statement, at module level or inside functions:
     live       a live run seen from a terminal: client, data, control, views, watch, Foxglove
     ros2       the rmw_zenoh protocol (keys, liveliness tokens, attachments, CDR): ROS 2 without ROS
     robots     real robots: the world's plant made of ROS 2 robots, the robots file, a simulated fleet
-    env        a PettingZoo environment over the in-process engine (learning-based laws)
     study      batch studies
     api        the Python API (`import swarm`)
+    env        a PettingZoo environment over the in-process engine (learning-based laws)
     cli        the command line
 
 A package may import only the packages `MAY_IMPORT` lists for it; no module may be part of an
@@ -40,8 +40,10 @@ MAY_IMPORT = {
     "study": {"study", "offline"} | BELOW_THE_SHELLS,
     "ros2": {"ros2", "contracts"},  # the rmw_zenoh protocol: keys, tokens, attachments, CDR
     "robots": {"robots", "ros2", "runtime"} | BELOW_THE_SHELLS,
-    "env": {"env", "offline"} | BELOW_THE_SHELLS,  # the PettingZoo environment over the in-process engine
-    "api": {"api", "runtime", "offline", "plots", "live", "robots", "env"} | BELOW_THE_SHELLS,
+    # the PettingZoo environment over the in-process engine; its episode's results are the API's
+    # `Results` (what swarm.simulate returns), so it sits above swarm.api
+    "env": {"env", "offline", "api"} | BELOW_THE_SHELLS,
+    "api": {"api", "runtime", "offline", "plots", "live", "robots"} | BELOW_THE_SHELLS,
     "cli": {"cli", "root", "api", "runtime", "offline", "plots", "live", "study", "robots", "ros2", "env"}
     | BELOW_THE_SHELLS,
     "root": {"root", "cli", "api", "contracts", "env"},  # swarm/__init__.py (its exports), swarm/__main__.py
