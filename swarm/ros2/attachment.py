@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import struct
 
-from swarm.ros2.xxh3 import xxh3_128_le
+import xxhash
 
 GID_LEN = 16
 SIZE = 8 + 8 + 1 + GID_LEN  # 33
@@ -39,4 +39,4 @@ def gid_for(key: str) -> bytes:
     it: XXH3-128 of the whole key, its low 64 bits then its high 64 bits, little-endian. `ros2 topic
     info -v` shows it, and the attachment of every sample carries it: a subscriber that knows a
     publisher's token can tell its samples from anyone else's."""
-    return xxh3_128_le(key.encode())
+    return xxhash.xxh3_128_digest(key.encode())[::-1]  # xxHash's canonical digest is big-endian
