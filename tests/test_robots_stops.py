@@ -176,3 +176,38 @@ def test_estop_ready_stops_every_robot_on_enter_and_the_api_stops_them_too(rt, t
     for ns in ROBOT.values():
         wait_for(lambda ns=ns: last_is_zero_after(wire, ns, event), DEADLINE, f"the API's zero twist for {ns}")
     stop_fleet(rt, fleet)
+
+
+def test_the_stops_open_the_same_zenoh_client_as_the_rest_of_the_project(tmp_path):
+    """swarm/robots/halt.py writes swarm.contracts.transport's client settings out (its start-up)."""
+    from swarm.contracts import tls, transport
+    from swarm.robots import halt
+
+    password = tmp_path / "pw"
+    password.write_text("secret\n")
+    plan = halt.HaltPlan(
+        "tls/127.0.0.1:7447",
+        0,
+        "jazzy",
+        (halt.Target(1, "", "/cmd_vel", ("Twist",)),),
+        "swarm",
+        str(password),
+        "/ca.pem",
+        "/me.pem",
+        "/me.key",
+    )
+    ours = plan.zenoh_config()
+    theirs = transport.client_config(
+        plan.connect,
+        timeout_ms=halt.OPEN_TIMEOUT_MS,
+        identity=("swarm", "secret"),
+        tls={
+            f"{tls.TLS}/root_ca_certificate": "/ca.pem",
+            f"{tls.TLS}/connect_certificate": "/me.pem",
+            f"{tls.TLS}/connect_private_key": "/me.key",
+            f"{tls.TLS}/enable_mtls": True,
+        },
+    )
+    assert (halt.TLS, halt.LEASE_MS) == (tls.TLS, transport.LEASE_MS)
+    for key in ("mode", "connect", "scouting", "transport"):
+        assert ours.get_json(key) == theirs.get_json(key), key

@@ -28,9 +28,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from swarm.contracts.errors import NoRunError, SwarmError, UsageError
+from swarm.contracts.errors import NoRunError, SwarmError
 from swarm.contracts.vocabulary import ExitCode
-from swarm.robots.halt import Halt, HaltError, HaltPlan, RunRecord, read_records
+from swarm.robots.halt import Halt, HaltError, HaltPlan, RunRecord, find_record, read_records
 
 HOLD_GAP = 0.05  # s between the zero twists sent while the run ends
 END_DEADLINE = 60.0  # s for the run to have ended after the robots were stopped
@@ -61,26 +61,6 @@ class Estopped:
         if self.ended is not None:
             out.append(f"estop: {self.ended}")
         return out
-
-
-def find_record(run: str | None) -> RunRecord:
-    """The runtime dir's record of run `run`, or of the only run whose `swarm up` still runs,
-    or (none runs) of the latest one; UsageError (one line) otherwise."""
-    records = read_records()
-    if run is not None:
-        for _p, rec, _alive in records:
-            if rec.run == run:
-                return rec
-        raise UsageError(f"no robots of run {run} on this machine: give --robots FILE")
-    alive = [rec for _p, rec, up in records if up]
-    if len(alive) == 1:
-        return alive[0]
-    if not alive and records:
-        return records[0][1]  # the latest run to drive robots here, ended: its robots all the same
-    if not alive:
-        raise UsageError("no run has driven robots on this machine (swarm up --robots records it): give --robots FILE")
-    names = ", ".join(r.run for r in alive)
-    raise UsageError(f"{len(alive)} runs drive robots ({names}): pick one with --run, or give --robots FILE")
 
 
 def _stat(pid: int) -> list[bytes] | None:
@@ -235,7 +215,7 @@ def estop(
             sent = halt.zero()
         except HaltError as e:
             failed, sent = str(e), 0
-        took = time.monotonic() - t0
+        took = (halt.first_sent if halt is not None and halt.first_sent else time.monotonic()) - t0
     if halt is not None and say is not None:
         say(Estopped(sent, plan.connect, took, None, None).lines()[0])
     quit = threading.Event()

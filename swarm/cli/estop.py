@@ -4,6 +4,8 @@ docs/guides/robots.md#estop)."""
 
 from __future__ import annotations
 
+import sys
+import time
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -75,9 +77,6 @@ def estop(
 def _when_asked(run: str | None, robots: Path | None):
     """--ready: the session open, one line, then the zero twists as soon as Enter comes (or
     stdin ends): (record, Halt, robots, s taken)."""
-    import sys
-    import time
-
     from swarm.api.estop import arm  # lazy: as in `estop`
     from swarm.robots.halt import HaltError  # lazy: as in `estop`
 
@@ -95,7 +94,8 @@ def _when_asked(run: str | None, robots: Path | None):
         halt.close()
         raise
     t0 = time.monotonic()
-    return record, halt, halt.zero(), time.monotonic() - t0
+    sent = halt.zero()
+    return record, halt, sent, (halt.first_sent or time.monotonic()) - t0
 
 
 def register(app: typer.Typer) -> None:

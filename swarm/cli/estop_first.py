@@ -35,8 +35,7 @@ def first(args: list[str]) -> None:
     if any(a in ("-h", "--help", "--ready", "--robots") or a.startswith("--robots=") for a in args):
         return
     try:
-        from swarm.api.estop import find_record  # lazy: (see the module) the record's few modules only
-        from swarm.robots.halt import Halt
+        from swarm.robots.halt import Halt, find_record  # lazy: (see the module) the record's few modules only
 
         record = find_record(_option(args, "--run") or os.environ.get("SWARM_RUN") or None)
         learn = any(len(t.types) > 1 for t in record.plan.targets)
@@ -44,7 +43,7 @@ def first(args: list[str]) -> None:
     except Exception:  # the command says why, with everything loaded
         return
     sent = halt.zero()
-    _sent = (record, halt, sent, time.monotonic() - t0)
+    _sent = (record, halt, sent, (halt.first_sent or time.monotonic()) - t0)
     quit = threading.Event()
 
     def hold() -> None:

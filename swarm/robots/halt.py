@@ -34,10 +34,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from swarm.contracts.runtime_dir import pid_alive, read_private, runtime_dir, write_private
-from swarm.contracts.tls import TLS
-from swarm.contracts.transport import client_config
 from swarm.ros2 import cdr
-from swarm.ros2.attachment import attachment, gid_for
+from swarm.ros2.attachment import attachment
 from swarm.ros2.keys import LIVELINESS, parse_entity_token, topic_key
 from swarm.ros2.types import TWIST, TWIST_STAMPED, RosType
 
@@ -49,6 +47,11 @@ STOP_GAP = 0.02  # s between them
 OPEN_TIMEOUT_MS = 2000  # the robots' router must answer within this to be stopped by us
 LEARN_TIMEOUT = 0.5  # s for the router's answer to the liveliness query (the robots' tokens)
 TYPES = {TWIST.short: TWIST, TWIST_STAMPED.short: TWIST_STAMPED}
+# swarm.contracts.transport's client_config settings, written out: that module (with the run's
+# credentials, wire and TLS modules) took most of `swarm estop`'s start-up on a loaded machine
+# (tests/test_robots_stops.py checks that both give the same config)
+LEASE_MS = 1000
+TLS = "transport/link/tls"
 RECORD_SUFFIX = ".robots"  # <runtime dir>/<run>.robots: a run's HaltPlan (RunRecord)
 
 
@@ -168,7 +171,23 @@ class HaltPlan:
                 f"{TLS}/connect_private_key": self.tls_key,
                 f"{TLS}/enable_mtls": True,
             }
-        return client_config(self.connect, timeout_ms=OPEN_TIMEOUT_MS, identity=identity, tls=tls)
+        settings: dict[str, Any] = {
+            "mode": "client",
+            "connect/endpoints": [self.connect],
+            "connect/timeout_ms": OPEN_TIMEOUT_MS,
+            "scouting/multicast/enabled": False,
+            "transport/link/tx/lease": LEASE_MS,
+            "transport/shared_memory/enabled": False,
+        }
+        if identity is not None:
+            settings["transport/auth/usrpwd"] = {"user": identity[0], "password": identity[1]}
+        settings.update(tls)
+        import zenoh  # lazy: only a process that opens a session loads zenoh's native library
+
+        cfg = zenoh.Config()
+        for key, value in settings.items():
+            cfg.insert_json5(key, json.dumps(value))
+        return cfg
 
 
 def type_of_subscriptions(topic: str, tokens: Iterable[tuple[str, str]]) -> str | None:
@@ -241,6 +260,7 @@ class Halt:
 
         self.plan = plan
         self.lock = threading.Lock()
+        self.first_sent: float | None = None  # monotonic s when the first zero twists went out
         try:
             self.session = (open_session or zenoh.open)(plan.zenoh_config())
         except HaltError:
@@ -251,8 +271,7 @@ class Halt:
         try:
             if learn:
                 self.plan = plan.with_types(learn_types(self.session, plan))
-            zid = str(self.session.info.zid())
-            self.gid = gid_for(f"{name}/{zid}/{os.getpid()}/{secrets.token_hex(4)}")  # ours: named as such
+            self.gid = secrets.token_bytes(16)  # a GID of our own (no token: no XXH3 of one to match)
             self.pubs: list[_Pub] = [
                 _Pub(self.session, self.plan, t, TYPES[kind], self.gid) for t in self.plan.targets for kind in t.types
             ]
@@ -278,6 +297,8 @@ class Halt:
                         p.put(zero_payload(p.kind))
                     except Exception:  # one robot's error must not keep the others going
                         pass
+                if i == 0 and self.first_sent is None:
+                    self.first_sent = time.monotonic()
                 if i < repeat - 1:
                     time.sleep(gap)
         return len({p.target.agent for p in pubs})
@@ -360,6 +381,28 @@ def read_records() -> list[tuple[Path, RunRecord, bool]]:
             continue
         out.append((p, rec, pid_alive(rec.launcher_pid)))
     return sorted(out, key=lambda x: -x[1].written)
+
+
+def find_record(run: str | None) -> RunRecord:
+    """The runtime dir's record of run `run`, or of the only run whose `swarm up` still runs,
+    or (none runs) of the latest one; UsageError (one line) otherwise."""
+    from swarm.contracts.errors import UsageError  # lazy: for the error's path only (the e-stop's start-up)
+
+    records = read_records()
+    if run is not None:
+        for _p, rec, _alive in records:
+            if rec.run == run:
+                return rec
+        raise UsageError(f"no robots of run {run} on this machine: give --robots FILE")
+    alive = [rec for _p, rec, up in records if up]
+    if len(alive) == 1:
+        return alive[0]
+    if not alive and records:
+        return records[0][1]  # the latest run to drive robots here, ended: its robots all the same
+    if not alive:
+        raise UsageError("no run has driven robots on this machine (swarm up --robots records it): give --robots FILE")
+    names = ", ".join(r.run for r in alive)
+    raise UsageError(f"{len(alive)} runs drive robots ({names}): pick one with --run, or give --robots FILE")
 
 
 # -- swarm up: a zero twist to every robot when the world exits -----------------------------------------
