@@ -7,12 +7,13 @@ For every run: a copy of the robots file on a free local port (filter off: its [
 with `enabled = false`, which keeps every figure and filters nothing), the fleet started, then
 `swarm up` for the scenario's duration on the realtime clock, `--time-scale` times faster than
 the wall (the fleet runs its clock as fast: its latency and command timeout are in the run's
-seconds), both in their own process groups, ended (SIGINT, then SIGKILL to the group) however
-the script ends. Then summary.json and trajectory.npz are read.
+seconds; default 1: on a loaded machine a faster run stalls, docs/benchmarks.md#rehearsal),
+both in their own process groups, ended (SIGINT, then SIGKILL to the group) however the
+script ends. Then summary.json and trajectory.npz are read.
 
-    python benchmarks/rehearsal.py                      # the four runs, --time-scale 3
-    python benchmarks/rehearsal.py --only lab6 --time-scale 1
-    python benchmarks/rehearsal.py --duration 60        # shorter runs
+    python benchmarks/rehearsal.py                      # the four runs, realtime: about 16 min
+    python benchmarks/rehearsal.py --time-scale 3       # a quick look: about 6 min
+    python benchmarks/rehearsal.py --only lab6 --filter on --duration 60
 
 Prints one row per run: the least distance between two robots, collisions, boundary exits
 (summary.json's `safety`), whether the run converged and when it settled, and the filter's
@@ -195,7 +196,7 @@ def main() -> int:
     ap.add_argument("--only", choices=sorted(SCENARIOS), action="append", help="this scenario only (repeatable)")
     ap.add_argument("--filter", choices=["on", "off"], action="append", help="these runs only (repeatable)")
     ap.add_argument("--duration", type=float, default=None, help="run seconds (default: each scenario's)")
-    ap.add_argument("--time-scale", type=float, default=3.0, help="run seconds per wall second (default 3)")
+    ap.add_argument("--time-scale", type=float, default=1.0, help="run seconds per wall second (default 1)")
     ap.add_argument("--latency", type=float, default=0.03, help="s from a pose's measurement to its publication")
     ap.add_argument("--pose-noise", type=float, default=0.01, help="m (yaw: / 0.2 m rad); default 0.01")
     ap.add_argument("--quantize", type=float, default=0.01, help="the fleet truncates commands (default 0.01)")
