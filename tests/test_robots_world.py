@@ -500,9 +500,10 @@ def test_with_a_plant_the_engine_records_its_poses_and_hands_it_the_applied_turn
     assert e.events[0]["kind"] == EventKind.FRESH and e.events[0]["tick"] == 0
 
 
-def world_with(plant, clock: str = "realtime") -> tuple[World, FakeSession]:
+def world_with(plant, clock: str = "realtime", duration: float | None = None) -> tuple[World, FakeSession]:
+    scenario = SCENARIO if duration is None else {**SCENARIO, "run": {**SCENARIO["run"], "duration": duration}}
     cfg = WorldConfig(
-        parse_scenario(SCENARIO), RUN, "unixsock-stream//nonexistent", None, clock=clock, progress=False, plant=plant
+        parse_scenario(scenario), RUN, "unixsock-stream//nonexistent", None, clock=clock, progress=False, plant=plant
     )
     world = World(cfg)
     ses = FakeSession()
@@ -528,33 +529,80 @@ def test_the_worlds_ticks_go_through_the_plant_which_is_stopped_at_the_end(signa
     join(world, 2)
     code = world_main._serve(world, world.cfg, None, StopSignals(world_main.Stop), Announcer(None))
     assert code == ExitCode.OK
-    assert plant.calls == ["start"] + ["step"] * world.ticks + ["stop"]
-    assert world.core.x[0] == pytest.approx(0.7 + 1.0 + 0.01 * world.ticks)
+    # every tick steps the plant, unless the machine stalled the world past a tick (a loaded
+    # machine can): then the plant holds for that step (world/clock.py `hold_robots`)
+    calls = plant.calls
+    assert calls[0] == "start" and calls[-1] == "stop" and set(calls[1:-1]) <= {"step", "hold", "start"}
+    steps, holds = calls.count("step"), calls.count("hold")
+    late = [e for e in world.engine.events if e["kind"] == EventKind.LATE]
+    assert steps + holds >= world.ticks and (holds == 0 or late), calls
+    if not holds:
+        assert steps == world.ticks and world.core.x[0] == pytest.approx(0.7 + 1.0 + 0.01 * world.ticks)
+
+
+def stall_run(where: str) -> tuple[RecordingPlant, World]:
+    """A realtime robots world of 30 ticks (50 ms) that stalls 0.5 s in tick 1: in its step
+    (`where` = "step": after its commands went out) or right after its frames went out ("wait":
+    as a SIGSTOP during the tick's wait does)."""
+    plant = RecordingPlant()
+    world, _ = world_with(plant, duration=1.5)
+    join(world, 1)
+    join(world, 2)
+    publish, step = world.publish_frames, world.record_and_step
+
+    def stall() -> None:
+        if world.core.tick == 1:
+            time.sleep(10 * world.core.dt)
+
+    def publish_frames():
+        sent = publish()
+        if where == "wait":
+            stall()
+        return sent
+
+    def record_and_step():
+        if where == "step":
+            stall()
+        step()
+
+    world.publish_frames, world.record_and_step = publish_frames, record_and_step  # type: ignore[method-assign]
+    code = world_main._serve(world, world.cfg, None, StopSignals(world_main.Stop), Announcer(None))
+    assert code == ExitCode.OK and world.core.tick == world.ticks == 30
+    assert any(e["kind"] == EventKind.LATE for e in world.engine.events)
+    return plant, world
+
+
+def held_then_driven(calls: list[str], driven_before: int) -> int:
+    """After `driven_before` steps: only holds (a zero twist, then the poses read back), at
+    least RESUME_HOLD_S of them, then steps again (a loaded machine may stall the world once
+    more: holds again, which is the point); the number of holds in the first spell."""
+    from swarm.world.clock import RESUME_HOLD_S
+
+    assert calls[: 1 + driven_before] == ["start"] + ["step"] * driven_before
+    rest = calls[1 + driven_before : -1]
+    holds = 0
+    while rest[:2] == ["hold", "start"]:
+        rest, holds = rest[2:], holds + 1
+    assert holds >= RESUME_HOLD_S / 0.05 and rest[:1] == ["step"] and set(rest) <= {"step", "hold", "start"}, calls
+    assert calls[-1] == "stop"
+    return holds
 
 
 def test_after_a_stall_the_plant_stands_still_then_starts_from_its_latest_poses(signals_back):
-    """The world stalls 0.5 s (ten of its 50 ms periods) in tick 1 of 4: the next tick is not a burst
-    of the missed ones; the plant is held (a zero twist to every robot) and started again (its
-    latest poses read) before the world's next step; then the run goes on."""
-    plant = RecordingPlant()
-    world, _ = world_with(plant)
-    join(world, 1)
-    join(world, 2)
-    step = world.record_and_step
+    """The world stalls 0.5 s (ten of its 50 ms periods) in tick 1, before its commands went
+    out: no burst of the missed ticks, and tick 1's commands (computed before the stall) are
+    never sent. The plant holds (a zero twist to every robot, its latest poses read back) for
+    RESUME_HOLD_S of steps while the links to the robots come back, then drives them again.
+    Every tick still counts."""
+    plant, _ = stall_run("step")
+    held_then_driven(plant.calls, driven_before=1)  # tick 0 driven, the stall before tick 1's commands
 
-    def record_and_step():
-        if world.core.tick == 1:
-            time.sleep(10 * world.core.dt)
-        step()
 
-    world.record_and_step = record_and_step  # type: ignore[method-assign]
-    code = world_main._serve(world, world.cfg, None, StopSignals(world_main.Stop), Announcer(None))
-    assert code == ExitCode.OK
-    resync = plant.calls.index("hold")
-    assert plant.calls[:resync] == ["start"] + ["step"] * 2  # ticks 0 and 1, the stall in tick 1's step
-    assert plant.calls[resync : resync + 3] == ["hold", "start", "step"]
-    assert plant.calls.count("step") == world.ticks and plant.calls[-1] == "stop"
-    assert any(e["kind"] == EventKind.LATE for e in world.engine.events)
+def test_a_stall_within_a_tick_sends_a_zero_twist_instead_of_that_ticks_stale_commands(signals_back):
+    """The stall comes right after tick 1's frames went out: tick 1's commands were computed
+    from poses the stall made stale, so they are never sent; the plant holds from tick 1 on."""
+    plant, _ = stall_run("wait")
+    held_then_driven(plant.calls, driven_before=1)  # tick 0 driven; tick 1's commands never sent
 
 
 @pytest.mark.parametrize(

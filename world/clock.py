@@ -31,6 +31,7 @@ from swarm.world.memory import Trimmer
 from swarm.world.state import RunState
 from swarm.world.tick_times import TickTimes
 
+RESUME_HOLD_S = 0.5  # s of wall time robots stand still after a stall (links back, fresh poses) before they drive again
 LATE_EVENT_GAP_S = 1.0  # s of wall time between two `late` events (the counts in summary.json keep every one)
 DESERTED_GRACE = 5.0  # s of wall time a started run may go on with no agent at all
 STALL_GRACE = 3.0  # s the agents get to answer after a stall of the world (their links come back in ~0.5 s)
@@ -252,8 +253,11 @@ class Clock:
         simulated time goes on from where it was (the run lasts longer in wall time). A
         re-anchoring that skipped at least one whole period records a `late` event (at most
         one per LATE_EVENT_GAP_S of wall time; summary.json counts every one), and a plant
-        (robots) gets a zero twist and starts the tick from its latest poses. Returns the
-        time this tick ends."""
+        (robots) gets a zero twist and starts the tick from its latest poses. A stall after a
+        tick's frames went out makes its commands stale: the engine finds it when it would send
+        them (`Engine.send_by`). Either way the plant then holds for RESUME_HOLD_S of steps
+        (`Engine.held_steps`: zero twists, fresh poses) before it drives the robots again.
+        Returns the time this tick ends."""
         now = time.monotonic()
         behind = now - (t_next - period)  # how late this tick starts
         if behind <= period / 2:
@@ -262,7 +266,9 @@ class Clock:
         self.late_ticks += 1
         self.skipped_ticks += skipped
         if skipped:
-            self.state.engine.resync_plant()
+            if not self.state.engine.held_steps:  # (already holding: the stall fell within the last tick)
+                self.state.engine.resync_plant()
+            self.hold_robots(period)
             if self.late_event_at is None or now - self.late_event_at >= LATE_EVENT_GAP_S:
                 self.late_event_at = now
                 self.state.event(
@@ -274,6 +280,17 @@ class Clock:
                     skipped=skipped,
                 )
         return time.monotonic() + period
+
+    @staticmethod
+    def hold_ticks(period: float) -> int:
+        return max(1, round(RESUME_HOLD_S / period))
+
+    def hold_robots(self, period: float) -> None:
+        """After a stall, a plant (robots) holds for RESUME_HOLD_S of steps: zero twists and
+        fresh poses, no command computed before or during the stall."""
+        engine = self.state.engine
+        if engine.plant is not None:
+            engine.held_steps = max(engine.held_steps, self.hold_ticks(period))
 
     def realtime_tick(self, t_next: float) -> None:
         st, inbox = self.state, self.inbox
@@ -354,6 +371,9 @@ class Clock:
             else:
                 t_next = self.keep_time(t_next, period)
                 self.realtime_tick(t_next)
+                if st.engine.plant is not None:  # commands sent later than this were computed before a stall
+                    st.engine.send_by = t_next + period
+                    st.engine.hold_after_stall = self.hold_ticks(period)
                 t_next += period
             self.shell.record_and_step()
             add_tick(time.perf_counter() - t_tick)

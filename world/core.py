@@ -269,6 +269,12 @@ class WorldCore:
             out[k] = math.nan
         return out
 
+    def advance_held(self) -> None:
+        """The plant held this step (world/engine.py: commands from poses a stall made stale)
+        and read its poses back: the tick goes on without a command sent."""
+        self._sensing = None
+        self.tick += 1
+
     def step(self, u: np.ndarray | None = None, speed: np.ndarray | None = None) -> None:
         """Advance every agent in the world by one dt with the latched commands (agent by
         agent in a small swarm, where that is faster; the same bits either way), or let the

@@ -27,6 +27,7 @@ process starts it before tick 0 (`start_plant`) and stops it however the run end
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -66,6 +67,16 @@ class Engine:
         self.core = WorldCore(scenario, joined=joined, plant=plant)
         self.plant = plant
         self.plant_stopped = False
+        # steps the plant holds for instead of driving the robots (world/clock.py): the tick a
+        # stall fell in (its commands came from stale poses) and those right after a stall,
+        # while the links to the robots come back (a zero twist sent into a link the stall
+        # broke is lost)
+        self.held_steps = 0
+        # realtime with a plant (world/clock.py): the monotonic time past which this tick's
+        # commands are stale (a stall of a tick or more since they were computed), and how
+        # many steps to hold for then
+        self.send_by: float | None = None
+        self.hold_after_stall = 1
         self.fault_plan = FaultPlan(scenario.faults, scenario.run.dt, scenario.run.seed)
         self.network = self.fault_plan.affects_network()  # frames and commands go through the fault plan
         self.ticks = ticks
@@ -239,6 +250,13 @@ class Engine:
         self.missed_now = 0
         if observe is not None:
             observe(u)
+        if self.send_by is not None and time.monotonic() > self.send_by:  # stalled since the frames went out
+            self.held_steps = max(self.held_steps, self.hold_after_stall)
+        if self.held_steps > 0 and self.plant is not None and not self.plant_stopped:
+            self.held_steps -= 1
+            self.resync_plant()  # a zero twist instead of commands computed from stale poses; fresh poses in
+            c.advance_held()
+            return
         if self.safety is None:
             c.step()
         else:
