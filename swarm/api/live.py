@@ -127,7 +127,12 @@ class Live:
         have all joined: wait for them before killing one. LiveError after `timeout` s."""
         deadline = time.monotonic() + timeout
         while True:
-            rows = self.agents()
+            try:
+                rows = self.agents()
+            except NoRunError:  # a world too busy to answer in time (a loaded machine): ask again
+                if time.monotonic() > deadline:
+                    raise
+                continue
             want = set(ids) if ids is not None else {r["id"] for r in rows}
             ready = {r["id"] for r in rows if r.get("alive") and r.get("pid") is not None}
             if want <= ready:
