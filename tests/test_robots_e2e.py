@@ -165,18 +165,27 @@ def test_the_turtlebot_run_drives_the_fleet_and_records_its_poses(rt, tmp_path):
         gap = np.min(np.hypot(*(recorded[:, None, :] - published[None, :, :]).transpose(2, 0, 1)), axis=1)
         assert gap.max() < 1e-9, f"agent {aid}: a recorded pose the fleet never published ({gap.max():g} m)"
     # the follower's radius goes the way the simulated run's goes (out past 1.5 m, the
-    # overshoot before it settles at 1 m), within the noise and the latency
+    # overshoot before it settles at 1 m), within the noise and the latency, up to the first
+    # tick the robots stood still for after a stall (a loaded machine: the world's time goes on
+    # while they stand, summary.json's first_held_tick)
     sim = swarm.simulate(TURTLEBOT, duration=duration)
     k, j = list(traj["ids"]).index(2), list(sim.arrays["ids"]).index(2)
     r = np.hypot(traj["x"][:, k], traj["y"][:, k])
     rs = np.hypot(sim.arrays["x"][:, j], sim.arrays["y"][:, j])
     t, ts = traj["t"], sim.arrays["t"]
     on_sim = np.interp(t, ts, rs)
+    held = summary["first_held_tick"]
+    assert (held is None) == (summary["held_ticks"] == 0)
+    before = t < (math.inf if held is None else held * 0.05 - 1e-9)
+    gap = np.abs(r - on_sim)[before]
     print(
         f"follower radius at {t[-1]:.1f} s: {r[-1]:.3f} m (swarm sim: {rs[-1]:.3f} m); "
-        f"max gap {np.abs(r - on_sim).max():.3f} m"
+        f"robots held {summary['held_ticks']} ticks from tick {held}; "
+        f"max gap before {t[before][-1] if before.any() else 0:.1f} s: {gap.max() if gap.size else 0:.3f} m"
     )
-    assert r.max() > 1.5 and np.abs(r - on_sim).max() < 0.2
+    assert gap.size == 0 or gap.max() < 0.2
+    if held is None or on_sim[before].max() > 1.6:
+        assert r[before].max() > 1.5
 
 
 def test_ctrl_c_of_swarm_up_stops_every_robot(rt, tmp_path):

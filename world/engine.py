@@ -72,6 +72,8 @@ class Engine:
         # while the links to the robots come back (a zero twist sent into a link the stall
         # broke is lost)
         self.held_steps = 0
+        self.held_total = 0  # steps the plant held for, over the run
+        self.first_held_tick: int | None = None  # the first of them (None: the plant never held)
         # realtime with a plant (world/clock.py): the monotonic time past which this tick's
         # commands are stale (a stall of a tick or more since they were computed), and how
         # many steps to hold for then
@@ -254,6 +256,9 @@ class Engine:
             self.held_steps = max(self.held_steps, self.hold_after_stall)
         if self.held_steps > 0 and self.plant is not None and not self.plant_stopped:
             self.held_steps -= 1
+            self.held_total += 1
+            if self.first_held_tick is None:
+                self.first_held_tick = c.tick
             self.resync_plant()  # a zero twist instead of commands computed from stale poses; fresh poses in
             c.advance_held()
             return

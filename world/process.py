@@ -308,7 +308,16 @@ class World:
         }
         st, clock = self.state, self.clock
         wall = clock.wall_ticks
-        plant = {} if self.cfg.plant is None else {"robots": self.cfg.plant.figures()}
+        plant = (
+            {}
+            if self.cfg.plant is None
+            else {
+                "robots": self.cfg.plant.figures(),
+                # steps the robots stood still for after a stall (world/clock.py), the first of them
+                "held_ticks": self.engine.held_total,
+                "first_held_tick": self.engine.first_held_tick,
+            }
+        )
         start = next((e.get("wall_time") for e in self.engine.events if e["kind"] == EventKind.START), None)
         result = self.engine.result(
             {
