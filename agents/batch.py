@@ -7,7 +7,7 @@ hysteresis test are the per-agent brain's own functions, run on arrays (agents/o
 what has an array form of its own (the choice of out-neighbour, agents/batch_select.py;
 the rooted rule's filter and hop counts, here; the sticky rule's keep,
 agents/batch_sticky.py) is compared with AgentBrain decision by decision on random swarms
-(tests/test_batch_decisions.py). A batch run equals the per-agent run (tests/test_batch.py).
+(tests/pure/test_batch_decisions.py). A batch run equals the per-agent run (tests/pure/test_batch.py).
 
 What a tick's frames hold, batched (`frames` below, built by the world's batch engine,
 world/batch.py; this package never imports it):

@@ -10,7 +10,7 @@ equals the per-agent run instead of drifting from it by rounding:
   (math.remainder, then (-pi, pi]), to the bit.
 - `hypot`, `atan2`, `atan`: numpy's SIMD versions differ from libm's in the last bit on
   some inputs, so these call `math` per element (leaders only: a few per member).
-- np.sin and math.sin agree (checked in tests/test_batch.py on this machine's numpy).
+- np.sin and math.sin agree (checked in tests/pure/test_batch.py on this machine's numpy).
 
 Pure: no I/O, no state.
 """

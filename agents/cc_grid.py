@@ -80,7 +80,7 @@ def best_cc(px, py, alpha, radius, s, r_min, r_cap, phis, mags, n_best=1, n_ring
     infeasible one (degenerate, out of [r_min, r_cap], not tangent) is skipped.
 
     Plain Python, one candidate at a time (the hot loop of plan_cc: everything inlined).
-    It is the numpy planner it replaced (`_best_cc` in tests/cc_reference.py) operation for operation:
+    It is the numpy planner it replaced (`_best_cc` in tests/support/cc_reference.py) operation for operation:
     divisions by zero, which numpy turned into inf / nan, are guarded instead (such
     candidates are infeasible either way); math.hypot can differ from numpy's hypot in
     the last bit, which matters only exactly at the tangency tolerance.

@@ -21,7 +21,7 @@ tangent, |o_A - o_B|^2 = (r_A + r_B)^2, which is the hyperbola
     p2 = (a_x sin alpha - a_y cos alpha) / D,
     p3 = ((a_x sin m - a_y cos m) / D)^2,  m = (alpha + beta) / 2,
 
-and p3 equals |a|^2 / (2 D) + p1 p2 (checked in tests/test_leader.py).  Equivalently,
+and p3 equals |a|^2 / (2 D) + p1 p2 (checked in tests/process/test_leader.py).  Equivalently,
 without the 1/D blow-up near alpha == beta,
 
     r_B = (|a|^2 / 2 + r_A Pa) / (r_A D - Pb),  Pa = D p2,  Pb = D p1,

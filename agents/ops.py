@@ -11,8 +11,8 @@ rules (swarm.agents.selection.keeps_current) are written once, over an `Ops`:
 
 The two sets compute every element with functions that round alike (batch_maths says
 which call `math` per element to be sure), and the shared code applies them in one order,
-so a batch run equals the per-agent run to the bit (tests/test_batch.py,
-tests/test_batch_decisions.py). Standard library only: an agent process imports this
+so a batch run equals the per-agent run to the bit (tests/pure/test_batch.py,
+tests/pure/test_batch_decisions.py). Standard library only: an agent process imports this
 and no numpy. Pure: no I/O, no state.
 """
 

@@ -186,7 +186,7 @@ class Sticky:
     continues either with more shadow edges between silent agents, ids decreasing, which
     cannot close, or with ordered edges only, which never reach a shadowing agent again,
     nor close by themselves. A restarted agent's feasible starts afresh; the `late`
-    rule keeps it out of cycles through its earlier life (tests/test_sticky.py checks
+    rule keeps it out of cycles through its earlier life (tests/pure/test_sticky.py checks
     all of this on random graphs with restarts).
 
     Finite time to a rooted agent, when one can be reached: a follower with nobody to

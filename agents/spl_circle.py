@@ -35,7 +35,7 @@ too (the paper's Lyapunov functions prove its circular formations exponentially 
 suggest, without proving, almost global convergence); from the shipped scenario's start the
 run ends in the splay state.
 
-Documented equilibrium (checked by tests/test_spl_law.py through `swarm sim`): every agent
+Documented equilibrium (checked by tests/pure/test_spl_law.py through `swarm sim`): every agent
 at distance R from the target, circling in direction s, neighbours 2 pi / N apart. It
 needs every agent to sense every other (all-to-all, the paper's setting: no sensing range
 or field of view), equal speeds and radii (one omega0), and the target (a leader law: in

@@ -10,7 +10,7 @@ The same generated scenario (benchmarks/bench_runtime.py's ring: N agents, 2 lea
 - `up`: `swarm up` (world and agents on Unix sockets, one machine: the reference);
 - `veth-tls` / `veth-tcp`: the world in namespace `w`, listening on `tls/` (or `tcp/`)
   10.213.0.1, and `swarm host` in namespaces `a` and `b`, half of the agents each, with
-  credentials from `swarm credentials --host` (tests/test_multihost.py's `Lan`: a bridge
+  credentials from `swarm credentials --host` (tests/process/test_multihost.py's `Lan`: a bridge
   in `w`, one veth pair per host);
 - `local-hosts`: the world on a Unix socket and the two `swarm host` routers on this
   machine (Unix sockets too): what the router hop costs without any network.

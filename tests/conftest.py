@@ -5,13 +5,15 @@ once by `swarm sim`, for every test that checks it or compares with it); and the
 Every test carries one tier marker, what it needs to run (`pytest -m pure`, `-m "not process"`...):
 
     pure     maths, models and files in this process: no zenoh session, no other process
-    seam     the world or an agent driven through the fake zenoh session of tests/fakes.py
+    seam     the world or an agent driven through the fake zenoh session of tests/support/fakes.py
     zenoh    real zenoh sessions inside this process (routing, transport, TLS, credentials)
     process  other processes: `swarm` commands, the world and agents as OS processes
 
-A file's tier (`TIERS`) is what its most demanding test needs; a test that takes the `rt`
-fixture (a private runtime for processes) is `process` wherever it is. `slow` is the other
-axis: the long tests of every tier (`-m "not slow"` is the fast tier, about 25 s).
+A file's tier is the folder it is in (tests/pure, tests/seam, tests/zenoh, tests/process): what
+its most demanding test needs. A test that takes the `rt` fixture (a private runtime for
+processes) belongs in tests/process. `slow` is the other axis: the long tests of every tier
+(`-m "not slow"` is the fast tier, about 25 s). What the tests share (fakes, the process
+tracker, deadlines, corpora) is in tests/support, on sys.path (pyproject: pythonpath).
 """
 
 from __future__ import annotations
@@ -32,89 +34,12 @@ from deadlines import DEADLINE, DEFAULT
 if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
-TIERS = {
-    "pure": {
-        "test_batch",
-        "test_batch_decisions",
-        "test_docs_links",
-        "test_sensing_fast",
-        "test_fastwire",
-        "test_env",
-        "test_layout",
-        "test_ros2_wire",
-        "test_ros2_export",
-        "test_cli_offline",
-        "test_follower",
-        "test_kinematics",
-        "test_layers",
-        "test_plots",
-        "test_recording_deferred",
-        "test_results_stream",
-        "test_rooted",
-        "test_safety",
-        "test_scenario",
-        "test_search",
-        "test_selection",
-        "test_sim",
-        "test_spl_law",
-        "test_sticky",
-        "test_tick_times",
-        "test_wire",
-    },
-    "seam": {"test_freetext", "test_law_api", "test_shells", "test_supervision", "test_world_ticks"},
-    "zenoh": {
-        "test_credentials",
-        "test_tls",
-        "test_transport",
-        "test_zenoh_routing",
-        "test_ros2_node",
-        "test_ros2_sdk",
-        "test_robots_world",
-        "test_robots_trust",
-    },
-    "process": {
-        "test_docs_examples",
-        "test_access",
-        "test_robots_e2e",
-        "test_peers_smoke",
-        "test_live_tools",
-        "test_robots_fleet",
-        "test_robots_stops",
-        "test_api",
-        "test_api_launch",
-        "test_api_live",
-        "test_forkserver",
-        "test_foxglove",
-        "test_hub_door",
-        "test_leader",
-        "test_live_cli",
-        "test_live_hostile",
-        "test_leftovers",
-        "test_live_scale",
-        "test_messages",
-        "test_multihost",
-        "test_packaging",
-        "test_procs",
-        "test_recording_stream",
-        "test_rehearsal",
-        "test_remote_access",
-        "test_resilience",
-        "test_runtime",
-        "test_runtime_faults",
-        "test_safety_runs",
-        "test_startup",
-        "test_stop_at_startup",
-        "test_study",
-        "test_supervision_runtime",
-        "test_world_memory",
-    },
-}
-TIER_OF = {module: tier for tier, modules in TIERS.items() for module in modules}
+TIER_NAMES = ("pure", "seam", "zenoh", "process")  # a folder each, in this order of need
 
 
 def per_test_limit(config, item) -> float | None:
     """pytest-timeout's limit for `item` (its marker's, else --timeout / pyproject's), scaled as
-    SWARM_TEST_DEADLINE scales the waits (tests/deadlines.py): the default deadline (120 s)
+    SWARM_TEST_DEADLINE scales the waits (tests/support/deadlines.py): the default deadline (120 s)
     leaves the limits as they are; None when there is none."""
     marker = item.get_closest_marker("timeout")
     base = marker.args[0] if marker is not None and marker.args else marker.kwargs.get("timeout") if marker else None
@@ -127,22 +52,25 @@ def per_test_limit(config, item) -> float | None:
 
 
 def pytest_collection_modifyitems(config, items):
-    """Mark every test with its tier; a test file missing from TIERS is an error (say its tier).
-    With SWARM_TEST_DEADLINE set, every test's time limit grows with it (`per_test_limit`)."""
-    missing = set()
+    """Mark every test with its tier, the folder it is in; a test outside the tier folders, or
+    one that starts processes (`rt`) outside tests/process, is an error. With
+    SWARM_TEST_DEADLINE set, every test's time limit grows with it (`per_test_limit`)."""
+    misplaced = set()
     for item in items:
         if DEADLINE != DEFAULT:
             limit = per_test_limit(config, item)
             if limit is not None:
                 item.add_marker(pytest.mark.timeout(limit), append=False)
-        module = item.path.stem
-        tier = "process" if "rt" in getattr(item, "fixturenames", ()) else TIER_OF.get(module)
-        if tier is None:
-            missing.add(module)
+        tier = item.path.parent.name
+        if tier not in TIER_NAMES or ("rt" in getattr(item, "fixturenames", ()) and tier != "process"):
+            misplaced.add(f"{item.path.parent.name}/{item.path.name}")
             continue
         item.add_marker(getattr(pytest.mark, tier))
-    if missing:
-        raise pytest.UsageError(f"tests/conftest.py TIERS: no tier for {', '.join(sorted(missing))}")
+    if misplaced:
+        raise pytest.UsageError(
+            f"tests: {', '.join(sorted(misplaced))} not in its tier's folder "
+            f"(tests/{{{','.join(TIER_NAMES)}}}; a test that starts processes, `rt`, in tests/process)"
+        )
 
 
 # One leader (agents[0], id 1) and two followers in a fixed chain 2 -> 1, 3 -> 2.
@@ -234,7 +162,7 @@ def shipped_sim(tmp_path_factory):
 
 @pytest.fixture
 def rt(tmp_path):
-    """A private runtime dir and process tracker (tests/runtime_helpers.py) for one test; at
+    """A private runtime dir and process tracker (tests/support/runtime_helpers.py) for one test; at
     the end it kills what is left of the processes the test started and fails if there was any."""
     from runtime_helpers import Runtime
 

@@ -38,7 +38,7 @@ from swarm.world.sensing import (
     sensing_pairs,
 )
 
-# The states as module names (world/, tests/test_sim.py import them)
+# The states as module names (world/, tests/pure/test_sim.py import them)
 ACTIVE, COASTING, GONE = AgentState.ACTIVE, AgentState.COASTING, AgentState.GONE
 STEP_ONE_BY_ONE = 32  # agents: up to this many, `step` goes agent by agent (world/kinematics.py)
 

@@ -98,7 +98,7 @@ class World:
     # -- zenoh plumbing (callbacks: enqueue only) -----------------------------------------
     def _open(self, session: Any = None) -> None:
         """Declare the world's keys on `session` (default: a new hub on cfg.listen; tests
-        pass a fake one, tests/fakes.py); a failure closes the session again."""
+        pass a fake one, tests/support/fakes.py); a failure closes the session again."""
         self.session = session if session is not None else open_hub(self.cfg.listen, self.cfg.auth)
         try:
             self._declare(self.session)

@@ -2,7 +2,7 @@
  * nearest contact chosen (agents). Optional: swarm/contracts/fastpath.py loads it where it was
  * built (pip install on a machine with a C compiler) and falls back to the pure-Python
  * functions of swarm/contracts/wire.py and swarm/agents/selection.py otherwise. Those stay
- * the reference: tests/test_fastwire.py checks that both give the same bytes and the same
+ * the reference: tests/pure/test_fastwire.py checks that both give the same bytes and the same
  * objects, bit for bit.
  *
  * The layouts (little-endian, packed) are wire.SENSE_HEAD "<BBBBiqddddI" (52 bytes) and

@@ -3,7 +3,7 @@
 picks the nearest contact. Where it was not built, or with SWARM_PURE_PYTHON=1 in the
 environment (inherited by every process of a run), the pure-Python functions run instead:
 they are the reference, and both give the same bytes, objects and trajectories
-(tests/test_fastwire.py). `swarm --version` says which path this installation runs."""
+(tests/pure/test_fastwire.py). `swarm --version` says which path this installation runs."""
 
 from __future__ import annotations
 

@@ -5,7 +5,7 @@ physics and sensors from world/batch.py, every agent's brain from agents/batch.p
 in the order of world/engine.Engine's tick (frames -> commands -> switch events ->
 record -> integrate). Each member's result is a swarm.world.recording.RunResult like
 swarm.offline.sim.run_sim's, with the same trajectory (to the bit on this project's
-machines; tests/test_batch.py checks 1e-9 m), the same "switch" events with the same
+machines; tests/pure/test_batch.py checks 1e-9 m), the same "switch" events with the same
 reasons, and the same summary, "engine" excepted ("sim-batch").
 
 A member with a [safety] table has its own `SafetyWatch` (world/safety_watch.py), called as

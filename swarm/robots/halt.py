@@ -49,7 +49,7 @@ LEARN_TIMEOUT = 0.5  # s for the router's answer to the liveliness query (the ro
 TYPES = {TWIST.short: TWIST, TWIST_STAMPED.short: TWIST_STAMPED}
 # swarm.contracts.transport's client_config settings, written out: that module (with the run's
 # credentials, wire and TLS modules) took most of `swarm estop`'s start-up on a loaded machine
-# (tests/test_robots_stops.py checks that both give the same config)
+# (tests/process/test_robots_stops.py checks that both give the same config)
 LEASE_MS = 1000
 TLS = "transport/link/tls"
 RECORD_SUFFIX = ".robots"  # <runtime dir>/<run>.robots: a run's HaltPlan (RunRecord)

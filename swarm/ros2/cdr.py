@@ -1,5 +1,5 @@
 """CDR payloads of the four message types, with `struct` only (byte-identical to rosbags'
-`serialize_cdr`, checked in tests/test_ros2_wire.py).
+`serialize_cdr`, checked in tests/pure/test_ros2_wire.py).
 
 A payload is the 4-byte encapsulation header `00 01 00 00` (CDR little-endian, no options) and
 an XCDR1 body whose alignment counts from the body's first byte: a primitive aligns to its

@@ -2,7 +2,7 @@
 its keys and liveliness tokens.
 
 The RIHS01 hashes (REP 2016) are those rosbags' `Typestore.hash_rihs01` computes, identical in
-its Humble and Jazzy stores (tests/test_ros2_wire.py checks them). rmw_zenoh on Humble writes
+its Humble and Jazzy stores (tests/pure/test_ros2_wire.py checks them). rmw_zenoh on Humble writes
 the literal `TypeHashNotSupported` instead, so a Humble and a Jazzy node never meet on a topic.
 """
 
