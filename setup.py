@@ -2,7 +2,7 @@
 everything else is declared in pyproject.toml. Without a C compiler (or Python's headers) the
 build says so in one line (pip shows it with -v) and goes on; swarm then runs its pure-Python
 path, which gives the same bytes and the same trajectories (swarm/contracts/fastpath.py,
-tests/test_fastwire.py). SWARM_NO_COMPILE=1 skips the build on purpose."""
+tests/pure/test_fastwire.py). SWARM_NO_COMPILE=1 skips the build on purpose."""
 
 from __future__ import annotations
 
