@@ -15,7 +15,7 @@ from __future__ import annotations
 from enum import IntEnum, StrEnum
 from typing import ClassVar
 
-__all__ = ["AgentState", "Coded", "EventKind", "ExitCode", "Phase", "SwitchReason", "signal_exit"]
+__all__ = ["AgentState", "Coded", "EventKind", "ExitCode", "FollowState", "Phase", "SwitchReason", "signal_exit"]
 
 
 class ExitCode(IntEnum):
@@ -104,3 +104,20 @@ class Phase(StrEnum):
     SHADOW = "shadow"  # followers: steering by out without a path to a leader
     SEARCH = "search"  # followers (sticky): nobody to steer by, flying a search pattern
     LOST = "lost"  # followers: nobody to steer by and no search
+
+
+class FollowState(StrEnum):
+    """A follower's selection state under the sticky rule (agents/selection.py; the states and
+    their transitions: docs/design/selection.md#states), reported with its command. Its
+    position in FOLLOW_STATES (swarm/contracts/wire.py) is its wire code."""
+
+    NONE = "none"  # leaders, and followers under the other rules (fixed, nearest, rooted)
+    ACQUIRE = "acquire"  # no commitment yet: waiting for its nearest agent to root, tracking the nearest rooted one
+    KEEP = "keep"  # committed: steering by its out-neighbour, advertising a path through it
+    HOLD = "hold"  # its out-neighbour is sensed but lost its path: steering by it, advertising none
+    COAST = "coast"  # its out-neighbour left the sensor's reach at the edge: steering by a prediction
+    SHADOW = "shadow"  # steering by an agent it may not commit to yet, advertising none
+    SEARCH = "search"  # nobody to steer by: flying the search pattern
+    LOST = "lost"  # nobody to steer by and no search
+    LATE = "late"  # joined a run under way: choosing nobody until its earlier life is forgotten
+
