@@ -225,6 +225,7 @@ class WorldCore:
         if got.pairs is None:
             if self.uses_grid():
                 sens = self.scenario.sensing
+                assert sens.range is not None  # (uses_grid: a sensing range)
                 got.pairs = sensing_pairs(self.x, self.y, self.heading, self.present_mask(), sens.range, sens.fov)
             else:
                 s, bearing, rng = self.sensing()

@@ -110,7 +110,7 @@ class FlagsAsFlags:
     empty one (what its plain help shows)."""
 
     def get_params(self, ctx):
-        params = super().get_params(ctx)  # (a mixin: the class after it in the MRO has it)
+        params = super().get_params(ctx)  # type: ignore[misc]  # (a mixin: the class after it in the MRO has it)
         for p in params:
             if getattr(p, "is_flag", False) and p.metavar is None:
                 p.metavar = ""
