@@ -120,4 +120,3 @@ class FollowState(StrEnum):
     SEARCH = "search"  # nobody to steer by: flying the search pattern
     LOST = "lost"  # nobody to steer by and no search
     LATE = "late"  # joined a run under way: choosing nobody until its earlier life is forgotten
-
