@@ -13,7 +13,8 @@ then the agents, then anything left in the group. Each child's
 output goes to `<out>/logs/`. The agents start once the world has said that it listens
 (its own word on a pipe, swarm/contracts/startup.py), never after a fixed wait.
 
-It supervises: an agent process that exits by itself is reported live, sent to the world
+It supervises (swarm/runtime/oversight.py: agent exits reported, the world's scripted process
+faults carried out): an agent process that exits by itself is reported live, sent to the world
 (an `agent_exit` request on the world's supervise key, which only the launcher's own
 `supervisor` identity may use: the world records a `crash` or `exit` event, see
 swarm/runtime/supervision.py) and listed at the end; one that exits before the run started, or a
@@ -45,9 +46,10 @@ from swarm.contracts.startup import ENV_READY_FD, ReadyWait
 from swarm.contracts.transport import default_endpoint, dial_endpoint, open_client
 from swarm.contracts.vocabulary import EventKind, ExitCode
 from swarm.runtime.forks import AgentStarter
+from swarm.runtime.oversight import Oversight
 from swarm.runtime.procs import Group, Reaper, wait_until
 from swarm.runtime.progress import AddedSpec, added_specs, truth_progress
-from swarm.runtime.supervision import AgentExitReport, agent_exit, send_report, world_failure
+from swarm.runtime.supervision import AgentExitReport
 
 # The world says when it listens (swarm/contracts/startup.py); these bounds are last resorts
 # only, for a world that neither gets there nor exits, and for our own session after that.
@@ -76,7 +78,7 @@ class UpConfig:
     robots: Path | None = None  # the robots file: the world drives ROS 2 robots (--robots, realtime only)
 
 
-class Launcher:
+class Launcher(Oversight):
     def __init__(self, cfg: UpConfig, say: Callable[[str], None] = _say):
         self.cfg = cfg
         self.say = say
@@ -342,78 +344,6 @@ class Launcher:
         if self.failed or self.world is None:
             return ExitCode.FAILED  # the world failed
         return self.world.returncode
-
-    # -- supervision --------------------------------------------------------------------------
-    def supervise(self, session) -> bool:
-        """Report agent processes that exited by themselves; True when the run must stop (an
-        agent could not start). `session` None: the world has ended, nothing is sent."""
-        for aid, p in self.procs:
-            code = p.poll()
-            if code is None or p.pid in self.seen_exit:
-                continue
-            self.seen_exit.add(p.pid)
-            if code == ExitCode.OK or p.pid in self.scripted:
-                continue  # the end of the run, or a scripted fault (the world has its event)
-            r = agent_exit(aid, p.pid, code, self.logs / f"agent-{aid}.log", before_start=not self.started)
-            if session is None and not r.crash:
-                continue  # after the world ended: agents that saw it go are no news
-            self.exits.append(r)
-            if r.before_start and self.world_exit_code() is None:
-                self.failure = r.line()  # said once, by `swarm up` at the end
-                self.failed = True
-            else:
-                self.say(f"swarm up: {r.line()}")
-        if session is not None:
-            for r in self.exits:
-                if not r.sent and not send_report(session, self.cfg.run, r):
-                    break  # the world does not answer now: again on the next round
-        return self.failed
-
-    def crashed(self) -> list[AgentExitReport]:
-        return [r for r in self.exits if r.crash]
-
-    def world_failure(self) -> str:
-        """One line: why the world exited with a failure (the last line of its log)."""
-        code = self.world.returncode if self.world is not None and self.world.returncode is not None else -1
-        return world_failure(code, self.started, self.logs / "world.log")
-
-    def carry_out_faults(self, session) -> None:
-        """Scripted process faults the world asks for (it holds its clock meanwhile)."""
-        while self.notices:
-            try:
-                msg = wire.decode_control(self.notices.pop(0))
-                if isinstance(msg, int):
-                    continue  # the end of the run: the world process exits by itself
-                if msg.agent not in self.cfg.scenario.ids:
-                    raise wire.WireError(f"control: fault for agent {msg.agent}, not in the scenario")
-            except wire.WireError as e:  # malformed (or forged): dropped (docs/reference/protocol.md#versioning)
-                self.dropped_notices += 1
-                if time.monotonic() - self.dropped_noted > 1.0:  # at most one line a second
-                    self.dropped_noted = time.monotonic()
-                    self.say(f"swarm up: ignored a malformed fault notice ({e}; {self.dropped_notices} so far)")
-                continue
-            index, kind, aid = msg.index, msg.kind, msg.agent
-            p = self.agents.get(aid)
-            running = p is not None and p.poll() is None
-            if kind == "restart":
-                if not running:
-                    self.start_agent(aid)
-            elif p is not None and running and kind in ("kill", "freeze", "thaw"):
-                sig = {"kill": signal.SIGKILL, "freeze": signal.SIGSTOP, "thaw": signal.SIGCONT}[kind]
-                if kind == "kill":
-                    self.scripted.add(p.pid)  # its exit is the fault's, not a crash
-                try:
-                    os.kill(p.pid, sig)
-                except ProcessLookupError:
-                    pass
-            if session is not None:
-                list(
-                    session.get(
-                        wire.world_supervise_key(self.cfg.run),
-                        timeout=2.0,
-                        payload=wire.encode_admin("fault_done", index=index),
-                    )
-                )
 
     def stop(self, signum: int = signal.SIGTERM) -> None:
         """Stop the run as signal `signum` asks (`run` returns soon after, the world told with
