@@ -7,7 +7,8 @@ same starts): uniform jitter of the agents' positions (+-`positions` m), heading
 a leader's orbit radius scaled with its speed so its angular rate stays); the run's own
 `[run] seed` is the study's seed (it drives the random faults: loss, noise).
 
-Per setting (one per combination of the lists): gains C1, C2, `[law.params]` entries,
+Per setting (one per combination of the lists): gains C1, C2, `[law.params]` entries, the
+sticky rule's selection tuning (`[sensing.tuning]` fields, axes "tuning.<field>"),
 sensing range and field of view, the safety filter on or off and its gamma (a scenario with
 a [safety] table: what safety costs a law, docs/design/safety.md), and the fault
 parameters: the noise std, loss probability and delay of the scenario's noise / loss /
@@ -39,7 +40,7 @@ from swarm.contracts.scenario import Scenario, parse_scenario
 from swarm.contracts.vocabulary import EventKind
 from swarm.offline.batch import refusal, run_batch
 from swarm.offline.sim import run_sim
-from swarm.study.swarms import SAFETY_COLUMNS, is_true, run_outcome, safety_totals
+from swarm.study.swarms import SAFETY_COLUMNS, STATE_COLUMNS, is_true, run_outcome, safety_totals, state_totals
 
 # the axes a setting may sweep, in the order of the CSV's columns ("param.<name>" for [law.params])
 AXES = ("c1", "c2", "range", "fov", "noise", "loss", "delay", "safety", "gamma")
@@ -67,13 +68,18 @@ class Template:
 
 @dataclass(frozen=True)
 class Setting:
-    """One combination of the swept values: (axis, value) pairs, axes as in AXES or
-    "param.<name>"."""
+    """One combination of the swept values: (axis, value) pairs, axes as in AXES,
+    "param.<name>" or "tuning.<name>"."""
 
     values: tuple[tuple[str, float], ...] = field(default_factory=tuple)
 
     def label(self) -> str:
         return " ".join(f"{k.removeprefix('param.')}={v:g}" for k, v in self.values) or "template"
+
+
+def _tuned(sensing: dict, name: str, value: float) -> dict:
+    """[sensing] with [sensing.tuning]'s `name` set to `value` (swarm/contracts/tuning.py)."""
+    return {**sensing, "tuning": {**(sensing.get("tuning") or {}), name: value}}
 
 
 def settings_of(sweeps: Mapping[str, Sequence[float]]) -> list[Setting]:
@@ -127,6 +133,8 @@ def varied(template: Template, setting: Setting, jitter: Jitter, seed: int) -> S
             d["safety"] = {**d["safety"], name: bool(v) if key == "safety" else v}
         elif key.startswith("param."):
             law["params"][key.removeprefix("param.")] = v
+        elif key.startswith("tuning."):
+            d["sensing"] = _tuned(d["sensing"], key.removeprefix("tuning."), v)
         else:
             raise ValueError(f"unknown axis {key!r}")
     d["law"], d["faults"] = law, faults
@@ -242,6 +250,7 @@ def columns(settings: Sequence[Setting]) -> list[str]:
         "losses",
         "loss_switches_max",
         *SAFETY_COLUMNS,
+        *STATE_COLUMNS,
         "crashes",
         "wall_s",
     ]
@@ -275,6 +284,7 @@ def summarise(rows: list[dict], settings: Sequence[Setting]) -> list[dict]:
                 "switches_max": max(per_agent, default=0),
                 "crashes": sum(int(r.get("crashes", 0)) for r in rs),
                 **safety_totals(rs),
+                **state_totals(rs),
             }
         )
     return out

@@ -27,6 +27,7 @@ from dataclasses import asdict, dataclass, fields
 import numpy as np
 
 from swarm.contracts.scenario import Scenario, parse_scenario
+from swarm.contracts.vocabulary import FollowState
 from swarm.offline.sim import run_sim
 from swarm.world.core import WorldCore
 from swarm.world.metrics import switch_ticks
@@ -147,7 +148,10 @@ def run_swarm(job: tuple[SwarmSetting, int]) -> dict:
 
 def swarm_row(setting: SwarmSetting, seed: int, cut: bool, res, wall: float) -> dict:
     """The CSV row of one run's RunResult (either engine's)."""
-    return {**asdict(setting), **asdict(SwarmRow(seed=seed, cut_off=cut, wall_s=wall, **run_outcome(res)))}
+    outcome = run_outcome(res)
+    states = {k: outcome.pop(k) for k in STATE_COLUMNS}
+    row = {**asdict(setting), **asdict(SwarmRow(seed=seed, cut_off=cut, wall_s=wall, **outcome))}
+    return {**{k: v for k, v in row.items() if k != "wall_s"}, **states, "wall_s": wall}
 
 
 def run_outcome(res) -> dict:
@@ -174,6 +178,7 @@ def run_outcome(res) -> dict:
         "losses": sum(v.get("losses", 0) for v in fol),
         "loss_switches_max": max((v.get("loss_switches_max", 0) for v in fol), default=0),
         **safety_outcome(summary),
+        **state_outcome(summary),
     }
 
 
@@ -187,6 +192,33 @@ def safety_outcome(summary: dict) -> dict:
     agent-ticks with no safe command; None each without a [safety] table."""
     safety = summary.get("safety") or {}
     return {k: safety.get(k) for k in SAFETY_COLUMNS}
+
+
+# s per follower in each selection state (swarm.contracts.vocabulary.FollowState), from summary.json's
+# per-agent `state_s` ({state: s}); nan where the run's summary has none
+STATE_COLUMNS = tuple(f"state_s_{s.value}" for s in FollowState)
+
+
+def state_outcome(summary: dict) -> dict:
+    """A run's time in each selection state for its row: the mean over its followers of
+    summary.json's `agents.<id>.state_s` (s per follower; a state a follower never was in counts
+    0); nan each when no follower has `state_s` (an engine or version that does not count them)."""
+    fol = [v for v in summary.get("agents", {}).values() if v.get("role") == "follower"]
+    counted = [v["state_s"] for v in fol if isinstance(v.get("state_s"), dict)]
+    if not counted:
+        return dict.fromkeys(STATE_COLUMNS, math.nan)
+    return {f"state_s_{s.value}": sum(float(c.get(s.value, 0.0)) for c in counted) / len(counted) for s in FollowState}
+
+
+def state_totals(rows: list[dict]) -> dict:
+    """A setting's time per selection state: the mean over its runs of each run's per-follower
+    mean (runs without the figures left out); {} when no run had them."""
+    out = {}
+    for k in STATE_COLUMNS:
+        vals = [float(r[k]) for r in rows if r.get(k) not in (None, "") and math.isfinite(float(r[k]))]
+        if vals:
+            out[k] = sum(vals) / len(vals)
+    return out
 
 
 def safety_totals(rows: list[dict]) -> dict:
@@ -211,7 +243,8 @@ def swarm_jobs(settings: Iterable[SwarmSetting], seeds: Iterable[int]) -> list[t
 
 
 def swarm_columns() -> list[str]:
-    return [f.name for f in fields(SwarmSetting)] + [f.name for f in fields(SwarmRow)]
+    outcome = [f.name for f in fields(SwarmRow) if f.name != "wall_s"]
+    return [f.name for f in fields(SwarmSetting)] + outcome + [*STATE_COLUMNS, "wall_s"]
 
 
 def setting_of(row: dict) -> tuple:
@@ -251,6 +284,7 @@ def summarise_swarms(rows: list[dict]) -> list[dict]:
                 "losses": sum(int(r.get("losses", 0)) for r in rs),
                 "loss_switches_max": max((int(r.get("loss_switches_max", 0)) for r in rs), default=0),
                 **safety_totals(rs),
+                **state_totals(rs),
                 **{k: getattr(setting, k) for k in ("n", "leaders", "selection", "range", "fov")},
             }
         )

@@ -1,0 +1,162 @@
+"""swarm.study (swarm/study/api.py, plan.py, sweeps.py): the Python API of `swarm study`, in this
+process (workers=1): the CLI's rows and files, an executor of one's own, the grid's checks, the
+time per selection state."""
+
+from __future__ import annotations
+
+import csv
+import math
+import re
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+import swarm
+from swarm.cli.main import app
+from swarm.contracts.errors import UsageError
+from swarm.study.swarms import STATE_COLUMNS, state_outcome, state_totals
+from swarm.study.sweeps import grid_axes, tuning_fields
+
+ROOT = Path(__file__).resolve().parents[2]
+SMALL = dict(n=4, leaders=1, sensing_range=[math.inf, 40.0], seeds=2, duration=6.0, dt=0.1)
+
+
+def read(path: Path) -> list[dict]:
+    with path.open() as f:
+        return list(csv.DictReader(f))
+
+
+def without_wall(rows: list[dict]) -> list[dict]:
+    return sorted(
+        ({k: "" if v is None else str(v) for k, v in r.items() if k != "wall_s"} for r in rows),
+        key=lambda r: str(sorted(r.items())),
+    )
+
+
+def test_swarm_study_is_reached_from_import_swarm():
+    assert "study" in dir(swarm)
+    assert swarm.study.run_scenario is swarm.study.api.run_scenario
+
+
+def test_run_swarms_writes_the_clis_files_and_rows(tmp_path):
+    r = swarm.study.run_swarms(**SMALL, workers=1, out=tmp_path / "api", plot=False, progress=False)
+    assert r.kind == "swarms" and not r.interrupted and r.engine == "batch"
+    assert len(r.rows) == 4 and len(r.summary) == 2
+    assert without_wall(read(r.runs_csv)) == without_wall(r.rows)
+    res = CliRunner().invoke(
+        app,
+        ["study", "swarms", "--n", "4", "--leaders", "1", "--range", "inf,40", "--seeds", "2", "--duration", "6"]
+        + ["--dt", "0.1", "-j", "1", "--no-plot", "--out", str(tmp_path / "cli")],
+    )
+    assert res.exit_code == 0, res.output
+    assert without_wall(read(tmp_path / "cli" / "runs.csv")) == without_wall(read(r.runs_csv))
+    assert read(tmp_path / "cli" / "summary.csv") == read(r.summary_csv)
+
+
+def test_an_executor_of_ones_own_runs_the_same_jobs(tmp_path):
+    seen = []
+
+    def serial(worker, jobs, on_row):
+        for job in jobs:
+            seen.append(job)
+            rows = worker(job)
+            for row in rows if isinstance(rows, list) else [rows]:
+                on_row(row)
+
+    plan = swarm.study.plan_swarms(**SMALL, workers=1)
+    mine = swarm.study.execute(plan, tmp_path / "mine", serial, progress=False)
+    local = swarm.study.execute(plan, tmp_path / "local", swarm.study.local_executor(1), progress=False)
+    assert seen == plan.jobs and len(mine.rows) == plan.runs == 4
+    assert without_wall(mine.rows) == without_wall(local.rows)
+
+
+def test_run_scenario_sweeps_a_law_parameter_and_names_its_column(tmp_path):
+    r = swarm.study.run_scenario(
+        ROOT / "scenarios" / "case2.toml",
+        grid={"range": [math.inf], "c1": [1.0, 2.0]},
+        seeds=1,
+        duration=2.0,
+        workers=1,
+        out=tmp_path / "s",
+        plot=False,
+        progress=False,
+    )
+    header = next(csv.reader(r.runs_csv.open()))
+    assert header[:4] == ["setting", "c1", "range", "seed"]  # the axes in their order, whatever the grid's
+    assert sorted(row["setting"] for row in r.rows) == ["c1=1 range=inf", "c1=2 range=inf"]
+
+
+@pytest.mark.parametrize(
+    "grid, message",
+    [
+        ({"c3": [1]}, "'c3' is not an axis of a scenario study"),
+        ({"noise": [-1]}, "grid['noise']: -1 is out of range"),
+        ({"safety": [0.5]}, "0 (off, measuring only) or 1 (on)"),
+        ({"param.1k": [1]}, "'1k' is not a parameter name"),
+        ({"c1": [0]}, "must be a positive finite number"),
+    ],
+)
+def test_a_bad_grid_is_refused_naming_the_key(grid, message):
+    with pytest.raises(UsageError, match=None) as e:
+        grid_axes(grid)
+    assert message in str(e.value)
+
+
+def test_a_tuning_name_that_is_no_field_names_the_valid_fields():
+    fields = tuning_fields()
+    with pytest.raises(UsageError) as e:
+        grid_axes({"tuning.nope": [1.0]}, {"tuning.nope": "--param tuning.nope"})
+    if fields is None:  # this version has no [sensing.tuning]
+        assert "--param tuning.nope: the selection tuning ([sensing.tuning]) is not available" in str(e.value)
+    else:
+        assert "'nope' is not a field of the selection tuning" in str(e.value)
+        assert all(f in str(e.value) for f in fields)
+
+
+def test_the_cli_refuses_a_tuning_name_that_is_no_field(tmp_path):
+    res = CliRunner().invoke(
+        app,
+        [
+            "study",
+            "scenario",
+            str(ROOT / "scenarios" / "case2.toml"),
+            "--param",
+            "tuning.nope=1,2",
+            "--out",
+            str(tmp_path / "x"),
+        ],
+    )
+    assert res.exit_code == 2, res.output
+    assert "--param tuning.nope" in res.output and "Traceback" not in res.output
+    assert not (tmp_path / "x").exists()
+
+
+def test_time_per_state_is_the_mean_over_followers_and_nan_without_it():
+    summary = {
+        "agents": {
+            "1": {"role": "leader"},
+            "2": {"role": "follower", "state_s": {"keep": 8.0, "coast": 2.0}},
+            "3": {"role": "follower", "state_s": {"keep": 4.0, "search": 6.0}},
+        }
+    }
+    got = state_outcome(summary)
+    assert got["state_s_keep"] == 6.0 and got["state_s_coast"] == 1.0 and got["state_s_search"] == 3.0
+    assert got["state_s_hold"] == 0.0 and set(got) == set(STATE_COLUMNS)
+    absent = state_outcome({"agents": {"2": {"role": "follower"}}})
+    assert all(math.isnan(v) for v in absent.values())
+    rows = [got, absent, {k: "" for k in STATE_COLUMNS}]  # a run with the figures, one without, a CSV gap
+    assert state_totals(rows)["state_s_keep"] == 6.0
+    assert state_totals([absent]) == {}
+
+
+def test_the_python_api_pages_study_example_runs(tmp_path, monkeypatch, capsys):
+    """docs/reference/api.md#study's block, as written (its output folder moved to tmp_path)."""
+    text = (ROOT / "docs" / "reference" / "api.md").read_text()
+    block = re.search(r"```python\n(.*?)```", text[text.index("## Studies {#study}") :], re.S)
+    assert block, "no python block in the Studies section"
+    monkeypatch.chdir(ROOT)
+    exec(compile(block[1].replace('"runs/', f'"{tmp_path}/'), "api.md#study", "exec"), {})
+    out = capsys.readouterr().out
+    assert "c1=1 range=inf 2 " in out and "4 rows" in out
+    assert (tmp_path / "study-example" / "summary.csv").exists()
