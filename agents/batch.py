@@ -37,9 +37,16 @@ from swarm.agents import batch_maths as bm
 from swarm.agents.batch_leader import BatchLeaders
 from swarm.agents.batch_select import NONE, select
 from swarm.agents.batch_sticky import BatchSticky
+from swarm.agents.brain import follow_state
 from swarm.agents.laws import bearing_law, loiter_rate
+from swarm.agents.sticky_follower import StickyFollower
 from swarm.contracts.laws import GAINS, resolve_law
-from swarm.contracts.vocabulary import Phase
+from swarm.contracts.vocabulary import FollowState, Phase
+from swarm.contracts.wire import FOLLOW_CODE, FOLLOW_STATES
+
+# the follow state of a sticky follower whose tick was a plain keep (BatchSticky.keep): StickyFollower
+# says keep after such a step (until it has states at all: none)
+_KEEP = FOLLOW_CODE[FollowState.KEEP] if "state" in getattr(StickyFollower, "__slots__", ("state",)) else 0
 
 
 @dataclass
@@ -47,6 +54,7 @@ class BatchDecision:
     u: np.ndarray  # (B, N) commanded turn rates (rad/s)
     out: np.ndarray  # (B, N) chosen out-neighbour column, -1 none (leaders, lost followers)
     hops: np.ndarray  # (B, N) advertised hops, -1 none
+    follow: np.ndarray  # (B, N) follow state codes (wire.FOLLOW_STATES; 0 none: leaders, other rules)
 
 
 def vectorised(law: object) -> bool:
@@ -106,6 +114,7 @@ class BatchBrains:
         self.nonfinite = np.zeros(shape, dtype=np.int64)
         self.rooted = np.ones(shape, dtype=bool)  # last tick: Choice.rooted (the phases)
         self.searching = np.zeros(shape, dtype=bool)  # last tick: flying a search circle
+        self.follow = np.zeros(shape, dtype=np.int8)  # last tick: Decision.follow, as wire codes
 
     # -- selection ------------------------------------------------------------------------------
     def _choose(self, frames) -> tuple[np.ndarray, np.ndarray]:
@@ -155,6 +164,21 @@ class BatchBrains:
             for b, row in enumerate(zip(self.out.tolist(), self.rooted.tolist(), self.searching.tolist()))
         ]
 
+    def follow_states(self) -> list[list[str]]:
+        """Decision.follow of every agent (B lists of N) at the last tick decided."""
+        names = [str(s) for s in FOLLOW_STATES]
+        return [[names[c] for c in row] for row in self.follow.tolist()]
+
+    def _follow(self, kept: np.ndarray) -> np.ndarray:
+        """The follow state codes of this tick (sticky): keep where it kept, the StickyFollower's
+        own state for those it stepped, none for leaders."""
+        assert self.sticky is not None
+        follow = np.where(kept, np.int8(_KEEP), np.int8(0)).astype(np.int8)
+        agents = self.sticky.agents
+        for b, i in np.argwhere(self.follower & ~kept).tolist():
+            follow[b, i] = FOLLOW_CODE[follow_state(agents[(b, i)])]
+        return follow
+
     # -- one tick -------------------------------------------------------------------------------
     def decide(self, tick: int, frames) -> BatchDecision:
         """AgentBrain.decide for every agent of every member on this tick's frames."""
@@ -179,6 +203,7 @@ class BatchBrains:
             # everybody who did not simply keep: one by one, written into choice, u, hops
             self.searching = np.zeros(u.shape, dtype=bool)
             self.sticky.rest(tick, frames, self.follower & ~kept, self.last_u, choice, u, hops, rooted, self.searching)
+            self.follow = self._follow(kept)
         bad = self.follower & ~np.isfinite(u)
         if bad.any():  # a NaN or inf turn rate: counted, the last one held
             self.nonfinite += bad
@@ -198,4 +223,4 @@ class BatchBrains:
             self.feasible = np.where(rooted_now, hops, self.feasible)
             self.unrooted = np.where(rooted_now, 0, self.unrooted + 1)
             self.hops = hops
-        return BatchDecision(u, choice, hops)
+        return BatchDecision(u, choice, hops, self.follow)

@@ -19,7 +19,7 @@ from swarm.agents.selection import select
 from swarm.agents.sticky_follower import StickyFollower
 from swarm.contracts.frames import SensorFrame
 from swarm.contracts.observation import Observation
-from swarm.contracts.vocabulary import Phase
+from swarm.contracts.vocabulary import FollowState, Phase
 
 LEADER_PHASES = (Phase.ARC1, Phase.ARC2, Phase.ORBIT)
 _new = tuple.__new__
@@ -36,6 +36,13 @@ class Decision(NamedTuple):
     # the search pattern), LOST (other rules: nobody to steer by, loitering)
     fallback: bool = False  # pinned out-neighbour not sensed, nearest used instead
     hops: int | None = None  # hops to a leader it advertises (leaders 0; None: no path known)
+    follow: str = FollowState.NONE  # a FollowState: the sticky follower's selection state after this
+    # tick (NONE: leaders, followers under the other rules); sent with the command, recorded
+
+
+def follow_state(sticky: StickyFollower) -> str:
+    """A sticky follower's FollowState after its last step (agents/sticky_follower.py)."""
+    return getattr(sticky, "state", FollowState.NONE)
 
 
 def saturate(u: float, limit: float | None) -> float:
@@ -135,10 +142,13 @@ class AgentBrain:
         self.out = choice.out
         c = choice.contact
         u = self._command(frame, c, search)
+        follow = FollowState.NONE if self.sticky is None else follow_state(self.sticky)
         if c is None:  # nobody (rooted) in sight: the law searches (sticky) or loiters
-            return Decision(frame.tick, u, None, Phase.LOST if search is None else Phase.SEARCH, choice.fallback)
+            phase = Phase.LOST if search is None else Phase.SEARCH
+            return Decision(frame.tick, u, None, phase, choice.fallback, None, follow)
         hops = c.hops + 1 if choice.rooted and 0 <= c.hops < self.max_hops else None
-        return Decision(frame.tick, u, c.id, Phase.TRACK if choice.rooted else Phase.SHADOW, choice.fallback, hops)
+        phase = Phase.TRACK if choice.rooted else Phase.SHADOW
+        return Decision(frame.tick, u, c.id, phase, choice.fallback, hops, follow)
 
     def _below(self) -> int | None:
         """Rooted rule: the hop count a new out-neighbour must beat (None: anyone rooted).

@@ -137,6 +137,7 @@ class AgentNode:
             "rooted": hops is not None,
             "hops": hops,
             "phase": None if d is None else d.phase,
+            "follow": None if d is None else d.follow,  # a FollowState (docs/reference/protocol.md#status)
             "fallback": False if d is None else d.fallback,
             "pinned": self.spec.follow,
             "u": None if d is None else d.u,
@@ -154,7 +155,7 @@ class AgentNode:
     def status_key(self) -> tuple:
         """What others rely on in the status: a change is published at once."""
         d = self.last
-        return (None, None, False, self.hops()) if d is None else (d.out, d.phase, d.fallback, d.hops)
+        return (None, None, False, self.hops(), None) if d is None else (d.out, d.phase, d.fallback, d.hops, d.follow)
 
     def maybe_publish_status(self, force: bool = False) -> None:
         """Publish on change of what others rely on, and every STATUS_PERIOD s anyway."""
@@ -197,7 +198,7 @@ class AgentNode:
 
     def on_sense(self, frame) -> bool:
         """Answer `frame` (not an older or repeated one); True when what the status says
-        changed (out-neighbour, phase, fallback or hops)."""
+        changed (out-neighbour, phase, fallback, hops or follow state)."""
         if frame.tick <= self.last_tick:
             if frame.tick == self.last_tick and self.last_cmd is not None:
                 self.cmd_pub.put(self.last_cmd)  # sent again by a world after its stall: the same answer
@@ -211,7 +212,7 @@ class AgentNode:
                 f"[agent {self.id}] tick {frame.tick}: the law {self.conf.law_names()[0]!r} returned "
                 f"{brain.last_nonfinite}; the last turn rate is held ({self.nonfinite()} so far)"
             )
-        self.last_cmd = wire.encode_cmd_fields(self.id, frame.tick, d.u, d.out, d.phase, d.hops, self.key)
+        self.last_cmd = wire.encode_cmd_fields(self.id, frame.tick, d.u, d.out, d.phase, d.hops, self.key, d.follow)
         self.cmd_pub.put(self.last_cmd)
         self.commands += 1
         self.last_tick = frame.tick
@@ -226,7 +227,7 @@ class AgentNode:
             )
             _log(f"[agent {self.id}] tick {frame.tick}: out-neighbour {last.out} -> {d.out} ({why})")
             return True
-        return d.phase != last.phase or d.fallback != last.fallback or d.hops != last.hops
+        return d.phase != last.phase or d.fallback != last.fallback or d.hops != last.hops or d.follow != last.follow
 
     def on_world(self, kind) -> None:
         """The world's token came or went (agents/world_link.py says what that means)."""

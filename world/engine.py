@@ -36,7 +36,8 @@ import numpy as np
 
 from swarm.contracts.frames import SensorFrame
 from swarm.contracts.scenario import Scenario
-from swarm.contracts.vocabulary import EventKind
+from swarm.contracts.vocabulary import EventKind, FollowState
+from swarm.contracts.wire import FOLLOW_CODE
 from swarm.world.core import ACTIVE, WorldCore
 from swarm.world.faults import FaultPlan, fault_event
 from swarm.world.plant import Plant
@@ -87,6 +88,8 @@ class Engine:
         )
         self.events: list[dict] = []
         self.out = np.full(len(scenario.agents), -1, dtype=np.int64)  # chosen out-neighbour ids
+        # each agent's follow state as its last latched command said it (wire.FOLLOW_STATES codes)
+        self.follow = np.zeros(len(scenario.agents), dtype=np.int8)
         self.hops_sent = self.core.hops.copy()  # hop counts this tick's frames advertise
         self.missed_now = 0  # live agents whose command is held at this tick
         self.wall_clock = wall_clock
@@ -158,6 +161,7 @@ class Engine:
             return None
         state = self.core.drop(agent)
         self.out[k] = -1
+        self.follow[k] = 0
         if not quiet:
             self.event(EventKind.DROP, agent, reason, now=state)
         return state
@@ -177,6 +181,7 @@ class Engine:
         self.core.add_agent(spec)
         self.rec.add_agent(self.core.scenario)
         self.out = np.append(self.out, -1)
+        self.follow = np.append(self.follow, np.int8(0))
         if self.safety is not None:
             self.safety.add_agent(spec.id)
 
@@ -207,10 +212,12 @@ class Engine:
         self.hops_sent = self.core.hops.copy()
 
     # -- 3. commands and 4. events ---------------------------------------------------------------
-    def command(self, agent: int, tick: int, u: float, out: int | None, hops: int | None) -> str:
+    def command(
+        self, agent: int, tick: int, u: float, out: int | None, hops: int | None, follow: str = FollowState.NONE
+    ) -> str:
         """Agent `agent`'s answer to its frame of `tick` (this tick): lost on the way by the
         fault plan (its last command is held), refused when not finite, or latched; a new
-        out-neighbour is a "switch" event."""
+        out-neighbour is a "switch" event. follow: its FollowState, recorded with its out."""
         if self.network and tick == self.core.tick and self.fault_plan.command_lost(tick, agent):
             self.missed_now += 1
             return LOST
@@ -218,6 +225,7 @@ class Engine:
         if not c.set_command(agent, u, hops):
             return REFUSED
         k = c.index[agent]
+        self.follow[k] = FOLLOW_CODE[follow]
         new = -1 if out is None else out
         was = self.out.item(k)  # a Python int: numpy scalars are slow to compare
         if new != was:
@@ -248,7 +256,7 @@ class Engine:
             alive, present = c.alive_mask(), c.present_mask()
             u, speed = self.safety.command(c.x, c.y, c.heading, c.speed, u, c.limit, present, alive, self.event)
             self.safety.measure(c.tick, c.x, c.y, present, alive, u, c.limit)
-        self.rec.record(c.tick, c.time, c.x, c.y, c.heading, u, self.out, c.alive_mask(), self.missed_now)
+        self.rec.record(c.tick, c.time, c.x, c.y, c.heading, u, self.out, c.alive_mask(), self.missed_now, self.follow)
         self.missed_now = 0
         if observe is not None:
             observe(u)
@@ -274,7 +282,7 @@ class Engine:
             nan = np.full(len(c.ids), np.nan)
             if self.safety is not None:
                 self.safety.measure(c.tick, c.x, c.y, c.present_mask(), c.alive_mask(), nan, c.limit)
-            self.rec.record(c.tick, c.time, c.x, c.y, c.heading, nan, self.out, c.alive_mask())
+            self.rec.record(c.tick, c.time, c.x, c.y, c.heading, nan, self.out, c.alive_mask(), 0, self.follow)
 
     def result(self, extra: dict, agent_extra: dict | None = None) -> RunResult:
         """The run's results; with [safety], its figures in summary.json ("safety", and each

@@ -140,7 +140,7 @@ class Inbox:
         if cmd.tick <= b.last_cmd_tick:
             st.ignored += 1  # duplicate or late
             return
-        done = st.engine.command(aid, cmd.tick, cmd.u, cmd.out, cmd.hops)
+        done = st.engine.command(aid, cmd.tick, cmd.u, cmd.out, cmd.hops, cmd.follow)
         if done == LOST:  # a network fault lost it: its last command is held
             b.last_cmd_tick = cmd.tick
             b.missed += 1

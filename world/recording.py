@@ -22,7 +22,16 @@ import numpy as np
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.vocabulary import EventKind
 from swarm.world.metrics import agent_metrics, converged, recovery, relative_errors, switch_ticks
-from swarm.world.results_stream import PER_TICK, Metrics, Scan, scan, streamed, write_npz
+from swarm.world.results_stream import (
+    PER_TICK,
+    Metrics,
+    Scan,
+    follow_counts,
+    scan,
+    state_seconds,
+    streamed,
+    write_npz,
+)
 from swarm.world.stream import RECORDING_FILE, Recording, RecordingError, StreamWriter
 
 TRAJECTORY_FILE = "trajectory.npz"
@@ -61,7 +70,7 @@ class TickRecorder(Protocol):
         """Ticks recorded (the last one + 1)."""
         ...
 
-    def record(self, tick: int, time: float, x, y, heading, u, out, alive, missed: int = 0) -> None: ...
+    def record(self, tick: int, time: float, x, y, heading, u, out, alive, missed: int = 0, follow=None) -> None: ...
 
     def event(self, ev: dict) -> None: ...
 
@@ -92,6 +101,7 @@ class Recorder:
         self.out = np.full((ticks + 1, n), -1, dtype=np.int64)
         self.alive = np.zeros((ticks + 1, n), dtype=bool)
         self.missed = np.zeros(ticks + 1, dtype=np.int64)  # live agents whose command was held
+        self.follow = np.zeros((ticks + 1, n), dtype=np.int8)  # follow state codes (wire.FOLLOW_STATES)
 
     def add_agent(self, scenario: Scenario) -> None:
         """One more column (an agent added at run time); earlier rows say it was absent."""
@@ -101,9 +111,11 @@ class Recorder:
         self.x, self.y, self.heading, self.u = (grow(a, np.nan) for a in (self.x, self.y, self.heading, self.u))
         self.out = grow(self.out, -1)
         self.alive = grow(self.alive, False)
+        self.follow = grow(self.follow, 0)
 
-    def record(self, tick: int, time: float, x, y, heading, u, out, alive, missed: int = 0) -> None:
-        """Store tick `tick`: pose at t_k and the turn rate applied over [t_k, t_k+1)."""
+    def record(self, tick: int, time: float, x, y, heading, u, out, alive, missed: int = 0, follow=None) -> None:
+        """Store tick `tick`: pose at t_k and the turn rate applied over [t_k, t_k+1); follow:
+        the agents' follow state codes (None: all none)."""
         self.t[tick] = time
         self.x[tick] = x
         self.y[tick] = y
@@ -112,6 +124,7 @@ class Recorder:
         self.out[tick] = out
         self.alive[tick] = alive
         self.missed[tick] = missed
+        self.follow[tick] = 0 if follow is None else follow
         self.rows = max(self.rows, tick + 1)
 
     def event(self, ev: dict) -> None:
@@ -129,6 +142,7 @@ class Recorder:
             "out": self.out[:n],
             "alive": self.alive[:n],
             "missed": self.missed[:n],
+            "follow": self.follow[:n],
         }
 
 
@@ -156,8 +170,8 @@ class StreamRecorder:
     def event(self, ev: dict) -> None:
         self.writer.event(ev)
 
-    def record(self, tick: int, time: float, x, y, heading, u, out, alive, missed: int = 0) -> None:
-        self.writer.tick(tick, time, self.ids, x, y, heading, u, out, alive, missed)
+    def record(self, tick: int, time: float, x, y, heading, u, out, alive, missed: int = 0, follow=None) -> None:
+        self.writer.tick(tick, time, self.ids, x, y, heading, u, out, alive, missed, follow)
         self.t_last = time
         self.rows = max(self.rows, tick + 1)
 
@@ -191,7 +205,7 @@ class DeferredRecorder:
         self.inner = inner
         self.pending: tuple | None = None
 
-    def record(self, tick: int, time: float, x, y, heading, u, out, alive, missed: int = 0) -> None:
+    def record(self, tick: int, time: float, x, y, heading, u, out, alive, missed: int = 0, follow=None) -> None:
         self.flush()
         self.pending = (
             tick,
@@ -203,6 +217,7 @@ class DeferredRecorder:
             np.array(out),
             np.array(alive),
             missed,
+            None if follow is None else np.array(follow),
         )
 
     def flush(self) -> None:
@@ -257,6 +272,7 @@ def recording_arrays(rec: Recording) -> dict[str, np.ndarray]:
         a[key] = np.full((rows, n), np.nan)
     a["out"] = np.full((rows, n), -1, dtype=np.int64)
     a["alive"] = np.zeros((rows, n), dtype=bool)
+    a["follow"] = np.zeros((rows, n), dtype=np.int8)
     for r in range(rows):
         row = by_tick[r]
         a["t"][r], a["missed"][r] = row["time"], row["missed"]
@@ -265,7 +281,7 @@ def recording_arrays(rec: Recording) -> dict[str, np.ndarray]:
             cols: slice | list[int] = slice(0, m)  # the usual case: the scenario's order
         else:
             cols = [col[int(i)] for i in row["ids"]]
-        for key in ("x", "y", "heading", "u", "out", "alive"):
+        for key in ("x", "y", "heading", "u", "out", "alive", "follow"):
             a[key][r, cols] = row[key]
     return {**static_arrays(s), **a}
 
@@ -309,6 +325,7 @@ class RunResult:
                 target=a["target"],
                 switches=counts,
             )
+            add_state_seconds(agents, a, self.scenario.run.dt)
         faults = []
         if self.scenario.faults and len(a["t"]) > 1:
             err = relative_errors(
@@ -353,6 +370,18 @@ class RunResult:
             "complete": not getattr(self.recorder, "torn", False),
             **self.extra,
         }
+
+
+def add_state_seconds(agents: dict, a: dict[str, np.ndarray], dt: float) -> None:
+    """Each follower's `state_s` (results_stream.state_seconds) into summary.json's `agents`,
+    from whole arrays; a recording without `follow` (older runs) says none throughout."""
+    follow = a.get("follow")
+    if follow is None:
+        follow = np.zeros(a["alive"].shape, dtype=np.int8)
+    counts = follow_counts(follow[:-1], a["alive"][:-1])
+    for k, (i, role) in enumerate(zip(a["ids"].tolist(), a["role"].tolist())):
+        if role == "follower" and str(i) in agents:
+            agents[str(i)]["state_s"] = state_seconds(counts[k], dt)
 
 
 def _json_default(o):

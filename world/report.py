@@ -12,6 +12,7 @@ import time
 import numpy as np
 
 from swarm.contracts.orbits import expected_radius, root_of
+from swarm.contracts.wire import FOLLOW_STATES
 from swarm.world.core import ACTIVE
 from swarm.world.engine import Engine
 
@@ -50,6 +51,7 @@ def run_info(engine: Engine, books: dict, header: dict, sensing: bool = False) -
             "speed": a.speed,
             "u": float(c.u[k]),
             "out": out[a.id],
+            "follow": str(FOLLOW_STATES[engine.follow[k]]),  # of its last latched command (none when not active)
             "root": root,
             "hops": hops,
             "distance": dist,

@@ -45,13 +45,15 @@ import numpy as np
 from swarm.contracts.orbits import expected_radius, root_of
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.vocabulary import EventKind
+from swarm.contracts.wire import FOLLOW_STATES
 from swarm.world.metrics import SETTLING_BAND, _finite_or_none
-from swarm.world.stream import TICK_ENCODING, RecordingError, read_recording
+from swarm.world.stream import TICK_BYTES, TICK_ENCODING, RecordingError, read_recording, tick_width
 
 CHUNK = 4096  # rows per chunk: memory is O(agents x CHUNK)
 COPY_BLOCK = 1 << 20  # bytes per read when a .npy file is copied into the zip
 CACHE_MAX = 4096  # graphs (out, alive) whose expected radii relative_errors keeps
-PER_TICK = ("t", "missed", "x", "y", "heading", "u", "out", "alive")  # after the static arrays, in this order
+PER_TICK = ("t", "missed", "x", "y", "heading", "u", "out", "alive", "follow")  # after the static arrays, in this order
+AGENT_COLUMNS = ("x", "y", "heading", "u", "out", "alive", "follow")  # the per-tick arrays of one column per agent
 _TIME_HEAD = 32  # bytes of a tick message's head (tick, time, n, missed)
 RESULTS_TMP = ".results-"  # the temporary directory's prefix (swarm/offline/results.py removes one left behind)
 
@@ -80,8 +82,7 @@ class _Ticks:
         if len(data) < _TIME_HEAD:
             raise ValueError(f"a {TICK_ENCODING} message of {len(data)} bytes")
         n = int.from_bytes(data[16:24], "little", signed=True)
-        if n < 0 or len(data) != _TIME_HEAD + n * (6 * 8 + 1):  # as decode_tick checks it
-            raise ValueError(f"a {TICK_ENCODING} message of {len(data)} bytes for {n} agents")
+        tick_width(n, len(data))  # ValueError as decode_tick raises it
         k = int.from_bytes(data[0:8], "little", signed=True)
         self.messages += 1
         if self.runs and self.runs[-1][1] == k:
@@ -111,14 +112,35 @@ def scan(path: Path) -> Scan:
 
 def _dtypes() -> dict[str, np.dtype]:
     f8, i8 = np.dtype(float), np.dtype(np.int64)
-    return {"t": f8, "x": f8, "y": f8, "heading": f8, "u": f8, "out": i8, "alive": np.dtype(bool), "missed": i8}
+    return {
+        "t": f8,
+        "x": f8,
+        "y": f8,
+        "heading": f8,
+        "u": f8,
+        "out": i8,
+        "alive": np.dtype(bool),
+        "missed": i8,
+        "follow": np.dtype(np.int8),
+    }
 
 
-FILL = {"t": np.nan, "x": np.nan, "y": np.nan, "heading": np.nan, "u": np.nan, "out": -1, "alive": False, "missed": 0}
+FILL = {
+    "t": np.nan,
+    "x": np.nan,
+    "y": np.nan,
+    "heading": np.nan,
+    "u": np.nan,
+    "out": -1,
+    "alive": False,
+    "missed": 0,
+    "follow": 0,
+}
 
 
-def _message_dtype(n: int) -> np.dtype:
-    """A `swarm-tick-v1` message for n agents as one record (world/stream.py)."""
+def _message_dtype(n: int, follow: bool = True) -> np.dtype:
+    """A `swarm-tick-v2` message for n agents as one record (world/stream.py); follow False:
+    a `swarm-tick-v1` one (no follow states)."""
     return np.dtype(
         [
             ("tick", "<i8"),
@@ -133,6 +155,7 @@ def _message_dtype(n: int) -> np.dtype:
             ("out", "<i8", (n,)),
             ("alive", "u1", (n,)),
         ]
+        + ([("follow", "i1", (n,))] if follow else [])
     )
 
 
@@ -200,6 +223,7 @@ class _Filler:
         self.left = messages  # the tick messages pass 1 counted: a file that grew since is read as it was
         self.batch: list[bytes] = []
         self.k0 = self.n = 0
+        self.width = TICK_BYTES
 
     def add(self, data: bytes) -> None:
         if self.left <= 0:
@@ -207,16 +231,20 @@ class _Filler:
         self.left -= 1
         k = int.from_bytes(data[0:8], "little", signed=True)
         n = int.from_bytes(data[16:24], "little", signed=True)
-        if self.batch and (k != self.k0 + len(self.batch) or n != self.n or len(self.batch) >= CHUNK):
+        width = tick_width(n, len(data))
+        if self.batch and (
+            k != self.k0 + len(self.batch) or n != self.n or width != self.width or len(self.batch) >= CHUNK
+        ):
             self.flush()
         if not self.batch:
-            self.k0, self.n = k, n
+            self.k0, self.n, self.width = k, n, width
         self.batch.append(data)
 
     def flush(self) -> None:
         if not self.batch:
             return
-        recs = np.frombuffer(b"".join(self.batch), _message_dtype(self.n))
+        follow = self.width == TICK_BYTES
+        recs = np.frombuffer(b"".join(self.batch), _message_dtype(self.n, follow))
         k0, self.batch = self.k0, []
         lo, hi = max(k0, 0), min(k0 + len(recs), self.files.rows)  # ticks outside the rows are not kept
         if lo >= hi:
@@ -226,19 +254,19 @@ class _Filler:
         f.write("t", lo, recs["time"])
         f.write("missed", lo, recs["missed"])
         ids = recs["ids"]
+        keys = AGENT_COLUMNS if follow else AGENT_COLUMNS[:-1]  # v1: follow stays FILL (none)
         if self.n <= n and (ids == self.ids[: self.n]).all():  # the usual case: the scenario's order
-            for key in ("x", "y", "heading", "u", "out", "alive"):
+            for key in AGENT_COLUMNS:
                 block = np.full((m, n), FILL[key], dtype=f.dtypes[key])
-                block[:, : self.n] = recs[key]
+                if key in keys:
+                    block[:, : self.n] = recs[key]
                 f.write(key, lo, block)
             return
-        blocks = {
-            key: np.full((m, n), FILL[key], dtype=f.dtypes[key]) for key in ("x", "y", "heading", "u", "out", "alive")
-        }
+        blocks = {key: np.full((m, n), FILL[key], dtype=f.dtypes[key]) for key in AGENT_COLUMNS}
         for r in range(m):
             cols = [self.col[int(i)] for i in ids[r]]
-            for key, block in blocks.items():
-                block[r, cols] = recs[key][r]
+            for key in keys:
+                blocks[key][r, cols] = recs[key][r]
         for key, block in blocks.items():
             f.write(key, lo, block)
 
@@ -252,6 +280,23 @@ def fill(path: Path, sc: Scan, files: NpyFiles) -> None:
 
 
 # ------------------------------------------------------------------ pass 3: summary.json's figures
+
+
+def follow_counts(follow: np.ndarray, alive: np.ndarray) -> np.ndarray:
+    """(n, len(FOLLOW_STATES)) ticks each agent was alive in each follow state, over the rows
+    given ((rows, n) arrays; codes outside FOLLOW_STATES are not counted)."""
+    n, k = follow.shape[1], len(FOLLOW_STATES)
+    codes = follow.astype(np.int64)
+    use = alive & (codes >= 0) & (codes < k)
+    cells = (np.arange(n)[None, :] * k + codes)[use]
+    return np.bincount(cells, minlength=n * k).reshape(n, k)
+
+
+def state_seconds(counts: np.ndarray, dt: float) -> dict[str, float]:
+    """summary.json's `state_s` of one follower: {follow state: seconds}, the states it was in
+    (in FOLLOW_STATES order), from its row of `follow_counts` over every row but the last (a
+    row's state holds over [t_k, t_k + dt); the last row is the end of the run)."""
+    return {str(FOLLOW_STATES[c]): round(v * dt, 9) for c, v in enumerate(counts.tolist()) if v}
 
 
 def _chunks(files: NpyFiles, keys: tuple[str, ...], start: int = 0):
@@ -397,9 +442,13 @@ class Metrics:
         switches = _Switches(n)
         faults = self._faults(tmap) if self.scenario.faults and T > 1 else []
         rel = _RelativeErrors(ids, roles, speeds, orbit, target) if faults else None
-        keys = ("t", "x", "y", "out", "alive") + (("missed",) if faults else ())
+        keys = ("t", "x", "y", "out", "alive", "follow") + (("missed",) if faults else ())
+        states = np.zeros((n, len(FOLLOW_STATES)), dtype=np.int64)
         for r0, r1, c in _chunks(files, keys):
             switches.add(r0, c["out"], c["alive"])
+            last_row = min(r1, T - 1) - r0  # rows before the run's last one
+            if last_row > 0:
+                states += follow_counts(c["follow"][:last_row], c["alive"][:last_row])
             for k in range(n):
                 if ang_from is not None and r1 > ang_from:
                     a = max(ang_from - r0, 0)
@@ -456,6 +505,8 @@ class Metrics:
                 "alive": alive_final[i],
             }
             self.agents[str(i)]["switches"] = int(switches.counts[k])
+            if roles[k] == "follower":
+                self.agents[str(i)]["state_s"] = state_seconds(states[k], self.scenario.run.dt)
         self.switches = int(sum(int(c) for c in switches.counts))
         self.faults = [self._fault_result(f, tmap) for f in faults]
 

@@ -65,6 +65,7 @@ class RunData:
     alive: np.ndarray  # (T, N) bool
     orbit_radius: np.ndarray | None = None  # (N,) or None
     summary: dict[str, Any] = field(default_factory=dict)
+    follow: np.ndarray | None = None  # (T, N) int8 follow state codes (wire.FOLLOW_STATES); None: an older run
 
     @property
     def n_agents(self) -> int:
@@ -103,6 +104,7 @@ def load_run(run_dir: Path) -> RunData:
                 raise RunReadError(f"{traj}: malformed {TRAJECTORY_FILE}: missing array key(s) {', '.join(missing)}")
             arrays = {k: np.asarray(z[k]) for k in REQUIRED_KEYS}
             orbit = np.asarray(z["orbit_radius"], dtype=float) if "orbit_radius" in z.files else None
+            follow = np.asarray(z["follow"]) if "follow" in z.files else None
     except RunReadError:
         raise
     except Exception as exc:  # zipfile/pickle/value errors from a corrupt file
@@ -126,6 +128,8 @@ def load_run(run_dir: Path) -> RunData:
             raise bad(f"'{k}' has shape {arrays[k].shape}, expected (T, N) = ({nt}, {n})")
     if orbit is not None and orbit.reshape(-1).shape[0] != n:
         orbit = None
+    if follow is not None and follow.shape != (nt, n):
+        raise bad(f"'follow' has shape {follow.shape}, expected (T, N) = ({nt}, {n})")
 
     summary: dict[str, Any] = {}
     spath = run_dir / SUMMARY_FILE
@@ -150,6 +154,7 @@ def load_run(run_dir: Path) -> RunData:
         alive=arrays["alive"].astype(bool),
         orbit_radius=None if orbit is None else orbit.reshape(-1),
         summary=summary,
+        follow=None if follow is None else follow.astype(np.int8),
     )
 
 

@@ -9,8 +9,9 @@ builds the same from the ground truth an observer of a live run receives.
 - `/swarm/trails` foxglove.SceneUpdate: each agent's path over the last TRAIL_SECONDS,
   one line strip per agent (less often than the scene: it is the bulk of the bytes);
 - `/swarm/agents` JSON `{"tick", "time", "agents": [{"id", "role", "alive", "x", "y",
-  "heading", "u", "out", "root", "expected_radius", "radial_error"}]}`: per-agent
-  numbers to plot, e.g. `/swarm/agents.agents[:]{id==3}.radial_error`;
+  "heading", "u", "out", "root", "expected_radius", "radial_error", "follow"}]}`: per-agent
+  numbers to plot, e.g. `/swarm/agents.agents[:]{id==3}.radial_error` (`follow`: the follow
+  state, keep / hold / coast / ...; `swarm watch --foxglove` takes it from the agents' statuses);
 - `/swarm/events` JSON, one message per event; `/swarm/run` JSON, what the run is.
 
 Only called at scene ticks (at most SCENE_RATE per simulated second), so a run pays for
@@ -26,6 +27,7 @@ from collections import deque
 import numpy as np
 
 from swarm.contracts.orbits import expected_radius, roots
+from swarm.contracts.wire import FOLLOW_STATES
 
 TRAIL_SECONDS = 30.0  # simulated s of path each trail shows
 TRAIL_RATE = 2.0  # trail points per simulated second
@@ -63,7 +65,9 @@ class SceneBuilder:
             self.leaders.add(spec.id)
 
     # -- per-agent numbers ------------------------------------------------------------------
-    def numbers(self, tick, t, ids, x, y, heading, u, out, alive) -> dict:
+    def numbers(self, tick, t, ids, x, y, heading, u, out, alive, follow=None) -> dict:
+        """follow: the agents' follow state codes (wire.FOLLOW_STATES), each agent's `follow`
+        by name; None: no `follow` (an observer that does not know them)."""
         spec = self.spec
         leaders = {int(i) for k, i in enumerate(ids) if alive[k] and int(i) in self.leaders}
         outs = {int(i): (int(out[k]) if out[k] >= 0 else None) for k, i in enumerate(ids)}
@@ -94,6 +98,7 @@ class SceneBuilder:
                     "root": root,
                     "expected_radius": R,
                     "radial_error": err,
+                    **({} if follow is None else {"follow": str(FOLLOW_STATES[int(follow[k])])}),
                 }
             )
         return {"tick": int(tick), "time": float(t), "agents": rows}
@@ -237,11 +242,11 @@ class SceneChannels:
     def event(self, ev: dict) -> None:
         self.events_ch.log(json.loads(json.dumps(ev, default=_plain)), log_time=log_time(ev.get("time", 0.0)))
 
-    def tick(self, tick, t, ids, x, y, heading, u, out, alive) -> None:
+    def tick(self, tick, t, ids, x, y, heading, u, out, alive, follow=None) -> None:
         """One scene update: the agents' numbers, the scene and, now and then, the trails."""
         ns = log_time(t)
         b = self.builder
-        numbers = b.numbers(tick, t, ids, x, y, heading, u, out, alive)
+        numbers = b.numbers(tick, t, ids, x, y, heading, u, out, alive, follow)
         self.agents_ch.log(numbers, log_time=ns)
         self.scene_ch.log(b.scene(ns, ids, x, y, out, heading, alive, numbers), log_time=ns)
         trails = b.trails_update(ns, ids, x, y, alive)

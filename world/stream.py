@@ -3,10 +3,12 @@
 MCAP is the robotics ecosystem's log format (Foxglove, ROS 2 bags). The file is written
 with foxglove-sdk and read back with the `mcap` package. Its channels:
 
-- `/swarm/ticks`  every tick, exact: message encoding `swarm-tick-v1`, little-endian
+- `/swarm/ticks`  every tick, exact: message encoding `swarm-tick-v2`, little-endian
   `int64 tick, float64 time, int64 n, int64 missed`, then `int64 ids[n]`, `float64 x[n],
-  y[n], heading[n], u[n]`, `int64 out[n]` (-1: none), `uint8 alive[n]`. trajectory.npz
-  and summary.json are rebuilt from these rows.
+  y[n], heading[n], u[n]`, `int64 out[n]` (-1: none), `uint8 alive[n]`, `int8 follow[n]`
+  (follow state codes, wire.FOLLOW_STATES). trajectory.npz and summary.json are rebuilt
+  from these rows. `swarm-tick-v1` (recordings before the follow states) is the same
+  without `follow`: read as all none.
 - `/swarm/scene`  foxglove.SceneUpdate at most 10 times per simulated second: agents as
   arrows (leaders red, followers blue), out-neighbour edges as lines, the target as a
   sphere, the expected orbits as circles; what Foxglove draws in its 3D panel.
@@ -43,7 +45,9 @@ from swarm.contracts.vocabulary import Coded, ExitCode
 from swarm.world.scene import SCENE_RATE, SceneChannels, log_time
 
 RECORDING_FILE = "recording.mcap"
-TICK_ENCODING = "swarm-tick-v1"
+TICK_ENCODING = "swarm-tick-v2"
+TICK_BYTES_V1 = 6 * 8 + 1  # bytes per agent of a swarm-tick-v1 message (no follow states)
+TICK_BYTES = TICK_BYTES_V1 + 1  # and of a swarm-tick-v2 one
 FLUSH_PERIOD = 0.5  # s of wall time between flushes (a SIGKILL loses at most about this)
 _HEAD = np.dtype([("tick", "<i8"), ("time", "<f8"), ("n", "<i8"), ("missed", "<i8")])
 
@@ -54,7 +58,8 @@ class RecordingError(Coded):
     exit_code = ExitCode.NO_SPACE
 
 
-def encode_tick(tick: int, t: float, ids, x, y, heading, u, out, alive, missed: int) -> bytes:
+def encode_tick(tick: int, t: float, ids, x, y, heading, u, out, alive, missed: int, follow=None) -> bytes:
+    """One swarm-tick-v2 message (follow None: all none)."""
     n = len(ids)
     head = np.array([(tick, t, n, missed)], dtype=_HEAD).tobytes()
     return b"".join(
@@ -67,21 +72,34 @@ def encode_tick(tick: int, t: float, ids, x, y, heading, u, out, alive, missed: 
             np.asarray(u, "<f8").tobytes(),
             np.asarray(out, "<i8").tobytes(),
             np.asarray(alive, np.uint8).tobytes(),
+            (np.zeros(n, np.int8) if follow is None else np.asarray(follow, np.int8)).tobytes(),
         )
     )
 
 
+def tick_width(n: int, size: int) -> int:
+    """Bytes per agent of a tick message of `size` bytes for n agents: TICK_BYTES (v2) or
+    TICK_BYTES_V1 (v1); ValueError when it is neither."""
+    if n >= 0:
+        for width in (TICK_BYTES, TICK_BYTES_V1):
+            if size == _HEAD.itemsize + n * width:
+                return width
+    raise ValueError(f"a {TICK_ENCODING} message of {size} bytes for {n} agents")
+
+
 def decode_tick(data: bytes) -> dict:
+    """A tick message (v2, or v1: follow all none)."""
     head = np.frombuffer(data, _HEAD, 1)[0]
     n = int(head["n"])
-    if n < 0 or len(data) != _HEAD.itemsize + n * (6 * 8 + 1):
-        raise ValueError(f"a {TICK_ENCODING} message of {len(data)} bytes for {n} agents")
+    width = tick_width(n, len(data))
     o = _HEAD.itemsize
     cols = {}
     for name, dt in (("ids", "<i8"), ("x", "<f8"), ("y", "<f8"), ("heading", "<f8"), ("u", "<f8"), ("out", "<i8")):
         cols[name] = np.frombuffer(data, dt, n, o)
         o += 8 * n
     cols["alive"] = np.frombuffer(data, np.uint8, n, o).astype(bool)
+    o += n
+    cols["follow"] = np.frombuffer(data, np.int8, n, o) if width == TICK_BYTES else np.zeros(n, np.int8)
     return {"tick": int(head["tick"]), "time": float(head["time"]), "missed": int(head["missed"]), **cols}
 
 
@@ -126,10 +144,10 @@ class StreamWriter:
     def event(self, ev: dict) -> None:
         self.channels.event(ev)
 
-    def tick(self, tick: int, t: float, ids, x, y, heading, u, out, alive, missed: int) -> None:
-        self.ticks_ch.log(encode_tick(tick, t, ids, x, y, heading, u, out, alive, missed), log_time=log_time(t))
+    def tick(self, tick: int, t: float, ids, x, y, heading, u, out, alive, missed: int, follow=None) -> None:
+        self.ticks_ch.log(encode_tick(tick, t, ids, x, y, heading, u, out, alive, missed, follow), log_time=log_time(t))
         if tick % self.scene_every == 0:
-            self.channels.tick(tick, t, ids, x, y, heading, u, out, alive)
+            self.channels.tick(tick, t, ids, x, y, heading, u, out, alive, follow)
         now = time.monotonic()
         if now - self.last_flush >= FLUSH_PERIOD:
             self.flush()

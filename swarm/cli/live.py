@@ -72,9 +72,10 @@ def agents(
     """One row per agent: pid, host, alive, out-neighbour, hops, errors, command age, missed ticks.
 
     Columns: id, role, pid, host, alive, out-neighbour, hops to a leader, leader phase,
-    distance from the target, radial error, turn rate, age of the last command, missed
-    (lockstep) ticks. The world's view merged with each live agent's own status (its out-neighbour, hops and
-    phase as it chose them); dropped agents as the world last saw them.
+    follow state (sticky followers: acquire, keep, hold, coast, shadow, search, lost, late; - for
+    leaders and the other rules), distance from the target, radial error, turn rate, age of the last command, missed
+    (lockstep) ticks. The world's view merged with each live agent's own status (its out-neighbour, hops,
+    phase and state as it chose them); dropped agents as the world last saw them.
 
     Example: swarm agents --json
     """

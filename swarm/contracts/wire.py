@@ -39,7 +39,7 @@ from typing import NamedTuple
 from swarm.contracts.fastpath import compiled as _c
 from swarm.contracts.frames import Contact, SensorFrame
 from swarm.contracts.freetext import BY_CHARS, HOST_CHARS, TEXT_CHARS, printable
-from swarm.contracts.vocabulary import AgentState, Phase
+from swarm.contracts.vocabulary import AgentState, FollowState, Phase
 
 VERSION = 1
 # A join reply whose brain names laws other than the built-in ones ("law": [law] follower /
@@ -127,8 +127,10 @@ def agent_of_key(key: str) -> int:
 #        target dx, dy (m; NaN when absent), n contacts; then n contact records.
 SENSE_HEAD = struct.Struct("<BBBBiqddddI")
 CONTACT = struct.Struct("<idddh")  # id, bearing (rad), heading (rad), range (m), advertised hops (-1 none)
-# cmd: kind, version, phase code, reserved, agent, tick, u (rad/s), out-neighbour (-1 none),
-#      advertised hops to a leader (-1 none), key (the claim key from the join reply)
+# cmd: kind, version, phase code, follow state code (FOLLOW_STATES; 0 none: the byte was reserved
+#      and always 0 before, so the version did not change), agent, tick, u (rad/s),
+#      out-neighbour (-1 none), advertised hops to a leader (-1 none), key (the claim key from
+#      the join reply)
 CMD = struct.Struct("<BBBBiqdihQ")
 # truth: kind, version, sequence number (u16 in bytes 2-3, low byte first; 0: not numbered),
 #        n agents, tick, time (s); then n agent records.
@@ -150,6 +152,20 @@ PHASES = (Phase.TRACK, Phase.LOST, Phase.ARC1, Phase.ARC2, Phase.ORBIT, Phase.SH
 # copies them into the run's summary): see docs/reference/outputs.md#summary
 STATUS_COUNTERS = ("garbage", "nonfinite", "losses", "loss_switches_max")
 STATES = (AgentState.ACTIVE, AgentState.COASTING, AgentState.GONE)
+# the order is the wire code of a command's follow state byte (and the int8 codes of
+# trajectory.npz's `follow`): NONE first, so that a sender writing 0 there says none
+FOLLOW_STATES = (
+    FollowState.NONE,
+    FollowState.ACQUIRE,
+    FollowState.KEEP,
+    FollowState.HOLD,
+    FollowState.COAST,
+    FollowState.SHADOW,
+    FollowState.SEARCH,
+    FollowState.LOST,
+    FollowState.LATE,
+)
+FOLLOW_CODE: dict[str, int] = {s: k for k, s in enumerate(FOLLOW_STATES)}
 
 
 def _check_head(buf: bytes, head: struct.Struct, kind: int, what: str) -> tuple:
@@ -416,27 +432,35 @@ class Command(NamedTuple):
     phase: str
     hops: int | None = None  # advertised hops to a leader
     key: int = 0  # the claim key the world gave this agent's process (proves who sends)
+    follow: str = FollowState.NONE  # a FollowState: the follower's selection state (none: leaders, other rules)
 
 
 _command = functools.partial(tuple.__new__, Command)  # Command from a tuple, in C
 
 
 def encode_cmd(c: Command) -> bytes:
-    return encode_cmd_fields(c.agent, c.tick, c.u, c.out, c.phase, c.hops, c.key)
+    return encode_cmd_fields(c.agent, c.tick, c.u, c.out, c.phase, c.hops, c.key, c.follow)
 
 
 _PHASE_CODE: dict[str, int] = {p: k for k, p in enumerate(PHASES)}
 
 
 def encode_cmd_fields(
-    agent: int, tick: int, u: float, out: int | None, phase: str, hops: int | None, key: int
+    agent: int,
+    tick: int,
+    u: float,
+    out: int | None,
+    phase: str,
+    hops: int | None,
+    key: int,
+    follow: str = FollowState.NONE,
 ) -> bytes:
     """encode_cmd without making a Command first (an agent's path every tick)."""
     return CMD.pack(
         KIND_CMD,
         VERSION,
         _PHASE_CODE[phase],
-        0,
+        FOLLOW_CODE[follow],
         agent,
         tick,
         u,
@@ -449,16 +473,29 @@ def encode_cmd_fields(
 def decode_cmd(buf: bytes) -> Command:
     if len(buf) != CMD.size:
         raise WireError(f"command: {len(buf)} bytes, expected {CMD.size}")
-    kind, version, phase, _, agent, tick, u, out, hops, key = CMD.unpack(buf)
+    kind, version, phase, follow, agent, tick, u, out, hops, key = CMD.unpack(buf)
     if kind != KIND_CMD or version != VERSION:
         _check_head(buf, CMD, KIND_CMD, "command")  # raises, saying which
     if not math.isfinite(u):
         raise WireError("command: non-finite turn rate")
     if phase >= len(PHASES):
         raise WireError(f"command: unknown phase code {phase}")
+    if follow >= len(FOLLOW_STATES):
+        raise WireError(f"command: unknown follow state code {follow}")
     if tick < 0:
         raise WireError(f"command: negative tick {tick}")
-    return _command((agent, tick, u, None if out < 0 else out, PHASES[phase], None if hops < 0 else hops, key))
+    return _command(
+        (
+            agent,
+            tick,
+            u,
+            None if out < 0 else out,
+            PHASES[phase],
+            None if hops < 0 else hops,
+            key,
+            FOLLOW_STATES[follow],
+        )
+    )
 
 
 def next_seq(seq: int) -> int:

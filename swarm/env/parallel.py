@@ -329,7 +329,7 @@ class SwarmEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
                     b.last_nonfinite = u
                     u = b.last_u
                 b.last_u = u
-            e.command(aid, k, u, d.out, d.hops)
+            e.command(aid, k, u, d.out, d.hops, d.follow)
         e.end_tick()
         view = self.view()
         live = list(self.agents)

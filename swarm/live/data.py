@@ -18,6 +18,7 @@ AGENT_FIELDS = (
     "hops",
     "root",
     "phase",
+    "follow",
     "fallback",
     "pinned",
     "x",
@@ -44,8 +45,9 @@ def merge_agents(info: dict, statuses: dict[int, dict]) -> list[dict]:
     """One row per agent of the world's info, sorted by id (fields: AGENT_FIELDS).
 
     A live agent that answered its status query gives its own pid, host, out-neighbour,
-    hops and phase; an agent that did not answer, or that the world has dropped, is
-    described by the world's info alone.
+    hops, phase and follow state; an agent that did not answer, or that the world has
+    dropped, is described by the world's info alone (its `follow`: that of its last latched
+    command; none when it is not active; absent from an older world's info: None).
     """
     rows = []
     for key in sorted(info.get("agents", {}), key=int):
@@ -71,6 +73,7 @@ def merge_agents(info: dict, statuses: dict[int, dict]) -> list[dict]:
                 out=own.get("out"),
                 hops=own.get("hops"),
                 phase=own.get("phase"),
+                follow=own.get("follow", row["follow"]),  # an older agent's status has none: the world's
                 fallback=own.get("fallback"),
                 pinned=own.get("pinned"),
             )

@@ -5,8 +5,9 @@ world/live_view.py), built by the same functions (world/scene.py's `SceneChannel
 
 What it draws is what any observer of the run receives over zenoh: the ground truth the world
 publishes (at most every TRUTH_PERIOD of wall time: tick, time, and per agent its pose, turn
-rate, out-neighbour and state), the events (switches, joins, drops, faults...) and the world's
-info (the target, each agent's role, speed and orbit radius). A scene is logged at most
+rate, out-neighbour and state), the events (switches, joins, drops, faults...), the world's
+info (the target, each agent's role, speed and orbit radius) and the agents' statuses (each
+one's follow state, `/swarm/agents`' `follow`, as its latest status said it). A scene is logged at most
 SCENE_RATE times per simulated second, stamped with the run's simulated time, as the world
 logs its own. An agent added at run time (`swarm spawn`) is read from the world's info when
 the ground truth first has it. `/swarm/run` says what is watched: `{"run", "scenario_name",
@@ -88,15 +89,29 @@ class Observer:
                 self.known.add(aid)
                 self.channels.add_agent(look, look._asdict(), t)
 
-    def truth(self, tick: int, t: float, recs, final: bool = False) -> bool:
+    def truth(self, tick: int, t: float, recs, final: bool = False, follow: dict[int, str] | None = None) -> bool:
         """One ground-truth message; logs a scene (True) unless the last was under
-        1/SCENE_RATE simulated s ago (and this is not the run's last tick)."""
+        1/SCENE_RATE simulated s ago (and this is not the run's last tick). follow: each
+        agent's follow state from its latest status (none where unknown; None or empty: the
+        scene's agents have no `follow`)."""
         self.tick = tick
         if not final and self.last_scene is not None and t - self.last_scene < 1.0 / SCENE_RATE - 1e-9:
             return False
         self.last_scene = t
+        codes = None
+        if follow:
+            codes = [wire.FOLLOW_CODE.get(follow.get(int(i), ""), 0) for i in recs["id"]]
         self.channels.tick(
-            tick, t, recs["id"], recs["x"], recs["y"], recs["heading"], recs["u"], recs["out"], recs["state"] == ACTIVE
+            tick,
+            t,
+            recs["id"],
+            recs["x"],
+            recs["y"],
+            recs["heading"],
+            recs["u"],
+            recs["out"],
+            recs["state"] == ACTIVE,
+            codes,
         )
         return True
 
@@ -109,6 +124,17 @@ class Feed:
         self.q: queue.SimpleQueue = queue.SimpleQueue()
         self.latest: bytes | None = None
         self.lock = threading.Lock()
+        self.follow: dict[int, str] = {}  # each agent's follow state, from its latest status
+
+    def on_status(self, sample) -> None:
+        try:
+            st = wire.decode_status(sample.payload.to_bytes())
+        except wire.WireError:
+            return
+        state = st.get("follow")
+        if isinstance(state, str) and state in wire.FOLLOW_CODE:
+            with self.lock:
+                self.follow[st["id"]] = state
 
     def on_truth(self, sample) -> None:
         with self.lock:
@@ -152,6 +178,7 @@ def serve_run(live, host: str, port: int, say) -> None:
                 subs = [
                     lr.session.declare_subscriber(wire.truth_key(live.run), feed.on_truth),
                     lr.session.declare_subscriber(wire.events_key(live.run), feed.on_event),
+                    lr.session.declare_subscriber(wire.agent_key(live.run, "*", "status"), feed.on_status),
                 ]
                 lr.watch_end()
             say(f"run {live.run}: {open_hint(host, port)}")
@@ -194,7 +221,9 @@ def _follow(live, lr, feed: Feed, observer: Observer, ticks: int) -> bool:
                 if info is not None:
                     observer.add_agents(info, t)
             if observer.known.issuperset(int(i) for i in recs["id"]):
-                observer.truth(tick, t, recs, final=tick >= ticks)
+                with feed.lock:
+                    follow = dict(feed.follow)
+                observer.truth(tick, t, recs, final=tick >= ticks, follow=follow)
         if lr.end_notice:
             time.sleep(0.2)  # what the world sent before its notice
             if feed.latest is not None or not feed.q.empty():

@@ -155,6 +155,11 @@ def header(info: dict, ended: bool | str = False):
     return t
 
 
+def follow_cell(follow: str | None) -> str:
+    """The state column: the follow state, "-" for none (leaders, the other rules) or unknown."""
+    return "-" if not follow or follow == "none" else str(follow)
+
+
 def agents_table(rows: list[dict], compact: bool = False):
     """The agents as a rich table (compact: the columns `swarm watch` has room for)."""
     # lazy: rich (30 ms) only to draw; --json and --dot never load it
@@ -168,6 +173,7 @@ def agents_table(rows: list[dict], compact: bool = False):
     cols += [("alive", "left"), ("out", "right"), ("hops", "right")]
     if not compact:
         cols += [("phase", "left")]
+    cols += [("state", "left")]  # the follow state (sticky followers: keep, hold, coast, ...)
     cols += [("dist m", "right"), ("err m", "right"), ("u rad/s", "right"), ("age s", "right"), ("missed", "right")]
     if not compact:
         cols += [("bad", "right")]
@@ -189,6 +195,7 @@ def agents_table(rows: list[dict], compact: bool = False):
         cells += ["yes" if r["alive"] else r["state"] or "no", fmt(r["out"], "d"), fmt(r["hops"], "d")]
         if not compact:
             cells += [r["phase"] or "-"]
+        cells += [follow_cell(r.get("follow"))]
         cells += [
             fmt(r["distance"], ".1f"),
             fmt(r["radial_error"], ".2f"),

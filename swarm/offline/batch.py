@@ -105,18 +105,13 @@ def run_batch(
     )
     B = len(scenarios)
     rec = None if recording is None else StreamRecorder(scenarios[0], ticks, recording)
-    keep = ("x", "y", "out") if lean else ("x", "y", "heading", "u", "out")
-    hist = (
-        {}
-        if rec is not None
-        else {
-            k: np.full((B, ticks + 1, n), -1 if k == "out" else np.nan, dtype=np.int64 if k == "out" else float)
-            for k in keep
-        }
-    )
+    keep = ("x", "y", "out", "follow") if lean else ("x", "y", "heading", "u", "out", "follow")
+    fills = {"out": (-1, np.int64), "follow": (0, np.int8)}
+    hist = {} if rec is not None else {k: np.full((B, ticks + 1, n), *fills.get(k, (np.nan, float))) for k in keep}
     pinned = brains.pinned if mode == "fixed" else None
     events: list[list[dict]] = [[] for _ in range(B)]
     out = np.full((B, n), -1, dtype=np.int64)  # Engine.out, as columns
+    follow = np.zeros((B, n), dtype=np.int8)  # Engine.follow
     alive = np.ones(n, dtype=bool)
     rows = np.arange(B)[:, None]
     every = max(1, ticks // 200)
@@ -150,9 +145,10 @@ def run_batch(
     def record(k: int, u: np.ndarray) -> None:
         out_ids = np.where(out >= 0, world.ids[rows, np.maximum(out, 0)], -1)
         if rec is not None:
-            rec.record(k, k * dt, world.x[0], world.y[0], world.heading[0], u[0], out_ids[0], alive)
+            rec.record(k, k * dt, world.x[0], world.y[0], world.heading[0], u[0], out_ids[0], alive, 0, follow[0])
             return
-        for key, v in (("x", world.x), ("y", world.y), ("heading", world.heading), ("u", u), ("out", out_ids)):
+        per_tick = (("x", world.x), ("y", world.y), ("heading", world.heading), ("u", u), ("out", out_ids))
+        for key, v in per_tick + (("follow", follow),):
             if key in hist:
                 hist[key][:, k, :] = v
 
@@ -161,6 +157,7 @@ def run_batch(
         d = brains.decide(k, frames)
         ok = world.latch(d.u, d.hops)
         new = np.where(ok, d.out, out)  # a refused command changes nothing (Engine.command)
+        follow = np.where(ok, d.follow, follow)
         changed = (new != out) & ~world.is_leader
         if changed.any():
             for b, ev in _switches(k, dt, world, frames, out, new, changed, pinned):
@@ -239,6 +236,7 @@ def _result(
         arrays.update(
             t=np.arange(ticks + 1) * world.dt,
             out=hist["out"][b],
+            follow=hist["follow"][b],
             alive=np.broadcast_to(True, shape),
             missed=np.zeros(ticks + 1, dtype=np.int64),
         )

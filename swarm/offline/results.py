@@ -18,7 +18,15 @@ from swarm.contracts.vocabulary import Coded, ExitCode
 from swarm.world.recording import RECORDING_FILE, RESULT_FILES, SUMMARY_FILE, TRAJECTORY_FILE, recover_run
 from swarm.world.results_stream import RESULTS_TMP
 
-PLOT_NAMES = ("trajectories.png", "distance.png", "control.png", "graph.png", "overview.png", "neighbours.png")
+PLOT_NAMES = (
+    "trajectories.png",
+    "distance.png",
+    "control.png",
+    "graph.png",
+    "overview.png",
+    "neighbours.png",
+    "states.png",
+)
 PLOT_SUFFIXES = (".png", ".pdf", ".svg")  # `swarm plot --format`
 # `swarm plot --animate`, the Foxglove layout of `swarm plot` / `swarm up --foxglove`; `swarm export --csv`
 # writes csv/agent-<id>.csv

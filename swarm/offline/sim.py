@@ -69,7 +69,7 @@ def run_sim(
                 engine.drop(aid, "its law raised (crash)")
                 frozen.discard(aid)
                 continue
-            engine.command(aid, k, d.u, d.out, d.hops)
+            engine.command(aid, k, d.u, d.out, d.hops, d.follow)
         engine.end_tick()
         if progress is not None and (k % every == 0):
             progress(k, ticks)

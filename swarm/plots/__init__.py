@@ -10,6 +10,8 @@ from a run directory (world/run_reader.py) and writes, next to them:
                        leaders' start clipped and marked)
 - ``overview.png``     the four panels in one 2x2 figure (paper layout)
 - ``neighbours.png``   each follower's out-neighbour over time (the dynamic graph)
+- ``states.png``       each follower's follow state over time (keep, hold, coast, shadow,
+                       search, ...); not for a run recorded without them
 
 (``.pdf`` / ``.svg`` for the other formats). `render_animation` writes ``animation.gif``.
 Every agent has one colour and label in all of them (leaders "L<id>", thicker, starred);
@@ -19,7 +21,7 @@ Modules: `style` (fixed colours, sizes, decimation), `palette` (each agent's col
 label, width and tree), `context` (what a run's figures share), `placement` (labels and
 markers kept apart), `clipping` (the control panel's y-range), `trajectories`,
 `timeseries` (distance, control), `groups` (small multiples), `graph` (final and dynamic
-graph), `render` (the figures, formats, saving), `animate` (the GIF). Long runs are
+graph), `states` (the follow states), `render` (the figures, formats, saving), `animate` (the GIF). Long runs are
 decimated to at most `MAX_POINTS` points per line. Only the headless Agg backend is used.
 
 Any problem with the input files comes out as a `PlotError` whose message names

@@ -17,6 +17,7 @@ from swarm.plots.clipping import control_range, title_pad_over_note, top_note
 from swarm.plots.context import GROUP_ABOVE, Ctx, grouped, make_context
 from swarm.plots.graph import panel_graph, panel_neighbours
 from swarm.plots.groups import grouped_control, grouped_distance
+from swarm.plots.states import has_states, panel_states
 from swarm.plots.style import DPI, MAX_POINTS
 from swarm.plots.timeseries import panel_control, panel_distance
 from swarm.plots.trajectories import figure_size as trajectories_size
@@ -115,6 +116,7 @@ def figure(name: str, ctx: Ctx, suffix: str) -> Figure:
         "control.png": ((9, 5.5), lambda ax: panel_control(ax, ctx)),
         "graph.png": ((7, 7), lambda ax: panel_graph(ax, ctx)),
         "neighbours.png": ((10, 1.9 + 0.35 * max(n_f, 1)), lambda ax: panel_neighbours(ax, ctx)),
+        "states.png": ((10, 2.1 + 0.35 * max(n_f, 1)), lambda ax: panel_states(ax, ctx)),
     }
     size, draw = panels[name]
     return one_panel(size, draw, suffix)
@@ -122,7 +124,8 @@ def figure(name: str, ctx: Ctx, suffix: str) -> Figure:
 
 def render_plots(run_dir: Path, max_points: int = MAX_POINTS, formats: Iterable[str] = ("png",)) -> list[Path]:
     """Write the run's figures into `run_dir` in each of `formats` (png, pdf, svg); return
-    their paths: `PLOT_FILES` in order, each in the formats in the order given."""
+    their paths: `PLOT_FILES` in order, each in the formats in the order given (but states.png
+    for a run recorded without follow states: an older run directory)."""
     formats = check_formats(formats)
     run_dir = Path(run_dir)
     ctx = make_context(load_run(run_dir), max_points)
@@ -130,5 +133,7 @@ def render_plots(run_dir: Path, max_points: int = MAX_POINTS, formats: Iterable[
     paths: list[Path] = []
     with plt.rc_context(RC):
         for name in PLOT_FILES:
+            if name == "states.png" and not has_states(ctx):
+                continue
             paths += save_figure(figure(name, ctx, suffix), run_dir / name, formats)
     return paths

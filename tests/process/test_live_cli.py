@@ -45,7 +45,7 @@ from typer.testing import CliRunner
 from swarm.cli.main import app
 from swarm.live import watch as W
 from swarm.live.data import graph_of, merge_agents
-from swarm.live.views import graph_dot
+from swarm.live.views import agents_table, graph_dot
 from swarm.runtime.procs import wait_until
 
 LIVE_COMMANDS = [
@@ -329,11 +329,30 @@ def _fake_info():
 
 def test_merge_and_graph_offline():
     info = _fake_info()
+    info["agents"]["4"]["follow"] = "hold"  # the world's view of an agent that did not answer
+    info["agents"]["2"]["follow"] = "keep"
     statuses = {
-        2: {"id": 2, "pid": 99, "host": "h2", "out": 10, "hops": 3, "phase": "track", "fallback": True, "pinned": 1},
+        2: {
+            "id": 2,
+            "pid": 99,
+            "host": "h2",
+            "out": 10,
+            "hops": 3,
+            "phase": "shadow",
+            "follow": "coast",
+            "fallback": True,
+            "pinned": 1,
+        },
         3: {"id": 3, "pid": 13, "host": "h", "out": 1, "hops": 1, "phase": "track"},
     }
     rows = merge_agents(info, statuses)
+    # the follow state: the agent's own (2), else the world's (4), none known (an older world: 1)
+    assert [r["follow"] for r in rows] == [None, "coast", None, "hold", None, None]
+    table = agents_table(rows)
+    assert [c.header for c in table.columns][7:9] == ["phase", "state"]
+    assert list(table.columns[8].cells) == ["-", "coast", "-", "hold", "-", "-"]
+    compact = agents_table(rows, compact=True)  # swarm watch's
+    assert "state" in [c.header for c in compact.columns]
     assert [r["id"] for r in rows] == [1, 2, 3, 4, 5, 10]
     r2, r3 = rows[1], rows[2]
     assert (r2["out"], r2["hops"], r2["pid"], r2["host"], r2["answered"]) == (10, 3, 99, "h2", True)
@@ -425,6 +444,11 @@ def test_runs_and_agents(live):
     res = invoke("agents")
     assert res.exit_code == 0 and live["run"] in res.stdout
     assert all(re.search(rf"^\s*{i}\s+(leader|follower)\s+\d+", res.stdout, re.M) for i in range(1, 7))
+    # the follow state: none for the leaders, the sticky followers' own (case2's settle on keep)
+    assert re.search(r"^\s*id\s+role\s+pid\s+host\s+alive\s+out\s+hops\s+phase\s+state\s", res.stdout, re.M)
+    assert {r["follow"] for r in rows if r["role"] == "leader"} == {"none"}
+    assert {r["follow"] for r in rows if r["role"] == "follower"} <= {"acquire", "keep"}
+    assert all(r["follow"] == statuses[r["id"]]["follow"] or r["follow"] == "keep" for r in rows)
 
 
 @pytest.mark.slow

@@ -116,6 +116,7 @@ def test_lockstep_up_equals_sim(lockstep_runs, name):
     assert np.all(np.isfinite(up["x"])) and np.all(np.isfinite(up["y"]))
     assert dx < 1e-9 and dy < 1e-9, f"{name}: swarm up differs from swarm sim by {max(dx, dy)} m"
     np.testing.assert_array_equal(up["out"], sim["out"])
+    np.testing.assert_array_equal(up["follow"], sim["follow"])  # the follow states the commands carried
     assert np.abs(up["heading"] - sim["heading"]).max() < 1e-9
     assert up["alive"].all(), "an agent was not alive for the whole lockstep run"
     # Same out-neighbour choices at the same ticks.
@@ -145,13 +146,13 @@ def test_lockstep_up_equals_sim_first_20_s(rt, tmp_path, name):
     assert rc == ExitCode.OK, up.launcher.text()[-3000:]
     traj, summ = up.trajectory(), up.summary()
     assert len(traj["t"]) == len(sim["t"]) == round(20 / load_scenario(scen).run.dt) + 1
-    for key in ("t", "x", "y", "heading", "u", "out", "alive"):
+    for key in ("t", "x", "y", "heading", "u", "out", "alive", "follow"):
         np.testing.assert_array_equal(traj[key], sim[key], err_msg=f"{name}: {key}")
     assert sorted(switches(summ["events"])) == sorted(switches(sim_summ["events"]))
     # what the agents counted themselves (their status) is what the brains of swarm sim counted
     for aid, a in sim_summ["agents"].items():
-        assert {k: summ["agents"][aid].get(k) for k in ("losses", "loss_switches_max")} == {
-            k: a.get(k) for k in ("losses", "loss_switches_max")
+        assert {k: summ["agents"][aid].get(k) for k in ("losses", "loss_switches_max", "state_s")} == {
+            k: a.get(k) for k in ("losses", "loss_switches_max", "state_s")
         }, aid
 
 

@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 
 from swarm.cli.main import app
 from swarm.contracts.scenario import load_scenario
-from swarm.contracts.vocabulary import EventKind, ExitCode
+from swarm.contracts.vocabulary import EventKind, ExitCode, FollowState
 from swarm.offline.csv_export import COLUMNS, csv_name, write_agent_csvs
 from swarm.offline.sim import run_sim
 from swarm.plots import (
@@ -45,13 +45,21 @@ from swarm.world.recording import write_run
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 # The documented plot files (docs/reference/outputs.md#plots), in the order render_plots returns them.
-EXPECTED_PNGS = ["trajectories.png", "distance.png", "control.png", "graph.png", "overview.png", "neighbours.png"]
+EXPECTED_PNGS = [
+    "trajectories.png",
+    "distance.png",
+    "control.png",
+    "graph.png",
+    "overview.png",
+    "neighbours.png",
+    "states.png",
+]
 
 
-def assert_pngs(run_dir: Path, paths: list[Path]) -> None:
+def assert_pngs(run_dir: Path, paths: list[Path], expected: list[str] = EXPECTED_PNGS) -> None:
     """`paths` are the documented files, in order, and exactly the PNGs now in `run_dir`."""
-    assert paths == [run_dir / name for name in EXPECTED_PNGS]
-    assert sorted(p.name for p in run_dir.glob("*.png")) == sorted(EXPECTED_PNGS)
+    assert paths == [run_dir / name for name in expected]
+    assert sorted(p.name for p in run_dir.glob("*.png")) == sorted(expected)
     for p in paths:
         name = p.name
         data = p.read_bytes()
@@ -382,6 +390,39 @@ def edit_run(run_dir: Path, **arrays_and_summary) -> Path:
     summary.update(summary_keys)
     (run_dir / "summary.json").write_text(json.dumps(summary))
     return run_dir
+
+
+def test_states_png_is_a_row_per_follower_in_the_colours_of_its_states(tmp_path: Path) -> None:
+    """states.png: a row per follower, bars in each follow state's colour (the first follower
+    acquires, keeps, coasts, searches, keeps; the one that drops is hatched after its drop),
+    the legend naming the states the run has, not those it lacks."""
+    from matplotlib.colors import to_hex
+
+    from swarm.plots.states import STATE_COLOURS, panel_states
+
+    run = load_run(make_run(tmp_path / "run"))
+    assert run.follow is not None
+    ctx = make_context(run)
+    fig, ax = plt.subplots()
+    try:
+        panel_states(ax, ctx)
+        colours = {to_hex(c.get_facecolor()[0]) for c in ax.collections}
+        for state in (FollowState.ACQUIRE, FollowState.KEEP, FollowState.COAST, FollowState.SEARCH):
+            assert to_hex(STATE_COLOURS[state]) in colours, state
+        assert to_hex(STATE_COLOURS[FollowState.HOLD]) not in colours
+        assert [t.get_text() for t in ax.get_yticklabels()] == [ctx.looks.labels[j] for j in run.followers()]
+        words = [t.get_text() for t in fig.legends[0].get_texts()]
+        assert words[0] == "acquire" and "keep" in words and words[-1] == "not alive"
+        assert not any(w.startswith("hold") for w in words)
+    finally:
+        plt.close(fig)
+
+
+def test_a_run_without_follow_states_plots_everything_else(tmp_path: Path) -> None:
+    """An older run directory (trajectory.npz without `follow`): every figure but states.png."""
+    run_dir = make_run(tmp_path / "run", ticks=60, follow=False)
+    assert load_run(run_dir).follow is None
+    assert_pngs(run_dir, render_plots(run_dir), [n for n in EXPECTED_PNGS if n != "states.png"])
 
 
 @pytest.mark.parametrize("switches, words", [(1, "1 switch)"), (2, "2 switches)")])

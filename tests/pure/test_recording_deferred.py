@@ -15,7 +15,7 @@ class Calls:
         self.calls: list[tuple] = []
         self.rows = 0
 
-    def record(self, tick, time, x, y, heading, u, out, alive, missed=0):
+    def record(self, tick, time, x, y, heading, u, out, alive, missed=0, follow=None):
         self.calls.append(
             (
                 "record",
@@ -28,6 +28,7 @@ class Calls:
                 out.tolist(),
                 alive.tolist(),
                 missed,
+                None if follow is None else follow.tolist(),
             )
         )
         self.rows = tick + 1
@@ -39,8 +40,8 @@ class Calls:
         self.calls.append(("close",))
 
 
-def _tick(rec, k, x):
-    rec.record(k, k * 0.01, x, x + 1, x * 0, x * 2, np.array([2, 1]), np.array([True, True]), k % 2)
+def _tick(rec, k, x, follow=None):
+    rec.record(k, k * 0.01, x, x + 1, x * 0, x * 2, np.array([2, 1]), np.array([True, True]), k % 2, follow)
 
 
 def test_the_calls_reach_the_recorder_in_the_same_order_with_the_values_of_their_time():
@@ -48,8 +49,10 @@ def test_the_calls_reach_the_recorder_in_the_same_order_with_the_values_of_their
     deferred = DeferredRecorder(inner)
     for rec in (direct, deferred):
         x = np.array([0.0, 1.0])
-        _tick(rec, 0, x)
+        follow = np.array([0, 2], dtype=np.int8)
+        _tick(rec, 0, x, follow)
         x += 5.0  # changed in place after the tick was recorded: the record keeps the old values
+        follow[1] = 4
         rec.event({"kind": "drop"})
         _tick(rec, 1, x)
         assert rec.rows == 2  # reading it writes what is pending
@@ -62,6 +65,7 @@ def test_the_calls_reach_the_recorder_in_the_same_order_with_the_values_of_their
     assert inner.calls == direct.calls
     assert [c[0] for c in inner.calls] == ["record", "event", "record", "record", "close"]
     assert inner.calls[0][3] == [0.0, 1.0]
+    assert inner.calls[0][-1] == [0, 2] and inner.calls[2][-1] is None  # the follow states of their time
 
 
 class Interrupted(Calls):

@@ -16,6 +16,8 @@ import pytest
 
 from swarm.contracts.scenario import Scenario, load_scenario
 from swarm.contracts.scenario_tables import AgentSpec
+from swarm.contracts.vocabulary import FollowState
+from swarm.contracts.wire import FOLLOW_STATES
 from swarm.offline.sim import run_sim
 from swarm.world import results_stream
 from swarm.world.recording import (
@@ -75,6 +77,7 @@ def synthetic(
     n = len(ids)
     out = np.array([-1 if a.role == "leader" else leaders[0] for a in s.agents], dtype=np.int64)
     alive = np.ones(n, dtype=bool)
+    follow = rng.integers(0, len(FOLLOW_STATES), n).astype(np.int8)
     phase = rng.uniform(0, 2 * np.pi, n)
     radius = np.array([a.speed for a in s.agents], dtype=float)
 
@@ -89,13 +92,15 @@ def synthetic(
     def log(k: int, order=None):
         t, x, y, h, u, missed = row(k)
         o = np.arange(len(ids)) if order is None else order
-        w.tick(k, t, np.array(ids)[o], x[o], y[o], h[o], u[o], out[o], alive[o], missed)
+        w.tick(k, t, np.array(ids)[o], x[o], y[o], h[o], u[o], out[o], alive[o], missed, follow[o])
 
     for k in range(ticks + 1):
         if k and rng.random() < 0.02:  # a follower switches, to another agent or to none
             j = int(rng.integers(0, len(ids)))
             if ids[j] not in leaders:
                 out[j] = int(rng.choice([-1, *[i for i in ids if i != ids[j]]]))
+        if k and rng.random() < 0.05:  # somebody's follow state changes
+            follow[int(rng.integers(0, len(ids)))] = int(rng.integers(0, len(FOLLOW_STATES)))
         if k and rng.random() < 0.01:  # a follower drops or rejoins
             j = int(rng.integers(0, len(ids)))
             if ids[j] not in leaders:
@@ -105,6 +110,7 @@ def synthetic(
             w.add_agent(spec, k * s.run.dt)
             ids.append(99)
             out, alive = np.append(out, leaders[-1]), np.append(alive, True)
+            follow = np.append(follow, np.int8(2))
             phase, radius = np.append(phase, 0.3), np.append(radius, 12.0)
             w.event({"kind": "join", "agent": 99, "tick": k, "time": k * s.run.dt})
         order = np.arange(len(ids))[::-1] if quirks and k % 97 == 5 else None
@@ -177,6 +183,56 @@ def test_a_run_without_faults_and_a_short_one(tmp_path):
         res = RunResult(s, _Finished(rec), read_recording(rec).events, {"engine": "x"})
         write_run(res, new)
         assert_same_results(new, old)
+
+
+def test_an_older_recording_without_follow_states_reads_as_none(tmp_path, monkeypatch):
+    """A swarm-tick-v1 recording (before the follow states: no `follow` bytes) gives the same
+    results as ever, with `follow` all none and each follower's `state_s` all none."""
+    from swarm.world import stream
+
+    v2 = stream.encode_tick
+
+    def v1(*args, **kw) -> bytes:
+        data = v2(*args, **kw)
+        return data[: -len(args[2])]  # without the n follow bytes
+
+    monkeypatch.setattr(stream, "encode_tick", v1)
+    s = load_scenario(ROOT / "scenarios" / "case2.toml")
+    rec = tmp_path / RECORDING_FILE
+    synthetic(rec, s, 120)
+    assert len(read_recording(rec).rows[0]["follow"]) == len(s.ids)
+    old, new = tmp_path / "old", tmp_path / "new"
+    old_write(rec, old, s)
+    summ = write_run(RunResult(s, _Finished(rec), read_recording(rec).events), new)
+    assert_same_results(new, old)
+    with np.load(new / TRAJECTORY_FILE) as z:
+        assert z["follow"].dtype == np.int8 and not z["follow"].any()
+    for a in summ["agents"].values():
+        assert a.get("state_s", {"none": 1.0}).keys() == {"none"}
+
+
+def test_state_seconds_add_up_to_each_followers_time_alive(tmp_path):
+    """summary.json's `state_s`: followers only, {state: seconds}, summing to the time the
+    follower was alive (rows but the last, times dt), written the same from the recording and
+    from memory."""
+    s = load_scenario(ROOT / "scenarios" / "case2.toml")
+    rec = tmp_path / RECORDING_FILE
+    synthetic(rec, s, 300, quirks=False)
+    summ = write_run(RunResult(s, _Finished(rec), read_recording(rec).events), tmp_path / "new")
+    old_write(rec, tmp_path / "old", s)
+    assert_same_results(tmp_path / "new", tmp_path / "old")
+    with np.load(tmp_path / "new" / TRAJECTORY_FILE) as z:
+        alive, ids, follow = z["alive"], z["ids"], z["follow"]
+    names = {str(f) for f in FollowState}
+    for k, aid in enumerate(ids.tolist()):
+        a = summ["agents"][str(aid)]
+        if a["role"] == "leader":
+            assert "state_s" not in a
+            continue
+        assert set(a["state_s"]) <= names and all(v > 0 for v in a["state_s"].values())
+        assert sum(a["state_s"].values()) == pytest.approx(alive[:-1, k].sum() * s.run.dt)
+        seen = {str(FOLLOW_STATES[c]) for c in np.unique(follow[:-1, k][alive[:-1, k]])}
+        assert set(a["state_s"]) == seen
 
 
 class _Finished:

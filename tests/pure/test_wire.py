@@ -26,7 +26,7 @@ from malformed import (
 
 from swarm.contracts import wire
 from swarm.contracts.frames import Contact, SensorFrame
-from swarm.contracts.vocabulary import EventKind, Phase
+from swarm.contracts.vocabulary import EventKind, FollowState, Phase
 from swarm.world.sensing import build_frames, encode_frames_pairwise, sensing_matrix
 
 # -- round trips ---------------------------------------------------------------------------
@@ -37,6 +37,32 @@ def test_frame_and_command_round_trip():
     assert wire.decode_sense(wire.encode_sense(f)) == f
     c = wire.Command(3, 7, 0.25, 1, Phase.TRACK, 2, 2**64 - 1)
     assert wire.decode_cmd(wire.encode_cmd(c)) == c
+    assert wire.decode_cmd(wire.encode_cmd(c)).follow == FollowState.NONE
+
+
+@pytest.mark.parametrize("state", list(FollowState))
+def test_a_command_carries_its_follow_state_in_the_byte_that_was_reserved(state):
+    """Every follow state round-trips; its code is its index in FOLLOW_STATES, in byte 3 (the
+    reserved byte, always 0 before: NONE is 0, so older senders' commands say none)."""
+    c = wire.Command(3, 7, 0.25, 1, Phase.SHADOW, None, 99, state)
+    buf = wire.encode_cmd(c)
+    assert wire.decode_cmd(buf) == c
+    assert buf[3] == wire.FOLLOW_STATES.index(state)
+    assert buf[:3] + b"\0" + buf[4:] == wire.encode_cmd(c._replace(follow=FollowState.NONE))
+    assert wire.encode_cmd_fields(3, 7, 0.25, 1, Phase.SHADOW, None, 99, state) == buf
+
+
+def test_follow_states_on_the_wire_are_every_follow_state_with_none_first():
+    assert wire.FOLLOW_STATES[0] == FollowState.NONE
+    assert sorted(wire.FOLLOW_STATES) == sorted(FollowState)
+    assert len(set(wire.FOLLOW_STATES)) == len(wire.FOLLOW_STATES) <= 127  # int8 codes in trajectory.npz
+
+
+def test_a_command_with_an_unknown_follow_state_is_a_wire_error():
+    good = wire.encode_cmd(wire.Command(3, 7, 0.25, 1, Phase.TRACK, 2, 5, FollowState.KEEP))
+    for code in (len(wire.FOLLOW_STATES), 200, 255):
+        with pytest.raises(wire.WireError, match="unknown follow state code"):
+            wire.decode_cmd(good[:3] + bytes([code]) + good[4:])
 
 
 def test_frames_encoded_all_at_once_are_the_frames_built_one_by_one():

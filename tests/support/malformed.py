@@ -144,8 +144,8 @@ JOIN_BAD = BAD_JSON + [
 ]
 
 
-def _cmd(agent, tick=0, u=0.1, out=-1, hops=-1, key=12345, phase=0, kind=wire.KIND_CMD, version=wire.VERSION):
-    return wire.CMD.pack(kind, version, phase, 0, agent, tick, u, out, hops, key)
+def _cmd(agent, tick=0, u=0.1, out=-1, hops=-1, key=12345, phase=0, kind=wire.KIND_CMD, version=wire.VERSION, follow=0):
+    return wire.CMD.pack(kind, version, phase, follow, agent, tick, u, out, hops, key)
 
 
 def _sense(
@@ -209,6 +209,7 @@ def _cmd_bad(rng, key_id) -> bytes:
             lambda: _cmd(a, u=-math.inf),
             lambda: _cmd(a, u=math.nan, out=other),
             lambda: _cmd(a, phase=rng.randint(5, 255)),
+            lambda: _cmd(a, follow=rng.randint(len(wire.FOLLOW_STATES), 255)),  # an unknown follow state
             lambda: _cmd(a, tick=-rng.randint(1, 2**40)),
             lambda: _cmd(other),  # a command for another agent on this agent's key
             lambda: _cmd(a, out=a),

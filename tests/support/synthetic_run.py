@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from swarm.contracts.vocabulary import EventKind
+from swarm.contracts.vocabulary import EventKind, FollowState
+from swarm.contracts.wire import FOLLOW_STATES
 
 
 def make_run(
@@ -20,11 +21,14 @@ def make_run(
     n_followers: int = 2,
     drop: tuple[int, int] | None = (1, 300),  # (follower index, tick) that drops
     events: bool = True,
+    follow: bool = True,
 ) -> Path:
     """Write a synthetic run dir with the exact trajectory.npz / summary.json layout.
 
     Leaders orbit the target at r = 10; followers spiral in to r = 10 * speed ratio.
-    Follower k follows agent k-1 (the first follows the first leader).
+    Follower k follows agent k-1 (the first follows the first leader). Followers' follow
+    states: acquire for the first tenth of the run, then keep, with a stretch of coast and
+    one of search for the first follower; follow False: no `follow` array (an older run).
     """
     run_dir.mkdir(parents=True, exist_ok=True)
     n = n_leaders + n_followers
@@ -55,12 +59,20 @@ def make_run(
     for j in range(n_leaders, n):
         out[:, j] = ids[j - 1] if j > n_leaders else ids[0]
     alive = np.ones((nt, n), dtype=bool)
+    codes = {s: k for k, s in enumerate(FOLLOW_STATES)}
+    states = np.zeros((nt, n), dtype=np.int8)
+    states[:, n_leaders:] = codes[FollowState.KEEP]
+    states[: nt // 10, n_leaders:] = codes[FollowState.ACQUIRE]
+    if n_followers:
+        states[nt // 3 : nt // 3 + nt // 20, n_leaders] = codes[FollowState.COAST]
+        states[nt // 3 + nt // 20 : nt // 3 + nt // 10, n_leaders] = codes[FollowState.SEARCH]
     summary_events = []
     if drop is not None and drop[1] < nt:
         fk, tick = drop
         j = n_leaders + fk
         alive[tick:, j] = False
         out[tick:, j] = -1
+        states[tick:, j] = 0
         u[tick:, j] = np.nan
         x[tick:, j] = x[tick, j]
         y[tick:, j] = y[tick, j]
@@ -78,6 +90,7 @@ def make_run(
         summary_events.append({"tick": 50, "time": 0.5, "agent": 3, "kind": EventKind.SWITCH, "from": 1, "to": 2})
     np.savez(
         run_dir / "trajectory.npz",
+        **({"follow": states} if follow else {}),
         ids=ids,
         role=role,
         speed=speed,
