@@ -31,7 +31,7 @@ from runtime_helpers import SCENARIOS, short_runtime_dir, wait_for
 from swarm.contracts.vocabulary import ExitCode
 from swarm.runtime.procs import wait_until
 
-pytestmark = pytest.mark.process
+pytestmark = pytest.mark.slow  # a Python process of its own per case (its tier, process, is its folder)
 
 MARK = "SWARM_TEST_STOP_MARK"  # in the environment of every process a case starts, and of theirs
 SIGNALS = {"SIGINT": (signal.SIGINT, ExitCode.INTERRUPTED), "SIGTERM": (signal.SIGTERM, ExitCode.TERMINATED)}
