@@ -44,6 +44,20 @@ from swarm.contracts.transport import answer
 from swarm.contracts.vocabulary import AgentState, EventKind
 from swarm.world.engine import LOST, REFUSED
 from swarm.world.fairness import INBOX_MAX, PER_KEY_MAX, FairQueue
+from swarm.world.inbox_messages import (
+    Admin,
+    Command,
+    Garbage,
+    Ignored,
+    Info,
+    Item,
+    Join,
+    Rejection,
+    Rogue,
+    Supervise,
+    Token,
+    Verdict,
+)
 from swarm.world.joins import Joins
 from swarm.world.report import run_info
 from swarm.world.reports import Reports
@@ -67,6 +81,8 @@ class Inbox:
     def __init__(self, state: RunState, queue: FairQueue, joins: Joins):
         self.state = state
         self.queue = queue
+        self.classifier = queue.classifier  # the callbacks' own checks (world/inbox_messages.py)
+        self.admit = self.classifier.admit
         self.joins = joins
         self.reports = Reports(state, self.release_held)
         self.drained_at = 0.0  # monotonic s the main thread last came back from its inbox
@@ -80,20 +96,34 @@ class Inbox:
         self.paused_written = False  # the clock's state the last pause/resume event wrote
         self.stop_taken: int | None = None  # the tick a stop was asked at (a second one is not recorded)
 
-    def handle(self, item: tuple, pending: set[int] | None) -> None:
-        kind = item[0]
-        if kind == "cmd":
-            self.on_cmd(item[1], item[2], pending, item[3] if len(item) > 3 else None)
-        elif kind == "alive":
-            self.on_alive(item[1], item[2] if len(item) > 2 else self.queue.latest_alive(item[1]), pending)
-        elif kind == "join":
-            self.joins.on_join(item[1])
-        elif kind == "info":
-            self.on_info(item[1])
-        elif kind == "admin":
-            self.on_admin(item[1])
-        elif kind == "supervise":
-            self.reports.on_supervise(item[1])
+    def handle(self, item: Item, pending: set[int] | None) -> None:
+        """One item taken off the queue (world/inbox_messages.py), by its type."""
+        match item:
+            case Command():  # decoded in the callback: admitted against the run's state now
+                self.latch(self.admit(item), pending)
+            case Token(key):
+                self.on_alive(key, self.queue.latest_alive(key), pending)
+            case Garbage():
+                self.reject(item)
+            case Join(query):
+                self.joins.on_join(query)
+            case Info(query):
+                self.on_info(query)
+            case Admin(query):
+                self.on_admin(query)
+            case Supervise(query):
+                self.reports.on_supervise(query)
+
+    def reject(self, why: Rejection) -> None:
+        """A message the run does not take (world/inbox_messages.py), counted: garbage to the
+        world and the agent whose key it came on, ignored to the world, rogue to the agent."""
+        match why:
+            case Garbage(aid=aid):
+                self._garbage_on(aid)
+            case Ignored():
+                self.state.ignored += 1
+            case Rogue(aid=aid):
+                self.count_rogue(aid, 1)
 
     def _garbage_on(self, aid: int | None) -> None:
         """A malformed message: the world's count, and the agent's whose key it came on."""
@@ -103,43 +133,20 @@ class Inbox:
         if b is not None:
             b.garbage += 1
 
-    def on_cmd(
-        self,
-        key: str,
-        payload: bytes,
-        pending: set[int] | None,
-        decoded: tuple[int, wire.Command] | None = None,
-    ) -> None:
-        """`decoded`: (agent id, command) as the callback decoded them (world/fairness.py);
-        None: decoded here (a malformed one is garbage)."""
-        st, core = self.state, self.state.core
-        if decoded is None:
-            aid = None
-            try:
-                aid = wire.agent_of_key(key)
-                cmd = wire.decode_cmd(payload)
-                if cmd.agent != aid:
-                    raise wire.WireError(f"command for agent {cmd.agent} on agent {aid}'s key")
-            except wire.WireError:
-                self._garbage_on(aid)
-                return
-        else:
-            aid, cmd = decoded
-        if cmd.out is not None and (cmd.out == aid or cmd.out not in core.index):
-            self._garbage_on(aid)
+    def on_cmd(self, key: str, payload: bytes, pending: set[int] | None) -> None:
+        """A command sample handled at once, not through the queue: classified here."""
+        self.latch(self.classifier.classify(key, payload), pending)
+
+    def latch(self, verdict: Verdict, pending: set[int] | None) -> None:
+        """A command the run takes goes to the engine (a fault-plan loss holds the last one);
+        anything else is counted (`reject`). `pending`: the agents whose command for this
+        tick is awaited (lockstep), less this one once its command is in."""
+        if not isinstance(verdict, Command):
+            self.reject(verdict)
             return
-        k = core.index.get(aid)
-        if k is None or core.state[k] != ACTIVE or cmd.tick > core.tick:
-            st.ignored += 1
-            return
+        st = self.state
+        _, aid, cmd = verdict
         b = st.book[aid]
-        if b.key is None or cmd.key != b.key:
-            # Not from the process that claimed this id (a rogue session, or a stale process).
-            self.count_rogue(aid, 1)
-            return
-        if cmd.tick <= b.last_cmd_tick:
-            st.ignored += 1  # duplicate or late
-            return
         done = st.engine.command(aid, cmd.tick, cmd.u, cmd.out, cmd.hops, cmd.follow)
         if done == LOST:  # a network fault lost it: its last command is held
             b.last_cmd_tick = cmd.tick
@@ -153,7 +160,7 @@ class Inbox:
         b.commands += 1
         b.last_cmd_tick = cmd.tick
         b.last_cmd_wall = time.monotonic()
-        if pending is not None and cmd.tick == core.tick:
+        if pending is not None and cmd.tick == st.engine.core.tick:
             pending.discard(aid)
 
     def count_rogue(self, aid: int, n: int) -> None:
@@ -167,13 +174,9 @@ class Inbox:
 
     def on_alive(self, key: str, kind: zenoh.SampleKind, pending: set[int] | None) -> None:
         st, core = self.state, self.state.core
-        try:
-            aid = wire.agent_of_key(key)
-        except wire.WireError:
-            st.garbage += 1
-            return
-        if aid not in core.index:
-            st.ignored += 1
+        aid = self.classifier.token(key)
+        if not isinstance(aid, int):
+            self.reject(aid)
             return
         k = core.index[aid]
         b = st.book[aid]

@@ -6,7 +6,8 @@ sends every live agent its own sensor frame, collects commands, steps `WorldCore
 and records the tick. At the end (or on SIGTERM/SIGINT) it writes trajectory.npz
 and summary.json into its output directory, announces the end and closes.
 
-All zenoh callbacks only put (kind, ...) tuples on one queue (world/fairness.py);
+All zenoh callbacks only put typed messages (world/inbox_messages.py) on one queue
+(world/fairness.py);
 everything else happens on the main thread. `World` is composed of parts, each with
 what it depends on in its constructor: the run's shared state (world/state.py), the
 inbox (world/inbox.py: what each message does), the joins (world/joins.py: join
@@ -30,6 +31,7 @@ from swarm.world.clock import Clock
 from swarm.world.engine import Engine
 from swarm.world.fairness import FairQueue
 from swarm.world.inbox import Inbox
+from swarm.world.inbox_messages import Admin, Info, Join, Supervise
 from swarm.world.joins import Joins
 from swarm.world.recording import RECORDING_FILE, DeferredRecorder, RecordingError, write_run
 from swarm.world.roster import agent_figures
@@ -108,20 +110,19 @@ class World:
 
     def _declare(self, ses: Any) -> None:
         run = self.cfg.run
-        put = self.queue.enqueue
+        fq = self.queue
+        command, token, put = fq.command, fq.token, fq.enqueue
         self._subs = [
             ses.declare_subscriber(
-                wire.agent_key(run, "*", "cmd"), lambda s: put(("cmd", str(s.key_expr), s.payload.to_bytes()))
+                wire.agent_key(run, "*", "cmd"), lambda s: command(str(s.key_expr), s.payload.to_bytes())
             ),
             ses.liveliness().declare_subscriber(
-                wire.agent_key(run, "*", "alive"),
-                lambda s: put(("alive", str(s.key_expr), s.kind), False),
-                history=True,
+                wire.agent_key(run, "*", "alive"), lambda s: token(str(s.key_expr), s.kind), history=True
             ),
-            ses.declare_queryable(wire.agent_key(run, "*", "join"), lambda q: put(("join", q))),
-            ses.declare_queryable(wire.world_info_key(run), lambda q: put(("info", q))),
-            ses.declare_queryable(wire.world_admin_key(run), lambda q: put(("admin", q))),
-            ses.declare_queryable(wire.world_supervise_key(run), lambda q: put(("supervise", q), False)),
+            ses.declare_queryable(wire.agent_key(run, "*", "join"), lambda q: put(Join(q))),
+            ses.declare_queryable(wire.world_info_key(run), lambda q: put(Info(q))),
+            ses.declare_queryable(wire.world_admin_key(run), lambda q: put(Admin(q))),
+            ses.declare_queryable(wire.world_supervise_key(run), lambda q: put(Supervise(q), False)),
         ]
         self.sense_pub = {
             i: ses.declare_publisher(wire.agent_key(run, i, "sense"), express=True) for i in self.cfg.scenario.ids

@@ -15,6 +15,7 @@ from swarm.world.clock import Clock
 from swarm.world.engine import Engine
 from swarm.world.fairness import FairQueue
 from swarm.world.inbox import Inbox
+from swarm.world.inbox_messages import Join
 from swarm.world.joins import Joins
 from swarm.world.process import World, WorldConfig
 from swarm.world.state import RunState
@@ -156,15 +157,13 @@ def parts(scenario: dict = SCENARIO):
 def test_the_inbox_alone_admits_joins_and_latches_commands():
     state, queue, inbox, _ = parts()
     q = FakeQuery(wire.encode_join_request(2, 102, "host"), key_expr=wire.agent_key(RUN, 2, "join"))
-    queue.enqueue(("join", q))
-    queue.enqueue(("alive", wire.agent_key(RUN, 2, "alive"), zenoh.SampleKind.PUT), False)
+    queue.enqueue(Join(q))
+    queue.token(wire.agent_key(RUN, 2, "alive"), zenoh.SampleKind.PUT)
     while inbox.drain(None, 0):
         pass
     key = wire.decode_join_reply(q.replies[0][1])["key"]
     assert state.core.active_ids() == [2] and [e["kind"] for e in state.engine.events] == ["join"]
-    queue.enqueue(
-        ("cmd", wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd_fields(2, 0, 0.2, None, Phase.LOST, None, key))
-    )
+    queue.command(wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd_fields(2, 0, 0.2, None, Phase.LOST, None, key))
     pending = {2}
     assert inbox.drain(pending, 0) and not pending and state.core.u[1] == 0.2 and state.book[2].commands == 1
 
@@ -301,8 +300,8 @@ def test_a_full_inbox_drops_commands_and_queries_but_never_liveliness(monkeypatc
     events = []
     world.engine.on_event = events.append
     for _ in range(5):
-        world.queue.enqueue(("cmd", wire.agent_key(RUN, 1, "cmd"), b"x"))
-    world.queue.enqueue(("alive", wire.agent_key(RUN, 1, "alive"), zenoh.SampleKind.PUT), False)
+        world.queue.command(wire.agent_key(RUN, 1, "cmd"), b"x")
+    world.queue.token(wire.agent_key(RUN, 1, "alive"), zenoh.SampleKind.PUT)
     assert world.queue.qsize() == 4 and world.queue.dropped == 2
     while world.inbox.drain(None, 0):
         pass
@@ -320,10 +319,8 @@ def test_one_keys_flood_costs_no_other_agent_a_command():
     world.engine.on_event = events.append
     for _ in range(PER_KEY_MAX + 500):
         cmd = wire.encode_cmd_fields(2, 0, 0.1, None, Phase.TRACK, None, k2)
-        world.queue.enqueue(("cmd", wire.agent_key(RUN, 2, "cmd"), cmd))
-    world.queue.enqueue(
-        ("cmd", wire.agent_key(RUN, 1, "cmd"), wire.encode_cmd_fields(1, 0, 0.1, None, Phase.TRACK, None, k1))
-    )
+        world.queue.command(wire.agent_key(RUN, 2, "cmd"), cmd)
+    world.queue.command(wire.agent_key(RUN, 1, "cmd"), wire.encode_cmd_fields(1, 0, 0.1, None, Phase.TRACK, None, k1))
     pending = {1, 2}
     while world.inbox.drain(pending, 0):
         pass
@@ -342,12 +339,10 @@ def test_a_rogues_flood_on_an_agents_key_costs_that_agent_nothing():
     join(world, 1)
     k2 = join(world, 2)
     for _ in range(4 * PER_KEY_MAX):
-        world.queue.enqueue(
-            ("cmd", wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd_fields(2, 0, 5.0, None, Phase.TRACK, None, k2 ^ 1))
+        world.queue.command(
+            wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd_fields(2, 0, 5.0, None, Phase.TRACK, None, k2 ^ 1)
         )
-    world.queue.enqueue(
-        ("cmd", wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd_fields(2, 0, 0.1, None, Phase.TRACK, None, k2))
-    )
+    world.queue.command(wire.agent_key(RUN, 2, "cmd"), wire.encode_cmd_fields(2, 0, 0.1, None, Phase.TRACK, None, k2))
     assert world.queue.qsize() == 1
     pending = {2}
     while world.inbox.drain(pending, 0):
@@ -366,13 +361,13 @@ def test_a_flapping_token_is_seen_at_its_latest_state_and_its_churn_is_capped():
     join(world, 1)
     key = wire.agent_key(RUN, 2, "alive")
     for i in range(100_000):
-        world.queue.enqueue(("alive", key, zenoh.SampleKind.PUT if i % 2 == 0 else zenoh.SampleKind.DELETE), False)
+        world.queue.token(key, zenoh.SampleKind.PUT if i % 2 == 0 else zenoh.SampleKind.DELETE)
     assert world.queue.qsize() == 1
     while world.inbox.drain(None, 0):
         pass
     assert 2 not in world.core.active_ids() and world.book[2].joins == 0  # last state: gone
     for i in range(2 * CHURN_EVENTS + 11):  # handled one by one: each a join or a drop
-        world.queue.enqueue(("alive", key, zenoh.SampleKind.PUT if i % 2 == 0 else zenoh.SampleKind.DELETE), False)
+        world.queue.token(key, zenoh.SampleKind.PUT if i % 2 == 0 else zenoh.SampleKind.DELETE)
         world.inbox.drain(None, 0)
     b = world.book[2]
     written = [e for e in world.engine.events if e["agent"] == 2 and e["kind"] in ("join", "rejoin", "drop")]

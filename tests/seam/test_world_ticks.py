@@ -15,6 +15,7 @@ from fakes import FakeQuery, FakeSession
 from swarm.contracts import wire
 from swarm.contracts.scenario import parse_scenario
 from swarm.contracts.vocabulary import Phase
+from swarm.world.inbox_messages import Command, Garbage
 from swarm.world.process import World, WorldConfig
 from swarm.world.sensing import GRID_MIN_AGENTS, sensing_matrix
 
@@ -148,19 +149,22 @@ def test_command_keys_are_parsed_once_and_only_the_runs_own():
     own = wire.agent_key(RUN, 2, "cmd")
     cmd = wire.encode_cmd_fields(2, 0, 0.1, None, Phase.TRACK, 1, world.book[2].key)
     for _ in range(2):
-        q.enqueue(("cmd", own, cmd))
-    assert q.cmd_keys == {own: 2}
+        q.command(own, cmd)
+    keys = q.classifier.cmd_keys
+    assert keys == {own: 2}
     stranger = wire.encode_cmd_fields(77, 0, 0.1, None, Phase.TRACK, 1, 5)
     for key in (wire.agent_key(RUN, 77, "cmd"), own.replace("/2/", "/02/"), own + "/more", "elsewhere/agent/2/cmd"):
         for payload in (cmd, stranger, b"garbage"):
-            got = q._decoded(key, payload)
+            got = q.classifier.decode(key, payload)
             try:
-                want = (wire.agent_of_key(key), wire.decode_cmd(payload))
-                want = want if want[1].agent == want[0] else None
+                aid, decoded = wire.agent_of_key(key), wire.decode_cmd(payload)
             except wire.WireError:
-                want = None
-            assert got == want, key
-    assert q.cmd_keys == {own: 2}
+                aid, decoded = None, None
+            if decoded is not None and decoded.agent == aid:
+                assert type(got) is Command and got == (key, aid, decoded), key
+            else:
+                assert type(got) is Garbage, key
+    assert keys == {own: 2}
     pending = {1, 2, 3}
     while world.inbox.drain(pending, 0):
         pass
