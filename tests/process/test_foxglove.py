@@ -59,6 +59,10 @@ def test_recording_lists_the_topics(tmp_path):
     assert set(last) == ids
     assert all(isinstance(r["radial_error"], float) for r in last.values()), last  # case2: every agent has a root
     assert all(r["u"] is None for r in last.values())  # the final state: no command
+    # the follow states: none for the leaders, case2's sticky followers keep theirs by 6 s
+    assert {i: r["follow"] for i, r in last.items()} == {
+        a.id: "none" if a.role == "leader" else "keep" for a in load_scenario(CASE2).agents
+    }
     assert all(isinstance(r["u"], float) for r in agents[-2]["agents"])
 
 
@@ -366,11 +370,12 @@ def test_watch_serves_a_live_run(rt, tmp_path):
         )
         ids = {a.id for a in load_scenario(CASE2).agents}
         seen: set[int] = set()
+        states: set[int] = set()  # agents whose follow state came (from their statuses)
         got_scene = False
         stream = messages(ws, subs)
         end = time.monotonic() + DEADLINE
-        while not (seen == ids and got_scene):
-            assert time.monotonic() < end, f"poses seen of {sorted(seen)} only; scene: {got_scene}"
+        while not (seen == ids and got_scene and states == ids):
+            assert time.monotonic() < end, f"poses seen of {sorted(seen)}, states of {sorted(states)}; {got_scene}"
             topic, doc = next(stream)
             if topic == "/swarm/agents":
                 seen |= {
@@ -378,6 +383,7 @@ def test_watch_serves_a_live_run(rt, tmp_path):
                     for r in doc["agents"]
                     if r["alive"] and isinstance(r["x"], float) and isinstance(r["radial_error"], float)
                 }
+                states |= {r["id"] for r in doc["agents"] if r.get("follow") in ("none", "acquire", "keep")}
             got_scene = got_scene or (topic == "/swarm/scene" and len(doc) > 0)
         victim = 3
         kill = rt.tracker.spawn(swarm_cmd("kill", victim, "--timeout", DEADLINE), "kill")

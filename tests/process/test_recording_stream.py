@@ -50,6 +50,12 @@ def test_tick_round_trip_and_bad_length():
     assert r["alive"].tolist() == [True, False, True] and r["out"].tolist() == [-1, 3, 1]
     with pytest.raises(ValueError, match="bytes for 3 agents"):
         decode_tick(data[:-1])
+    assert r["follow"].tolist() == [0, 0, 0]  # no follow states given: none
+    follow = np.array([2, 4, 0], dtype=np.int8)
+    data = encode_tick(12, 0.6, ids, x, x * 2, x * 3, x * 4, np.array([-1, 3, 1]), np.array([1, 0, 1]), 2, follow)
+    assert decode_tick(data)["follow"].tolist() == [2, 4, 0]
+    v1 = decode_tick(data[:-3])  # a swarm-tick-v1 message (before the follow states): none
+    assert v1["follow"].tolist() == [0, 0, 0] and v1["alive"].tolist() == [True, False, True]
 
 
 @pytest.mark.slow  # a whole run in-process

@@ -46,6 +46,7 @@ def assert_same_run(ref, got, *, full: bool = True) -> None:
     assert deviation(ref, got) <= TOL
     a, b = ref.recorder.arrays(), got.recorder.arrays()
     np.testing.assert_array_equal(a["out"], b["out"])
+    np.testing.assert_array_equal(a["follow"], b["follow"])  # the same follow states (summary: state_s)
     if full:
         np.testing.assert_allclose(a["u"], b["u"], rtol=0, atol=1e-9, equal_nan=True)
     assert got.events == ref.events

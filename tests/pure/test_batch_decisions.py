@@ -109,13 +109,21 @@ def step_both(scenario, ticks, hops_per_tick):
             frames.hops[0],
         )
         got = batch.decide(tick, frames)
-        phases = batch.phases()[0]
+        phases, follow = batch.phases()[0], batch.follow_states()[0]
         for i, brain in enumerate(brains):
             d = brain.decide(mine[ids[i]])
             out = int(got.out[0, i])
             yield (
-                (tick, ids[i], d.u, d.out, d.phase, d.hops),
-                (tick, ids[i], float(got.u[0, i]), None if out < 0 else ids[out], phases[i], _none(got.hops[0, i])),
+                (tick, ids[i], d.u, d.out, d.phase, d.hops, d.follow),
+                (
+                    tick,
+                    ids[i],
+                    float(got.u[0, i]),
+                    None if out < 0 else ids[out],
+                    phases[i],
+                    _none(got.hops[0, i]),
+                    follow[i],
+                ),
             )
         world.latch(got.u, got.hops)
         world.step()

@@ -13,7 +13,10 @@ from swarm.cli.main import app
 from swarm.contracts.scenario import load_scenario
 
 SCENARIOS = sorted((Path(__file__).resolve().parents[2] / "scenarios").glob("*.toml"))
-KEYS = {"ids", "role", "speed", "orbit_radius", "target", "dt", "t", "x", "y", "heading", "u", "out", "alive", "missed"}
+KEYS = {
+    *("ids", "role", "speed", "orbit_radius", "target", "dt", "t", "x", "y", "heading", "u", "out", "alive", "missed"),
+    "follow",
+}
 COMMANDS = ["check", "schema", "sim", "plot", "export"]
 
 

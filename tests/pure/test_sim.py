@@ -19,7 +19,10 @@ from swarm.world.metrics import agent_metrics, angular_rate, converged, settling
 from swarm.world.recording import write_run
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
-KEYS = {"ids", "role", "speed", "orbit_radius", "target", "dt", "t", "x", "y", "heading", "u", "out", "alive", "missed"}
+KEYS = {
+    *("ids", "role", "speed", "orbit_radius", "target", "dt", "t", "x", "y", "heading", "u", "out", "alive", "missed"),
+    "follow",
+}
 
 
 # -- engine ---------------------------------------------------------------------------------
