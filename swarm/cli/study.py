@@ -33,15 +33,18 @@ def _done(result: StudyResult) -> None:
         raise typer.Exit(stop_code())
 
 
-def _stopped(result: StudyResult, total: int) -> None:
+def _stopped(result: StudyResult) -> None:
     if result.interrupted:
-        typer.echo(f"stopped: {len(result.rows)} of {total} runs finished, kept in {result.runs_csv}", err=True)
+        typer.echo(f"stopped: {len(result.rows)} of {result.runs} runs finished, kept in {result.runs_csv}", err=True)
 
 
 DtOpt = Annotated[float, typer.Option(help="step (s)", min=1e-4)]
 JobsOpt = Annotated[int, typer.Option("--jobs", "-j", min=0, help="worker processes (0: one per core)")]
 OutOpt = Annotated[
     Optional[Path], typer.Option("--out", "-o", help="output directory (default runs/study-<kind>-<time>)")
+]
+QuietOpt = Annotated[
+    bool, typer.Option("--quiet", "-q", help="no progress on stderr (a bar on a terminal, else a line every 10 s)")
 ]
 BatchOpt = Annotated[
     bool,
@@ -85,6 +88,7 @@ def swarms(
     out: OutOpt = None,
     plot: Annotated[bool, typer.Option(help="write study.png")] = True,
     batch: BatchOpt = True,
+    quiet: QuietOpt = False,
 ) -> None:
     """Random swarms through the in-process engine: converged fraction, settling, switches.
 
@@ -134,8 +138,9 @@ def swarms(
         out=out,
         plot=plot,
         say=typer.echo,
+        progress=not quiet,
     )
-    _stopped(result, len(rules) * len(ranges) * pairs * seeds)
+    _stopped(result)
     summary = result.summary
     table(
         summary,
@@ -179,6 +184,7 @@ def gains(
     out: OutOpt = None,
     plot: Annotated[bool, typer.Option(help="write gains.png")] = True,
     batch: BatchOpt = True,
+    quiet: QuietOpt = False,
 ) -> None:
     """Where does the follower law settle? A map of (C1, C2) against speed ratio.
 
@@ -203,8 +209,9 @@ def gains(
         out=out,
         plot=plot,
         say=typer.echo,
+        progress=not quiet,
     )
-    _stopped(result, len(c1s) * len(c2s) * len(qs) * starts)
+    _stopped(result)
     gain_table(result.summary)
     _done(result)
 
@@ -263,6 +270,7 @@ def scenario(
     ] = 0,
     out: OutOpt = None,
     plot: Annotated[bool, typer.Option(help="write study.png and sweep.png")] = True,
+    quiet: QuietOpt = False,
 ) -> None:
     """Your scenario, your law: vary it over seeds and settings; where does it converge?
 
@@ -316,9 +324,10 @@ def scenario(
         out=out,
         plot=plot,
         say=typer.echo,
+        progress=not quiet,
         labels=labels,
     )
-    _stopped(result, math.prod(len(v) or 1 for v in grid.values()) * seeds)
+    _stopped(result)
     table(
         result.summary,
         [

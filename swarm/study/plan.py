@@ -78,6 +78,7 @@ class StudyResult:
     interrupted: bool
     engine: str
     wall_s: float  # running the jobs, s
+    runs: int = 0  # runs planned (len(rows) when not interrupted)
     plots: list[Path] = field(default_factory=list)
 
     @property
@@ -128,4 +129,4 @@ def execute(
     wall = time.perf_counter() - t0
     summary = plan.summarise(rows)
     write_csv(out / "summary.csv", summary)
-    return StudyResult(plan.kind, out, rows, summary, interrupted, plan.engine, wall)
+    return StudyResult(plan.kind, out, rows, summary, interrupted, plan.engine, wall, plan.runs)

@@ -39,17 +39,19 @@ def test_swarm_study_is_reached_from_import_swarm():
     assert swarm.study.run_scenario is swarm.study.api.run_scenario
 
 
-def test_run_swarms_writes_the_clis_files_and_rows(tmp_path):
-    r = swarm.study.run_swarms(**SMALL, workers=1, out=tmp_path / "api", plot=False, progress=False)
+def test_run_swarms_writes_the_clis_files_and_rows(tmp_path, capsys):
+    r = swarm.study.run_swarms(**SMALL, workers=1, out=tmp_path / "api", plot=False)
+    assert "study swarms: 4/4 runs" in capsys.readouterr().err  # no terminal: a line, not a bar
     assert r.kind == "swarms" and not r.interrupted and r.engine == "batch"
     assert len(r.rows) == 4 and len(r.summary) == 2
     assert without_wall(read(r.runs_csv)) == without_wall(r.rows)
     res = CliRunner().invoke(
         app,
         ["study", "swarms", "--n", "4", "--leaders", "1", "--range", "inf,40", "--seeds", "2", "--duration", "6"]
-        + ["--dt", "0.1", "-j", "1", "--no-plot", "--out", str(tmp_path / "cli")],
+        + ["--dt", "0.1", "-j", "1", "--no-plot", "-q", "--out", str(tmp_path / "cli")],
     )
     assert res.exit_code == 0, res.output
+    assert "rows -> " in res.output and "study swarms: 4/4" not in res.output  # -q: no progress
     assert without_wall(read(tmp_path / "cli" / "runs.csv")) == without_wall(read(r.runs_csv))
     assert read(tmp_path / "cli" / "summary.csv") == read(r.summary_csv)
 
