@@ -26,6 +26,7 @@ from swarm.agents.coast import Sighting
 from swarm.agents.laws import bearing_law, loiter_rate
 from swarm.agents.leader import on_orbit_command
 from swarm.agents.sticky_follower import StickyFollower
+from swarm.contracts.vocabulary import FollowState
 
 
 class BatchSticky:
@@ -55,7 +56,7 @@ class BatchSticky:
             if a.role == "follower"
         }
         self.out = np.full(shape, NONE, dtype=np.int64)  # Sticky.out (a column)
-        self.committed = np.zeros(shape, dtype=bool)
+        self.committed = np.zeros(shape, dtype=bool)  # Sticky.committed: state KEEP, HOLD or COAST
         self.feasible = np.full(shape, NONE, dtype=np.int64)
         self.fresh = np.ones(shape, dtype=bool)  # the scalar object is up to date
         # the last sighting of the agent steered by (Tracker.last), and the one before (prev)
@@ -64,8 +65,9 @@ class BatchSticky:
 
     # -- the keep, over arrays --------------------------------------------------------------------
     def keep(self, frames, follower: np.ndarray) -> np.ndarray:
-        """(B, N) True where a committed follower senses its out-neighbour and it advertises a
-        path: Sticky.choose's first branch (feasible updated; held, coasted, silent are 0)."""
+        """(B, N) True where a committed follower (KEEP, HOLD, COAST) senses its out-neighbour
+        and it advertises a path: the machine's "rooted" transition to KEEP (Sticky._rooted:
+        feasible updated; spell and silent 0)."""
         h_out = bm.take(frames.hops, self.out)
         kept = follower & self.committed & (h_out >= 0)
         if kept.any():
@@ -151,7 +153,8 @@ class BatchSticky:
     def _load(self, f: StickyFollower, b: int, i: int) -> None:
         """Bring the scalar follower up to date after keeps (what they changed)."""
         st, tr, mem = f.sticky, f.tracker, f.memory
-        st.held = st.coasted = st.silent = 0
+        st.state = f.state = FollowState.KEEP  # kept: Sticky._rooted's transition, "rooted" -> KEEP
+        st.spell = st.silent = 0
         st.feasible = int(self.feasible[b, i])
         ids = self.specs[b]
         tr.last = self.last.get(b, i, ids)

@@ -5,10 +5,10 @@ seconds at a time while they settle (a slow follower outside a fast leader's orb
 lapped, and every lap takes the leader out of range for a while). Re-choosing on each
 such gap restarts the follower's transient every few seconds, and it may never settle.
 So a committed follower whose out-neighbour leaves the sensor's reach *at its edge* (its
-last sighting was at EDGE x the range or more, or off its own heading by EDGE x half the
-field of view or more) keeps it for up to COAST_S seconds, steering by where it
-predicts it. It advertises no path meanwhile (it cannot see whether there still is one):
-its own followers hold it for as long (agents/selection.Sticky). The prediction:
+last sighting was at `edge` x the range or more, or off its own heading by `edge` x half the
+field of view or more; SelectionTuning.edge, 0.8) keeps it for up to SelectionTuning.coast_s
+seconds (5), steering by where it predicts it. It advertises no path meanwhile (it cannot see
+whether there still is one): its own followers hold it for as long (agents/selection.Sticky). The prediction:
 
 - from its last two sightings, the out-neighbour's speed (its displacement, with the
   follower's own dead-reckoned displacement taken out) and turn rate (the change of its
@@ -31,15 +31,10 @@ from typing import NamedTuple
 from swarm.agents.search import anchor_point, drift
 from swarm.contracts.frames import Contact
 from swarm.contracts.orbits import wrap
+from swarm.contracts.tuning import SelectionTuning
 
 _new = tuple.__new__
-EDGE = 0.8  # a sighting at this fraction of the range (or half field of view) or beyond is "at the edge"
-COAST_S = 5.0  # seconds a committed follower keeps an out-neighbour that left at the edge
-
-
-def coast_ticks(dt: float) -> int:
-    """COAST_S in ticks of dt."""
-    return max(1, math.ceil(COAST_S / dt - 1e-9))
+DEFAULT = SelectionTuning()  # the edge, when not given
 
 
 class Sighting(NamedTuple):
@@ -58,9 +53,11 @@ class Tracker:
 
     __slots__ = ("edge_range", "edge_angle", "speed", "last", "prev", "state", "predicted")
 
-    def __init__(self, sensing_range: float | None, fov: float | None, speed: float):
-        self.edge_range = math.inf if sensing_range is None else EDGE * sensing_range
-        self.edge_angle = math.inf if fov is None or fov >= 2 * math.pi else EDGE * 0.5 * fov
+    def __init__(self, sensing_range: float | None, fov: float | None, speed: float, edge: float = DEFAULT.edge):
+        """edge: SelectionTuning.edge, the fraction of the range and half field of view
+        beyond which a sighting is at the edge."""
+        self.edge_range = math.inf if sensing_range is None else edge * sensing_range
+        self.edge_angle = math.inf if fov is None or fov >= 2 * math.pi else edge * 0.5 * fov
         self.speed = speed
         self.last: Sighting | None = None
         self.prev: Sighting | None = None

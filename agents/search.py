@@ -11,11 +11,13 @@ ground truth:
   sensed anybody searches about the point where it started to.
 - **Pattern.** It flies about home on a circle whose radius follows the time spent
   searching along an Archimedean spiral of pitch p: rho = sqrt(rho0^2 + p v s / pi) after
-  s s (one lap at speed v adds p to the radius). With p = range / 2 = rho0, every point
+  s s (one lap at speed v adds p to the radius). With p = range / 2 = rho0 (the default
+  SelectionTuning.search_pitch, 0.5 sensing ranges; swarm/contracts/tuning.py), every point
   within distance D of home comes within the range R of the follower by the time rho
   reaches D + p / 2, and so does every agent moving on a circle of radius up to
   R - p / 2 = 3R/4 about such a point, whatever its phase. The spiral breathes: out to
-  4 rho0 and back in, then out to 8 rho0 and back, and so on, so that it passes again
+  4 rho0 (search_first_out) and back in, then out to 8 rho0 (x search_growth, 2) and back,
+  and so on, so that it passes again
   and again, at other phases, over the region near home where the swarm most likely is,
   and still covers the whole plane in the end. With unlimited sensing the pattern is a
   fixed circle of radius v / C2 about home (only a field of view, or nobody left alive,
@@ -39,39 +41,50 @@ import math
 
 from swarm.contracts.observation import Search
 from swarm.contracts.orbits import wrap
+from swarm.contracts.tuning import SelectionTuning, TuningTicks
 
-PITCH = 0.5  # spiral pitch, in sensing ranges: p = PITCH * R (also the first radius)
+DEFAULT = SelectionTuning()  # the search's pitch and breaths, when not given
 SEEN = 0.25  # the circle about a rooted agent it sees but may not take yet, in first radii
 MIN_TURN_MARGIN = 1.25  # radius at least this times v / max_turn_rate (the tightest circle)
 
 
 def pattern(
-    sensing_range: float | None, speed: float, c2: float, max_turn_rate: float | None
+    sensing_range: float | None, speed: float, c2: float, max_turn_rate: float | None, pitch: float
 ) -> tuple[float, float, float]:
-    """(rho0, pitch, rho_min) of a follower's spiral (m): see the module docstring."""
+    """(rho0, pitch, rho_min) of a follower's spiral (m): see the module docstring; pitch:
+    SelectionTuning.search_pitch, in sensing ranges."""
     if sensing_range is None or not math.isfinite(sensing_range):
         rho0, pitch = speed / c2, 0.0
     else:
-        rho0 = pitch = PITCH * sensing_range
+        rho0 = pitch = pitch * sensing_range
     rho_min = 0.0 if not max_turn_rate else MIN_TURN_MARGIN * speed / max_turn_rate
     return rho0, pitch, rho_min
 
 
-def radius(rho0: float, pitch: float, rho_min: float, speed: float, tau: float) -> float:
+def radius(
+    rho0: float,
+    pitch: float,
+    rho_min: float,
+    speed: float,
+    tau: float,
+    first_out: float = DEFAULT.search_first_out,
+    growth: float = DEFAULT.search_growth,
+) -> float:
     """The search circle's radius after tau s of searching (m): a spiral of pitch p that
-    breathes, out from rho0 to 2 x rho0 x 2^k and back in again, k = 1, 2, 3...: on the
-    way out rho = sqrt(rho0^2 + p v s / pi) after s s, and the same backwards on the way
-    in. At least rho_min. Without a pitch (unlimited sensing): rho0."""
+    breathes, out from rho0 to first_out x rho0 x growth^k and back in again, k = 0, 1, 2...
+    (4, 8, 16... x rho0 by default): on the way out rho = sqrt(rho0^2 + p v s / pi) after
+    s s, and the same backwards on the way in. At least rho_min. Without a pitch
+    (unlimited sensing): rho0."""
     if pitch <= 0.0:
         return max(rho_min, rho0)
     rate = pitch * speed / math.pi  # area swept per s, over pi (m^2/s)
-    s, top = tau, 4.0 * rho0
+    s, top = tau, first_out * rho0
     while True:
         leg = (top * top - rho0 * rho0) / rate  # s from rho0 out to `top`
         if s <= 2.0 * leg:
             break
         s -= 2.0 * leg
-        top *= 2.0
+        top *= growth
     if s > leg:
         s = 2.0 * leg - s
     return max(rho_min, math.sqrt(rho0 * rho0 + rate * s))
@@ -92,10 +105,30 @@ def drift(hx: float, hy: float, h0: float, h1: float, speed: float, elapsed: flo
 class SearchMemory:
     """A follower's anchor, home and search clock (module docstring); one per brain."""
 
-    __slots__ = ("rho0", "pitch", "rho_min", "speed", "anchor", "home", "searching", "since", "direction", "prev")
+    __slots__ = (
+        "rho0",
+        "pitch",
+        "rho_min",
+        "breaths",
+        "speed",
+        "anchor",
+        "home",
+        "searching",
+        "since",
+        "direction",
+        "prev",
+    )
 
-    def __init__(self, sensing_range: float | None, speed: float, c2: float, max_turn_rate: float | None):
-        self.rho0, self.pitch, self.rho_min = pattern(sensing_range, speed, c2, max_turn_rate)
+    def __init__(
+        self,
+        sensing_range: float | None,
+        speed: float,
+        c2: float,
+        max_turn_rate: float | None,
+        tuning: SelectionTuning | TuningTicks = DEFAULT,
+    ):
+        self.rho0, self.pitch, self.rho_min = pattern(sensing_range, speed, c2, max_turn_rate, tuning.search_pitch)
+        self.breaths = (tuning.search_first_out, tuning.search_growth)
         self.speed = speed
         self.anchor: tuple[float, float] | None = None  # (range, bearing) last sensed
         self.home: tuple[float, float] | None = None  # the anchor minus own position since, if carried
@@ -140,6 +173,6 @@ class SearchMemory:
         return Search(
             self.home[0],
             self.home[1],
-            radius(self.rho0, self.pitch, self.rho_min, self.speed, time - self.since),
+            radius(self.rho0, self.pitch, self.rho_min, self.speed, time - self.since, *self.breaths),
             self.direction,
         )

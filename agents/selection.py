@@ -29,22 +29,22 @@ from swarm.agents.ops import Num
 from swarm.contracts.fastpath import compiled as _c
 from swarm.contracts.frames import Contact
 from swarm.contracts.orbits import wrap
+from swarm.contracts.vocabulary import FollowState
 
-REACH = 0.85  # sticky: new choices within this fraction of the sensing range only
-LOSS_CHANGES = 4  # sticky: changes of out-neighbour one loss can cost, at most (Sticky's docstring)
-HOLD_TICKS = 20  # sticky: ticks a follower holds an out-neighbour that lost its path
-
-
-def reach(sensing_range: float | None) -> float:
-    """The range (m) within which a sticky follower makes new choices: REACH x its sensing
-    range (inf when unlimited). Kept choices last while sensed at all, so an agent near the
-    edge of the range, in and out of sight, is not taken and lost tick after tick."""
-    return math.inf if sensing_range is None else REACH * sensing_range
+LOSS_CHANGES = 4  # sticky: changes of out-neighbour one loss can cost, at most (docs/design/selection.md#switch-bound)
 
 
-def cone(fov: float | None) -> float | None:
-    """The same for a field of view: new choices within REACH x half of it from the heading."""
-    return None if fov is None or fov >= 2 * math.pi else REACH * 0.5 * fov
+def reach(sensing_range: float | None, fraction: float) -> float:
+    """The range (m) within which a sticky follower makes new choices: `fraction`
+    (SelectionTuning.reach) x its sensing range (inf when unlimited). Kept choices last while
+    sensed at all, so an agent near the edge of the range, in and out of sight, is not taken
+    and lost tick after tick."""
+    return math.inf if sensing_range is None else fraction * sensing_range
+
+
+def cone(fov: float | None, fraction: float) -> float | None:
+    """The same for a field of view: new choices within `fraction` x half of it from the heading."""
+    return None if fov is None or fov >= 2 * math.pi else fraction * 0.5 * fov
 
 
 class Choice(NamedTuple):
@@ -118,262 +118,296 @@ def select(
     return Choice(best.id, best, fallback)
 
 
+# -- the sticky rule: an explicit state machine (docs/design/selection.md#states) ------------------
+
+_F = FollowState
+COMMITTED = frozenset({_F.KEEP, _F.HOLD, _F.COAST})  # states with an out-neighbour it is committed to
+
+# The transition table, as in docs/design/selection.md#states: (from any of, condition, to). The
+# handlers return the condition's name with the next state; tests/pure/test_follow_states.py walks
+# every row, and tests/pure/test_sticky.py checks that no other transition is ever taken.
+TABLE: tuple[tuple[tuple[FollowState, ...], str, FollowState], ...] = (
+    ((_F.LATE,), "patience", _F.LATE),  # silent for at most `wait` ticks since it joined
+    ((_F.LATE, _F.ACQUIRE), "quiet", _F.LATE),  # late, never committed, silent < quiet, nobody feasible
+    ((_F.LATE, _F.ACQUIRE, _F.SHADOW, _F.SEARCH), "wait", _F.ACQUIRE),  # its nearest agent may still root
+    ((_F.LATE, _F.ACQUIRE, _F.SHADOW, _F.SEARCH, _F.LOST), "commit", _F.KEEP),  # a feasible rooted agent
+    ((_F.LATE, _F.ACQUIRE, _F.SHADOW, _F.SEARCH, _F.LOST), "shadow", _F.SHADOW),  # keeps or takes a shadow
+    ((_F.LATE, _F.ACQUIRE, _F.SHADOW, _F.SEARCH, _F.LOST), "search", _F.SEARCH),  # nobody
+    ((_F.LOST,), "quiet", _F.LOST),  # silent < quiet, nobody feasible
+    ((_F.KEEP, _F.HOLD, _F.COAST), "rooted", _F.KEEP),  # out-neighbour sensed with a path
+    ((_F.KEEP, _F.HOLD), "unrooted", _F.HOLD),  # ... sensed without one, held < hold
+    ((_F.KEEP, _F.COAST), "edge", _F.COAST),  # ... not sensed, predicted beyond the edge, coasted < coast
+    ((_F.KEEP, _F.HOLD, _F.COAST), "switch", _F.KEEP),  # lost; a feasible rooted agent in reach
+    ((_F.KEEP, _F.HOLD, _F.COAST), "lost", _F.LOST),  # lost; nobody feasible
+)
+TRANSITIONS = frozenset((src, cond, dst) for srcs, cond, dst in TABLE for src in srcs)
+_NOBODY = Choice(None, None, False, False)
+_AFTER_LOSS = {"commit": "switch", "quiet": "lost"}  # what _seek's conditions are called on a loss
+
+
+class Limits(NamedTuple):
+    """What a sticky follower's machine needs to know, in ticks (a tuning's TuningTicks and
+    the run's depth) and metres/radians."""
+
+    wait: int  # ticks it waits for its nearest agent to root (the deepest a path can be)
+    drain: int  # ticks without a path after which stale advertisements through it are gone
+    hold: int  # ticks it holds an out-neighbour that lost its path
+    coast: int  # ticks it coasts on an out-neighbour that left at the edge
+    me: int | None  # own id: shadows of agents without a path go to lower ids only (None: never)
+    reach: float  # new choices within this range (m); kept ones while sensed
+    cone: float | None  # ... and within this angle of its heading (rad; None: any)
+
+    @property
+    def quiet(self) -> int:
+        """Silent this long, nobody holds it or coasts on it any more: it may shadow."""
+        return max(self.hold, self.coast) + 1
+
+
+class LossTally:
+    """Losses of a committed out-neighbour and the changes of out-neighbour each cost."""
+
+    __slots__ = ("losses", "open", "changes", "worst")
+
+    def __init__(self) -> None:
+        self.losses = 0  # committed out-neighbours lost (out of sight, gone, held or coasted too long)
+        self.open = False  # lost one and not committed again yet
+        self.changes = 0  # changes of out since that loss
+        self.worst = 0  # the most changes of out any one loss has cost
+
+    def lost(self) -> None:
+        self.losses += 1
+        self.open, self.changes = True, 0
+
+    def step(self, changed: bool, rooted: bool) -> None:
+        if self.open:
+            self.changes += changed
+            if rooted:
+                self.open = False
+                self.worst = max(self.worst, self.changes)
+
+
 class Sticky:
     """selection = "sticky" (the default): the paper's nearest choice, made once and kept;
     while nothing rooted can be chosen, hold on, shadow an agent it senses, or search.
 
-    State machine of one follower `me`, fed one frame's contacts per tick (pure, no I/O).
-    "Rooted" agents are those whose frame contact advertises a path (hops >= 0); new
-    choices are made among agents within `reach` and `cone` (fractions of the sensing
-    range and field of view, so that an agent at the edge, in and out of sight, is not
-    taken and lost tick after tick):
-
-    - **Acquire** (its first choice after starting): take the nearest agent as soon as it
-      is rooted. Paths spread one hop per tick from the leaders, so while the nearest
-      agent is not rooted yet the follower waits up to `wait_ticks` ticks for it,
-      tracking the nearest rooted agent meanwhile and advertising nothing (so nobody can
-      root through a choice it may still change). If the nearest agent never roots, the
-      follower commits to the nearest rooted agent when the wait is over.
-    - **Keep**: a committed follower keeps its out-neighbour for as long as it senses it
-      and it advertises a path. There are no voluntary switches: nearer agents passing by
-      change nothing, which is what makes the graph stop changing.
-    - **Hold**: when the out-neighbour is still sensed but stops advertising a path (it
-      lost its own), the follower keeps steering by it for up to `hold_ticks` ticks,
-      advertising nothing, and commits to it again, with no change of out-neighbour, as
-      soon as it advertises a path again. One agent's short loss then costs its subtree
-      no switch at all. (Only right after a sighting of it rooted: not after coasting.)
-    - **Coast**: when the out-neighbour leaves the frame at the edge of the sensor's reach,
-      `coast(out)` (agents/coast.py) predicts where it is; the follower steers by that
-      prediction for up to `coast_ticks` ticks, advertising nothing, and goes on as before
-      if the agent is sensed again, rooted.
-    - **Lost**: when the out-neighbour is no longer sensed and cannot be coasted on
-      (dropped mid-range, or coasted or held too long), the follower switches on that
-      very tick to the nearest *feasible* rooted agent in reach: one advertising fewer
-      hops than the fewest this follower has advertised since its last reset
-      (`feasible`). Its own descendants all advertise more than that, so the switch
-      cannot close a loop (the feasibility condition of loop-free distance-vector
-      routing). After `drain_ticks` ticks without advertising a path every stale
-      advertisement that passed through it has been replaced, so it resets `feasible`
-      and takes any rooted agent.
-    - **Shadow**: while no feasible rooted agent is in reach, the follower steers by an
-      agent it senses without advertising a path: the nearest rooted one (if not
-      feasible), else the nearest one with a lower id than its own. It keeps that agent
-      while it senses it and it stays such a candidate, and commits to it, with no change,
-      as soon as it is a feasible rooted agent (or to the nearest feasible rooted agent in
-      reach). Once it has committed, a follower shadows only after `quiet` =
-      max(hold_ticks, coast_ticks) + 1 ticks without advertising (so that nobody still
-      holds or coasts on it), and at most once per loss.
-    - **Search**: with nobody to hold, coast on, shadow or commit to, out = None; the
-      agent's law flies the search pattern of agents/search.py.
-    - **Late**: a follower that joins a run already under way (restarted, or added)
-      chooses nobody for wait_ticks + 1 ticks (stale advertisements of paths through an
-      earlier life of it have drained by then: nobody advertises while holding or
-      coasting) and shadows only after `quiet` ticks, like one that lost its path.
-
-    Loop-free, every kind of edge included. *Ordered* edges (committed, held, coasted,
-    provisional) go down in `feasible`: along a committed, held or coasted edge i -> j,
-    feasible_j < feasible_i (j's feasible is at most the hops it advertised when i chose
-    it, which were below feasible_i; later both only decrease, as neither resets while
-    i holds or coasts: quiet < drain_ticks; and i's stays above j's since i advertises
-    j's hops + 1); a provisional edge starts at a follower that never committed (feasible
-    infinite) and ends at a committed one. So no cycle is made of ordered edges alone.
-    A *shadow* edge s -> t starts at a follower that advertised nothing on the previous
-    tick and that nobody holds or coasts on: it goes to an agent that advertised a path
-    on the previous tick, or to a lower id. Ordered edges never end at a shadowing agent
-    (committed and provisional edges end at agents that advertised on the previous tick;
-    held and coasted ones at agents silent for at most quiet - 1 ticks since they were
-    last seen rooted, which do not shadow yet). So from the head of a shadow edge a cycle
-    continues either with more shadow edges between silent agents, ids decreasing, which
-    cannot close, or with ordered edges only, which never reach a shadowing agent again,
-    nor close by themselves. A restarted agent's feasible starts afresh; the `late`
-    rule keeps it out of cycles through its earlier life (tests/pure/test_sticky.py checks
-    all of this on random graphs with restarts).
-
-    Finite time to a rooted agent, when one can be reached: a follower with nobody to
-    steer by searches (agents/search.py), on a spiral that breathes out ever wider, so
-    every point of the plane comes within its range, and so does every agent circling a
-    point at up to 3/4 of the range from it, whatever its phase; a rooted agent it senses
-    it closes in on until it is in reach, and takes as soon as it is feasible, which any
-    rooted agent is once the follower has been silent for drain_ticks ticks. So a rooted
-    swarm circling a fixed target at such radii is found in finite time (the studies in
-    docs/design/selection.md measure the rest: every run of every setting converged).
-
-    Bound: the first commit comes after at most 1 + wait_ticks provisional choices and
-    any number of shadows and searches. After that, each loss of the out-neighbour
-    costs at most LOSS_CHANGES = 4 changes of out: to a feasible rooted agent (1); or to
-    nobody, then at most one shadow, then rooted (2 or 3, or 4 when that shadow is lost
-    too: a second loss of contact is searched out, not shadowed again). A held or coasted
-    out-neighbour that comes back rooted costs nothing. With unlimited sensing and no
-    faults nothing is lost, so the graph is fixed within about 2 x wait_ticks ticks and
-    the paper's theorem applies from there on. With a range or field of view, losses are
-    forced by geometry while agents settle; once they are on their orbits (rigid
-    rotation: fixed relative positions) nothing is lost any more and the graph stops
-    changing.
+    A state machine (FollowState), fed one frame's contacts per tick: `state` is where the
+    last tick left it, `choose` runs that state's handler, which returns the condition that
+    held, the next state and the choice: a transition of TRANSITIONS. The states, the table
+    and why it is loop-free with at most LOSS_CHANGES changes per loss:
+    docs/design/selection.md#states, #loop-free and #switch-bound. Pure, no I/O.
     """
 
     __slots__ = (
-        "wait_ticks",
-        "drain_ticks",
-        "hold_ticks",
-        "coast_ticks",
-        "quiet",
-        "me",
-        "reach",
+        "limits",
+        "state",
         "out",
-        "committed",
-        "acquired",
         "feasible",
-        "waited",
         "silent",
-        "held",
-        "coasted",
+        "waited",
+        "spell",
         "shadowed",
-        "patience",
+        "acquired",
         "late",
-        "cone",
-        "heading",
-        "losses",
-        "in_loss",
-        "loss_changes",
-        "worst_loss",
+        "tally",
     )
 
     def __init__(
         self,
+        *,
         wait_ticks: int,
         drain_ticks: int,
+        hold_ticks: int = 0,
+        coast_ticks: int = 0,
         me: int | None = None,
         reach: float = math.inf,
-        hold_ticks: int = HOLD_TICKS,
-        coast_ticks: int = 0,
-        late: bool = False,
         cone: float | None = None,
+        late: bool = False,
     ):
-        self.wait_ticks = wait_ticks
-        self.hold_ticks = hold_ticks
-        self.coast_ticks = coast_ticks
-        # silent this long, nobody holds it or coasts on it any more: it may shadow
-        self.quiet = max(hold_ticks, coast_ticks) + 1
-        self.drain_ticks = max(drain_ticks, self.quiet + 1)  # nobody resets while held (see the proof)
-        # late: joined a run already under way (restarted, or added): stays out of everybody's way
-        # until nothing can still point at, or advertise a path through, an earlier life of it
-        self.patience = 0
-        self.late = False
+        quiet = max(hold_ticks, coast_ticks) + 1
+        # nobody resets `feasible` while held or coasted on (the proof): drain > quiet
+        self.limits = Limits(wait_ticks, max(drain_ticks, quiet + 1), hold_ticks, coast_ticks, me, reach, cone)
+        self.state = FollowState.ACQUIRE
+        self.out: int | None = None  # the agent it steers by (committed, provisional or shadowed)
+        self.feasible: int | None = None  # fewest hops advertised since the last reset
+        self.silent = 0  # ticks in a row it advertised no path, up to the previous one
+        self.waited = 0  # ACQUIRE: provisional choices made while waiting for the nearest agent to root
+        self.spell = 0  # HOLD, COAST: ticks held, coasted
+        self.shadowed = False  # took a shadow since the last loss
+        self.acquired = False  # has committed at least once since the brain started
+        self.late = False  # joined a run under way
+        self.tally = LossTally()
         if late:
             self.late_join()
-        self.me = me  # own id: shadows of agents without a path go to lower ids only (None: never)
-        self.reach = reach  # new choices within this range only (m); kept ones while sensed
-        self.cone = cone  # ... and within this angle of its heading (rad; None: any), given each tick:
-        self.heading = 0.0  # its own heading (rad)
-        self.out: int | None = None
-        self.committed = False  # rooted through `out` (advertising hops), or holding it
-        self.acquired = False  # has committed at least once since the brain started
-        self.feasible: int | None = None  # fewest hops advertised since the last reset
-        self.waited = 0  # ticks spent waiting for the nearest agent to root
-        self.silent = 0  # ticks in a row it advertised no path, up to the previous one
-        self.held = 0  # ticks it has held its out-neighbour without a path
-        self.coasted = 0  # ticks it has coasted on its out-neighbour out of sight
-        self.shadowed = 0  # shadows taken since the last loss
-        self.losses = 0  # committed out-neighbours lost (out of sight, gone, held too long)
-        self.in_loss = False  # lost one and not committed again yet
-        self.loss_changes = 0  # changes of out since that loss
-        self.worst_loss = 0  # the most changes of out any one loss has cost
 
     def late_join(self) -> None:
-        """It joined a run already under way (restarted, or added): it chooses nobody until
-        every stale advertisement of a path through an earlier life of it has drained
-        (wait_ticks, the deepest a path can be), and shadows nobody until nobody can still
-        hold or coast on that earlier life (`quiet`)."""
-        self.patience = self.wait_ticks + 1
-        self.late = True
+        """It joined a run already under way (restarted, or added), before its first tick: it
+        chooses nobody until every stale advertisement of a path through an earlier life of it
+        has drained (wait + 1 ticks: the deepest a path can be), and shadows nobody until nobody
+        can still hold or coast on that earlier life (`quiet` ticks). Both count its silence."""
+        self.state, self.late = FollowState.LATE, True
+
+    # -- what others read -------------------------------------------------------------------------
+    @property
+    def committed(self) -> bool:
+        return self.state in COMMITTED
+
+    @property
+    def losses(self) -> int:
+        return self.tally.losses
+
+    @property
+    def worst_loss(self) -> int:
+        return self.tally.worst
 
     def loss_figures(self) -> dict:
         """losses: committed out-neighbours lost; loss_switches_max: the most changes of
         out-neighbour any one of them cost before it committed again (at most LOSS_CHANGES)."""
-        return {"losses": self.losses, "loss_switches_max": self.worst_loss}
+        return {"losses": self.tally.losses, "loss_switches_max": self.tally.worst}
 
-    def _reachable(self, c: Contact) -> bool:
-        """May it be a new choice: within `reach`, and within `cone` of the own heading?"""
-        return c.range <= self.reach and (self.cone is None or abs(wrap(c.bearing - self.heading)) <= self.cone)
-
-    def _shadow_ok(self, c: Contact) -> bool:
-        return c.hops >= 0 or (self.me is not None and c.id < self.me)
-
-    def choose(self, contacts: tuple[Contact, ...], coast: Callable[[int], Contact | None] | None = None) -> Choice:
+    # -- one tick -----------------------------------------------------------------------------
+    def choose(
+        self,
+        contacts: tuple[Contact, ...],
+        coast: Callable[[int], Contact | None] | None = None,
+        heading: float = 0.0,
+    ) -> Choice:
         """This tick's out-neighbour; `Choice.rooted` says whether to advertise a path
         (hops = contact.hops + 1) through it. coast(out): the predicted contact of a
         committed out-neighbour that is not sensed (agents/coast.py), None if it cannot
-        coast; asked only then."""
+        coast; asked only then. heading: its own (rad), for `cone`."""
         before = self.out
-        ch = self._choose(contacts, coast)
+        _, self.state, ch = self.step(contacts, coast, heading)
         self.silent = 0 if ch.rooted else self.silent + 1
-        if self.in_loss:
-            self.loss_changes += ch.out != before
-            if ch.rooted:
-                self.in_loss = False
-                self.worst_loss = max(self.worst_loss, self.loss_changes)
+        self.tally.step(ch.out != before, ch.rooted)
         return ch
 
-    def _choose(self, contacts: tuple[Contact, ...], coast) -> Choice:
-        if self.patience:
-            self.patience -= 1
-            return Choice(None, None, False, False)
-        if self.committed:
-            for c in contacts:
-                if c.id == self.out:
-                    if c.hops >= 0:
-                        self.held = self.coasted = 0
-                        self.feasible = min(self.feasible, c.hops + 1)  # type: ignore[type-var]
-                        return Choice(c.id, c, False, True)
-                    if self.held < self.hold_ticks and not self.coasted:  # hold on: it may root again
-                        self.held += 1
-                        return Choice(c.id, c, False, False)
-                    break
-            else:
-                if coast is not None and self.held == 0 and self.coasted < self.coast_ticks:
-                    p = coast(self.out)
-                    if p is not None:  # out of sight at the edge: steer by where it must be, silent
-                        self.coasted += 1
-                        return Choice(p.id, p, False, False)
-            self.committed = False  # lost: out of sight, gone, or held too long
-            self.held = self.coasted = self.shadowed = self.loss_changes = 0
-            self.losses += 1
-            self.in_loss = True
-            self.out = None
-        if self.feasible is not None and self.silent >= self.drain_ticks:
+    def step(self, contacts, coast, heading: float) -> tuple[str, FollowState, Choice]:
+        """The current state's handler: (condition, next state, choice), a row of
+        TRANSITIONS. Changes everything but `state` and `silent` (choose's)."""
+        return _HANDLERS[self.state](self, contacts, coast, heading)
+
+    # -- the handlers, one per state (ACQUIRE, LOST, SHADOW, SEARCH share one) ----------------------
+    def _late(self, contacts, coast, heading: float) -> tuple[str, FollowState, Choice]:
+        """LATE: nobody for wait + 1 ticks after joining, then as ACQUIRE (quiet: LATE again)."""
+        if self.silent <= self.limits.wait:
+            return "patience", FollowState.LATE, _NOBODY
+        return self._seek(contacts, coast, heading)
+
+    def _keep(self, contacts, coast, heading: float) -> tuple[str, FollowState, Choice]:
+        """KEEP: keep it while it is sensed and rooted; hold it if it lost its path, coast on
+        it if it left at the edge; else it is lost."""
+        for c in contacts:
+            if c.id == self.out:
+                if c.hops >= 0:
+                    return self._rooted(c)
+                if self.limits.hold > 0:  # hold on: it may root again
+                    self.spell = 1
+                    return "unrooted", FollowState.HOLD, Choice(c.id, c, False, False)
+                return self._lose(contacts, coast, heading)
+        return self._coasting(contacts, coast, heading)
+
+    def _hold(self, contacts, coast, heading: float) -> tuple[str, FollowState, Choice]:
+        """HOLD: sensed without a path; KEEP when it roots again, lost when gone or held too long."""
+        for c in contacts:
+            if c.id == self.out:
+                if c.hops >= 0:
+                    return self._rooted(c)
+                if self.spell < self.limits.hold:
+                    self.spell += 1
+                    return "unrooted", FollowState.HOLD, Choice(c.id, c, False, False)
+                break
+        return self._lose(contacts, coast, heading)
+
+    def _coast(self, contacts, coast, heading: float) -> tuple[str, FollowState, Choice]:
+        """COAST: steering by a prediction; KEEP when sensed rooted again; lost when sensed
+        without a path, coasted too long, or the prediction fails."""
+        for c in contacts:
+            if c.id == self.out:
+                return self._rooted(c) if c.hops >= 0 else self._lose(contacts, coast, heading)
+        return self._coasting(contacts, coast, heading)
+
+    def _rooted(self, c: Contact) -> tuple[str, FollowState, Choice]:
+        """Its out-neighbour is sensed and advertises a path: KEEP."""
+        self.spell = 0
+        self.feasible = min(self.feasible, c.hops + 1)  # type: ignore[type-var]
+        return "rooted", FollowState.KEEP, Choice(c.id, c, False, True)
+
+    def _coasting(self, contacts, coast, heading: float) -> tuple[str, FollowState, Choice]:
+        """KEEP or COAST, the out-neighbour not sensed: coast on its prediction, or lose it."""
+        if coast is not None and self.spell < self.limits.coast:
+            p = coast(self.out)
+            if p is not None:  # out of sight at the edge: steer by where it must be, silent
+                self.spell += 1
+                return "edge", FollowState.COAST, Choice(p.id, p, False, False)
+        return self._lose(contacts, coast, heading)
+
+    def _lose(self, contacts, coast, heading: float) -> tuple[str, FollowState, Choice]:
+        """Lost (out of sight, gone, held or coasted too long): it seeks on this very tick;
+        a commit is then a switch, a quiet wait LOST."""
+        self.spell, self.shadowed, self.out = 0, False, None
+        self.tally.lost()
+        cond, nxt, ch = self._seek(contacts, coast, heading)
+        return _AFTER_LOSS.get(cond, cond), nxt, ch
+
+    def _seek(self, contacts, coast, heading: float) -> tuple[str, FollowState, Choice]:
+        """ACQUIRE, LOST, SHADOW, SEARCH (and LATE after its patience): nobody committed to.
+        One rule for all: what differs between them is in `out` (a provisional choice or a
+        shadow, kept while it may be) and in `acquired` and `late`."""
+        lim = self.limits
+        if self.feasible is not None and self.silent >= lim.drain:
             self.feasible = None  # stale advertisements have drained
         rooted = tuple(c for c in contacts if c.hops >= 0 and (self.feasible is None or c.hops < self.feasible))
-        best = nearest(tuple(c for c in rooted if self._reachable(c)))
+        best = nearest(tuple(c for c in rooted if self._reachable(c, heading)))
         if self.acquired:
             for c in rooted:  # the agent it shadows has rooted: commit to it
                 if c.id == self.out:
                     best = c
                     break
         if best is not None:
-            if not self.acquired and self.waited < self.wait_ticks:
+            if not self.acquired and self.waited < lim.wait:
                 first = nearest(contacts)
                 if first is not None and first.id != best.id:
                     self.waited += 1  # give the nearest agent time to root; track a rooted one
                     self.out = best.id
-                    return Choice(best.id, best, False, False)
+                    return "wait", FollowState.ACQUIRE, Choice(best.id, best, False, False)
             self.out = best.id
-            self.committed = self.acquired = True
+            self.acquired = True
             self.feasible = best.hops + 1 if self.feasible is None else min(self.feasible, best.hops + 1)
-            return Choice(best.id, best, False, True)
-        if (self.acquired or self.late) and self.silent < self.quiet:  # somebody may still hold it, or coast on it
+            return "commit", FollowState.KEEP, Choice(best.id, best, False, True)
+        if (self.acquired or self.late) and self.silent < lim.quiet:  # somebody may still hold it, or coast on it
             self.out = None
-            return Choice(None, None, False, False)
+            return "quiet", FollowState.LOST if self.acquired else FollowState.LATE, _NOBODY
         for c in contacts:  # keep the agent it shadows while it can
             if c.id == self.out and self._shadow_ok(c):
-                return Choice(c.id, c, False, False)
+                return "shadow", FollowState.SHADOW, Choice(c.id, c, False, False)
         shadow = None
-        if self.shadowed == 0 or not self.acquired:
-            shadow = nearest(tuple(c for c in contacts if c.hops >= 0 and self._reachable(c))) or nearest(
-                tuple(c for c in contacts if self._shadow_ok(c) and self._reachable(c))
+        if not self.shadowed or not self.acquired:
+            shadow = nearest(tuple(c for c in contacts if c.hops >= 0 and self._reachable(c, heading))) or nearest(
+                tuple(c for c in contacts if self._shadow_ok(c) and self._reachable(c, heading))
             )
         if shadow is None:
             self.out = None
-            return Choice(None, None, False, False)
-        self.shadowed += 1
+            return "search", FollowState.SEARCH, _NOBODY
+        self.shadowed = True
         self.out = shadow.id
-        return Choice(shadow.id, shadow, False, False)
+        return "shadow", FollowState.SHADOW, Choice(shadow.id, shadow, False, False)
+
+    def _reachable(self, c: Contact, heading: float) -> bool:
+        """May it be a new choice: within `reach`, and within `cone` of the own heading?"""
+        lim = self.limits
+        return c.range <= lim.reach and (lim.cone is None or abs(wrap(c.bearing - heading)) <= lim.cone)
+
+    def _shadow_ok(self, c: Contact) -> bool:
+        return c.hops >= 0 or (self.limits.me is not None and c.id < self.limits.me)
+
+
+_HANDLERS = {
+    FollowState.LATE: Sticky._late,
+    FollowState.ACQUIRE: Sticky._seek,
+    FollowState.KEEP: Sticky._keep,
+    FollowState.HOLD: Sticky._hold,
+    FollowState.COAST: Sticky._coast,
+    FollowState.LOST: Sticky._seek,
+    FollowState.SHADOW: Sticky._seek,
+    FollowState.SEARCH: Sticky._seek,
+}

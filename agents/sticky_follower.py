@@ -10,35 +10,40 @@ Pure: no I/O.
 
 from __future__ import annotations
 
-from swarm.agents.coast import Tracker, coast_ticks
+from swarm.agents.coast import Tracker
 from swarm.agents.search import SearchMemory
-from swarm.agents.selection import HOLD_TICKS, Choice, Sticky, cone, nearest, reach
+from swarm.agents.selection import Choice, Sticky, cone, nearest, reach
 from swarm.contracts.frames import Contact
 from swarm.contracts.observation import Search
+from swarm.contracts.tuning import SelectionTuning, TuningTicks
+from swarm.contracts.vocabulary import FollowState
 
 
 class StickyFollower:
     """A follower under selection = "sticky" (see agents/selection.Sticky)."""
 
-    __slots__ = ("sticky", "tracker", "memory", "fresh")
+    __slots__ = ("sticky", "tracker", "memory", "fresh", "state")
 
     def __init__(self, spec, gains, sensing, dt: float, max_hops: int):
         """spec/gains/sensing: the scenario's AgentSpec/GainsSpec/SensingSpec or the
-        swarm.contracts.brain_config equivalents; max_hops: the deepest a path can be."""
+        swarm.contracts.brain_config equivalents (sensing.tuning: a SelectionTuning, the
+        defaults when absent); max_hops: the deepest a path can be."""
         sensing_range, fov = getattr(sensing, "range", None), getattr(sensing, "fov", None)
-        coast = coast_ticks(dt)  # holds last as long as coasts: a subtree waits out its root's coast
+        tune = TuningTicks.of(getattr(sensing, "tuning", None) or SelectionTuning(), dt)
         self.sticky = Sticky(
-            max_hops,
-            max_hops,
-            spec.id,
-            reach(sensing_range),
-            hold_ticks=max(HOLD_TICKS, coast),
-            coast_ticks=coast,
-            cone=cone(fov),
+            wait_ticks=max_hops,  # paths spread one hop per tick: the deepest is max_hops ticks away
+            drain_ticks=max_hops,  # ... and so are the stale advertisements through it
+            hold_ticks=tune.hold,
+            coast_ticks=tune.coast,
+            me=spec.id,
+            reach=reach(sensing_range, tune.reach),
+            cone=cone(fov, tune.reach),
         )
-        self.tracker = Tracker(sensing_range, fov, spec.speed)
-        self.memory = SearchMemory(sensing_range, spec.speed, gains.c2, spec.max_turn_rate)
+        self.tracker = Tracker(sensing_range, fov, spec.speed, tune.edge)
+        self.memory = SearchMemory(sensing_range, spec.speed, gains.c2, spec.max_turn_rate, tune)
         self.fresh = True  # no frame yet
+        # after each step: the machine's state, or SEARCH / LOST when it has nobody (flying a search or not)
+        self.state = FollowState.ACQUIRE
 
     def step(
         self, contacts: tuple[Contact, ...], heading: float, time: float, last_u: float, tick: int = 0
@@ -50,12 +55,11 @@ class StickyFollower:
             if tick > 0:
                 self.sticky.late_join()
         tracker = self.tracker
-        self.sticky.heading = heading
 
         def coast(out: int) -> Contact | None:
             return tracker.predict(out, heading, time)
 
-        choice = self.sticky.choose(contacts, coast)
+        choice = self.sticky.choose(contacts, coast, heading)
         c = choice.contact
         predicted = c is not None and c is tracker.predicted
         if c is None:
@@ -64,4 +68,9 @@ class StickyFollower:
             tracker.sighted(c, heading, time)
         # nobody to steer by: search about the nearest agent it senses with a path to a leader
         seen = None if c is not None else nearest(tuple(k for k in contacts if k.hops >= 0))
-        return choice, self.memory.update(c, seen, heading, time, last_u, predicted)
+        search = self.memory.update(c, seen, heading, time, last_u, predicted)
+        state = self.sticky.state
+        if c is None and state is not FollowState.LATE:  # LOST, SEARCH: what it flies
+            state = FollowState.LOST if search is None else FollowState.SEARCH
+        self.state = state
+        return choice, search

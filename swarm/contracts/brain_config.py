@@ -11,7 +11,10 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field
 
+from pydantic import ValidationError
+
 from swarm.contracts.laws import MAX_LAW_PARAMS, follower_law_name
+from swarm.contracts.tuning import SelectionTuning
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,6 +52,7 @@ class SensingConf:
     hysteresis: float
     range: float | None = None  # own sensor's range (m), None: unlimited (sets the search pattern)
     fov: float | None = None  # own sensor's field of view (rad), None: all round
+    tuning: SelectionTuning = SelectionTuning()  # sticky: [sensing.tuning] (swarm/contracts/tuning.py)
 
 
 @dataclass(frozen=True, slots=True)
@@ -67,7 +71,9 @@ class BrainConf:
         return [follower_law_name(self.gains.law, self.law.follower)[1]]
 
     def to_json(self) -> dict:
-        return asdict(self)
+        d = asdict(self)
+        d["sensing"]["tuning"] = self.sensing.tuning.model_dump()
+        return d
 
     @classmethod
     def from_scenario(cls, scenario, agent_id: int) -> BrainConf:
@@ -76,7 +82,7 @@ class BrainConf:
         return cls(
             AgentConf(a.id, a.role, a.speed, a.orbit_radius, a.direction, a.follow, a.max_turn_rate),
             GainsConf(g.c1, g.c2, g.law),
-            SensingConf(s.selection, s.hysteresis, s.range, s.fov),
+            SensingConf(s.selection, s.hysteresis, s.range, s.fov, s.tuning),
             scenario.run.dt,
             len(scenario.agents),
             LawConf(scenario.law.follower, scenario.law.leader, dict(scenario.law.params)),
@@ -131,11 +137,26 @@ class BrainConf:
                 num(s, "hysteresis", "sensing"),
                 num(s, "range", "sensing", positive=True, optional=True),
                 num(s, "fov", "sensing", positive=True, optional=True),
+                _tuning(s.get("tuning") if isinstance(s, dict) else None),
             ),
             num(d, "dt", "brain", positive=True),
             integer(d, "n_agents", "brain"),
             _law_conf(d.get("law")),
         )
+
+
+def _tuning(d) -> SelectionTuning:
+    """sensing.tuning of a join reply (absent: the defaults); ValueError names the field."""
+    if d is None:
+        return SelectionTuning()
+    if not isinstance(d, dict):
+        raise ValueError("sensing.tuning: expected an object")
+    try:
+        return SelectionTuning.model_validate(d)
+    except ValidationError as e:
+        err = e.errors()[0]
+        where = ".".join(str(p) for p in err["loc"])
+        raise ValueError(f"sensing.tuning.{where}: {err['msg']}") from None
 
 
 def _law_conf(d) -> LawConf:

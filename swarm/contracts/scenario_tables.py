@@ -15,6 +15,7 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
 from swarm.contracts.laws import MAX_LAW_PARAMS, LawError, check_law
+from swarm.contracts.tuning import SelectionTuning
 from swarm.contracts.wire import MAX_AGENT_ID, MAX_AGENTS
 
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -174,6 +175,10 @@ class SensingSpec(Strict):
         default=0.0,
         description="nearest, fixed, rooted: switch to a new nearest agent only if it is this "
         "fraction closer than the current one (sticky ignores it)",
+    )
+    tuning: SelectionTuning = Field(
+        default=SelectionTuning(),
+        description="[sensing.tuning], sticky: its spells (s) and margins (docs/design/selection.md#tuning)",
     )
 
 

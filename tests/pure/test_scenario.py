@@ -445,3 +445,73 @@ def test_byte_order_mark_and_crlf_are_read(base, write_toml):
     path = write_toml(base)
     path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes().replace(b"\n", b"\r\n"))
     assert parse_scenario(base) == load_scenario(path)
+
+
+# -- [sensing.tuning] (swarm/contracts/tuning.py) ----------------------------------------------------
+
+_TWO = {
+    "gains": {"c1": 1.0, "c2": 0.5},
+    "agents": [
+        {"id": 1, "role": "leader", "x": 0, "y": 0, "heading": 0, "speed": 1, "orbit_radius": 1},
+        {"id": 2, "role": "follower", "x": 5, "y": 0, "heading": 0, "speed": 1},
+    ],
+}
+
+
+def test_tuning_defaults_are_the_shipped_values():
+    from swarm.contracts.tuning import SelectionTuning, TuningTicks
+
+    t = parse_scenario(_TWO).sensing.tuning
+    assert t == SelectionTuning()
+    assert (t.hold_s, t.coast_s, t.reach, t.edge, t.search_pitch) == (5.0, 5.0, 0.85, 0.8, 0.5)
+    assert (t.search_first_out, t.search_growth) == (4.0, 2.0)
+    # hold used to be max(20 ticks, coast ticks): the same at dt <= 0.25 s
+    for dt in (0.01, 0.05, 0.1, 0.25):
+        k = TuningTicks.of(t, dt)
+        assert k.hold == k.coast == max(20, math.ceil(5.0 / dt - 1e-9))
+    assert TuningTicks.of(SelectionTuning(hold_s=0.001), 0.05).hold == 1  # at least one tick
+
+
+def test_tuning_table_is_read_and_checked_naming_the_field():
+    s = parse_scenario({**_TWO, "sensing": {"tuning": {"hold_s": 3, "reach": 0.7}}})
+    assert (s.sensing.tuning.hold_s, s.sensing.tuning.reach, s.sensing.tuning.coast_s) == (3.0, 0.7, 5.0)
+    for bad, field, words in [
+        ({"hold_s": -1.0}, "sensing.tuning.hold_s", "greater than 0"),
+        ({"reach": 1.5}, "sensing.tuning.reach", "less than or equal to 1"),
+        ({"edge": 0}, "sensing.tuning.edge", "greater than 0"),
+        ({"search_growth": 1.0}, "sensing.tuning.search_growth", "greater than 1"),
+        ({"hold": 5.0}, "sensing.tuning.hold", "unknown key"),
+        ({"coast_s": "5"}, "sensing.tuning.coast_s", "number"),
+    ]:
+        with pytest.raises(ScenarioError) as e:
+            parse_scenario({**_TWO, "sensing": {"tuning": bad}}, "t.toml")
+        assert field in str(e.value) and words in str(e.value) and "t.toml" in str(e.value)
+
+
+def test_tuning_overlay_of_a_dump_validates():
+    """What `swarm study scenario --param tuning.FIELD=...` does: set sensing.tuning.FIELD in a
+    dump of the scenario and validate it again."""
+    s = parse_scenario(_TWO)
+    d = s.model_dump()
+    d["sensing"]["tuning"]["coast_s"] = 2.5
+    assert Scenario.model_validate(d).sensing.tuning.coast_s == 2.5
+    d["sensing"]["tuning"]["coast_s"] = 0.0
+    with pytest.raises(ValidationError, match="coast_s"):
+        Scenario.model_validate(d)
+
+
+def test_tuning_travels_to_agent_processes():
+    import json
+
+    from swarm.contracts.brain_config import BrainConf
+
+    s = parse_scenario({**_TWO, "sensing": {"range": 40.0, "tuning": {"coast_s": 2.0, "edge": 0.9}}})
+    conf = BrainConf.from_scenario(s, 2)
+    back = BrainConf.from_json(json.loads(json.dumps(conf.to_json())))
+    assert back == conf and back.sensing.tuning == s.sensing.tuning
+    d = conf.to_json()
+    del d["sensing"]["tuning"]  # an older world: the defaults
+    assert BrainConf.from_json(d).sensing.tuning == parse_scenario(_TWO).sensing.tuning
+    d["sensing"]["tuning"] = {"edge": 2.0}
+    with pytest.raises(ValueError, match=r"sensing\.tuning\.edge"):
+        BrainConf.from_json(d)

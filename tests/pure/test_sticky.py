@@ -16,7 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from swarm.agents.brain import AgentBrain
-from swarm.agents.selection import HOLD_TICKS, LOSS_CHANGES, Sticky
+from swarm.agents.selection import LOSS_CHANGES, TRANSITIONS, Sticky
 from swarm.contracts.frames import Contact, SensorFrame
 from swarm.contracts.graph import analyse
 from swarm.contracts.scenario import parse_scenario
@@ -29,17 +29,32 @@ def C(i, r, hops):
     return Contact(i, 0.0, 0.0, r, hops)
 
 
+class Checked(Sticky):
+    """A Sticky that checks every transition it takes against the table (selection.TRANSITIONS)
+    and records it in `seen` (the class's, over every run)."""
+
+    __slots__ = ()
+    seen: set = set()
+
+    def step(self, contacts, coast, heading):
+        cond, nxt, ch = super().step(contacts, coast, heading)
+        row = (self.state, cond, nxt)
+        assert row in TRANSITIONS, row
+        Checked.seen.add(row)
+        return cond, nxt, ch
+
+
 # -- the state machine ---------------------------------------------------------------------
 
 
 def test_commits_at_once_to_a_nearest_agent_that_is_rooted():
-    s = Sticky(5, 5)
+    s = Sticky(wait_ticks=5, drain_ticks=5)
     ch = s.choose((C(1, 10.0, 0), C(3, 20.0, -1)))
     assert (ch.out, ch.rooted) == (1, True)
 
 
 def test_waits_for_the_nearest_agent_to_root_tracking_a_rooted_one_meanwhile():
-    s = Sticky(5, 5)
+    s = Sticky(wait_ticks=5, drain_ticks=5)
     ch = s.choose((C(1, 50.0, 0), C(3, 10.0, -1)))  # 3 is nearest but not rooted yet
     assert (ch.out, ch.rooted) == (1, False)  # tracks the leader, advertises no path
     ch = s.choose((C(1, 50.0, 0), C(3, 10.0, 1)))  # 3 rooted now
@@ -47,7 +62,7 @@ def test_waits_for_the_nearest_agent_to_root_tracking_a_rooted_one_meanwhile():
 
 
 def test_commits_to_nearest_rooted_when_the_wait_is_over():
-    s = Sticky(3, 3)
+    s = Sticky(wait_ticks=3, drain_ticks=3)
     for _ in range(3):
         ch = s.choose((C(1, 50.0, 0), C(3, 10.0, -1)))
         assert not ch.rooted
@@ -56,7 +71,7 @@ def test_commits_to_nearest_rooted_when_the_wait_is_over():
 
 
 def test_keeps_its_out_neighbour_when_nearer_agents_pass_by():
-    s = Sticky(3, 3)
+    s = Sticky(wait_ticks=3, drain_ticks=3)
     s.choose((C(1, 50.0, 0),))
     for r in (40.0, 5.0, 0.1):
         ch = s.choose((C(1, 50.0, 0), C(6, r, 0), C(7, r / 2, 1)))
@@ -64,14 +79,14 @@ def test_keeps_its_out_neighbour_when_nearer_agents_pass_by():
 
 
 def test_switches_on_the_tick_its_out_neighbour_is_lost():
-    s = Sticky(3, 3)
+    s = Sticky(wait_ticks=3, drain_ticks=3)
     s.choose((C(1, 50.0, 0), C(6, 60.0, 0)))
     ch = s.choose((C(6, 60.0, 0), C(7, 5.0, 2)))  # 1 gone; 7 (2 hops) is not below our 1
     assert (ch.out, ch.rooted) == (6, True)
 
 
 def test_holds_an_out_neighbour_that_lost_its_path_and_commits_again_when_it_roots():
-    s = Sticky(3, 3, me=9, hold_ticks=5)
+    s = Sticky(wait_ticks=3, drain_ticks=3, me=9, hold_ticks=5)
     s.choose((C(4, 10.0, 1), C(6, 60.0, 0)))
     assert s.feasible == 2
     for _ in range(5):  # held: same out-neighbour, no path advertised
@@ -81,7 +96,7 @@ def test_holds_an_out_neighbour_that_lost_its_path_and_commits_again_when_it_roo
 
 
 def test_switches_when_its_out_neighbour_stays_without_a_path_longer_than_the_hold():
-    s = Sticky(3, 3, me=9, hold_ticks=5)
+    s = Sticky(wait_ticks=3, drain_ticks=3, me=9, hold_ticks=5)
     s.choose((C(4, 10.0, 1), C(6, 60.0, 0)))
     for _ in range(5):
         s.choose((C(4, 10.0, -1), C(6, 60.0, 0)))
@@ -90,7 +105,7 @@ def test_switches_when_its_out_neighbour_stays_without_a_path_longer_than_the_ho
 
 
 def test_after_a_loss_ignores_its_former_descendants_searches_shadows_then_resets():
-    s = Sticky(4, 4, me=9, hold_ticks=1)  # quiet after 2 silent ticks, drained after 4
+    s = Sticky(wait_ticks=4, drain_ticks=4, me=9, hold_ticks=1)  # quiet after 2 silent ticks, drained after 4
     s.choose((C(1, 50.0, 0),))  # hops 1
     # leader gone; 5 still advertises 2 hops (it followed us): not feasible
     ch = s.choose((C(5, 5.0, 2),))
@@ -106,14 +121,14 @@ def test_after_a_loss_ignores_its_former_descendants_searches_shadows_then_reset
 
 
 def test_shadows_a_lower_id_only_among_agents_without_a_path():
-    s = Sticky(3, 3, me=5)
+    s = Sticky(wait_ticks=3, drain_ticks=3, me=5)
     ch = s.choose((C(7, 5.0, -1), C(3, 20.0, -1)))  # 7 is nearer, but only 3 is below 5
     assert (ch.out, ch.rooted) == (3, False)
-    assert Sticky(3, 3, me=2).choose((C(7, 5.0, -1), C(3, 20.0, -1))).out is None
+    assert Sticky(wait_ticks=3, drain_ticks=3, me=2).choose((C(7, 5.0, -1), C(3, 20.0, -1))).out is None
 
 
 def test_new_choices_only_within_reach_but_kept_while_sensed():
-    s = Sticky(3, 3, me=9, reach=50.0)
+    s = Sticky(wait_ticks=3, drain_ticks=3, me=9, reach=50.0)
     assert s.choose((C(1, 55.0, 0),)).out is None  # beyond reach: not taken
     ch = s.choose((C(1, 45.0, 0),))
     assert (ch.out, ch.rooted) == (1, True)
@@ -122,7 +137,7 @@ def test_new_choices_only_within_reach_but_kept_while_sensed():
 
 
 def test_coasts_on_a_predicted_contact_then_loses_it():
-    s = Sticky(3, 3, me=9, coast_ticks=2)
+    s = Sticky(wait_ticks=3, drain_ticks=3, me=9, coast_ticks=2)
     s.choose((C(1, 50.0, 0),))
     ghost = C(1, 61.0, 0)
     for _ in range(2):
@@ -131,13 +146,13 @@ def test_coasts_on_a_predicted_contact_then_loses_it():
         assert s.committed and s.losses == 0
     ch = s.choose((), lambda out: ghost)  # coasted long enough
     assert ch.out is None and s.losses == 1
-    s2 = Sticky(3, 3, me=9, coast_ticks=2)
+    s2 = Sticky(wait_ticks=3, drain_ticks=3, me=9, coast_ticks=2)
     s2.choose((C(1, 50.0, 0),))
     assert s2.choose((), lambda out: None).out is None  # cannot coast (vanished mid-range): lost at once
 
 
 def test_feasible_follows_the_fewest_hops_advertised():
-    s = Sticky(2, 2)
+    s = Sticky(wait_ticks=2, drain_ticks=2)
     s.choose((C(4, 10.0, 3),))
     assert s.feasible == 4
     s.choose((C(4, 10.0, 1),))  # upstream got shallower
@@ -176,7 +191,7 @@ def _abstract_run(
     ticks: int,
     p_sense: float,
     p_drop: float,
-    hold: int = HOLD_TICKS,
+    hold: int = 20,
     coast: int = 0,
     reach: float = math.inf,
     selectors: dict | None = None,
@@ -190,7 +205,7 @@ def _abstract_run(
     rng = np.random.default_rng(seed)
 
     def fresh(i, late=False):
-        return Sticky(n, n, me=i, reach=reach, hold_ticks=hold, coast_ticks=coast, late=late)
+        return Checked(wait_ticks=n, drain_ticks=n, me=i, reach=reach, hold_ticks=hold, coast_ticks=coast, late=late)
 
     sel = {i: fresh(i) for i in range(leaders, n)}
     if selectors is not None:
@@ -249,7 +264,8 @@ def _abstract_run(
     reach=st.sampled_from([math.inf, 60.0, 100.0]),
 )
 def test_no_follower_only_cycle_is_ever_formed(seed, n, leaders, p_sense, p_drop, hold, coast, reach):
-    """Every out edge counts: committed, held, coasted, provisional and shadow edges."""
+    """Every out edge counts: committed, held, coasted, provisional and shadow edges. (Every
+    transition taken is a row of the table: `Checked`.)"""
     leaders = min(leaders, n - 1)
     for k, out, _alive in _abstract_run(seed, n, leaders, 80, p_sense, p_drop, hold, coast, reach):
         g = analyse(out, set(range(leaders)))
