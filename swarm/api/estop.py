@@ -117,10 +117,14 @@ def end_run(
         return None, None
     world = record.world_pid if record is not None else None
     launcher = record.launcher_pid if record is not None else None
+    silent: str | None = None  # why a world that is alive did not answer
     if launcher is not None and not _alive(launcher):
         return run, f"run {run} had ended (its swarm up, pid {launcher}, is gone)"
     if world is not None and _stopped_child(world, launcher):
-        os.kill(world, signal.SIGKILL)
+        try:
+            os.kill(world, signal.SIGKILL)
+        except ProcessLookupError:  # killed meanwhile (its swarm up's own end): gone as wanted
+            pass
         how = f"its world (pid {world}) was stopped (SIGSTOP): killed with SIGKILL"
         if launcher is not None and _wait_gone(launcher, timeout):
             return run, f"run {run} ended: {how}; its swarm up (pid {launcher}) has ended the run"
@@ -133,13 +137,18 @@ def end_run(
         except NoRunError as e:
             if launcher is None or not _alive(launcher):
                 return run, f"no run ended: {e}"
+            silent = str(e)  # alive (or just gone) and not answering: its swarm up may still end the run
         else:
             with live_run:
                 return live_run.ref.run, _ask(live_run, timeout)
-    if launcher is not None:  # the world is gone: its swarm up ends the run by itself
+    if launcher is not None:  # the world is gone (or does not answer): its swarm up ends the run by itself
+        if silent is None:
+            was, world_is = "its world was gone", "its world is gone"
+        else:
+            was = world_is = f"its world did not answer ({silent})"
         if _wait_gone(launcher, timeout):
-            return run, f"run {run} ended: its world was gone; its swarm up (pid {launcher}) has ended the run"
-        return run, f"run {run}: its world is gone; its swarm up (pid {launcher}) has not ended within {timeout:g} s"
+            return run, f"run {run} ended: {was}; its swarm up (pid {launcher}) has ended the run"
+        return run, f"run {run}: {world_is}; its swarm up (pid {launcher}) has not ended within {timeout:g} s"
     return run, None
 
 
@@ -216,8 +225,6 @@ def estop(
         except HaltError as e:
             failed, sent = str(e), 0
         took = (halt.first_sent if halt is not None and halt.first_sent else time.monotonic()) - t0
-    if halt is not None and say is not None:
-        say(Estopped(sent, plan.connect, took, None, None).lines()[0])
     quit = threading.Event()
     holder = None
     if halt is not None:
@@ -230,6 +237,11 @@ def estop(
         holder = threading.Thread(target=hold, name="estop-hold", daemon=True)
         holder.start()
     try:
+        if halt is not None and say is not None:
+            try:
+                say(Estopped(sent, plan.connect, took, None, None).lines()[0])
+            except OSError:  # the output is gone (a closed pipe): the run is still to be ended
+                pass
         ended: tuple[str | None, str | None] = (None, None)
         if end:
             ended = end_run(record, run, connect, credentials, live, timeout)

@@ -8,6 +8,7 @@ nothing is done here: the command does it all, as it would have."""
 
 from __future__ import annotations
 
+import atexit
 import os
 import threading
 import time
@@ -53,6 +54,16 @@ def first(args: list[str]) -> None:
     thread = threading.Thread(target=hold, name="estop-first-hold", daemon=True)
     thread.start()
     _holding = (quit, thread)
+    atexit.register(_release)  # a command that ends before it takes them (a usage error, a stop)
+
+
+def _release() -> None:
+    """At exit: what `first` opened and the command did not take, stopped and closed (a
+    daemon thread in zenoh and an open session at the interpreter's end: its native threads
+    can abort it)."""
+    done = taken()
+    if done is not None:
+        done[1].close()
 
 
 def taken() -> tuple[Any, Any, int, float] | None:
