@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import socket
-import sys
 
 from swarm.contracts import wire
 from swarm.contracts.vocabulary import ExitCode
@@ -16,10 +15,6 @@ class AgentExit(BaseException):  # also raised by signal handlers: never swallow
         super().__init__(message)
         self.code = code
         self.message = message
-
-
-def log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
 
 
 def claim(session, run: str, agent_id: int, timeout: float = 5.0, spec: dict | None = None) -> dict:

@@ -20,6 +20,7 @@ joined again, with a new brain.
 
 from __future__ import annotations
 
+import logging
 import os
 import queue
 import signal
@@ -29,7 +30,6 @@ import time
 
 from swarm.agents.brain import AgentBrain, Decision
 from swarm.agents.joining import AgentExit, claim
-from swarm.agents.joining import log as _log
 from swarm.agents.world_link import NEW_WORLD, WorldLink
 from swarm.contracts import wire
 from swarm.contracts.brain_config import BrainConf
@@ -37,6 +37,7 @@ from swarm.contracts.laws import LawError, check_trusted, trusted_laws
 from swarm.contracts.transport import answer
 from swarm.contracts.vocabulary import ExitCode
 
+log = logging.getLogger(__name__)
 STATUS_PERIOD = 0.2  # s of wall time between periodic status messages
 STATUS_MIN_GAP = 0.05  # s: a change is published at once, but not more often than this (the
 # rest wait for the next periodic one): a follower switching every tick sent one per tick
@@ -208,9 +209,12 @@ class AgentNode:
         d = brain.decide(frame)
         if brain.nonfinite != bad and time.monotonic() - self.nonfinite_noted > NONFINITE_NOTE_S:
             self.nonfinite_noted = time.monotonic()
-            _log(
-                f"[agent {self.id}] tick {frame.tick}: the law {self.conf.law_names()[0]!r} returned "
-                f"{brain.last_nonfinite}; the last turn rate is held ({self.nonfinite()} so far)"
+            log.info(
+                "tick %d: the law %r returned %s; the last turn rate is held (%d so far)",
+                frame.tick,
+                self.conf.law_names()[0],
+                brain.last_nonfinite,
+                self.nonfinite(),
             )
         self.last_cmd = wire.encode_cmd_fields(self.id, frame.tick, d.u, d.out, d.phase, d.hops, self.key, d.follow)
         self.cmd_pub.put(self.last_cmd)
@@ -225,7 +229,7 @@ class AgentNode:
                 if d.fallback
                 else f"selection = {self.conf.sensing.selection}"
             )
-            _log(f"[agent {self.id}] tick {frame.tick}: out-neighbour {last.out} -> {d.out} ({why})")
+            log.info("tick %d: out-neighbour %s -> %s (%s)", frame.tick, last.out, d.out, why)
             return True
         return d.phase != last.phase or d.fallback != last.fallback or d.hops != last.hops or d.follow != last.follow
 
@@ -241,7 +245,7 @@ class AgentNode:
                 self.nonfinite_before = self.nonfinite()
                 self.brain = self.new_brain()
                 self.last_tick, self.last, self.last_cmd = -1, None, None
-            _log(f"[agent {self.id}] a world is back; rejoining")
+            log.info("a world is back; rejoining")
             key = claim(self.session, self.run, self.id).get("key", 0)
             with self.lock:
                 self.key, self.answering = key, True
@@ -255,7 +259,7 @@ class AgentNode:
                 self.garbage += 1
             return
         sig = {"KILL": signal.SIGKILL, "TERM": signal.SIGTERM, "STOP": signal.SIGSTOP}[name]
-        _log(f"[agent {self.id}] asked over zenoh to take SIG{name}")
+        log.info("asked over zenoh to take SIG%s", name)
         os.kill(os.getpid(), sig)
 
     def loop(self) -> int:

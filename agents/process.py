@@ -16,6 +16,7 @@ on stderr (a signal while it connects included), never a traceback.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import re
 import signal
@@ -25,9 +26,9 @@ import time
 from pathlib import Path
 
 from swarm.agents.joining import AgentExit, claim
-from swarm.agents.joining import log as _log
 from swarm.agents.node import AgentNode
 from swarm.contracts import credentials
+from swarm.contracts import log as logs
 from swarm.contracts.identities import CredentialsError, agent_user
 from swarm.contracts.laws import trusted_laws
 from swarm.contracts.lifeline import LAUNCHER_PID_ENV, endpoint_refuses, tie_to_launcher
@@ -35,6 +36,7 @@ from swarm.contracts.stop_signals import StopSignals
 from swarm.contracts.transport import CONNECT_TIMEOUT_MS, open_client
 from swarm.contracts.vocabulary import ExitCode, signal_exit
 
+log = logging.getLogger(__name__)
 WORLD_GRACE = 10.0  # s an agent waits for a world that stopped answering (--world-grace)
 # Started by `swarm up`, an agent waits longer for its connection: hundreds of agents starting
 # at once on two cores (and the world admitting them) took more than the 10 s of a lone one.
@@ -62,6 +64,7 @@ def run_agent(
     file in the runtime directory) and imports only a law that is built in or trusted."""
     # SIGTERM/SIGINT raise AgentExit, held back while the session opens: once open, it is
     # closed however the agent ends (an open one hangs the exit: swarm/contracts/stop_signals.py)
+    logs.setup(f"agent {agent_id}")  # "[agent 3] ..." notes, "swarm agent 3: ..." errors
     stops = StopSignals(_stopped).install()
     session = None
     code: int = ExitCode.FAILED  # a crash, unless it ends otherwise
@@ -75,22 +78,23 @@ def run_agent(
                 session, creds = opened
         except AgentExit as e:  # a signal before it joined
             name = signal.Signals(e.code - 128).name
-            _log(f"swarm agent {agent_id}: stopped by {name} while connecting to {connect}")
+            log.error("stopped by %s while connecting to %s", name, connect)
             code = e.code
             return code
         run = run or creds.run
         reply = claim(session, run, agent_id, spec=spec)
+        log.debug("joined run %s through %s (pid %d)", run, connect, os.getpid())
         node = AgentNode(session, run, agent_id, reply, wait_world, connect, world_grace, trusted_laws(trust))
         node.open()
         code = node.loop()
     except AgentExit as e:
         if e.message:
-            _log(f"swarm agent: {e.message}")
+            log.error("swarm agent: %s", e.message, extra=logs.VERBATIM)  # (the message names the agent)
         code = e.code
     except Exception:  # a bug, or an exception in a follower law: the traceback ends the log
         import traceback  # lazy: only a crash needs it (an agent process imports little)
 
-        traceback.print_exc()
+        log.error("%s", traceback.format_exc().rstrip(), extra=logs.VERBATIM)
     finally:
         stops.ignore()
         if session is not None:
@@ -110,9 +114,10 @@ def _connect(
     while endpoint_refuses(connect):  # no socket file, or a refused connection: no world (yet)
         stops.check()
         if time.monotonic() > t_end:
-            _log(
-                f"swarm agent {agent_id}: no world at {connect}: nothing listened there for "
-                f"{world_wait:g} s (start the run first: swarm up, or swarm world)"
+            log.error(
+                "no world at %s: nothing listened there for %g s (start the run first: swarm up, or swarm world)",
+                connect,
+                world_wait,
             )
             return ExitCode.NO_WORLD
         time.sleep(0.1)
@@ -122,7 +127,7 @@ def _connect(
         creds.check_agent(agent_id)
         creds.identity(user)
     except CredentialsError as e:
-        _log(f"swarm agent {agent_id}: {e}")
+        log.error("%s", e)
         return ExitCode.REFUSED
     launched = bool(os.environ.get(LAUNCHER_PID_ENV))
     try:
@@ -137,9 +142,13 @@ def _connect(
         )
     except Exception as e:
         why = " ".join(_RUST_SOURCE.sub("", str(e)).split())
-        _log(
-            f"swarm agent {agent_id}: cannot connect to {connect} as {user} of run {creds.run}: {why} "
-            "(something listens there, but it refused these credentials or is not this run's world)"
+        log.error(
+            "cannot connect to %s as %s of run %s: %s (something listens there, but it refused these "
+            "credentials or is not this run's world)",
+            connect,
+            user,
+            creds.run,
+            why,
         )
         return ExitCode.REFUSED
     return session, creds

@@ -18,12 +18,15 @@ about 1 s + grace after the world stopped. See docs/reference/protocol.md, secti
 
 from __future__ import annotations
 
+import logging
 import time
 
-from swarm.agents.joining import AgentExit, log
+from swarm.agents.joining import AgentExit
 from swarm.contracts import wire
 from swarm.contracts.lifeline import endpoint_refuses
 from swarm.contracts.vocabulary import ExitCode
+
+log = logging.getLogger(__name__)
 
 HERE, WAITING, GONE = "here", "waiting", "gone"  # what a DELETE turned out to be
 RESUMED, NEW_WORLD, NOTHING = "resumed", "new world", "nothing"  # what a PUT means
@@ -68,16 +71,14 @@ class WorldLink:
         # After our own stall, our link reconnects within ~0.5 s; a dead world is still
         # noticed within ~0.6 s.
         if self.still_there(3.0 if stalled else 0.6):
-            log(
-                f"[agent {self.agent}] lost the world's token but the world is still there "
-                f"(stalled {stalled:.1f} s before): carrying on"
+            log.info(
+                "lost the world's token but the world is still there (stalled %.1f s before): carrying on", stalled
             )
             return HERE
         if self.grace > 0 and not (self.endpoint and endpoint_refuses(self.endpoint)):
             self.lost_at = time.monotonic()
-            log(
-                f"[agent {self.agent}] the world of run {self.run} stopped answering; waiting up to "
-                f"{self.grace:g} s for it (--world-grace)"
+            log.info(
+                "the world of run %s stopped answering; waiting up to %g s for it (--world-grace)", self.run, self.grace
             )
             return WAITING
         self.alive = False
@@ -86,7 +87,7 @@ class WorldLink:
                 ExitCode.WORLD_GONE,
                 f"agent {self.agent}: the world of run {self.run} vanished; exiting (use --wait-world to wait for it)",
             )
-        log(f"[agent {self.agent}] the world vanished; waiting for it to come back")
+        log.info("the world vanished; waiting for it to come back")
         return GONE
 
     def on_put(self) -> str:
@@ -96,7 +97,7 @@ class WorldLink:
         if self.lost_at is not None:
             waited, self.lost_at = self.waited(), None
             if hub is None or self.hub is None or hub == self.hub:
-                log(f"[agent {self.agent}] the world answers again after {waited:.1f} s; carrying on")
+                log.info("the world answers again after %.1f s; carrying on", waited)
                 return RESUMED
             self.hub = hub
             return NEW_WORLD
@@ -119,4 +120,4 @@ class WorldLink:
                 f"answered for {self.grace:g} s (--world-grace); exiting",
             )
         self.lost_at, self.alive = None, False
-        log(f"[agent {self.agent}] the world has not answered for {self.grace:g} s; waiting for a world")
+        log.info("the world has not answered for %g s; waiting for a world", self.grace)

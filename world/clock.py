@@ -15,7 +15,7 @@ event and ends the run (exit ExitCode.DESERTED; `completed` is false).
 
 from __future__ import annotations
 
-import sys
+import logging
 import time
 from collections.abc import Callable, Iterable
 from typing import Any, Protocol
@@ -30,6 +30,8 @@ from swarm.world.inbox import Inbox
 from swarm.world.memory import Trimmer
 from swarm.world.state import RunState
 from swarm.world.tick_times import TickTimes
+
+log = logging.getLogger(__name__)
 
 RESUME_HOLD_S = 0.5  # s of wall time robots stand still after a stall (links back, fresh poses) before they drive again
 LATE_EVENT_GAP_S = 1.0  # s of wall time between two `late` events (the counts in summary.json keep every one)
@@ -108,11 +110,8 @@ class Clock:
                 raise TimeoutError(f"agents {', '.join(map(str, missing))} did not join within {cfg.join_timeout} s")
             if cfg.progress and now - last_note > 5.0:
                 last_note = now
-                print(
-                    f"[world] waiting for agents {', '.join(map(str, missing))}: "
-                    f"swarm agent --id N --connect {cfg.listen}",
-                    file=sys.stderr,
-                    flush=True,
+                log.info(
+                    "waiting for agents %s: swarm agent --id N --connect %s", ", ".join(map(str, missing)), cfg.listen
                 )
             self.inbox.drain(None, 0.1)
 
@@ -196,11 +195,8 @@ class Clock:
         if self.deserted_since is None:
             self.deserted_since = now
             if st.cfg.progress:
-                print(
-                    f"[world] no agent left at tick {core.tick}; ending the run unless one joins within "
-                    f"{DESERTED_GRACE:g} s",
-                    file=sys.stderr,
-                    flush=True,
+                log.info(
+                    "no agent left at tick %d; ending the run unless one joins within %g s", core.tick, DESERTED_GRACE
                 )
         return now - self.deserted_since > DESERTED_GRACE
 
@@ -383,10 +379,6 @@ class Clock:
             if cfg.progress and now - last_note > 2.0:
                 last_note = now
                 rate = core.tick / max(now - t0_ticks, 1e-9)
-                print(
-                    f"[world] tick {core.tick}/{st.ticks} t={core.time:.2f}s {rate:.0f} ticks/s",
-                    file=sys.stderr,
-                    flush=True,
-                )
+                log.info("tick %d/%d t=%.2fs %.0f ticks/s", core.tick, st.ticks, core.time, rate)
         self.wall_ticks = time.monotonic() - t0_ticks
         return ExitCode.OK

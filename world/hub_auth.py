@@ -9,9 +9,9 @@ get one identity each from `swarm credentials` (swarm/cli/access.py).
 
 from __future__ import annotations
 
+import logging
 import os
 import shutil
-import sys
 from dataclasses import replace
 
 from swarm.contracts import credentials, tls
@@ -19,6 +19,8 @@ from swarm.contracts.identities import ENV_SUPERVISOR, CredentialsError
 from swarm.contracts.runtime_dir import pid_alive
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.transport import HubAuth, dial_endpoint, open_hub_requested, runtime_dir
+
+log = logging.getLogger(__name__)
 
 
 def run_auth(run: str, listen: str, scenario: Scenario) -> HubAuth | None:
@@ -54,11 +56,7 @@ def run_auth(run: str, listen: str, scenario: Scenario) -> HubAuth | None:
         creds = replace(creds, secret=old.secret)
     credentials.write(creds, path)
     if open_hub:
-        print(
-            "swarm world: SWARM_OPEN_HUB is set: anyone who reaches the endpoint can act on this run",
-            file=sys.stderr,
-            flush=True,
-        )
+        log.warning("SWARM_OPEN_HUB is set: anyone who reaches the endpoint can act on this run")
         return None
     # The launcher's own password (swarm/contracts/access.py, `supervisor`): taken out of the
     # environment at once; a world started by hand has no supervisor.

@@ -20,9 +20,10 @@ internal error, NO_SPACE the recording or the results could not be written, DESE
 
 from __future__ import annotations
 
-import sys
+import logging
 import traceback
 
+from swarm.contracts import log as logs
 from swarm.contracts.identities import CredentialsError
 from swarm.contracts.runtime_sweep import sweep_stale, unix_socket_answers
 from swarm.contracts.startup import Announcer
@@ -34,6 +35,8 @@ from swarm.world.live_view import LiveViewError, open_hint, start_live_view
 from swarm.world.memory import limit_arenas
 from swarm.world.process import World, WorldConfig
 from swarm.world.recording import RecordingError
+
+log = logging.getLogger(__name__)
 
 
 class Stop(BaseException):
@@ -48,6 +51,15 @@ class Stop(BaseException):
 def run_world(cfg: WorldConfig) -> int:
     """Run a world to the end; exit code OK when the run completed, 128+signal when stopped,
     NO_SPACE when the recording or the results could not be written (see the module)."""
+    logs.setup("world")  # "[world] ..." notes, "swarm world: ..." errors (swarm/contracts/log.py)
+    log.debug(
+        "run %s: %d agents, %s clock, endpoint %s, results in %s",
+        cfg.run,
+        len(cfg.scenario.agents),
+        cfg.clock,
+        cfg.listen,
+        cfg.out_dir or "none (no --out)",
+    )
     limit_arenas()  # before zenoh's and foxglove's threads start (world/memory.py)
     # Stop (SIGTERM/SIGINT) from the first moment: the run's credentials, once written,
     # must go with it however early it is stopped; held back while the hub opens
@@ -61,10 +73,7 @@ def run_world(cfg: WorldConfig) -> int:
                 sweep_stale(runtime_dir())  # files of worlds that were killed (their pid is gone)
                 cfg.auth = run_auth(cfg.run, cfg.listen, cfg.scenario)
         except (CredentialsError, OSError) as e:
-            print(
-                f"swarm world: {e if isinstance(e, CredentialsError) else f'cannot write the run credentials: {e}'}",
-                file=sys.stderr,
-            )
+            log.error("%s", e if isinstance(e, CredentialsError) else f"cannot write the run credentials: {e}")
             return ExitCode.USAGE
         return _run_world(cfg, stops, tell)
     except Stop as s:  # before the world listened: nothing recorded
@@ -89,13 +98,13 @@ def _free_socket(sock) -> bool:
 def _run_world(cfg: WorldConfig, stops: StopSignals, tell: Announcer) -> int:
     sock = socket_path(cfg.listen)
     if not _free_socket(sock):
-        print(f"swarm world: {cfg.listen} is in use by another run", file=sys.stderr)
+        log.error("%s is in use by another run", cfg.listen)
         return ExitCode.USAGE
     tell.say("recording")
     try:
         world = World(cfg)
     except RecordingError as e:
-        print(f"swarm world: {e}", file=sys.stderr)
+        log.error("%s", e)
         return ExitCode.NO_SPACE
     live = None  # the --foxglove server (world/live_view.py)
     try:
@@ -104,7 +113,7 @@ def _run_world(cfg: WorldConfig, stops: StopSignals, tell: Announcer) -> int:
                 live = start_live_view(world.rec.writer, cfg.run, *cfg.foxglove)
             except LiveViewError as e:
                 world.discard_recording()
-                print(f"swarm world: {e}", file=sys.stderr)
+                log.error("%s", e)
                 return ExitCode.USAGE
         if cfg.plant is not None:
             tell.say("robots")
@@ -124,7 +133,7 @@ def _run_world(cfg: WorldConfig, stops: StopSignals, tell: Announcer) -> int:
             return signal_exit(s.signum)
         except Exception as e:  # zenoh.ZError: endpoint unusable
             world.discard_recording()
-            print(f"swarm world: cannot listen on {cfg.listen}: {e}", file=sys.stderr)
+            log.error("cannot listen on %s: %s", cfg.listen, e)
             return ExitCode.USAGE
         try:
             return _serve(world, cfg, live, stops, tell)
@@ -152,11 +161,11 @@ def _prepare_plant(world: World, cfg: WorldConfig, stops: StopSignals) -> int | 
     except Stop as s:
         code = signal_exit(s.signum)
     except Coded as e:  # the plant's own words: the robot and the topic
-        print(f"swarm world: {e}", file=sys.stderr)
+        log.error("%s", e)
         code = e.exit_code
     except Exception:
-        traceback.print_exc()
-        print("swarm world: internal error while preparing the robots", file=sys.stderr)
+        _traceback()
+        log.error("internal error while preparing the robots")
         code = ExitCode.FAILED
     stops.ignore()  # the world ends here: nothing may interrupt stopping the robots
     _stop_plant(world)
@@ -170,8 +179,8 @@ def _stop_plant(world: World) -> None:
     try:
         world.engine.stop_plant()
     except Exception:
-        traceback.print_exc()
-        print("swarm world: internal error while stopping the robots", file=sys.stderr)
+        _traceback()
+        log.error("internal error while stopping the robots")
 
 
 def _serve(world: World, cfg: WorldConfig, live, stops: StopSignals, tell: Announcer) -> int:
@@ -181,22 +190,22 @@ def _serve(world: World, cfg: WorldConfig, live, stops: StopSignals, tell: Annou
         tell.ready()
         if cfg.progress:
             if live is not None and cfg.foxglove is not None:
-                print(f"[world] {open_hint(*cfg.foxglove)}", file=sys.stderr, flush=True)
-            print(f"[world] run {cfg.run} listening on {cfg.listen}", file=sys.stderr, flush=True)
+                log.info("%s", open_hint(*cfg.foxglove))
+            log.info("run %s listening on %s", cfg.run, cfg.listen)
         code = world.run()
     except Stop as s:
         world.stopped_by = s.signum
         code = signal_exit(s.signum)
     except TimeoutError as e:
-        print(f"swarm world: {e}", file=sys.stderr)
+        log.error("%s", e)
         code = ExitCode.JOIN_TIMEOUT
     except RecordingError as e:  # disk full mid-run: what reached the disk stays readable
-        print(f"swarm world: {e}; stopping the run", file=sys.stderr)
+        log.error("%s; stopping the run", e)
         world.stopped_by = -1
         code = ExitCode.NO_SPACE
     except Exception:  # a bug: say so, but still write what was recorded and close cleanly
-        traceback.print_exc()
-        print("swarm world: internal error; results so far are written", file=sys.stderr)
+        _traceback()
+        log.error("internal error; results so far are written")
         world.stopped_by = -1
         code = ExitCode.FAILED
     # The robots stop first (a Stop while stopping them is ignored from here on), then the
@@ -207,14 +216,16 @@ def _serve(world: World, cfg: WorldConfig, live, stops: StopSignals, tell: Annou
         world.finish()
     except RecordingError as e:
         if code != ExitCode.NO_SPACE:
-            print(f"swarm world: {e}", file=sys.stderr)
+            log.error("%s", e)
         code = ExitCode.NO_SPACE
     except Exception:  # a bug in writing the results: say so, and still close (end notice)
-        traceback.print_exc()
-        print(
-            f"swarm world: internal error writing the results; recording.mcap in {cfg.out_dir} "
-            "keeps the run (swarm export)",
-            file=sys.stderr,
-        )
+        _traceback()
+        log.error("internal error writing the results; recording.mcap in %s keeps the run (swarm export)", cfg.out_dir)
         code = ExitCode.FAILED
     return code
+
+
+def _traceback() -> None:
+    """The exception being handled, its traceback as Python prints it, before the line that
+    says what failed (the log's last line, the cause `swarm up` reports)."""
+    log.error("%s", traceback.format_exc().rstrip(), extra=logs.VERBATIM)

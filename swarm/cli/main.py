@@ -31,7 +31,9 @@ from importlib import import_module
 import typer
 
 from swarm import __version__
-from swarm.cli.errors import OneLineErrors, map_app
+from swarm.cli.errors import OneLineErrors, fail, map_app
+from swarm.contracts import log as logs
+from swarm.contracts.vocabulary import ExitCode
 
 GROUPS = ("up", "run", "offline", "plot", "live", "watch", "control", "access", "host", "robots", "tools", "estop")
 # command -> the group modules that are enough to run it (several commands in all: a typer app
@@ -57,6 +59,16 @@ def _print_version(value: bool) -> None:
         raise typer.Exit()
 
 
+def set_up_logs(command: str | None, verbose: bool, quiet: bool) -> None:
+    """This process's diagnostics, prefixed with the command's name ("swarm up: ...", "[up] ...";
+    swarm/contracts/log.py); -v / -q set $SWARM_LOG_LEVEL, which the processes it starts inherit."""
+    if verbose and quiet:
+        raise fail("swarm: -v and -q together: give one", ExitCode.USAGE)
+    if verbose or quiet:
+        logs.set_level_env("DEBUG" if verbose else "WARNING")
+    logs.setup(command or "swarm")
+
+
 def build(groups=GROUPS, study: bool = True):
     """The typer app of these command groups (and `swarm study`), every command's errors mapped."""
     app = typer.Typer(
@@ -69,11 +81,18 @@ def build(groups=GROUPS, study: bool = True):
 
     @app.callback()
     def root(
+        ctx: typer.Context,
         version: bool = typer.Option(
             False, "--version", is_eager=True, callback=_print_version, help="print the version and exit"
         ),
+        verbose: bool = typer.Option(
+            False, "--verbose", "-v", help="debug lines too, in this process and the ones it starts (world, agents)"
+        ),
+        quiet: bool = typer.Option(
+            False, "--quiet", "-q", help="warnings and errors only, in this process and the ones it starts"
+        ),
     ) -> None:
-        pass
+        set_up_logs(ctx.invoked_subcommand, verbose, quiet)
 
     for group in groups:
         import_module(f"swarm.cli.{group}").register(app)
@@ -96,13 +115,26 @@ def __getattr__(name: str):
 FOXGLOVE_COMMANDS = ("up", "world", "watch")  # the commands with --foxglove [PORT]
 
 
+GLOBAL_FLAGS = ("-v", "--verbose", "-q", "--quiet")  # the options of `swarm` itself, before the command
+
+
+def command_at(argv: list[str]) -> int:
+    """The index of the command's name in argv (after `swarm`'s own -v/-q); len(argv) if none."""
+    k = 1
+    while k < len(argv) and argv[k] in GLOBAL_FLAGS:
+        k += 1
+    return k
+
+
 def foxglove_argv(argv: list[str]) -> list[str]:
     """`--foxglove PORT` and `--foxglove=PORT` (PORT all digits) as `--foxglove --foxglove-port
-    PORT` for the commands of FOXGLOVE_COMMANDS (argv[1]); everything else as it is, and
-    nothing after `--`. typer cannot give an option a value that may be left out."""
-    if len(argv) < 2 or argv[1] not in FOXGLOVE_COMMANDS:
+    PORT` for the commands of FOXGLOVE_COMMANDS (the command's name after `swarm`'s own -v/-q);
+    everything else as it is, and nothing after `--`. typer cannot give an option a value that
+    may be left out."""
+    c = command_at(argv)
+    if c >= len(argv) or argv[c] not in FOXGLOVE_COMMANDS:
         return list(argv)
-    out, k = list(argv[:2]), 2
+    out, k = list(argv[: c + 1]), c + 1
     while k < len(argv):
         a = argv[k]
         if a == "--":
@@ -120,7 +152,8 @@ def foxglove_argv(argv: list[str]) -> list[str]:
 
 def main() -> None:
     sys.argv[:] = foxglove_argv(sys.argv)
-    group = LAZY.get(sys.argv[1]) if len(sys.argv) > 1 else None
+    c = command_at(sys.argv)
+    group = LAZY.get(sys.argv[c]) if c < len(sys.argv) else None
     (build(group, study=False) if group else __getattr__("app"))()
 
 

@@ -4,8 +4,8 @@ swarm/cli/up.py): the options they share are declared once, below, as `Annotated
 from __future__ import annotations
 
 import json
+import logging
 import os
-import sys
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -42,6 +42,8 @@ from swarm.contracts.stop_signals import signal_name
 from swarm.contracts.transport import default_endpoint
 from swarm.contracts.vocabulary import EventKind, ExitCode
 from swarm.contracts.wire import MAX_AGENT_ID, WireError, check_run_id
+
+log = logging.getLogger(__name__)
 
 ROBOTS_LOCKSTEP = "--robots runs the realtime clock only (robots do not wait for a lockstep): drop --clock lockstep"
 RobotsOpt = Annotated[
@@ -178,7 +180,7 @@ def world(
         check_foxglove(foxglove_host, foxglove_port)
     if out is not None:
         claim_out(out, force)
-    typer.echo(f"run {run} on {listen}; " + (f"results in {out}" if out else "no results kept (no --out)"), err=True)
+    log.info("run %s on %s; %s", run, listen, f"results in {out}" if out else "no results kept (no --out)")
     code = run_world(
         WorldConfig(
             s,
@@ -228,11 +230,8 @@ def _robot_world(s, robots: Path, clock: str | None, time_scale: float, launched
         for w in warnings:
             typer.echo(f"warning: robots: {w}", err=True)
 
-    def say(line: str) -> None:
-        print(f"[world] {line}", file=sys.stderr, flush=True)
-
-    s = robot_scenario(s, file)
-    return s, RobotPlant(file, s, str(robots), time_scale=time_scale, say=say)
+    s = robot_scenario(s, file)  # the plant's notes: "[world] robots: ..." lines (the world's log)
+    return s, RobotPlant(file, s, str(robots), time_scale=time_scale, say=log.info)
 
 
 def agent(

@@ -14,11 +14,13 @@ otherwise shows 0 ticks/s, not the last rate it had.
 
 from __future__ import annotations
 
+import atexit
 import math
-import shutil
+import os
+import sys
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import zenoh
 
@@ -131,17 +133,18 @@ def progress_errors(p: dict) -> str:
 
 class ProgressLine:
     """`swarm up`'s progress line, from the figures `swarm.launch` reports (`show`): at most
-    one a second when stdout is not a terminal (and the last tick's); on a terminal, one
-    row rewritten in place (`end` moves past it)."""
+    one a second when stdout is not a terminal (and the last tick's), plain lines for a log;
+    on a terminal, one row that rich keeps at the bottom (a live display: other lines printed
+    meanwhile, on stdout or stderr, go above it), cut to the terminal's width; `end` leaves the
+    last one there and moves past it."""
 
     def __init__(self, tty: bool):
         self.tty = tty
         self.last, self.tick, self.wall = 0.0, 0, 0.0
         self.clock = ""  # the rate (or "paused") last shown
+        self.live: Any = None  # rich's live display (rich.live.Live), from the first line on a terminal
 
     def show(self, p: dict) -> None:
-        import typer  # lazy: typer (30 ms) only where the line is shown; swarm.launch does not
-
         now = time.monotonic()
         still = p["tick"] == self.tick and self.wall > 0
         if p.get("paused") and self.wall > 0:  # the rate after the pause counts from its end
@@ -156,16 +159,41 @@ class ProgressLine:
             return  # a log gets a line when something changed
         self.last, self.tick, self.wall, self.clock = now, p["tick"], p["wall"], clock
         line = f"t={p['time']:7.2f}s tick {p['tick']}/{p['ticks']} {clock}  " + progress_errors(p)
-        if self.tty:  # one terminal row: a wrapped line would not be cleared by the next one
-            typer.echo("\r\033[K" + line[: max(20, shutil.get_terminal_size().columns - 1)], nl=False)
+        if self.tty:
+            self._draw(line)
         else:
-            typer.echo(line)
+            print(line, flush=True)
+
+    def _draw(self, line: str) -> None:
+        # lazy: rich (40 ms) only where the line is drawn; swarm.launch does not need it
+        from rich.console import Console
+        from rich.live import Live
+        from rich.text import Text
+
+        text = Text(line, no_wrap=True, overflow="crop")  # one terminal row
+        if self.live is None:
+            console = Console(file=sys.stdout, force_terminal=True, highlight=False)
+            self.live = Live(
+                text, console=console, auto_refresh=False, transient=False, redirect_stderr=_same_terminal()
+            )
+            self.live.start()
+            atexit.register(self.end)  # a command that ends without `end` gives the terminal back
+        self.live.update(text, refresh=True)
 
     def end(self) -> None:
-        if self.tty:
-            import typer  # lazy: as in show()
+        if self.live is not None:
+            live, self.live = self.live, None
+            live.stop()
 
-            typer.echo("")
+
+def _same_terminal() -> bool:
+    """Whether stderr is the terminal stdout is: then its lines go above the live line too
+    (through rich); stderr elsewhere (`2>file`) stays where it is."""
+    try:
+        out, err = os.fstat(sys.stdout.fileno()), os.fstat(sys.stderr.fileno())
+    except (OSError, ValueError, AttributeError):  # a stream without a file (a test's capture)
+        return False
+    return sys.stderr.isatty() and (out.st_dev, out.st_ino, out.st_rdev) == (err.st_dev, err.st_ino, err.st_rdev)
 
 
 class Paused:
