@@ -3,7 +3,7 @@ every robot zero-twisted straight onto the robots' network first, then the run e
 its world. It does not depend on the world: it works with the world running, stalled or gone.
 
 Which robots: `robots` (a robots file) if given; else the record that `swarm up --robots` keeps
-in the runtime dir (`<run>.robots`, private to the user: swarm/robots/halt.py `RunRecord`, with
+in the runtime dir (`<run>.robots`, private to the user: swarm/robots/run_record.py `RunRecord`, with
 the command types it learned; it stays after the run until the next one's replaces it): the run
 `run`'s, or the only one whose `swarm up` runs, or else the latest. The
 zero twists go first (`Halt`, STOP_REPEAT times), and go on every HOLD_GAP s until the run has
@@ -30,7 +30,8 @@ from typing import Any
 
 from swarm.contracts.errors import NoRunError, SwarmError
 from swarm.contracts.vocabulary import ExitCode
-from swarm.robots.halt import Halt, HaltError, HaltPlan, RunRecord, find_record, read_records
+from swarm.robots.halt import Halt, HaltError, HaltPlan
+from swarm.robots.run_record import RunRecord, find_record, read_records
 
 HOLD_GAP = 0.05  # s between the zero twists sent while the run ends
 END_DEADLINE = 60.0  # s for the run to have ended after the robots were stopped

@@ -159,7 +159,7 @@ class Launch:
         self.launcher = Launcher(cfg) if say is None else Launcher(cfg, say)
         self.endpoint, self.dial = self.launcher.endpoint, self.launcher.dial
         if robots is not None:  # every robot zero-twisted as soon as the world exits, whatever ends it
-            from swarm.robots.halt import WorldExitStop  # lazy: zenoh and swarm.ros2, for --robots only
+            from swarm.robots.run_record import WorldExitStop  # lazy: zenoh and swarm.ros2, for --robots only
 
             la = self.launcher
             la.world_exit = WorldExitStop(

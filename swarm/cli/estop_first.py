@@ -1,5 +1,5 @@
 """`swarm estop`'s zero twists before the command line loads (swarm/cli/__init__.py calls
-`first` when argv[1] is `estop`): the run's record (swarm/robots/halt.py `RunRecord`: the
+`first` when argv[1] is `estop`): the run's record (swarm/robots/run_record.py `RunRecord`: the
 robots' router and every robot's command topic and type) read and the zero twists sent with
 the few modules that takes, before typer and the commands' modules are imported (those took
 most of the e-stop's time on a loaded machine). `swarm estop` then goes on as usual and
@@ -36,7 +36,9 @@ def first(args: list[str]) -> None:
     if any(a in ("-h", "--help", "--ready", "--robots") or a.startswith("--robots=") for a in args):
         return
     try:
-        from swarm.robots.halt import Halt, find_record  # lazy: (see the module) the record's few modules only
+        # lazy: (see the module) the record's few modules only
+        from swarm.robots.halt import Halt
+        from swarm.robots.run_record import find_record
 
         record = find_record(_option(args, "--run") or os.environ.get("SWARM_RUN") or None)
         learn = any(len(t.types) > 1 for t in record.plan.targets)

@@ -22,18 +22,8 @@ from swarm.contracts.orbits import wrap
 from swarm.contracts.scenario import load_scenario
 from swarm.contracts.vocabulary import ExitCode
 from swarm.robots.config import parse_robots
-from swarm.robots.fleet import (
-    Delayed,
-    Fleet,
-    FleetError,
-    FleetOptions,
-    PoseNoise,
-    Unicycle,
-    odom_pose,
-    router_config,
-    saturate,
-    world_pose,
-)
+from swarm.robots.fleet import Fleet, FleetError, FleetOptions, router_config
+from swarm.robots.sim_body import Delayed, PoseNoise, Unicycle, odom_pose, saturate, world_pose
 from swarm.ros2 import cdr
 from swarm.ros2.attachment import parse_attachment
 from swarm.ros2.node import Ros2Node

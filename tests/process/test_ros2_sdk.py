@@ -28,8 +28,10 @@ from runtime_helpers import SCENARIOS, start_up, wait_for
 from swarm.contracts.scenario import load_scenario
 from swarm.contracts.vocabulary import ExitCode
 from swarm.robots.config import parse_robots
-from swarm.robots.fleet import Unicycle, router_config, world_pose
-from swarm.robots.plant import NODE_NAME, RobotPlant
+from swarm.robots.fleet import router_config
+from swarm.robots.plant import RobotPlant
+from swarm.robots.robot import NODE_NAME
+from swarm.robots.sim_body import Unicycle, world_pose
 from swarm.ros2.types import ODOMETRY, TWIST, TWIST_STAMPED
 from swarm.world.core import WorldCore
 

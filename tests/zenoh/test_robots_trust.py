@@ -24,18 +24,11 @@ import zenoh
 from swarm.contracts.scenario import parse_scenario
 from swarm.contracts.transport import client_config
 from swarm.robots.config import RobotsError, check_against, load_robots, parse_robots
-from swarm.robots.fleet import router_config, truncated
-from swarm.robots.plant import (
-    Plausible,
-    Robot,
-    RobotPlant,
-    motor_steps,
-    planned_speed,
-    quantized,
-    rebase,
-    robot_scenario,
-    twist_for,
-)
+from swarm.robots.fleet import router_config
+from swarm.robots.plant import RobotPlant, robot_scenario
+from swarm.robots.pose import Plausible, motor_steps, planned_speed, quantized, rebase, twist_for
+from swarm.robots.robot import Robot
+from swarm.robots.sim_body import truncated
 from swarm.ros2 import cdr
 from swarm.ros2.attachment import attachment, gid_for
 from swarm.ros2.node import Ros2Node

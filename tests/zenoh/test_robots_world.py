@@ -1,5 +1,5 @@
 """The robot world: the world's plant hook (world/plant.py) and the robots' plant
-(swarm/robots/plant.py `RobotPlant`).
+(swarm/robots/plant.py `RobotPlant`, with swarm/robots/robot.py, discovery.py and pose.py).
 
 - pure: the odom -> world transform, the twists (saturation, a gone agent stops its robot),
   the command type read from a robot's subscription token, the pose ages and stale spells;
@@ -29,22 +29,19 @@ from typer.testing import CliRunner, Result
 
 from swarm.api.launch import Launch
 from swarm.cli.main import app
+from swarm.contracts import log as logs
 from swarm.contracts import wire
 from swarm.contracts.errors import UsageError
 from swarm.contracts.scenario import parse_scenario
 from swarm.contracts.startup import Announcer
 from swarm.contracts.stop_signals import StopSignals
 from swarm.contracts.vocabulary import EventKind, ExitCode
-from swarm.robots import plant
+from swarm.robots import pose
 from swarm.robots.config import RobotsError, parse_robots
-from swarm.robots.fleet import odom_pose
-from swarm.robots.plant import (
-    PoseAges,
-    RobotPlant,
-    cmd_type_from,
-    odom_to_world,
-    twist_for,
-)
+from swarm.robots.plant import RobotPlant
+from swarm.robots.pose import PoseAges, odom_to_world, twist_for
+from swarm.robots.robot import cmd_type_from
+from swarm.robots.sim_body import odom_pose
 from swarm.ros2 import cdr
 from swarm.ros2.attachment import attachment, gid_for
 from swarm.ros2.keys import EntityInfo
@@ -175,7 +172,7 @@ def test_pose_ages_say_stale_once_and_fresh_once_and_keep_their_figures():
 
 def test_pose_figures_keep_bounded_memory_and_the_exact_maximum(monkeypatch):
     """A long run keeps the latest KEPT ages for the median, every maximum and count exactly."""
-    monkeypatch.setattr(plant, "KEPT", 10)
+    monkeypatch.setattr(pose, "KEPT", 10)
     ages = PoseAges()
     seq = [5.0] + [0.1] * 30 + [math.inf] * 3 + [0.2] * 5
     for a in seq:
@@ -630,6 +627,7 @@ def test_the_plant_is_stopped_however_the_run_ends(raised, code, monkeypatch, ca
 def test_a_plant_that_cannot_be_prepared_ends_the_world_with_its_errors_code_and_is_stopped(capsys, signals_back):
     plant = RecordingPlant(fail=RobotsError("r.toml: agent 1's robot /tb3_0: no Odometry on /tb3_0/odom within 10 s"))
     world, _ = world_with(plant)
+    logs.setup("world")  # as run_world does (swarm/contracts/log.py)
     assert world_main._prepare_plant(world, world.cfg, StopSignals(world_main.Stop)) == ExitCode.USAGE
     assert plant.calls == ["prepare", "stop"]
     assert (
@@ -814,7 +812,7 @@ def test_launch_with_robots_runs_realtime_passes_the_file_to_its_world_and_says_
 def test_a_pose_is_carried_forward_from_its_stamp_along_the_last_twist():
     """Latency compensation ([ros2] predict): the pose measured `age` s ago moves on with the
     twist the robot was given; a clock out of step is not extrapolated past the horizon."""
-    from swarm.robots.plant import predicted
+    from swarm.robots.pose import predicted
     from swarm.world.kinematics import step_one
 
     assert predicted((0.0, 0.0, 0.0), (1.0, 0.0), 0.5, 1.0) == pytest.approx((0.5, 0.0, 0.0))
