@@ -13,7 +13,10 @@ def main() -> None:
     import os
     import sys
 
-    prog = " ".join(["swarm", *[w for w in sys.argv[1:2] if not w.startswith("-")]])
+    args = sys.argv[1:]
+    while args[:1] and args[0] in ("-v", "--verbose", "-q", "--quiet"):  # `swarm`'s own (swarm/cli/main.py)
+        args = args[1:]
+    prog = " ".join(["swarm", *[w for w in args[:1] if not w.startswith("-")]])
 
     def first(signum, _frame):  # until CliStops is in place: the same line and exit, at once
         os.write(2, f"{prog}: stopped by {'SIGINT' if signum == _signal.SIGINT else 'SIGTERM'}\n".encode())
@@ -24,10 +27,10 @@ def main() -> None:
     from swarm.contracts.stop_signals import CliStops  # lazy: after the first handler (see the module)
 
     stops = CliStops(prog).install()
-    if sys.argv[1:2] == ["estop"]:  # the robots first: zero twists before typer and the commands load
+    if args[:1] == ["estop"]:  # the robots first: zero twists before typer and the commands load
         from swarm.cli.estop_first import first as zero_first  # lazy: (see the module)
 
-        zero_first(sys.argv[2:])
+        zero_first(args[1:])
     from importlib import import_module  # lazy: (see the module)
 
     cli = import_module("swarm.cli.main")  # (the heavy imports: typer, the commands' modules)
