@@ -5,6 +5,7 @@ files and plots; Ctrl-C keeps every finished row (exit 130)."""
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Optional
 
@@ -31,6 +32,13 @@ def _done(result: StudyResult) -> None:
     typer.echo(f"results: {result.out}")
     if result.interrupted:
         raise typer.Exit(stop_code())
+
+
+def _progress(quiet: bool) -> bool:
+    """Progress on stderr unless -q here, or `swarm -q` before the command (it sets
+    $SWARM_LOG_LEVEL to WARNING: warnings and errors only)."""
+    level = os.environ.get("SWARM_LOG_LEVEL", "").strip().upper()
+    return not (quiet or level in ("WARNING", "ERROR") or (level.isdigit() and int(level) >= 30))
 
 
 def _stopped(result: StudyResult) -> None:
@@ -138,7 +146,7 @@ def swarms(
         out=out,
         plot=plot,
         say=typer.echo,
-        progress=not quiet,
+        progress=_progress(quiet),
     )
     _stopped(result)
     summary = result.summary
@@ -209,7 +217,7 @@ def gains(
         out=out,
         plot=plot,
         say=typer.echo,
-        progress=not quiet,
+        progress=_progress(quiet),
     )
     _stopped(result)
     gain_table(result.summary)
@@ -324,7 +332,7 @@ def scenario(
         out=out,
         plot=plot,
         say=typer.echo,
-        progress=not quiet,
+        progress=_progress(quiet),
         labels=labels,
     )
     _stopped(result)

@@ -162,3 +162,14 @@ def test_the_python_api_pages_study_example_runs(tmp_path, monkeypatch, capsys):
     out = capsys.readouterr().out
     assert "c1=1 range=inf 2 " in out and "4 rows" in out
     assert (tmp_path / "study-example" / "summary.csv").exists()
+
+
+@pytest.mark.parametrize(
+    "flag, level, shown",
+    [(False, "", True), (True, "", False), (False, "WARNING", False), (False, "info", True), (False, "40", False)],
+)
+def test_progress_is_off_with_q_here_or_swarm_q(monkeypatch, flag, level, shown):
+    from swarm.cli.study import _progress
+
+    monkeypatch.setenv("SWARM_LOG_LEVEL", level)
+    assert _progress(flag) is shown
