@@ -14,6 +14,7 @@ import math
 from collections.abc import Mapping, Sequence
 
 from swarm.contracts.errors import UsageError
+from swarm.contracts.tuning import SelectionTuning
 
 # axis -> (lowest, highest, inf allowed) (c1 and c2: positive and finite)
 BOUNDS: dict[str, tuple[float, float, bool]] = {
@@ -28,22 +29,14 @@ BOUNDS: dict[str, tuple[float, float, bool]] = {
 ORDER = ("c1", "c2", "param.", "tuning.", "range", "fov", "noise", "loss", "delay", "safety", "gamma")
 
 
-def tuning_fields() -> tuple[str, ...] | None:
-    """The fields of [sensing.tuning] (None: this version's scenarios have no such table)."""
-    try:
-        # lazy: a module this version may not have yet (then: None)
-        from swarm.contracts.tuning import SelectionTuning  # type: ignore[import-not-found,unused-ignore]
-    except ImportError:
-        return None
-    names = getattr(SelectionTuning, "model_fields", None) or getattr(SelectionTuning, "__dataclass_fields__", {})
-    return tuple(names)
+def tuning_fields() -> tuple[str, ...]:
+    """The fields of [sensing.tuning] (swarm/contracts/tuning.py)."""
+    return tuple(SelectionTuning.model_fields)
 
 
 def check_tuning(name: str, label: str) -> None:
     """UsageError unless `name` is a field of [sensing.tuning]; `label` names the option."""
     valid = tuning_fields()
-    if valid is None:
-        raise UsageError(f"{label}: the selection tuning ([sensing.tuning]) is not available in this version")
     if name not in valid:
         raise UsageError(
             f"{label}: {name!r} is not a field of the selection tuning [sensing.tuning]; the fields: {', '.join(valid)}"

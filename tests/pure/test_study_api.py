@@ -15,6 +15,8 @@ from typer.testing import CliRunner
 import swarm
 from swarm.cli.main import app
 from swarm.contracts.errors import UsageError
+from swarm.contracts.scenario import load_scenario
+from swarm.study.scenario import Jitter, Setting, Template, varied
 from swarm.study.swarms import STATE_COLUMNS, state_outcome, state_totals
 from swarm.study.sweeps import grid_axes, tuning_fields
 
@@ -107,13 +109,21 @@ def test_a_bad_grid_is_refused_naming_the_key(grid, message):
 
 def test_a_tuning_name_that_is_no_field_names_the_valid_fields():
     fields = tuning_fields()
+    assert {"hold_s", "coast_s", "reach", "edge", "search_pitch"} <= set(fields)
     with pytest.raises(UsageError) as e:
         grid_axes({"tuning.nope": [1.0]}, {"tuning.nope": "--param tuning.nope"})
-    if fields is None:  # this version has no [sensing.tuning]
-        assert "--param tuning.nope: the selection tuning ([sensing.tuning]) is not available" in str(e.value)
-    else:
-        assert "'nope' is not a field of the selection tuning" in str(e.value)
-        assert all(f in str(e.value) for f in fields)
+    assert "--param tuning.nope: 'nope' is not a field of the selection tuning" in str(e.value)
+    assert all(f in str(e.value) for f in fields)
+
+
+def test_a_tuning_axis_sets_the_scenarios_sensing_tuning_and_nothing_else():
+    path = ROOT / "scenarios" / "case2-range.toml"
+    spec = load_scenario(path)
+    template = Template(spec.model_dump(), str(path), (str(path.parent),))
+    got = varied(template, Setting((("tuning.coast_s", 2.0), ("tuning.reach", 0.7))), Jitter(), 0)
+    assert got.sensing.tuning.coast_s == 2.0 and got.sensing.tuning.reach == 0.7
+    assert got.sensing.tuning.hold_s == spec.sensing.tuning.hold_s and got.sensing.range == spec.sensing.range
+    assert Setting((("tuning.coast_s", 2.0),)).label() == "tuning.coast_s=2"
 
 
 def test_the_cli_refuses_a_tuning_name_that_is_no_field(tmp_path):
