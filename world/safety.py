@@ -51,6 +51,7 @@ What is solved, and how:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -68,7 +69,8 @@ CHANGED_TOL = 1e-12  # rad/s and m/s: a solved command this close to the law's c
 @dataclass(frozen=True)
 class Arena:
     """A convex polygon as half-planes: p is inside iff normals @ p >= offsets (each row
-    a unit inward normal); wall k runs from vertices[k] to vertices[k + 1]."""
+    a unit inward normal); wall k runs from vertices[k] to vertices[k + 1], the corners in
+    the order given (a "safety" event's "wall k" is the one from corner k to k + 1)."""
 
     vertices: tuple[tuple[float, float], ...]
     normals: np.ndarray = field(repr=False, compare=False)
@@ -83,12 +85,14 @@ class Arena:
         turns = polygon_turns(pts)
         if not all(t > 0 for t in turns) and not all(t < 0 for t in turns):
             raise ValueError("the polygon is not convex (or has repeated or collinear corners)")
-        if turns[0] < 0:  # clockwise: walk it the other way
-            pts = pts[::-1]
         p = np.array(pts)
-        edge = np.roll(p, -1, axis=0) - p
-        normals = np.stack([-edge[:, 1], edge[:, 0]], axis=1) / np.hypot(edge[:, 0], edge[:, 1])[:, None]
-        offsets = np.einsum("ij,ij->i", normals, p)
+        nxt = np.roll(p, -1, axis=0)
+        edge = nxt - p
+        left = np.stack([-edge[:, 1], edge[:, 0]], axis=1) / np.hypot(edge[:, 0], edge[:, 1])[:, None]
+        ccw = turns[0] > 0  # the inside is left of each wall walked counter-clockwise, right of it clockwise
+        normals = left if ccw else -left
+        # a wall's offset from its corner where a counter-clockwise walk starts it (either is exact)
+        offsets = np.einsum("ij,ij->i", normals, p if ccw else nxt)
         return cls(tuple(pts), normals, offsets)
 
     @classmethod
@@ -114,6 +118,17 @@ class Barriers:
     gamma: float  # 1/s: dh/dt >= -gamma h
     arena: Arena | None = None
     speed: bool = False  # may the filter change speeds (slow down, stop): robots that allow it
+
+    def __post_init__(self) -> None:
+        # a scenario's [safety] table is checked where it is read; these are for the Python API
+        for name in ("radius", "lookahead", "gamma"):
+            value = getattr(self, name)
+            try:
+                ok = math.isfinite(value) and value > 0
+            except TypeError:
+                ok = False
+            if not ok:
+                raise ValueError(f"Barriers.{name} must be a finite number > 0, got {value!r}")
 
     @property
     def pair_distance(self) -> float:
@@ -279,11 +294,16 @@ def safe_commands(
     within their limits) and the limits (rad/s; inf: none). present: (N,) agents in the
     world (the others are ignored); controlled: (N,) those whose commands may change (the
     others, e.g. coasting, keep theirs and are obstacles; default: every present one).
-    Agents not present keep their (u_law, v0)."""
+    Agents not present keep their (u_law, v0), and so does an agent whose pose, speed or
+    command is not finite: it is ignored as one not present (nothing is known of where it
+    goes; its NaN in a condition would leave that condition unchecked and its group's QP
+    unsolvable, the filter off for every agent joined to it)."""
     u_law = np.asarray(u_law, dtype=float)
     v0 = np.asarray(v0, dtype=float)
+    x, y, g = (np.asarray(a, dtype=float) for a in (x, y, g))
     n = len(u_law)
-    present = np.asarray(present, dtype=bool)
+    finite = np.isfinite(x) & np.isfinite(y) & np.isfinite(g) & np.isfinite(v0) & np.isfinite(u_law)
+    present = np.asarray(present, dtype=bool) & finite
     ctl = present.copy() if controlled is None else np.asarray(controlled, dtype=bool) & present
     u, v = u_law.copy(), v0.copy()
     none = np.zeros(n, dtype=bool)
@@ -325,7 +345,8 @@ def safe_commands(
             infeasible[members] = True
         u[members], v[members] = gu, gv
         active.extend(act)
-    changed = ctl & ((np.abs(u - u_law) > CHANGED_TOL) | (np.abs(v - v0) > CHANGED_TOL) | infeasible)
+    with np.errstate(invalid="ignore"):  # inf - inf of an agent left out (not finite): not changed
+        changed = ctl & ((np.abs(u - u_law) > CHANGED_TOL) | (np.abs(v - v0) > CHANGED_TOL) | infeasible)
     return Filtered(u, v, changed, infeasible, cond, np.array(sorted(active), dtype=np.int64), solves)
 
 

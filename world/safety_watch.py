@@ -148,7 +148,9 @@ class SafetyWatch:
         self, tick: int, x: np.ndarray, y: np.ndarray, present: np.ndarray, active: np.ndarray, u, limit
     ) -> None:
         """The figures of the poses of `tick` (x, y: (N,) m; present: in the world; active:
-        controlled by a law, whose applied turn rate `u` is checked against `limit`)."""
+        controlled by a law, whose applied turn rate `u` is checked against `limit`). A pose
+        that is not finite is no position: left out, as the filter leaves it out."""
+        present = present & np.isfinite(x) & np.isfinite(y)
         i, j = pairs(present)
         d = distances(x, y, i, j)
         touching: set[tuple[int, int]] = set()

@@ -317,3 +317,66 @@ def test_the_scenario_and_the_world_agree_on_inside(k, r, turn, cw, px, py):
     if np.min(np.abs(arena.depth(px, py))) < 1e-9:
         return  # on a wall: either answer
     assert spec.inside(px, py) == bool(arena.inside(px, py))
+
+
+@pytest.mark.parametrize("corners", [[(0, 0), (5, 8), (10, 0)], [(5, 8), (0, 0), (10, 0)], [(0, 0), (10, 0), (5, 8)]])
+def test_a_wall_is_named_by_the_corners_as_given(corners):
+    """The "wall k" of a "safety" event's `by` (docs/reference/protocol.md) runs from corner k
+    to k + 1 of the arena as written, clockwise too (it named the walls of the polygon turned
+    round: the wall from (0, 0) to (5, 8) of a clockwise triangle was "wall 1")."""
+    tri = Arena.polygon(corners)
+    assert tri.vertices == tuple((float(x), float(y)) for x, y in corners)
+    bar = Barriers(radius=0.4, lookahead=0.3, gamma=0.5, arena=tri)
+    # near the wall through (0, 0) and (5, 8), heading at it
+    x, y, g = np.array([3.2]), np.array([3.0]), np.array([math.atan2(5, -8) + 0.6])
+    f = safe_commands(bar, x, y, g, np.array([0.5]), np.array([0.0]), np.array([3.0]), np.ones(1, dtype=bool))
+    assert f.changed[0] and not f.infeasible[0]
+    k = next(k for k in range(3) if {corners[k], corners[(k + 1) % 3]} == {(0, 0), (5, 8)})
+    assert f.reasons(0) == [("wall", k)]
+    assert kept(bar, x, y, g, np.array([0.5]), f.u).all()
+    # the walls themselves do not depend on the order
+    assert sorted(tri.depth(3.2, 3.0).tolist()) == sorted(Arena.polygon(corners[::-1]).depth(3.2, 3.0).tolist())
+
+
+def test_an_agent_without_a_finite_pose_is_left_out_and_the_others_are_still_filtered():
+    """A NaN in one present agent's pose (or speed, or command) made every condition with it
+    unknown: never broken, always kept in, joining every agent near it into one group whose QP
+    could not be solved, so that the agents next to it got no filtering at all. It is left
+    out instead, as an agent not in the world; the least distance is measured without it."""
+    from swarm.contracts.scenario_tables import SafetySpec
+    from swarm.world.safety_watch import SafetyWatch
+
+    bar = Barriers(radius=0.5, lookahead=0.2, gamma=1.0)
+    # agents 0 and 1 close in (a turn keeps them apart); agent 2 near both
+    x, y = np.array([0.0, 3.0, 1.5]), np.array([0.0, 0.6, 1.2])
+    g, v, u_max = np.array([0.0, np.pi, 0.0]), np.ones(3), np.full(3, 3.0)
+    u_law = np.zeros(3)
+    good = safe_commands(bar, x, y, g, v, u_law, u_max, np.array([True, True, False]))
+    assert good.changed[:2].any() and not good.infeasible.any()
+    for bad in ("x", "g", "v", "u"):
+        args = {"x": x.copy(), "g": g.copy(), "v": v.copy(), "u": u_law.copy()}
+        args[bad][2] = np.nan if bad != "v" else np.inf
+        f = safe_commands(bar, args["x"], y, args["g"], args["v"], args["u"], u_max, np.ones(3, dtype=bool))
+        assert not f.infeasible.any(), bad
+        np.testing.assert_array_equal(f.u[:2], good.u[:2])
+        assert not f.changed[2] and (f.u[2] == args["u"][2] or bad == "u")
+        assert kept(bar, x[:2], y[:2], g[:2], v[:2], f.u[:2]).all()
+    watch = SafetyWatch(SafetySpec(radius=1.0, arena=[-5, -5, 5, 5]), [1, 2, 3])
+    watch.measure(
+        0, np.array([0.0, 0.5, np.nan]), np.zeros(3), np.ones(3, dtype=bool), np.ones(3, dtype=bool), u_law, u_max
+    )
+    fig = watch.figures()
+    assert fig["min_distance"] == 0.5 and fig["min_distance_pair"] == [1, 2] and fig["collisions"] == 1
+    assert fig["boundary_exits"] == 0
+
+
+@pytest.mark.parametrize("field", ["radius", "lookahead", "gamma"])
+@pytest.mark.parametrize("value", [0.0, -1.0, math.nan, math.inf, "1"])
+def test_barriers_refuse_parameters_that_mean_nothing(field, value):
+    """gamma <= 0 asks every barrier to grow (the filter would change almost every command),
+    lookahead 0 gives the turn rate no hold on any barrier (and divides by zero with speed =
+    true): a clear error naming the field, as the scenario's [safety] table gives."""
+    good = {"radius": 0.5, "lookahead": 0.1, "gamma": 1.0}
+    Barriers(**good)
+    with pytest.raises(ValueError, match=f"Barriers.{field} must be a finite number > 0"):
+        Barriers(**{**good, field: value})
