@@ -39,14 +39,13 @@ from swarm.agents.batch_select import NONE, select
 from swarm.agents.batch_sticky import BatchSticky
 from swarm.agents.brain import follow_state
 from swarm.agents.laws import bearing_law, loiter_rate
-from swarm.agents.sticky_follower import StickyFollower
 from swarm.contracts.laws import GAINS, resolve_law
 from swarm.contracts.vocabulary import FollowState, Phase
 from swarm.contracts.wire import FOLLOW_CODE, FOLLOW_STATES
 
-# the follow state of a sticky follower whose tick was a plain keep (BatchSticky.keep): StickyFollower
-# says keep after such a step (until it has states at all: none)
-_KEEP = FOLLOW_CODE[FollowState.KEEP] if "state" in getattr(StickyFollower, "__slots__", ("state",)) else 0
+# the follow state of a sticky follower whose tick was a plain keep (BatchSticky.keep): what
+# StickyFollower.state says after such a step
+_KEEP = FOLLOW_CODE[FollowState.KEEP]
 
 
 @dataclass

@@ -42,7 +42,7 @@ class Decision(NamedTuple):
 
 def follow_state(sticky: StickyFollower) -> str:
     """A sticky follower's FollowState after its last step (agents/sticky_follower.py)."""
-    return getattr(sticky, "state", FollowState.NONE)
+    return sticky.state
 
 
 def saturate(u: float, limit: float | None) -> float:
