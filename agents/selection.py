@@ -364,20 +364,30 @@ class Sticky:
                     best = c
                     break
         if best is not None:
-            if not self.acquired and self.waited < lim.wait:
-                first = nearest(contacts)
-                if first is not None and first.id != best.id:
-                    self.waited += 1  # give the nearest agent time to root; track a rooted one
-                    self.out = best.id
-                    return "wait", FollowState.ACQUIRE, Choice(best.id, best, False, False)
-            self.out = best.id
-            self.acquired = True
-            self.feasible = best.hops + 1 if self.feasible is None else min(self.feasible, best.hops + 1)
-            return "commit", FollowState.KEEP, Choice(best.id, best, False, True)
+            return self._take(best, contacts)
         if (self.acquired or self.late) and self.silent < lim.quiet:  # somebody may still hold it, or coast on it
             self.out = None
             return "quiet", FollowState.LOST if self.acquired else FollowState.LATE, _NOBODY
-        for c in contacts:  # keep the agent it shadows while it can
+        return self._shadow(contacts, heading)
+
+    def _take(self, best: Contact, contacts) -> tuple[str, FollowState, Choice]:
+        """A feasible rooted agent: commit to it, or, never committed yet, wait for the nearest
+        agent to root while it may (`waited` < wait), steering by `best` meanwhile."""
+        if not self.acquired and self.waited < self.limits.wait:
+            first = nearest(contacts)
+            if first is not None and first.id != best.id:
+                self.waited += 1  # give the nearest agent time to root; track a rooted one
+                self.out = best.id
+                return "wait", FollowState.ACQUIRE, Choice(best.id, best, False, False)
+        self.out = best.id
+        self.acquired = True
+        self.feasible = best.hops + 1 if self.feasible is None else min(self.feasible, best.hops + 1)
+        return "commit", FollowState.KEEP, Choice(best.id, best, False, True)
+
+    def _shadow(self, contacts, heading: float) -> tuple[str, FollowState, Choice]:
+        """Nobody feasible, and it may shadow: keep its shadow while it may, else take a new one
+        (a rooted agent in reach, else a lower id in reach; after a loss only once), else search."""
+        for c in contacts:
             if c.id == self.out and self._shadow_ok(c):
                 return "shadow", FollowState.SHADOW, Choice(c.id, c, False, False)
         shadow = None
