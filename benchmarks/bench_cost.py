@@ -6,9 +6,10 @@
 
 In this one process, on bench_runtime.py's ring scenario with N agents (unlimited sensing, and
 a range under which each agent senses about --neighbours others), the code that runs each
-tick of `swarm up`, with the world process's choices (its pairwise frames up to
-FRAMES_PAIRWISE agents, the matrices and `wire.encode_sense_rows` above, or with --pairs
-the sensed pairs where the grid is used, as the world does; the recording
+tick of `swarm up`, with the world process's choices (the matrices and
+`wire.encode_sense_rows` at every N, or with --pairs the sensed pairs where the grid is
+used, as the world does; an older --tree whose world built up to 8 agents' frames pair by
+pair is measured through the matrices too; the recording
 deferred and streamed to an MCAP file), timed part by part in thread CPU time (what other
 processes on the machine do is not counted; the cost of reading the clock is taken off):
 
@@ -75,9 +76,8 @@ from swarm.contracts.frames import Contact, SensorFrame  # noqa: E402
 from swarm.contracts.scenario import parse_scenario  # noqa: E402
 from swarm.contracts.vocabulary import ExitCode  # noqa: E402
 from swarm.world.engine import Engine  # noqa: E402
-from swarm.world.process import FRAMES_PAIRWISE  # noqa: E402
 from swarm.world.recording import DeferredRecorder  # noqa: E402
-from swarm.world.sensing import encode_frames_pairwise, sensing_matrix  # noqa: E402
+from swarm.world.sensing import sensing_matrix  # noqa: E402
 
 WORLD_PARTS = ("sensing", "encode", "record", "commands", "step")
 AGENT_PARTS = ("decode", "select", "law", "encode")
@@ -133,24 +133,7 @@ def measure(n: int, neighbours: int | None, ticks: int, selection: str, warmup: 
         eng.mark_frames()
         active = c.active_ids()
         rows = [c.index[a] for a in active]
-        if len(c.ids) <= FRAMES_PAIRWISE:
-            t1 = clock()
-            frames = encode_frames_pairwise(
-                c.tick,
-                c.time,
-                rows,
-                c.ids,
-                c.x,
-                c.y,
-                c.heading,
-                c.present_mask(),
-                c.is_leader,
-                c.target,
-                sens.range,
-                sens.fov,
-                c.hops,
-            )
-        elif pairs and c.uses_grid():  # what world/process.py does where the grid is used
+        if pairs and c.uses_grid():  # what world/process.py does where the grid is used
             found = c.sensed_pairs()
             t1 = clock()
             tx, ty = c.target

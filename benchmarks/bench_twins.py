@@ -16,8 +16,7 @@ time. The tick runs as shipped and with one twin's fast member swapped for its r
   selection.py, the same switch as SWARM_PURE_PYTHON=1 but one function at a time;
 - `frames: reference`: every frame built as a `SensorFrame` (sensing.build_frames) and
   encoded one by one (wire.encode_sense), what the world does under faults, instead of
-  `encode_frames_pairwise` (up to FRAMES_PAIRWISE agents) / `wire.encode_sense_rows`;
-- `frames: no pairwise`: `wire.encode_sense_rows` from the matrices also for small swarms;
+  `wire.encode_sense_rows` (or `encode_sense_pairs` where the grid is used);
 - `step: numpy`: kinematics.step on arrays for every swarm, instead of `step_one` agent by
   agent up to STEP_ONE_BY_ONE agents;
 - `grid off` (part 1 at --large sizes, with a range only): every pair (`sensing_matrix` and
@@ -72,13 +71,11 @@ import numpy as np  # noqa: E402
 from bench_runtime import scenario_toml  # noqa: E402
 
 import swarm.world.core as core_mod  # noqa: E402
-import swarm.world.process as process_mod  # noqa: E402
 from swarm.agents import selection, sticky_follower  # noqa: E402
 from swarm.agents.brain import AgentBrain  # noqa: E402
 from swarm.contracts import fastpath, wire  # noqa: E402
 from swarm.contracts.scenario import parse_scenario  # noqa: E402
 from swarm.world.engine import Engine  # noqa: E402
-from swarm.world.sensing import encode_frames_pairwise  # noqa: E402
 
 clock = time.thread_time_ns
 JUNK = np.zeros(8 << 20, np.uint8)  # --cold: written before each process's part of a tick (bench_cold.py)
@@ -97,7 +94,6 @@ PATCHES: dict[str, list[tuple[object, str, object]]] = {
         (sticky_follower, "nearest", selection.nearest_py),
     ],
     "frames: reference": [],  # the tick below builds SensorFrames and encodes them one by one
-    "frames: no pairwise": [(process_mod, "FRAMES_PAIRWISE", 0)],
     "step: numpy": [(core_mod, "STEP_ONE_BY_ONE", 0)],
     "grid off": [(core_mod, "GRID_MIN_AGENTS", 1 << 62)],
 }
@@ -109,7 +105,6 @@ SMALL_VARIANTS = [
     "C off: decode",
     "C off: nearest",
     "frames: reference",
-    "frames: no pairwise",
     "step: numpy",
 ]
 LARGE_VARIANTS = ["shipped", "grid off", "C off: all", "frames: reference", "step: numpy"]
@@ -137,25 +132,8 @@ def encode_frames(eng: Engine, reference: bool) -> tuple[list[int], list[bytes]]
         frames = c.frames(active)
         return active, [wire.encode_sense(frames[a]) for a in active]
     rows = [c.index[a] for a in active]
-    sens = c.scenario.sensing
     tx, ty = c.target
-    if len(c.ids) <= process_mod.FRAMES_PAIRWISE:
-        out = encode_frames_pairwise(
-            c.tick,
-            c.time,
-            rows,
-            c.ids,
-            c.x,
-            c.y,
-            c.heading,
-            c.present_mask(),
-            c.is_leader,
-            c.target,
-            sens.range,
-            sens.fov,
-            c.hops,
-        )
-    elif c.uses_grid():
+    if c.uses_grid():
         i, j, bearing, rng = c.sensed_pairs()
         out = wire.encode_sense_pairs(
             c.tick, c.time, rows, c.ids, c.heading, tx - c.x, ty - c.y, c.is_leader, i, j, bearing, rng, c.hops
@@ -291,8 +269,6 @@ def call_pairs(n: int, neighbours: int | None, reps: int, warm_ticks: int = 40) 
         ship,
         again,
     )
-    if n <= process_mod.FRAMES_PAIRWISE:
-        add("frames: pairwise vs rows (compiled)", "world", 1, frames_with("frames: no pairwise"), ship, again)
     add("frames: C vs pure encoder", "world", 1, frames_with("C off: encode"), ship, again)
     if c.uses_grid():
         add("grid + pairs vs every pair + rows", "world", 1, frames_with("grid off"), ship, fresh_sensing)

@@ -35,12 +35,10 @@ from swarm.world.inbox_messages import Admin, Info, Join, Supervise
 from swarm.world.joins import Joins
 from swarm.world.recording import RECORDING_FILE, DeferredRecorder, RecordingError, write_run
 from swarm.world.roster import agent_figures
-from swarm.world.sensing import encode_frames_pairwise
 from swarm.world.state import RunState, WorldConfig
 
-__all__ = ["FRAMES_PAIRWISE", "TRUTH_PERIOD", "World", "WorldConfig"]
+__all__ = ["TRUTH_PERIOD", "World", "WorldConfig"]
 
-FRAMES_PAIRWISE = 8  # agents: up to this many, frames are built pair by pair (world/sensing.py)
 TRUTH_PERIOD = 0.02  # s of wall time between ground-truth messages (observers, not the recording)
 END_WAIT_S = 1.0  # s the world waits, after its end notice, for its agents' tokens to go (see `_close`)
 
@@ -195,24 +193,7 @@ class World:
         self.engine.mark_frames()  # the same numbers, encoded straight from the arrays
         active = c.active_ids()
         rows = [c.index[aid] for aid in active]
-        if len(c.ids) <= FRAMES_PAIRWISE:
-            sens = c.scenario.sensing
-            frames = encode_frames_pairwise(
-                c.tick,
-                c.time,
-                rows,
-                c.ids,
-                c.x,
-                c.y,
-                c.heading,
-                c.present_mask(),
-                c.is_leader,
-                c.target,
-                sens.range,
-                sens.fov,
-                c.hops,
-            )
-        elif c.uses_grid():  # the sensed pairs straight from the grid: no (N, N) matrix made
+        if c.uses_grid():  # the sensed pairs straight from the grid: no (N, N) matrix made
             i, j, bearing, rng = c.sensed_pairs()
             tx, ty = c.target
             frames = wire.encode_sense_pairs(

@@ -10,9 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarm.contracts import wire
 from swarm.contracts.frames import Contact, SensorFrame
-from swarm.contracts.orbits import wrap as wrap_one
 from swarm.world.kinematics import wrap
 
 __all__ = [
@@ -23,7 +21,6 @@ __all__ = [
     "sensing_grid",
     "pairs_matrices",
     "build_frames",
-    "encode_frames_pairwise",
     "GRID_MIN_AGENTS",
 ]
 
@@ -167,50 +164,3 @@ def build_frames(
         tgt = (float(target[0] - x[i]), float(target[1] - y[i])) if is_leader[i] else None
         frames[int(ids[i])] = SensorFrame(int(tick), float(time), int(ids[i]), float(heading[i]), contacts, tgt)
     return frames
-
-
-def encode_frames_pairwise(
-    tick: int,
-    time: float,
-    receivers,
-    ids,
-    x,
-    y,
-    heading,
-    present,
-    is_leader,
-    target,
-    sense_range: float | None,
-    fov: float | None,
-    hops,
-) -> list[bytes]:
-    """The encoded frames of the receivers (indices), the bytes of
-    wire.encode_sense_rows(..., *sensing_matrix(...)), computed pair by pair on Python
-    floats: a small swarm's frames cost fewer numpy calls this way (two: every range, then
-    the bearings sensed, with numpy's own hypot and arctan2, so the bits are the matrix's)."""
-    xs, ys, gs = x.tolist(), y.tolist(), heading.tolist()
-    idl, hl, lead, pres = ids.tolist(), hops.tolist(), is_leader.tolist(), present.tolist()
-    n = len(xs)
-    pairs, dxs, dys = [], [], []
-    for i in receivers:
-        if pres[i]:
-            xi, yi = xs[i], ys[i]
-            for j in range(n):
-                if j != i and pres[j]:
-                    pairs.append((i, j))
-                    dxs.append(xs[j] - xi)
-                    dys.append(ys[j] - yi)
-    rng = np.hypot(dxs, dys).tolist()
-    seen = [k for k, r in enumerate(rng) if sense_range is None or r <= sense_range]
-    bearing = np.arctan2([dys[k] for k in seen], [dxs[k] for k in seen]).tolist()
-    contacts: dict[int, list] = {i: [] for i in receivers}
-    cone = None if fov is None or fov >= 2 * np.pi else 0.5 * fov
-    for k, b in zip(seen, bearing):
-        i, j = pairs[k]
-        if cone is None or abs(wrap_one(b - gs[i])) <= cone:
-            contacts[i].append((idl[j], b, gs[j], rng[k], hl[j]))
-    tx, ty = target
-    return [
-        wire.encode_sense_tuples(tick, time, idl[i], gs[i], (tx - xs[i], ty - ys[i]) if lead[i] else None, contacts[i])
-        for i in receivers
-    ]

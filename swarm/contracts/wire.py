@@ -209,31 +209,6 @@ CONTACT_FIELDS = [
 ]  # == CONTACT
 
 
-def encode_sense_arrays(
-    tick: int,
-    time: float,
-    agent: int,
-    heading: float,
-    target: tuple[float, float] | None,
-    ids,
-    bearing,
-    headings,
-    ranges,
-    hops,
-) -> bytes:
-    """encode_sense for a frame given as numpy columns (the world's fast path); same bytes."""
-    import numpy as np  # lazy: agent processes import wire and never load numpy
-
-    recs = np.empty(len(ids), dtype=np.dtype(CONTACT_FIELDS))
-    recs["id"], recs["bearing"], recs["heading"], recs["range"] = ids, bearing, headings, ranges
-    recs["hops"] = hops
-    tx, ty = target if target is not None else (math.nan, math.nan)
-    return (
-        SENSE_HEAD.pack(KIND_SENSE, VERSION, int(target is not None), 0, agent, tick, time, heading, tx, ty, len(ids))
-        + recs.tobytes()
-    )
-
-
 def encode_sense_rows(
     tick: int, time: float, rows, ids, heading, target_dx, target_dy, is_leader, sensed, bearing, ranges, hops
 ) -> list[bytes]:
@@ -268,10 +243,10 @@ def _agent_columns(rows, ids, hops, heading, target_dx, target_dy, is_leader) ->
 def encode_sense_rows_py(
     tick: int, time: float, rows, ids, heading, target_dx, target_dy, is_leader, sensed, bearing, ranges, hops
 ) -> list[bytes]:
-    """encode_sense_arrays for the agents at indices `rows`, all at once, from the world's
+    """The encoded frames of the agents at indices `rows`, all at once, from the world's
     arrays: ids, heading, hops, is_leader and the target's offset from each agent
     (target_dx, target_dy) are (N,); sensed, bearing and ranges (N, N). The same bytes as
-    one encode_sense_arrays per agent, in one numpy pass over every sensed pair (flat
+    one encode_sense per agent, in one numpy pass over every sensed pair (flat
     indices into the matrices: no (N, N) copy when `rows` is every agent in order)."""
     import numpy as np  # lazy: agent processes import wire and never load numpy
 

@@ -27,7 +27,7 @@ from malformed import (
 from swarm.contracts import wire
 from swarm.contracts.frames import Contact, SensorFrame
 from swarm.contracts.vocabulary import EventKind, FollowState, Phase
-from swarm.world.sensing import build_frames, encode_frames_pairwise, sensing_matrix
+from swarm.world.sensing import build_frames, sensing_matrix
 
 # -- round trips ---------------------------------------------------------------------------
 
@@ -88,29 +88,6 @@ def test_frames_encoded_all_at_once_are_the_frames_built_one_by_one():
     assert [wire.decode_sense(b) for b in got] == [want[int(ids[k])] for k in rows]
     assert got == [wire.encode_sense(want[int(ids[k])]) for k in rows]
     assert wire.decode_sense(got[4]).contacts == ()
-
-
-@pytest.mark.parametrize("sense_range, fov", [(None, None), (15.0, None), (None, 2.0), (15.0, 3.5), (40.0, 6.3)])
-def test_frames_built_pair_by_pair_are_the_matrix_frames(sense_range, fov):
-    """A small swarm's frames (world/sensing.encode_frames_pairwise, on Python floats) are
-    the bytes of the matrix path (sensing_matrix + encode_sense_rows): ranges, bearings
-    and the field of view to the bit, absent agents, an agent that senses nobody."""
-
-    for seed in range(40):
-        rng = np.random.default_rng(seed)
-        n = int(rng.integers(2, 12))
-        ids = np.arange(1, n + 1)
-        x, y, g = rng.uniform(-25, 25, n), rng.uniform(-25, 25, n), rng.uniform(-np.pi, np.pi, n)
-        x[0] = 900.0  # senses nobody (with a range)
-        lead = rng.random(n) < 0.3
-        hops = rng.integers(-1, 5, n)
-        present = rng.random(n) < 0.85
-        rows = [k for k in range(n) if present[k]]
-        target = (float(rng.uniform(-5, 5)), float(rng.uniform(-5, 5)))
-        s, bearing, rngm = sensing_matrix(x, y, g, present, sense_range, fov)
-        want = wire.encode_sense_rows(4, 0.04, rows, ids, g, target[0] - x, target[1] - y, lead, s, bearing, rngm, hops)
-        got = encode_frames_pairwise(4, 0.04, rows, ids, x, y, g, present, lead, target, sense_range, fov, hops)
-        assert got == want, seed
 
 
 def test_join_round_trip():
