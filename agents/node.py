@@ -101,8 +101,7 @@ class AgentNode:
         self.answering = True  # False while (re)claiming the id of a new world, and after a crash
 
     def new_brain(self) -> AgentBrain:
-        c = self.conf
-        return AgentBrain(c.agent, c.gains, c.sensing, c.dt, c.n_agents, c.law)
+        return AgentBrain(self.conf)
 
     def open(self) -> None:
         ses, run, put = self.session, self.run, self.inbox.put

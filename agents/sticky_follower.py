@@ -13,9 +13,10 @@ from __future__ import annotations
 from swarm.agents.coast import Tracker
 from swarm.agents.search import SearchMemory
 from swarm.agents.selection import Choice, Sticky, cone, nearest, reach
+from swarm.contracts.brain_config import AgentConf, GainsConf, SensingConf
 from swarm.contracts.frames import Contact
 from swarm.contracts.observation import Search
-from swarm.contracts.tuning import SelectionTuning, TuningTicks
+from swarm.contracts.tuning import TuningTicks
 from swarm.contracts.vocabulary import FollowState
 
 
@@ -24,12 +25,11 @@ class StickyFollower:
 
     __slots__ = ("sticky", "tracker", "memory", "fresh", "state")
 
-    def __init__(self, spec, gains, sensing, dt: float, max_hops: int):
-        """spec/gains/sensing: the scenario's AgentSpec/GainsSpec/SensingSpec or the
-        swarm.contracts.brain_config equivalents (sensing.tuning: a SelectionTuning, the
-        defaults when absent); max_hops: the deepest a path can be."""
-        sensing_range, fov = getattr(sensing, "range", None), getattr(sensing, "fov", None)
-        tune = TuningTicks.of(getattr(sensing, "tuning", None) or SelectionTuning(), dt)
+    def __init__(self, spec: AgentConf, gains: GainsConf, sensing: SensingConf, dt: float, max_hops: int):
+        """spec/gains/sensing: the parts of its BrainConf (swarm/contracts/brain_config.py);
+        dt (s); max_hops: the deepest a path can be."""
+        sensing_range, fov = sensing.range, sensing.fov
+        tune = TuningTicks.of(sensing.tuning, dt)
         self.sticky = Sticky(
             wait_ticks=max_hops,  # paths spread one hop per tick: the deepest is max_hops ticks away
             drain_ticks=max_hops,  # ... and so are the stale advertisements through it

@@ -30,6 +30,7 @@ sys.path.insert(0, str(REPO))  # the repository's swarm, not an installed copy
 from swarm.agents.brain import AgentBrain  # noqa: E402
 from swarm.agents.selection import nearest  # noqa: E402
 from swarm.contracts import wire  # noqa: E402
+from swarm.contracts.brain_config import BrainConf  # noqa: E402
 from swarm.contracts.fastpath import path as wire_path  # noqa: E402
 from swarm.contracts.scenario import load_scenario  # noqa: E402
 from swarm.contracts.vocabulary import ExitCode  # noqa: E402
@@ -61,9 +62,8 @@ def main(argv: list[str] | None = None) -> int:
     followers = [s.id for s in sc.agents if s.role == "follower"]
     if not followers:
         ap.error(f"{a.scenario}: no follower to replay")
-    dt, n = sc.run.dt, len(sc.agents)
     eng = Engine(sc, a.frames)
-    brains = {s.id: AgentBrain(s, sc.gains, sc.sensing, dt, n, sc.law) for s in sc.agents}
+    brains = {s.id: AgentBrain(BrainConf.from_scenario(sc, s.id)) for s in sc.agents}
     who = followers[len(followers) // 2]
     frames: list[bytes] = []
     for k in range(a.frames):
@@ -87,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
         return f
 
     def brain() -> AgentBrain:
-        return AgentBrain(spec, sc.gains, sc.sensing, dt, n, sc.law)
+        return AgentBrain(BrainConf.from_scenario(sc, spec.id))
 
     print(f"{a.scenario.name}, agent {who}, {count} frames, {sc.sensing.selection} selection; wire path: {wire_path}")
     rows = [

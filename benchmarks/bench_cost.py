@@ -72,6 +72,7 @@ from bench_runtime import scenario_toml  # noqa: E402
 from swarm.agents.brain import AgentBrain  # noqa: E402
 from swarm.agents.selection import nearest  # noqa: E402
 from swarm.contracts import wire  # noqa: E402
+from swarm.contracts.brain_config import BrainConf  # noqa: E402
 from swarm.contracts.frames import Contact, SensorFrame  # noqa: E402
 from swarm.contracts.scenario import parse_scenario  # noqa: E402
 from swarm.contracts.vocabulary import ExitCode  # noqa: E402
@@ -116,7 +117,7 @@ def measure(n: int, neighbours: int | None, ticks: int, selection: str, warmup: 
     eng = Engine(s, ticks + warmup + 10, recording=tmp / "recording.mcap")
     rec = DeferredRecorder(eng.rec)
     eng.rec = rec
-    brains = {a.id: AgentBrain(a, s.gains, s.sensing, s.run.dt, n) for a in s.agents}
+    brains = {a.id: AgentBrain(BrainConf.from_scenario(s, a.id)) for a in s.agents}
     overhead = clock_cost()
     laws = {}
     for aid, b in brains.items():

@@ -32,6 +32,7 @@ from bench_runtime import scenario_toml  # noqa: E402
 
 from swarm.agents.brain import AgentBrain  # noqa: E402
 from swarm.contracts import wire  # noqa: E402
+from swarm.contracts.brain_config import BrainConf
 from swarm.contracts.scenario import parse_scenario  # noqa: E402
 from swarm.contracts.vocabulary import ExitCode  # noqa: E402
 from swarm.world.engine import Engine  # noqa: E402
@@ -40,7 +41,7 @@ from swarm.world.engine import Engine  # noqa: E402
 def measure(n: int, neighbours: int | None, ticks: int) -> dict:
     s = parse_scenario(tomllib.loads(scenario_toml(n, neighbours, ticks=ticks + 50)))
     eng = Engine(s, ticks + 100)
-    brains = {a.id: AgentBrain(a, s.gains, s.sensing, s.run.dt, n) for a in s.agents}
+    brains = {a.id: AgentBrain(BrainConf.from_scenario(s, a.id)) for a in s.agents}
     world_s = agents_s = 0.0
     contacts = 0
     for k in range(ticks + 50):

@@ -74,6 +74,7 @@ import swarm.world.core as core_mod  # noqa: E402
 from swarm.agents import selection, sticky_follower  # noqa: E402
 from swarm.agents.brain import AgentBrain  # noqa: E402
 from swarm.contracts import fastpath, wire  # noqa: E402
+from swarm.contracts.brain_config import BrainConf  # noqa: E402
 from swarm.contracts.scenario import parse_scenario  # noqa: E402
 from swarm.world.engine import Engine  # noqa: E402
 
@@ -161,7 +162,7 @@ def run_ticks(n: int, neighbours: int | None, ticks: int, variants: list[str], c
     for alone in (False, True):
         order = ["shipped"] if alone else variants
         eng = Engine(s, total + 10)
-        brains = {a.id: AgentBrain(a, s.gains, s.sensing, s.run.dt, n) for a in s.agents}
+        brains = {a.id: AgentBrain(BrainConf.from_scenario(s, a.id)) for a in s.agents}
         c = eng.core
         world_ns: dict[str, list[int]] = {v: [] for v in order}  # per tick
         agent_ns: dict[str, list[int]] = {v: [] for v in order}  # per tick, every agent's
@@ -233,7 +234,7 @@ def call_pairs(n: int, neighbours: int | None, reps: int, warm_ticks: int = 40) 
     tick in the process concerned ("world", or one "agent")."""
     s = parse_scenario(tomllib.loads(scenario_toml(n, neighbours, ticks=warm_ticks + reps)))
     eng = Engine(s, warm_ticks + 10)
-    brains = {a.id: AgentBrain(a, s.gains, s.sensing, s.run.dt, n) for a in s.agents}
+    brains = {a.id: AgentBrain(BrainConf.from_scenario(s, a.id)) for a in s.agents}
     c = eng.core
     for _ in range(warm_ticks):
         eng.mark_frames()

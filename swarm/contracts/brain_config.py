@@ -3,18 +3,24 @@ and their parameters, the selection rule, dt. Plain dataclasses (no pydantic: ag
 processes stay small and start fast), built from the scenario by the world and sent in
 the join reply as JSON, and checked again on arrival, since it comes off the network.
 
-`AgentBrain` takes these or the scenario's pydantic models alike (same attribute names).
+A BrainConf is the one configuration `AgentBrain` (and `StickyFollower`, the batch brains)
+takes: whatever runs a brain (`swarm sim`, the batch engine, the environment, the agent
+process) builds one first, from the scenario with `BrainConf.from_scenario`.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING, Any
 
 from pydantic import ValidationError
 
 from swarm.contracts.laws import MAX_LAW_PARAMS, follower_law_name
 from swarm.contracts.tuning import SelectionTuning
+
+if TYPE_CHECKING:
+    from swarm.contracts.scenario import Scenario
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,7 +49,7 @@ class GainsConf:
 class LawConf:
     follower: str = "bearing"
     leader: str = "cc"
-    params: dict = field(default_factory=dict)  # name -> finite number
+    params: dict[str, float] = field(default_factory=dict)  # name -> finite number
 
 
 @dataclass(frozen=True, slots=True)
@@ -70,13 +76,15 @@ class BrainConf:
             return [self.law.leader]
         return [follower_law_name(self.gains.law, self.law.follower)[1]]
 
-    def to_json(self) -> dict:
+    def to_json(self) -> dict[str, Any]:
         d = asdict(self)
         d["sensing"]["tuning"] = self.sensing.tuning.model_dump()
         return d
 
     @classmethod
-    def from_scenario(cls, scenario, agent_id: int) -> BrainConf:
+    def from_scenario(cls, scenario: Scenario, agent_id: int) -> BrainConf:
+        """Agent `agent_id`'s configuration in `scenario`: the one way a Scenario becomes a
+        brain's configuration (the world's join reply, `swarm sim`, the batch engine, the env)."""
         a = scenario.agent(agent_id)
         g, s = scenario.gains, scenario.sensing
         return cls(
@@ -89,10 +97,10 @@ class BrainConf:
         )
 
     @classmethod
-    def from_json(cls, d: dict) -> BrainConf:
+    def from_json(cls, d: dict[str, Any]) -> BrainConf:
         """Rebuild and check a BrainConf received over the network; ValueError names the field."""
 
-        def num(obj, key, where, positive=False, optional=False):
+        def num(obj: object, key: str, where: str, positive: bool = False, optional: bool = False) -> Any:
             v = obj.get(key) if isinstance(obj, dict) else None
             if v is None and optional:
                 return None
@@ -100,7 +108,7 @@ class BrainConf:
                 raise ValueError(f"{where}.{key}: expected a {'positive ' if positive else ''}finite number")
             return float(v)
 
-        def integer(obj, key, where, optional=False):
+        def integer(obj: object, key: str, where: str, optional: bool = False) -> Any:
             v = obj.get(key) if isinstance(obj, dict) else None
             if v is None and optional:
                 return None
@@ -108,7 +116,7 @@ class BrainConf:
                 raise ValueError(f"{where}.{key}: expected an integer")
             return v
 
-        def choice(obj, key, where, options):
+        def choice(obj: object, key: str, where: str, options: tuple[str, ...]) -> Any:
             v = obj.get(key) if isinstance(obj, dict) else None
             if v not in options:
                 raise ValueError(f"{where}.{key}: expected one of {options}")
@@ -145,7 +153,7 @@ class BrainConf:
         )
 
 
-def _tuning(d) -> SelectionTuning:
+def _tuning(d: object) -> SelectionTuning:
     """sensing.tuning of a join reply (absent: the defaults); ValueError names the field."""
     if d is None:
         return SelectionTuning()
@@ -159,7 +167,7 @@ def _tuning(d) -> SelectionTuning:
         raise ValueError(f"sensing.tuning.{where}: {err['msg']}") from None
 
 
-def _law_conf(d) -> LawConf:
+def _law_conf(d: object) -> LawConf:
     """The `law` object of a join reply (absent: the built-in laws); ValueError names the field."""
     if d is None:
         return LawConf()

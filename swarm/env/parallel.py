@@ -31,6 +31,7 @@ from pettingzoo import ParallelEnv  # type: ignore[import-untyped]  # pettingzoo
 
 from swarm.agents.brain import AgentBrain, Decision, saturate
 from swarm.api.runs import Results, in_memory
+from swarm.contracts.brain_config import BrainConf
 from swarm.contracts.observation import Observation
 from swarm.contracts.orbits import expected_radius, roots
 from swarm.contracts.scenario import Scenario, load_scenario
@@ -208,8 +209,7 @@ class SwarmEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         return obs, {name: self._info(name) for name in self.agents}
 
     def _brain(self, aid: int) -> AgentBrain:
-        s = self.scenario
-        b = AgentBrain(s.agent(aid), s.gains, s.sensing, s.run.dt, len(s.agents), s.law)
+        b = AgentBrain(BrainConf.from_scenario(self.scenario, aid))
         if aid in self.life:
             b.law = self._keep  # the observation is kept; the action decides
         return b

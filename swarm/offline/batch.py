@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from swarm.agents.batch import BatchBrains, vectorised
+from swarm.contracts.brain_config import BrainConf
 from swarm.contracts.laws import GAINS, resolve_law
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.vocabulary import EventKind
@@ -100,8 +101,9 @@ def run_batch(
         raise ValueError("a streamed recording is for a batch of one")
     dt, ticks, n, mode = keys.pop()
     world = BatchWorld(scenarios)
+    confs = [[BrainConf.from_scenario(s, a.id) for a in s.agents] for s in scenarios]  # as each agent's brain
     brains = BatchBrains(
-        [s.agents for s in scenarios], [s.gains for s in scenarios], [s.sensing for s in scenarios], dt, n
+        [[c.agent for c in row] for row in confs], [r[0].gains for r in confs], [r[0].sensing for r in confs], dt, n
     )
     B = len(scenarios)
     rec = None if recording is None else StreamRecorder(scenarios[0], ticks, recording)

@@ -12,6 +12,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from swarm.agents.brain import AgentBrain
+from swarm.contracts.brain_config import BrainConf
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.vocabulary import EventKind
 from swarm.world.engine import Engine
@@ -36,12 +37,11 @@ def run_sim(
     dt = scenario.run.dt
     ticks = int(round((duration if duration is not None else scenario.run.duration) / dt))
     engine = Engine(scenario, ticks, recording=recording)
-    n = len(scenario.agents)
 
-    def brain(a):
-        return AgentBrain(a, scenario.gains, scenario.sensing, dt, n, scenario.law)
+    def brain(aid: int) -> AgentBrain:
+        return AgentBrain(BrainConf.from_scenario(scenario, aid))
 
-    brains = {a.id: brain(a) for a in scenario.agents}
+    brains = {a.id: brain(a.id) for a in scenario.agents}
     frozen: set[int] = set()  # frozen processes: dropped, brain kept for the thaw
     every = max(1, ticks // 200)
     for k in range(ticks):
@@ -53,7 +53,7 @@ def run_sim(
             elif f.kind == "restart":
                 frozen.discard(aid)
                 if engine.join(aid, "fault: restart", rejoin=True):
-                    brains[aid] = brain(scenario.agent(aid))
+                    brains[aid] = brain(aid)
             elif f.kind == "freeze":
                 if engine.drop(aid, "fault: freeze") is not None:
                     frozen.add(aid)

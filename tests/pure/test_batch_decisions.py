@@ -21,6 +21,7 @@ from hypothesis import strategies as st
 
 from swarm.agents.batch import BatchBrains
 from swarm.agents.brain import AgentBrain
+from swarm.contracts.brain_config import BrainConf
 from swarm.contracts.scenario import parse_scenario
 from swarm.world.batch import BatchWorld
 from swarm.world.sensing import build_frames
@@ -84,8 +85,9 @@ def step_both(scenario, ticks, hops_per_tick):
     ((u, out, phase, hops) of AgentBrain, the same of BatchBrains)."""
     world = BatchWorld([scenario])
     n, dt = len(scenario.agents), scenario.run.dt
-    batch = BatchBrains([scenario.agents], [scenario.gains], [scenario.sensing], dt, n)
-    brains = [AgentBrain(a, scenario.gains, scenario.sensing, dt, n, scenario.law) for a in scenario.agents]
+    confs = [BrainConf.from_scenario(scenario, a.id) for a in scenario.agents]
+    batch = BatchBrains([[c.agent for c in confs]], [confs[0].gains], [confs[0].sensing], dt, n)
+    brains = [AgentBrain(c) for c in confs]
     ids = [a.id for a in scenario.agents]
     target = np.array([scenario.target.x, scenario.target.y])
     sens = scenario.sensing

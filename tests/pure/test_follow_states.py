@@ -8,12 +8,11 @@ sensing graphs: tests/pure/test_sticky.py (`Checked`, in every hypothesis proper
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import pytest
 
 from swarm.agents.selection import TRANSITIONS, Sticky
 from swarm.agents.sticky_follower import StickyFollower
+from swarm.contracts.brain_config import AgentConf, GainsConf, SensingConf
 from swarm.contracts.frames import Contact
 from swarm.contracts.vocabulary import FollowState as K
 
@@ -220,9 +219,12 @@ def test_every_state_but_none_has_a_row_from_it_and_to_it():
 # -- StickyFollower.state ----------------------------------------------------------------------------
 
 
+SPEC = AgentConf(9, "follower", 10.0, None, "ccw", None, None)
+GAINS = GainsConf(1.0, 0.5, "bearing")
+
+
 def follower(sensing_range: float | None = 100.0) -> StickyFollower:
-    spec = SimpleNamespace(id=9, speed=10.0, max_turn_rate=None)
-    return StickyFollower(spec, SimpleNamespace(c2=0.5), SimpleNamespace(range=sensing_range, fov=None), 0.05, 3)
+    return StickyFollower(SPEC, GAINS, SensingConf("sticky", 0.0, sensing_range, None), 0.05, 3)
 
 
 @pytest.mark.parametrize(
@@ -259,9 +261,8 @@ def test_sticky_follower_joining_late_is_late_then_coasts():
 def test_sticky_follower_takes_its_tuning_from_sensing():
     from swarm.contracts.tuning import SelectionTuning
 
-    spec = SimpleNamespace(id=9, speed=10.0, max_turn_rate=None)
     tuning = SelectionTuning(hold_s=1.0, coast_s=2.0, reach=0.5, edge=0.9, search_pitch=0.25)
-    f = StickyFollower(spec, SimpleNamespace(c2=0.5), SimpleNamespace(range=80.0, fov=None, tuning=tuning), 0.05, 3)
+    f = StickyFollower(SPEC, GAINS, SensingConf("sticky", 0.0, 80.0, None, tuning), 0.05, 3)
     lim = f.sticky.limits
     assert (lim.hold, lim.coast, lim.reach, lim.quiet) == (20, 40, 40.0, 41)
     assert f.tracker.edge_range == pytest.approx(72.0) and f.memory.rho0 == 20.0

@@ -12,6 +12,7 @@ import pytest
 
 from swarm.agents.brain import AgentBrain, saturate
 from swarm.agents.laws import bearing_law, make_follower_law
+from swarm.contracts.brain_config import BrainConf
 from swarm.contracts.laws import LawError, resolve_law
 from swarm.contracts.scenario import parse_scenario
 from swarm.offline.sim import run_sim
@@ -100,7 +101,7 @@ def _brain(base, **agent_changes):
     for k, v in agent_changes.items():
         base["agents"][1][k] = v
     s = parse_scenario(base)
-    return AgentBrain(s.agent(2), s.gains, s.sensing, s.run.dt), s
+    return AgentBrain(BrainConf.from_scenario(s, 2), max_hops=10_000), s
 
 
 def _frame(tick, heading, *contacts):
@@ -152,7 +153,7 @@ def test_follower_non_finite_law_output_holds_last(base, law_module):
 
 def test_leader_frame_without_target_is_an_error(base):
     s = parse_scenario(base)
-    brain = AgentBrain(s.agent(1), s.gains, s.sensing, s.run.dt)
+    brain = AgentBrain(BrainConf.from_scenario(s, 1), max_hops=10_000)
     with pytest.raises(ValueError, match="no target"):
         brain.decide(SensorFrame(0, 0.0, 1, 0.0, ()))
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from swarm.agents.brain import AgentBrain
+from swarm.contracts.brain_config import BrainConf
 from swarm.contracts.frames import Contact, SensorFrame
 from swarm.contracts.graph import analyse
 from swarm.contracts.scenario import load_scenario
@@ -45,7 +46,7 @@ def test_rooted_selection_roots_every_follower_and_converges():
 
 def _brain():
     s = load_scenario(ROOTED)
-    return AgentBrain(s.agent(2), s.gains, s.sensing, s.run.dt, len(s.agents))
+    return AgentBrain(BrainConf.from_scenario(s, 2))
 
 
 def _frame(tick, *contacts):

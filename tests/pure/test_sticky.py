@@ -8,6 +8,7 @@ In-process tier: random swarms through `swarm sim`'s engine stay under the switc
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -17,6 +18,7 @@ from hypothesis import strategies as st
 
 from swarm.agents.brain import AgentBrain
 from swarm.agents.selection import LOSS_CHANGES, TRANSITIONS, Sticky
+from swarm.contracts.brain_config import BrainConf
 from swarm.contracts.frames import Contact, SensorFrame
 from swarm.contracts.graph import analyse
 from swarm.contracts.scenario import parse_scenario
@@ -172,7 +174,7 @@ def test_nobody_to_steer_by_searches_then_the_brain_tracks():
         }
     )
     assert sc.sensing.selection == "sticky"  # the default
-    b = AgentBrain(sc.agent(2), sc.gains, sc.sensing, 0.01, 2)
+    b = AgentBrain(dataclasses.replace(BrainConf.from_scenario(sc, 2), dt=0.01))  # max_hops: its 2 agents
     d = b.decide(SensorFrame(0, 0.0, 2, 0.0, (C(3, 1.0, -1),), None))  # 3: a higher id, no path
     assert d.out is None and d.phase == "search" and d.hops is None and math.isfinite(d.u)
     d = b.decide(SensorFrame(1, 0.01, 2, 0.0, (C(3, 1.0, -1), C(1, 9.0, 0)), None))

@@ -45,7 +45,7 @@ def law_module(monkeypatch):
 def _brain(base, aid, law):
     base["law"] = law
     s = parse_scenario(base)
-    return AgentBrain(s.agent(aid), s.gains, s.sensing, s.run.dt, len(s.agents), s.law), s
+    return AgentBrain(BrainConf.from_scenario(s, aid)), s
 
 
 # -- what a law is given --------------------------------------------------------------------------
@@ -85,7 +85,7 @@ def test_state_is_kept_between_calls_and_new_with_a_new_brain(base, law_module):
     brain, s = _brain(base, 1, {"leader": "helpers_law:orbit_rate_leader", "params": {"rate": 0.3}})
     us = [brain.decide(frame._replace(tick=k)).u for k in range(3)]
     assert us == [0.3] * 3 and brain.state == {"calls": 3}
-    fresh = AgentBrain(s.agent(1), s.gains, s.sensing, s.run.dt, 3, s.law)
+    fresh = AgentBrain(BrainConf.from_scenario(s, 1), max_hops=3)
     assert fresh.state == {}
 
 

@@ -202,7 +202,7 @@ def test_non_finite_law_output_is_counted_and_held(tmp_path, monkeypatch):
     }
     s = parse_scenario(sc)
     c = BrainConf.from_scenario(s, 2)
-    brain = AgentBrain(c.agent, c.gains, c.sensing, c.dt, c.n_agents)
+    brain = AgentBrain(c)
     frame = Engine(s, 10).frames()[2]
     us = [brain.decide(frame._replace(tick=k)).u for k in range(4)]
     # 0.25 saturates to the limit 0.1; a NaN holds it (not the limit a NaN would saturate to).
