@@ -14,6 +14,7 @@ Pure: no I/O.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -86,6 +87,6 @@ class BatchLeaders:
         return [leader_phase(self.a, t1, t2) for t1, t2 in zip(self.t1.tolist(), self.t2.tolist())]
 
 
-def on_orbit(x, y, heading, v, radius, s, limit) -> np.ndarray:
+def on_orbit(x: Any, y: Any, heading: Any, v: Any, radius: Any, s: Any, limit: Any) -> np.ndarray:
     """swarm.agents.leader.on_orbit_command over arrays of leaders (inputs already checked)."""
     return bm.saturate(orbit_hold(x, y, heading, v, radius, s, ops=bm.ARRAY), limit)

@@ -18,6 +18,7 @@ Pure: no I/O, no state.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -29,20 +30,20 @@ _atan2 = np.frompyfunc(math.atan2, 2, 1)
 _atan = np.frompyfunc(math.atan, 1, 1)
 
 
-def saturate(u, limit) -> np.ndarray:
+def saturate(u: Any, limit: Any) -> np.ndarray:
     """max(-limit, min(limit, u)) elementwise; limit inf where the agent has none."""
     return np.maximum(-limit, np.minimum(limit, u))
 
 
-def hypot(x, y) -> np.ndarray:
+def hypot(x: Any, y: Any) -> np.ndarray:
     return _hypot(x, y).astype(float)
 
 
-def atan2(y, x) -> np.ndarray:
+def atan2(y: Any, x: Any) -> np.ndarray:
     return _atan2(y, x).astype(float)
 
 
-def atan(x) -> np.ndarray:
+def atan(x: Any) -> np.ndarray:
     return _atan(x).astype(float)
 
 

@@ -12,6 +12,7 @@ light as a follower's).
 from __future__ import annotations
 
 import math
+from typing import Any
 
 from swarm.contracts.orbits import TAU
 
@@ -66,7 +67,19 @@ def geomspace(start: float, stop: float, num: int) -> list[float]:
     return out
 
 
-def best_cc(px, py, alpha, radius, s, r_min, r_cap, phis, mags, n_best=1, n_ring=0):
+def best_cc(
+    px: Any,
+    py: Any,
+    alpha: Any,
+    radius: Any,
+    s: Any,
+    r_min: Any,
+    r_cap: Any,
+    phis: Any,
+    mags: Any,
+    n_best: Any = 1,
+    n_ring: Any = 0,
+) -> Any:
     """Evaluate CC candidates on a grid; return a list of (length, r_a, r_b, phi) or None.
 
     The list holds the shortest candidate of each of the n_best best entry angles, best

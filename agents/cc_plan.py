@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 from swarm.agents.cc_grid import D_EPS, best_cc, geomspace, linspace, snap
 from swarm.contracts.orbits import TAU, wrap
@@ -132,7 +133,7 @@ def check_inputs(v: float, radius: float, direction: int, max_turn_rate: float |
     return int(direction)
 
 
-def _single_arc_phi(px, py, alpha, radius, s):
+def _single_arc_phi(px: Any, py: Any, alpha: Any, radius: Any, s: Any) -> Any:
     """Entry angle (rad) of the one-arc path: circle A tangent to the orbit itself, or None.
 
     Circle A through the start with heading alpha is tangent to the orbit (as circle B with
@@ -150,7 +151,7 @@ def _single_arc_phi(px, py, alpha, radius, s):
     return math.atan2(s * oy / ssum, s * ox / ssum)
 
 
-def _orbit_path(x, y, v, radius, s) -> CCPath:
+def _orbit_path(x: Any, y: Any, v: Any, radius: Any, s: Any) -> CCPath:
     """Zero-length path for a leader already on the orbit (both arcs are the orbit)."""
     theta = math.atan2(y, x)
     entry = (radius * math.cos(theta), radius * math.sin(theta), wrap(theta + s * 0.5 * math.pi))

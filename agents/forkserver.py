@@ -35,6 +35,7 @@ import os
 import signal
 import sys
 import time
+from typing import Any
 
 import swarm.agents.brain  # noqa: F401  (imported here so that no agent has to)
 import swarm.agents.laws  # noqa: F401
@@ -45,7 +46,7 @@ from swarm.contracts.vocabulary import ExitCode
 REPARENT_WAIT = 5.0  # s an agent waits to be re-parented (its middle process exits at once)
 
 
-def serve(stdin=None, stdout=None) -> int:
+def serve(stdin: Any = None, stdout: Any = None) -> int:
     """Answer fork requests until stdin ends; 0."""
     stdin = stdin or sys.stdin.buffer
     out = (stdout or sys.stdout.buffer).fileno()

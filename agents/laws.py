@@ -25,6 +25,7 @@ from types import MappingProxyType
 
 from swarm.agents.leader import on_orbit_command
 from swarm.agents.ops import SCALAR, Num, Ops
+from swarm.contracts.brain_config import GainsConf, LawConf
 from swarm.contracts.laws import FOLLOWER, GAINS, LEADER, LawError, follower_law_name, resolve_law
 from swarm.contracts.observation import Observation
 
@@ -98,9 +99,9 @@ def _older(name: str, c1: float, c2: float) -> Law:
     return law
 
 
-def agent_law(role: str, gains, law) -> Law:
-    """The law(obs) an agent of `role` runs: gains, a GainsSpec/GainsConf; law, a
-    LawSpec/LawConf (None: the built-in laws)."""
+def agent_law(role: str, gains: GainsConf, law: LawConf | None) -> Law:
+    """The law(obs) an agent of `role` runs: gains and law, its BrainConf's (law None: the
+    built-in laws)."""
     _check_gains(gains.c1, gains.c2)
     if role == "leader":
         return resolve_law("cc" if law is None else law.leader, LEADER)
@@ -110,6 +111,6 @@ def agent_law(role: str, gains, law) -> Law:
     return resolve_law(name, FOLLOWER)
 
 
-def law_params(law) -> MappingProxyType:
+def law_params(law: LawConf | None) -> MappingProxyType[str, float]:
     """obs.params: the [law.params] numbers, read-only."""
     return MappingProxyType({} if law is None else dict(law.params))

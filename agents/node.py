@@ -27,12 +27,14 @@ import signal
 import socket
 import threading
 import time
+from typing import Any
 
 from swarm.agents.brain import AgentBrain, Decision
 from swarm.agents.joining import AgentExit, claim
 from swarm.agents.world_link import NEW_WORLD, WorldLink
 from swarm.contracts import wire
 from swarm.contracts.brain_config import BrainConf
+from swarm.contracts.frames import SensorFrame
 from swarm.contracts.laws import LawError, check_trusted, trusted_laws
 from swarm.contracts.transport import answer
 from swarm.contracts.vocabulary import ExitCode
@@ -49,7 +51,7 @@ class AgentNode:
 
     def __init__(
         self,
-        session,
+        session: Any,
         run: str,
         agent_id: int,
         reply: dict,
@@ -57,7 +59,7 @@ class AgentNode:
         endpoint: str | None = None,
         world_grace: float = 0.0,
         trusted: set[str] | None = None,
-    ):
+    ) -> None:
         import zenoh  # lazy: only a process that opens a session loads zenoh's native library (not the fork server)
 
         self.zenoh = zenoh
@@ -167,7 +169,7 @@ class AgentNode:
             self.last_status = key
 
     # -- main loop -------------------------------------------------------------------------------
-    def decode_frame(self, payload: bytes):
+    def decode_frame(self, payload: bytes) -> SensorFrame | None:
         """The frame in `payload`, or None (counted as garbage) when it is not a valid one for us."""
         try:
             frame = wire.decode_sense(payload)
@@ -180,7 +182,7 @@ class AgentNode:
             return None
         return frame
 
-    def on_sense_sample(self, sample) -> None:
+    def on_sense_sample(self, sample: Any) -> None:
         """zenoh's callback for a sensor frame: answer it here and now. A change of status
         wakes the main thread to publish it; an exception (a law that raises) is handed to
         the main thread, which ends the process with it, and no frame is answered after it."""
@@ -196,7 +198,7 @@ class AgentNode:
             self.answering = False
             self.inbox.put(("crash", e))
 
-    def on_sense(self, frame) -> bool:
+    def on_sense(self, frame: SensorFrame) -> bool:
         """Answer `frame` (not an older or repeated one); True when what the status says
         changed (out-neighbour, phase, fallback, hops or follow state)."""
         if frame.tick <= self.last_tick:
@@ -232,7 +234,7 @@ class AgentNode:
             return True
         return d.phase != last.phase or d.fallback != last.fallback or d.hops != last.hops or d.follow != last.follow
 
-    def on_world(self, kind) -> None:
+    def on_world(self, kind: Any) -> None:
         """The world's token came or went (agents/world_link.py says what that means)."""
         if kind != self.zenoh.SampleKind.PUT:
             self.link.on_delete(self.stalled)  # raises AgentExit when the world is gone

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 
+from swarm.contracts.frames import Contact
 from swarm.contracts.observation import Search
 from swarm.contracts.orbits import wrap
 from swarm.contracts.tuning import SelectionTuning, TuningTicks
@@ -137,7 +138,15 @@ class SearchMemory:
         self.direction = 1
         self.prev: tuple[float, float] | None = None  # (heading, time) of the previous tick
 
-    def update(self, steer, seen, heading: float, time: float, last_u: float, predicted: bool = False) -> Search | None:
+    def update(
+        self,
+        steer: Contact | None,
+        seen: Contact | None,
+        heading: float,
+        time: float,
+        last_u: float,
+        predicted: bool = False,
+    ) -> Search | None:
         """One tick. steer: the Contact it steers by (None: nobody), `predicted` when that
         is a coasting prediction (agents/coast.py: not a sighting, home is carried on);
         seen: with nobody to steer by, the nearest agent it senses with a path to a leader,

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import time
+from typing import Any
 
 from swarm.agents.joining import AgentExit
 from swarm.contracts import wire
@@ -33,7 +34,9 @@ RESUMED, NEW_WORLD, NOTHING = "resumed", "new world", "nothing"  # what a PUT me
 
 
 class WorldLink:
-    def __init__(self, session, run: str, agent: int, endpoint: str | None, grace: float, wait_world: bool):
+    def __init__(
+        self, session: Any, run: str, agent: int, endpoint: str | None, grace: float, wait_world: bool
+    ) -> None:
         """grace: s to wait for a world that stopped answering (0: not at all); wait_world:
         wait for a new world instead of exiting when it is gone."""
         self.session = session

@@ -13,6 +13,7 @@ sensing matrices are only built for the members whose followers need to look aro
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -28,7 +29,7 @@ def _take(a: np.ndarray, j: np.ndarray) -> np.ndarray:
     return a[np.arange(a.shape[0])[:, None], np.maximum(j, 0)]
 
 
-def sensing_matrices(x, y, heading, sense_range, fov, fov_on):
+def sensing_matrices(x: Any, y: Any, heading: Any, sense_range: Any, fov: Any, fov_on: Any) -> Any:
     """swarm.world.sensing.sensing_matrix for M members with everybody present: (S, range),
     both (M, N, N); sense_range (M,) (inf: unlimited), fov (M,) applied where fov_on."""
     dx = x[:, None, :] - x[:, :, None]
@@ -53,17 +54,17 @@ class BatchFrames:
         self.hops = w.hops.copy()  # what this tick's frames advertise
         self.ids, self.ids_sorted = w.ids, w.ids_sorted
 
-    def target(self, b: np.ndarray, i: np.ndarray):
+    def target(self, b: np.ndarray, i: np.ndarray) -> Any:
         """(tx, ty): the target minus the position of agents (b, i) (a leader's frame)."""
         w = self.w
         return w.target[b, 0] - w.x[b, i], w.target[b, 1] - w.y[b, i]
 
-    def offsets(self, j):
+    def offsets(self, j: Any) -> Any:
         """(dx, dy) (B, N): agent j[b, i]'s position minus agent i's."""
         w = self.w
         return _take(w.x, j) - w.x, _take(w.y, j) - w.y
 
-    def contacts(self, b: int, i: int, sensed_row, rng_row) -> tuple[Contact, ...]:
+    def contacts(self, b: int, i: int, sensed_row: Any, rng_row: Any) -> tuple[Contact, ...]:
         """The contacts of agent (b, i)'s frame (world/sensing.build_frames' values), from row i
         of member b's sensing matrices; bearings with numpy's arctan2, as the world's."""
         w = self.w
@@ -77,7 +78,7 @@ class BatchFrames:
             for a, bb in zip(j.tolist(), bearing.tolist())
         )
 
-    def sensed_pairs(self, j: np.ndarray, b=slice(None)) -> np.ndarray:
+    def sensed_pairs(self, j: np.ndarray, b: Any = slice(None)) -> np.ndarray:
         """(B, N): agent i senses agent j[b, i] (False where j < 0); with `b`, the
         members b only (j then has their rows)."""
         w = self.w
@@ -99,7 +100,7 @@ class BatchFrames:
         dx, dy = self.offsets(j)
         return np.arctan2(dy, dx)
 
-    def matrices(self, m: np.ndarray):
+    def matrices(self, m: np.ndarray) -> Any:
         """(sensed, range) (|m|, N, N) of members m."""
         w = self.w
         return sensing_matrices(w.x[m], w.y[m], w.heading[m], w.sense_range[m], w.fov[m], w.fov_on[m])
@@ -114,7 +115,7 @@ class BatchWorld:
         self.n = n.pop()
         rows = [s.agents for s in scenarios]
 
-        def arr(f, dtype=float):
+        def arr(f: Any, dtype: Any = float) -> Any:
             return np.array([[f(a) for a in row] for row in rows], dtype=dtype)
 
         self.ids = arr(lambda a: a.id, np.int64)

@@ -22,11 +22,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
 from swarm.contracts.scenario import Scenario
+from swarm.contracts.scenario_tables import AgentSpec
 from swarm.contracts.vocabulary import AgentState, SwitchReason
 from swarm.world.kinematics import step, step_one
 from swarm.world.sensing import (
@@ -61,15 +62,15 @@ class _States(list):
 
     __slots__ = ("version",)
 
-    def __init__(self, items=()) -> None:
+    def __init__(self, items: Any = ()) -> None:
         super().__init__(items)
         self.version = 0
 
 
-def _bumping(name: str):
+def _bumping(name: str) -> Any:
     base = getattr(list, name)
 
-    def changed(self, *args, **kwargs):
+    def changed(self: _States, *args: Any, **kwargs: Any) -> Any:
         try:
             return base(self, *args, **kwargs)
         finally:  # after the change: a roster built meanwhile is of the old version, and stale
@@ -197,7 +198,7 @@ class WorldCore:
             self.sensing(),
         )
 
-    def sensing(self):
+    def sensing(self) -> Any:
         """(S, bearing, range) matrices of the current tick: S[i, j] when i senses j.
         Computed once per tick (and again after a drop, join or add); do not modify them.
         With a sensing range and at least GRID_MIN_AGENTS agents they come from the grid
@@ -214,7 +215,7 @@ class WorldCore:
                 got.matrices = sensing_matrix(self.x, self.y, self.heading, self.present_mask(), sens.range, sens.fov)
         return got.matrices
 
-    def sensed_pairs(self):
+    def sensed_pairs(self) -> Any:
         """(i, j, bearing, range) arrays of this tick's sensed pairs (agent i senses agent j),
         sorted by i, then j, what wire.encode_sense_pairs takes: through the grid
         (`sensing_pairs`, no (N, N) matrix made) where `sensing` uses it, else from
@@ -336,7 +337,7 @@ class WorldCore:
             self.hops[k] = 0 if self.is_leader[k] else -1
         self.state[k] = ACTIVE
 
-    def add_agent(self, spec) -> None:
+    def add_agent(self, spec: AgentSpec) -> None:
         """A new agent (not in the scenario file) enters the run, not yet joined ("gone")."""
         self._sensing = None
         if spec.id in self.index:

@@ -36,6 +36,7 @@ import numpy as np
 
 from swarm.contracts.frames import SensorFrame
 from swarm.contracts.scenario import Scenario
+from swarm.contracts.scenario_tables import AgentSpec
 from swarm.contracts.vocabulary import EventKind, FollowState
 from swarm.contracts.wire import FOLLOW_CODE
 from swarm.world.core import ACTIVE, WorldCore
@@ -109,7 +110,7 @@ class Engine:
     def scenario(self) -> Scenario:
         return self.core.scenario
 
-    def event(self, kind: str, agent: int | None, reason: str, **more) -> dict:
+    def event(self, kind: str, agent: int | None, reason: str, **more: Any) -> dict:
         ev: dict[str, Any] = {"tick": self.core.tick, "time": self.core.time}
         if self.wall_clock is not None:
             ev["wall_time"] = self.wall_clock()
@@ -166,7 +167,7 @@ class Engine:
             self.event(EventKind.DROP, agent, reason, now=state)
         return state
 
-    def join(self, agent: int, reason: str, rejoin: bool, quiet: bool = False, **more) -> bool:
+    def join(self, agent: int, reason: str, rejoin: bool, quiet: bool = False, **more: Any) -> bool:
         """The agent's process is (back) in the world, controlled from its current pose.
         `quiet`: no event (counted by the shell)."""
         if self.core.state[self.core.index[agent]] == ACTIVE:
@@ -176,7 +177,7 @@ class Engine:
             self.event(EventKind.REJOIN if rejoin else EventKind.JOIN, agent, reason, **more)
         return True
 
-    def add_agent(self, spec) -> None:
+    def add_agent(self, spec: AgentSpec) -> None:
         """A new agent (not in the scenario file) enters the run, not joined yet."""
         self.core.add_agent(spec)
         self.rec.add_agent(self.core.scenario)

@@ -16,6 +16,8 @@ thaw) are due at a tick; who carries them out depends on the engine.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 
@@ -45,12 +47,12 @@ class FaultPlan:
     def process_faults_due(self, tick: int) -> list[tuple[int, FaultSpec]]:
         return [(i, f) for i, f in self.due(tick) if f.kind in PROCESS_FAULTS]
 
-    def _active(self, tick: int, agent: int, kind: str):
+    def _active(self, tick: int, agent: int, kind: str) -> Iterator[Any]:
         for t0, t1, f in zip(self.tick_of, self.end_of, self.faults):
             if f.kind == kind and t0 <= tick < t1 and (f.agent is None or f.agent == agent):
                 yield f
 
-    def _rng(self, tick: int, agent: int, salt: int):
+    def _rng(self, tick: int, agent: int, salt: int) -> Any:
         """Random numbers that depend only on (seed, tick, agent, salt): the same draws
         whatever order messages arrive in, so both engines lose the same messages."""
         return np.random.default_rng([self.seed, tick, agent, salt])

@@ -29,6 +29,7 @@ recorded. Who asked (`by`) comes bounded and escaped from the wire's decoder
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import socket
@@ -185,7 +186,7 @@ class Inbox:
             if waiting.pop(aid, None) is not None:
                 self.disturbed += 1  # lockstep: its frame goes again (world/clock.py)
                 if st.cfg.progress:
-                    print(f"[world] agent {aid}: its link is back", file=sys.stderr, flush=True)
+                    log.info("agent %d: its link is back", aid)
             if core.state[k] == ACTIVE:
                 return
             b.claim_until = 0.0  # the key stays: a thawed process rejoins with the claim it had

@@ -14,6 +14,7 @@ microseconds in a process whose caches the other agents' processes keep cold.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -26,7 +27,7 @@ _EPS = float(np.finfo(float).eps)  # np.sinc's stand-in for 0
 wrap = wrap_array  # an angle (rad), or an array of them, wrapped to (-pi, pi]
 
 
-def step(x, y, heading, speed, turn_rate, dt: float):
+def step(x: Any, y: Any, heading: Any, speed: Any, turn_rate: Any, dt: float) -> Any:
     """Advance unicycles by dt seconds with constant turn rates.
 
     x, y (m), heading (rad), speed (m/s), turn_rate (rad/s): scalars or arrays of one

@@ -14,6 +14,7 @@ draw) is left out. Without --foxglove nothing here runs (and foxglove is not imp
 from __future__ import annotations
 
 import re
+from typing import Any
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8765
@@ -24,11 +25,11 @@ class LiveViewError(Exception):
     """The live view cannot be served (the port is in use, the host unusable)."""
 
 
-def _serve(channel) -> bool:
+def _serve(channel: Any) -> bool:
     return channel.topic != "/swarm/ticks"
 
 
-def serve(ctx, name: str, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT):
+def serve(ctx: Any, name: str, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT) -> Any:
     """Serve the channels of `ctx` (a foxglove.Context; all but `/swarm/ticks`) on
     ws://host:port as server `name`; returns the server (`.stop()` ends it). Raises
     LiveViewError with one line naming host and port on failure (the port in use)."""
@@ -43,7 +44,7 @@ def serve(ctx, name: str, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT):
         raise LiveViewError(f"--foxglove: cannot serve on {host}:{port}: {why}") from None
 
 
-def start_live_view(writer, run: str, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT):
+def start_live_view(writer: Any, run: str, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT) -> Any:
     """Serve `writer`'s channels (a world/stream.py StreamWriter) on ws://host:port."""
     return serve(writer.ctx, f"swarm {run}", host, port)
 

@@ -21,13 +21,14 @@ from __future__ import annotations
 
 import ctypes
 import time
+from typing import Any
 
 ARENAS = 2  # malloc arenas at most (the main one and one for every other thread)
 PERIOD = 10.0  # s of wall time between trims
 _M_ARENA_MAX = -8  # glibc's mallopt parameter
 
 
-def _libc(name: str):
+def _libc(name: str) -> Any:
     try:
         return getattr(ctypes.CDLL(None), name)
     except (OSError, AttributeError):  # not glibc

@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -57,7 +58,7 @@ def settling_time(t: np.ndarray, r: np.ndarray, R: float, band: float = SETTLING
     return float(t[0]) if idx.size == 0 else float(t[min(idx[-1] + 1, len(t) - 1)])
 
 
-def angular_rate(t: np.ndarray, x: np.ndarray, y: np.ndarray, target, window: float) -> float:
+def angular_rate(t: np.ndarray, x: np.ndarray, y: np.ndarray, target: Any, window: float) -> float:
     """Mean angular rate about the target (rad/s) over the last `window` seconds."""
     k0 = int(np.searchsorted(t, t[-1] - window))
     k0 = min(k0, len(t) - 2)
@@ -68,7 +69,19 @@ def angular_rate(t: np.ndarray, x: np.ndarray, y: np.ndarray, target, window: fl
 
 
 def agent_metrics(
-    *, ids, roles, speeds, orbit_radius, t, x, y, alive, out_final, target, window: float | None = None, switches=None
+    *,
+    ids: Any,
+    roles: Any,
+    speeds: Any,
+    orbit_radius: Any,
+    t: Any,
+    x: Any,
+    y: Any,
+    alive: Any,
+    out_final: Any,
+    target: Any,
+    window: float | None = None,
+    switches: Any = None,
 ) -> dict[str, dict]:
     """Per-agent metrics keyed by str(id), as written to summary.json.
 
@@ -124,7 +137,9 @@ def converged(agents: dict[str, dict], tol: float = CONVERGED_TOL) -> bool:
     return bool(live) and all(a["relative_error"] is not None and a["relative_error"] < tol for a in live)
 
 
-def relative_errors(*, ids, roles, speeds, orbit_radius, x, y, alive, out, target) -> np.ndarray:
+def relative_errors(
+    *, ids: Any, roles: Any, speeds: Any, orbit_radius: Any, x: Any, y: Any, alive: Any, out: Any, target: Any
+) -> np.ndarray:
     """(T, N) relative radial error |r - R_i| / R_i per tick, with R_i from that tick's graph
     (NaN where the agent is not alive or has no path to a live leader)."""
     T, N = x.shape

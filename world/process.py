@@ -17,6 +17,7 @@ zenoh keys, publishing and the results. world/main.py runs it from start to end.
 
 from __future__ import annotations
 
+import logging
 import sys
 import time
 from collections.abc import Iterable
@@ -36,6 +37,8 @@ from swarm.world.joins import Joins
 from swarm.world.recording import RECORDING_FILE, DeferredRecorder, RecordingError, write_run
 from swarm.world.roster import agent_figures
 from swarm.world.state import RunState, WorldConfig
+
+log = logging.getLogger(__name__)
 
 __all__ = ["TRUTH_PERIOD", "World", "WorldConfig"]
 
@@ -171,11 +174,7 @@ class World:
         except Exception:
             pass
         if self.cfg.progress:
-            print(
-                f"[world] t={self.core.time:8.2f}s tick {self.core.tick}: {kind} agent {agent}: {reason}",
-                file=sys.stderr,
-                flush=True,
-            )
+            log.info("t=%8.2fs tick %d: %s agent %s: %s", self.core.time, self.core.tick, kind, agent, reason)
 
     def publish_frames(self) -> set[int]:
         """Send every active agent its frame of this tick (the same numbers as WorldCore.frames)."""

@@ -70,7 +70,19 @@ class TickRecorder(Protocol):
         """Ticks recorded (the last one + 1)."""
         ...
 
-    def record(self, tick: int, time: float, x, y, heading, u, out, alive, missed: int = 0, follow=None) -> None: ...
+    def record(
+        self,
+        tick: int,
+        time: float,
+        x: Any,
+        y: Any,
+        heading: Any,
+        u: Any,
+        out: Any,
+        alive: Any,
+        missed: int = 0,
+        follow: Any = None,
+    ) -> None: ...
 
     def event(self, ev: dict) -> None: ...
 
@@ -113,7 +125,19 @@ class Recorder:
         self.alive = grow(self.alive, False)
         self.follow = grow(self.follow, 0)
 
-    def record(self, tick: int, time: float, x, y, heading, u, out, alive, missed: int = 0, follow=None) -> None:
+    def record(
+        self,
+        tick: int,
+        time: float,
+        x: Any,
+        y: Any,
+        heading: Any,
+        u: Any,
+        out: Any,
+        alive: Any,
+        missed: int = 0,
+        follow: Any = None,
+    ) -> None:
         """Store tick `tick`: pose at t_k and the turn rate applied over [t_k, t_k+1); follow:
         the agents' follow state codes (None: all none)."""
         self.t[tick] = time
@@ -170,7 +194,19 @@ class StreamRecorder:
     def event(self, ev: dict) -> None:
         self.writer.event(ev)
 
-    def record(self, tick: int, time: float, x, y, heading, u, out, alive, missed: int = 0, follow=None) -> None:
+    def record(
+        self,
+        tick: int,
+        time: float,
+        x: Any,
+        y: Any,
+        heading: Any,
+        u: Any,
+        out: Any,
+        alive: Any,
+        missed: int = 0,
+        follow: Any = None,
+    ) -> None:
         self.writer.tick(tick, time, self.ids, x, y, heading, u, out, alive, missed, follow)
         self.t_last = time
         self.rows = max(self.rows, tick + 1)
@@ -205,7 +241,19 @@ class DeferredRecorder:
         self.inner = inner
         self.pending: tuple | None = None
 
-    def record(self, tick: int, time: float, x, y, heading, u, out, alive, missed: int = 0, follow=None) -> None:
+    def record(
+        self,
+        tick: int,
+        time: float,
+        x: Any,
+        y: Any,
+        heading: Any,
+        u: Any,
+        out: Any,
+        alive: Any,
+        missed: int = 0,
+        follow: Any = None,
+    ) -> None:
         self.flush()
         self.pending = (
             tick,
@@ -384,7 +432,7 @@ def add_state_seconds(agents: dict, a: dict[str, np.ndarray], dt: float) -> None
             agents[str(i)]["state_s"] = state_seconds(counts[k], dt)
 
 
-def _json_default(o):
+def _json_default(o: Any) -> Any:
     if isinstance(o, (np.integer,)):
         return int(o)
     if isinstance(o, (np.floating,)):
@@ -394,7 +442,7 @@ def _json_default(o):
     raise TypeError(f"not JSON serialisable: {type(o)}")
 
 
-def _write_atomic(path: Path, write) -> None:
+def _write_atomic(path: Path, write: Any) -> None:
     """`write(f)` into a temporary file beside `path`, then rename: `path` is whole or absent.
     Raises RecordingError naming the file (disk full, file too large, ...)."""
     tmp = path.with_name(f".{path.name}.tmp")

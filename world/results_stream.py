@@ -299,7 +299,7 @@ def state_seconds(counts: np.ndarray, dt: float) -> dict[str, float]:
     return {str(FOLLOW_STATES[c]): round(v * dt, 9) for c, v in enumerate(counts.tolist()) if v}
 
 
-def _chunks(files: NpyFiles, keys: tuple[str, ...], start: int = 0):
+def _chunks(files: NpyFiles, keys: tuple[str, ...], start: int = 0) -> Iterator[Any]:
     for r0 in range(start, files.rows, CHUNK):
         r1 = min(r0 + CHUNK, files.rows)
         yield r0, r1, {k: files.read(k, r0, r1) for k in keys}
@@ -511,7 +511,7 @@ class Metrics:
         self.faults = [self._fault_result(f, tmap) for f in faults]
 
     # metrics.recovery, a window at a time
-    def _faults(self, tmap) -> list[_Fault]:
+    def _faults(self, tmap: Any) -> list[_Fault]:
         T = len(tmap)
         dt = float(tmap[1] - tmap[0]) if T > 1 else 1.0
         specs = [
@@ -547,7 +547,7 @@ class Metrics:
             f.worst = w if f.worst is None else max(f.worst, w)
         f.missed += int(missed[a - r0 : b - r0].sum())
 
-    def _fault_result(self, f: _Fault, tmap) -> dict:
+    def _fault_result(self, f: _Fault, tmap: Any) -> dict:
         T = len(tmap)
         dt = float(tmap[1] - tmap[0]) if T > 1 else 1.0
         length = f.stop - f.start
@@ -571,7 +571,7 @@ class Metrics:
 class _RelativeErrors:
     """`metrics.relative_errors`, rows at a time."""
 
-    def __init__(self, ids, roles, speeds, orbit_radius, target) -> None:
+    def __init__(self, ids: Any, roles: Any, speeds: Any, orbit_radius: Any, target: Any) -> None:
         self.ids, self.speeds, self.orbit, self.target = ids, speeds, orbit_radius, target
         self.col = {int(i): k for k, i in enumerate(ids)}
         self.leaders = {int(i) for i, r in zip(ids, roles) if r == "leader"}

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import secrets
 from dataclasses import dataclass
+from typing import Any
 
 from pydantic import ValidationError
 
@@ -47,7 +48,7 @@ class AgentBook:
     churn_unwritten: int = 0
 
 
-def new_agent_spec(aid: int, spec, core: WorldCore):
+def new_agent_spec(aid: int, spec: object, core: WorldCore) -> AgentSpec:
     """The AgentSpec of an agent added at run time (`swarm spawn`); WireError names the field."""
     if aid in core.index:
         raise wire.WireError(f"agent {aid} already exists")
@@ -78,7 +79,7 @@ def admit(core: WorldCore, book: AgentBook, req: dict, now: float) -> int:
 
 
 def agent_figures(
-    book: AgentBook, ticks: int, realtime: bool, garbage: int = 0, nonfinite: int = 0, **selection
+    book: AgentBook, ticks: int, realtime: bool, garbage: int = 0, nonfinite: int = 0, **selection: Any
 ) -> dict:
     """One agent's process figures for summary.json (see docs/reference/outputs.md#summary);
     `garbage`, `nonfinite` and `selection` (losses, loss_switches_max) are what the agent

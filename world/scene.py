@@ -23,10 +23,12 @@ from __future__ import annotations
 import json
 import math
 from collections import deque
+from typing import Any
 
 import numpy as np
 
 from swarm.contracts.orbits import expected_radius, roots
+from swarm.contracts.scenario_tables import AgentSpec
 from swarm.contracts.wire import FOLLOW_STATES
 
 TRAIL_SECONDS = 30.0  # simulated s of path each trail shows
@@ -46,7 +48,7 @@ class SceneBuilder:
     what it needs of each agent, `.id`, `.role`, `.speed` and `.orbit_radius` (a scenario's
     AgentSpec has them)."""
 
-    def __init__(self, target: tuple[float, float], agents, scene_rate: float):
+    def __init__(self, target: tuple[float, float], agents: Any, scene_rate: float) -> None:
         self.target = (float(target[0]), float(target[1]))
         self.agents = list(agents)
         self.spec = {a.id: a for a in self.agents}
@@ -58,14 +60,26 @@ class SceneBuilder:
         self.radii: tuple = ()
         self.circles: list = []
 
-    def add_agent(self, spec) -> None:
+    def add_agent(self, spec: AgentSpec) -> None:
         self.agents.append(spec)
         self.spec[spec.id] = spec
         if spec.role == "leader":
             self.leaders.add(spec.id)
 
     # -- per-agent numbers ------------------------------------------------------------------
-    def numbers(self, tick, t, ids, x, y, heading, u, out, alive, follow=None) -> dict:
+    def numbers(
+        self,
+        tick: int,
+        t: Any,
+        ids: Any,
+        x: Any,
+        y: Any,
+        heading: Any,
+        u: Any,
+        out: Any,
+        alive: Any,
+        follow: Any = None,
+    ) -> dict:
         """follow: the agents' follow state codes (wire.FOLLOW_STATES), each agent's `follow`
         by name; None: no `follow` (an observer that does not know them)."""
         spec = self.spec
@@ -104,7 +118,7 @@ class SceneBuilder:
         return {"tick": int(tick), "time": float(t), "agents": rows}
 
     # -- the scene ----------------------------------------------------------------------------
-    def scene(self, ns, ids, x, y, out, heading, alive, numbers):
+    def scene(self, ns: Any, ids: Any, x: Any, y: Any, out: Any, heading: Any, alive: Any, numbers: Any) -> Any:
         # lazy: foxglove (18 ms) only where a scene is drawn; readers of a run import this module (world/stream.py)
         from foxglove.messages import (
             ArrowPrimitive,
@@ -182,7 +196,7 @@ class SceneBuilder:
             ]
         )
 
-    def trails_update(self, ns, ids, x, y, alive):
+    def trails_update(self, ns: Any, ids: Any, x: Any, y: Any, alive: Any) -> Any:
         """Sample the trails (every trail_every scene updates); a SceneUpdate of them every
         TRAIL_EVERY samples, else None."""
         self.updates += 1
@@ -216,12 +230,12 @@ class SceneChannels:
     """The channels of what Foxglove shows of a run, in `ctx` (a foxglove.Context), in this
     order: `/swarm/events`, `/swarm/run`, `/swarm/scene`, `/swarm/agents`, `/swarm/trails`."""
 
-    def __init__(self, ctx, target: tuple[float, float], agents, scene_rate: float):
+    def __init__(self, ctx: Any, target: tuple[float, float], agents: Any, scene_rate: float) -> None:
         # lazy: foxglove (18 ms) only where a scene is drawn; readers of a run import this module (world/stream.py)
         import foxglove
         from foxglove.channels import SceneUpdateChannel
 
-        def json_channel(topic: str, title: str):
+        def json_channel(topic: str, title: str) -> Any:
             return foxglove.Channel(topic, schema={"title": title, "type": "object"}, context=ctx)
 
         self.events_ch = json_channel("/swarm/events", "swarm.Event")
@@ -234,7 +248,7 @@ class SceneChannels:
     def run(self, msg: dict, t: float = 0.0) -> None:
         self.run_ch.log(msg, log_time=log_time(t))
 
-    def add_agent(self, spec, doc: dict, t: float) -> None:
+    def add_agent(self, spec: Any, doc: dict, t: float) -> None:
         """An agent added at run time: drawn from now on, and `{"add_agent": doc}` on /swarm/run."""
         self.builder.add_agent(spec)
         self.run({"add_agent": doc}, t)
@@ -242,7 +256,19 @@ class SceneChannels:
     def event(self, ev: dict) -> None:
         self.events_ch.log(json.loads(json.dumps(ev, default=_plain)), log_time=log_time(ev.get("time", 0.0)))
 
-    def tick(self, tick, t, ids, x, y, heading, u, out, alive, follow=None) -> None:
+    def tick(
+        self,
+        tick: int,
+        t: Any,
+        ids: Any,
+        x: Any,
+        y: Any,
+        heading: Any,
+        u: Any,
+        out: Any,
+        alive: Any,
+        follow: Any = None,
+    ) -> None:
         """One scene update: the agents' numbers, the scene and, now and then, the trails."""
         ns = log_time(t)
         b = self.builder
@@ -254,19 +280,19 @@ class SceneChannels:
             self.trails_ch.log(trails, log_time=ns)
 
 
-def _plain(o):
+def _plain(o: Any) -> Any:
     if isinstance(o, np.generic):
         return o.item()
     raise TypeError(f"not JSON serialisable: {type(o)}")
 
 
-def _stamp(ns: int):
+def _stamp(ns: int) -> Any:
     from foxglove.messages import Timestamp  # lazy: as in SceneChannels.scene
 
     return Timestamp(sec=ns // 10**9, nsec=ns % 10**9)
 
 
-def _pose(x: float, y: float, h: float):
+def _pose(x: float, y: float, h: float) -> Any:
     from foxglove.messages import Pose, Quaternion, Vector3  # lazy: as in SceneChannels.scene
 
     return Pose(

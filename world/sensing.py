@@ -8,6 +8,8 @@ the target's position relative to themselves. Pure numpy, no I/O.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from swarm.contracts.frames import Contact, SensorFrame
@@ -36,7 +38,7 @@ GRID_MARGIN = 1.0 + 1e-6
 GRID_MAX_CELLS = 1 << 24
 
 
-def sensing_matrix(x, y, heading, present, sense_range: float | None, fov: float | None):
+def sensing_matrix(x: Any, y: Any, heading: Any, present: Any, sense_range: float | None, fov: float | None) -> Any:
     """The reference: every pair. Boolean (N, N) matrix S with S[i, j] true when agent i senses agent j.
 
     present: (N,) bool, agents that are in the world. sense_range (m) or None for
@@ -62,7 +64,7 @@ def sensing_matrix(x, y, heading, present, sense_range: float | None, fov: float
     return s, bearing, rng
 
 
-def sensing_pairs(x, y, heading, present, sense_range: float, fov: float | None):
+def sensing_pairs(x: Any, y: Any, heading: Any, present: Any, sense_range: float, fov: float | None) -> Any:
     """Who senses whom with a sensing range, through a uniform grid of cells a range wide:
     (i, j, bearing, range) arrays of the sensed pairs (agent i senses agent j), sorted by i,
     then j. The same pairs and the same bits as `sensing_matrix` (S, and its bearing and
@@ -111,7 +113,7 @@ def sensing_pairs(x, y, heading, present, sense_range: float, fov: float | None)
     return a[o], b[o], bearing[o], rng[o]
 
 
-def pairs_matrices(n: int, i, j, bearing, rng):
+def pairs_matrices(n: int, i: Any, j: Any, bearing: Any, rng: Any) -> Any:
     """(S, bearing, range) (N, N) matrices from sensed pairs: S true at the pairs, bearing and
     range there (NaN and inf at every pair not sensed)."""
     s = np.zeros((n, n), dtype=bool)
@@ -123,7 +125,7 @@ def pairs_matrices(n: int, i, j, bearing, rng):
     return s, b, r
 
 
-def sensing_grid(x, y, heading, present, sense_range: float, fov: float | None):
+def sensing_grid(x: Any, y: Any, heading: Any, present: Any, sense_range: float, fov: float | None) -> Any:
     """`sensing_matrix` through the grid (`sensing_pairs`): the same S, and the same bearing
     and range wherever S; NaN and inf elsewhere (pairs not sensed, whose values no frame
     carries)."""
@@ -131,20 +133,20 @@ def sensing_grid(x, y, heading, present, sense_range: float, fov: float | None):
 
 
 def build_frames(
-    tick,
-    time,
-    ids,
-    x,
-    y,
-    heading,
-    present,
-    receivers,
-    is_leader,
-    target,
-    sense_range=None,
-    fov=None,
-    hops=None,
-    matrices=None,
+    tick: int,
+    time: Any,
+    ids: Any,
+    x: Any,
+    y: Any,
+    heading: Any,
+    present: Any,
+    receivers: Any,
+    is_leader: Any,
+    target: Any,
+    sense_range: Any = None,
+    fov: Any = None,
+    hops: Any = None,
+    matrices: Any = None,
 ) -> dict[int, SensorFrame]:
     """One SensorFrame per receiver index (agents that need a frame this tick).
 

@@ -33,9 +33,10 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -58,7 +59,19 @@ class RecordingError(Coded):
     exit_code = ExitCode.NO_SPACE
 
 
-def encode_tick(tick: int, t: float, ids, x, y, heading, u, out, alive, missed: int, follow=None) -> bytes:
+def encode_tick(
+    tick: int,
+    t: float,
+    ids: Any,
+    x: Any,
+    y: Any,
+    heading: Any,
+    u: Any,
+    out: Any,
+    alive: Any,
+    missed: int,
+    follow: Any = None,
+) -> bytes:
     """One swarm-tick-v2 message (follow None: all none)."""
     n = len(ids)
     head = np.array([(tick, t, n, missed)], dtype=_HEAD).tobytes()
@@ -144,7 +157,20 @@ class StreamWriter:
     def event(self, ev: dict) -> None:
         self.channels.event(ev)
 
-    def tick(self, tick: int, t: float, ids, x, y, heading, u, out, alive, missed: int, follow=None) -> None:
+    def tick(
+        self,
+        tick: int,
+        t: float,
+        ids: Any,
+        x: Any,
+        y: Any,
+        heading: Any,
+        u: Any,
+        out: Any,
+        alive: Any,
+        missed: int,
+        follow: Any = None,
+    ) -> None:
         self.ticks_ch.log(encode_tick(tick, t, ids, x, y, heading, u, out, alive, missed, follow), log_time=log_time(t))
         if tick % self.scene_every == 0:
             self.channels.tick(tick, t, ids, x, y, heading, u, out, alive, follow)
@@ -168,7 +194,7 @@ class StreamWriter:
         except Exception:
             self._failed()
 
-    def _failed(self):
+    def _failed(self) -> None:
         """A write failed (disk full, file too large): what was flushed before stays readable.
         The writer is closed now, so that it has nothing left to say when it is dropped."""
         self.closed = self.failed = True
@@ -191,7 +217,7 @@ class Recording:
     complete: bool = False
 
 
-def _records(f):
+def _records(f: Any) -> Iterator[Any]:
     """The MCAP records of `f` up to its end, or up to where it is torn (a writer killed
     mid-chunk): whatever the reader raises there (a short read, a bad length, a truncated
     compressed chunk) ends the file. The second value says whether the footer was reached."""

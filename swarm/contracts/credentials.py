@@ -22,6 +22,7 @@ import secrets
 import stat
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 from swarm.contracts import wire
 from swarm.contracts.identities import HOST, CredentialsError, agent_user, check_host_name, password_for
@@ -106,7 +107,7 @@ class Credentials:
         u, p = self.identity(user)
         return replace(self, secret=None, user=u, password=p, pid=None, path=None, host=None, agents=None)
 
-    def export_host(self, name: str, agent_ids) -> Credentials:
+    def export_host(self, name: str, agent_ids: Any) -> Credentials:
         """A copy for agent host `name` running `agent_ids`: the `host` identity (the host
         router's, at the hub) and those agents' identities, nothing else (no secret, no pid)."""
         ids = tuple(sorted(set(agent_ids)))

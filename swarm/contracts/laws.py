@@ -28,6 +28,7 @@ import inspect
 import os
 import sys
 from collections.abc import Callable, Iterable
+from typing import Any
 
 FollowerLaw = Callable[[float, float, float, float, float], float]  # [gains] law
 Law = Callable[..., float]  # [law] follower / leader: law(obs) -> u
@@ -62,7 +63,7 @@ def trusted_laws(extra: tuple[str, ...] | list[str] = ()) -> set[str]:
     return {n.strip() for n in env.split(",") if n.strip()} | set(extra)
 
 
-def with_trusted_laws(names) -> str:
+def with_trusted_laws(names: Any) -> str:
     """$SWARM_TRUSTED_LAWS for a child process: `names` and what this process trusts."""
     return ",".join(dict.fromkeys([*names, *sorted(trusted_laws())]))
 
@@ -126,7 +127,7 @@ def resolve_law(name: str, kind: str = GAINS, dirs: Iterable = ()) -> Law:
     return fn
 
 
-def _binds(fn, *args) -> bool:
+def _binds(fn: Any, *args: Any) -> bool:
     try:
         inspect.signature(fn).bind(*args)
     except (TypeError, ValueError):  # ValueError: no signature to check
@@ -134,12 +135,12 @@ def _binds(fn, *args) -> bool:
     return True
 
 
-def _is_python_function(fn) -> bool:
+def _is_python_function(fn: Any) -> bool:
     """A `def` or `lambda` (also one bound to an object): code whose signature is its own."""
     return inspect.isfunction(fn) or (inspect.ismethod(fn) and inspect.isfunction(fn.__func__))
 
 
-def _kind_of(fn) -> str:
+def _kind_of(fn: Any) -> str:
     if inspect.isclass(fn):
         return "a class"
     if inspect.isbuiltin(fn) or inspect.ismethoddescriptor(fn) or type(fn).__name__ == "method-wrapper":

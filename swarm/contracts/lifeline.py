@@ -24,6 +24,7 @@ import signal
 import socket
 import sys
 from collections.abc import Mapping
+from typing import Any
 
 LAUNCHER_PID_ENV = "SWARM_LAUNCHER_PID"
 PR_SET_PDEATHSIG = 1
@@ -56,7 +57,7 @@ def exit_status(code: int) -> str:
         return f"killed by signal {-code}"
 
 
-def endpoint_socket(endpoint: str, timeout: float):
+def endpoint_socket(endpoint: str, timeout: float) -> Any:
     """(a plain socket, the address to connect it to) for the listener under `endpoint`
     (tcp/HOST:PORT and tls/HOST:PORT: its TCP listener; unixsock-stream/PATH), with
     `timeout`; None when `endpoint` cannot be parsed."""

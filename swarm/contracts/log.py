@@ -25,6 +25,7 @@ from __future__ import annotations
 import logging
 import os
 import sys
+from typing import Any
 
 ENV_LEVEL = "SWARM_LOG_LEVEL"
 ROOT = "swarm"  # the logger that holds the handler; modules log to its children (__name__)
@@ -56,11 +57,11 @@ class _Stderr(logging.StreamHandler):
         super().__init__()
 
     @property
-    def stream(self):
+    def stream(self) -> Any:
         return sys.stderr
 
     @stream.setter
-    def stream(self, value) -> None:  # (StreamHandler.__init__ sets it)
+    def stream(self, value: Any) -> None:  # (StreamHandler.__init__ sets it)
         pass
 
 

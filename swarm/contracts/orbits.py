@@ -9,6 +9,7 @@ the batch brains).
 from __future__ import annotations
 
 import math
+from typing import Any
 
 TAU = 2.0 * math.pi
 
@@ -24,7 +25,7 @@ def wrap(angle: float) -> float:
 _FAST = 1.25 * TAU  # below this |angle| the remainder subtracts at most one tau
 
 
-def wrap_array(angle):
+def wrap_array(angle: Any) -> Any:
     """`wrap` on a numpy array (or anything numpy takes), the same bits: exact in numpy for
     |angle| < 1.25 tau (there the remainder subtracts at most one tau, and by Sterbenz's
     lemma that subtraction is exact); larger angles go through math.remainder."""

@@ -13,6 +13,7 @@ from __future__ import annotations
 import re
 import tomllib
 from pathlib import Path
+from typing import Any
 
 from pydantic import Field, ValidationError, ValidationInfo, field_validator, model_validator
 
@@ -54,7 +55,7 @@ class Scenario(Strict):
 
     @field_validator("agents", mode="before")
     @classmethod
-    def _not_too_many(cls, agents):
+    def _not_too_many(cls, agents: Any) -> Any:
         # before validating each one: a file of a million agents fails at once
         if isinstance(agents, list) and len(agents) > MAX_AGENTS:
             raise ValueError(f"{len(agents)} agents, more than the wire carries ({MAX_AGENTS})")

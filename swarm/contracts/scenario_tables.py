@@ -10,7 +10,7 @@ swarm/contracts/scenario.py's.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
@@ -251,7 +251,7 @@ class FaultSpec(Strict):
         return self
 
 
-def polygon_turns(points) -> list[float]:
+def polygon_turns(points: Any) -> list[float]:
     """The cross product of each pair of consecutive edges of a polygon (corners (x, y)):
     all > 0, a convex polygon walked counter-clockwise; all < 0, clockwise."""
     n = len(points)
@@ -284,7 +284,7 @@ class SafetySpec(Strict):
 
     @field_validator("arena")
     @classmethod
-    def _arena(cls, arena):
+    def _arena(cls, arena: Any) -> Any:
         if arena is None or not arena or not isinstance(arena[0], list):
             if arena is not None and len(arena) != 4:
                 raise ValueError(f"a rectangle is [xmin, ymin, xmax, ymax], got {len(arena)} numbers")

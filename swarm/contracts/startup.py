@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 import select
 import time
+from typing import Any
 
 ENV_READY_FD = "SWARM_READY_FD"
 READY = "ready"
@@ -93,7 +94,7 @@ class ReadyWait:
                     self.step = word
         return self.step == READY
 
-    def wait(self, timeout: float, stop=lambda: False, interval: float = 0.1) -> bool:
+    def wait(self, timeout: float, stop: Any = lambda: False, interval: float = 0.1) -> bool:
         """Until `ready` (True), the pipe's end, `stop()` or `timeout` s (False)."""
         t_end = time.monotonic() + timeout
         while not self.poll(min(interval, max(0.0, t_end - time.monotonic()))):

@@ -21,8 +21,9 @@ from __future__ import annotations
 import os
 import signal
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from typing import Any
 
 SIGNALS = (signal.SIGTERM, signal.SIGINT)
 
@@ -50,7 +51,7 @@ class StopSignals:
         self.saved = {sig: signal.signal(sig, self._handler) for sig in SIGNALS}
         return self
 
-    def _handler(self, signum, _frame) -> None:
+    def _handler(self, signum: Any, _frame: Any) -> None:
         if self.fired and self.once:
             return
         if self.holding:
@@ -64,7 +65,7 @@ class StopSignals:
         raise self.make(signum)
 
     @contextmanager
-    def held(self):
+    def held(self) -> Iterator[Any]:
         """A signal in the block is raised when the block ends (not if it raised already)."""
         self.holding += 1
         try:
@@ -74,7 +75,7 @@ class StopSignals:
         if not self.holding and self.pending is not None:
             self._fire(self.pending)
 
-    def interruptible(self, fn, *args, **kwargs):
+    def interruptible(self, fn: Any, *args: Any, **kwargs: Any) -> Any:
         """`fn(*args, **kwargs)` with the stops live even inside a held block, for a blocking
         open: a stop that came while it ran is raised as it returns or fails (zenoh.open
         does not look at signals itself: it runs to its connect timeout), so it returns
@@ -176,7 +177,7 @@ class CliStops:
         """The command has returned: a stop from now on exits at once."""
         self.phase = self.ENDING
 
-    def _handler(self, signum: int, _frame) -> None:
+    def _handler(self, signum: int, _frame: Any) -> None:
         if self.phase != self.RUNNING:
             self.exit_now(signum)
         if self.signum is not None:
@@ -198,7 +199,7 @@ class CliStops:
         finally:
             os._exit(128 + signum)
 
-    def _unraisable(self, u) -> None:
+    def _unraisable(self, u: Any) -> None:
         if self.raised is not None and u.exc_value is self.raised:
             self.exit_now(self.raised.signum)  # the stop was lost where it came (see the class)
         self._hook(u)

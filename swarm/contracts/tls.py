@@ -20,6 +20,7 @@ import ipaddress
 import socket
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from swarm.contracts.credentials import Credentials
 from swarm.contracts.identities import CredentialsError
@@ -97,7 +98,7 @@ def _local_addresses() -> list[str]:
     return out
 
 
-def _dedupe(hosts) -> list[str]:
+def _dedupe(hosts: Any) -> list[str]:
     seen, out = set(), []
     for h in hosts:
         k = h.lower()
@@ -122,7 +123,7 @@ def hosts_of_endpoint(endpoint: str) -> list[str]:
 # --- certificates ----------------------------------------------------------------------
 
 
-def _san_entries(hosts: list[str]):
+def _san_entries(hosts: list[str]) -> Any:
     # lazy: cryptography (30 ms) only where a certificate is read or made, not in every process
     from cryptography import x509
 
@@ -138,7 +139,7 @@ def _san_entries(hosts: list[str]):
     return _dedupe_general(entries)
 
 
-def _dedupe_general(entries):
+def _dedupe_general(entries: Any) -> Any:
     seen, out = set(), []
     for e in entries:
         if e not in seen:
@@ -168,7 +169,7 @@ def generate_run_certificates(directory: Path, run: str, hosts: list[str], days:
     now = _dt.datetime.now(_dt.UTC)
     not_before, not_after = now - _dt.timedelta(hours=1), now + _dt.timedelta(days=days)
 
-    def name(cn: str):
+    def name(cn: str) -> Any:
         return x509.Name(
             [x509.NameAttribute(NameOID.ORGANIZATION_NAME, "swarm"), x509.NameAttribute(NameOID.COMMON_NAME, cn[:64])]
         )

@@ -18,6 +18,7 @@ import resource
 import socket
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from swarm.contracts import access, tls, wire
 from swarm.contracts.credentials import Credentials
@@ -84,7 +85,7 @@ def raise_open_files(want: int = ACCEPT_PENDING + 1024) -> None:
             pass
 
 
-def _config(settings: dict):
+def _config(settings: dict) -> Any:
     import zenoh  # lazy: only a process that opens a session loads zenoh's native library
 
     cfg = zenoh.Config()
@@ -112,7 +113,9 @@ def open_hub_requested() -> bool:
     return os.environ.get(ENV_OPEN_HUB, "") not in ("", "0")
 
 
-def hub_config(listen: str, auth: HubAuth | None = None, dictionary: Path | None = None, door: str | None = None):
+def hub_config(
+    listen: str, auth: HubAuth | None = None, dictionary: Path | None = None, door: str | None = None
+) -> Any:
     settings = {
         "mode": "router",
         "listen/endpoints": [listen_endpoint(listen)] + ([door] if door else []),
@@ -141,7 +144,7 @@ def hub_config(listen: str, auth: HubAuth | None = None, dictionary: Path | None
 
 def client_config(
     connect: str, timeout_ms: int = CONNECT_TIMEOUT_MS, identity: tuple[str, str] | None = None, tls: dict | None = None
-):
+) -> Any:
     settings = {
         "mode": "client",
         "connect/endpoints": [connect],
@@ -157,7 +160,7 @@ def client_config(
     return _config(settings)
 
 
-def open_hub(listen: str, auth: HubAuth | None = None):
+def open_hub(listen: str, auth: HubAuth | None = None) -> Any:
     """Open the run's hub. With `auth`, only the run's identities may connect and each may
     do only what swarm/contracts/access.py allows. zenoh reads the user dictionary once,
     at open: it lives in a private file for that moment only."""
@@ -223,7 +226,7 @@ def host_router_config(
     dictionary: Path | None = None,
     acl: dict | None = None,
     tls: dict | None = None,
-):
+) -> Any:
     """An agent host's router (swarm/runtime/host.py): listens on `listen` for its own agents and
     connects to the run's hub at `upstream`, as `identity` (the run's `host`). With
     `dictionary` and `acl`, only its agents get in, each confined as at the hub."""
@@ -261,7 +264,7 @@ def open_client(
     creds: Credentials | None = None,
     user: str = OPERATOR,
     door: bool = True,
-):
+) -> Any:
     """Open a client session as `user` (with `creds`; without, only an open hub lets it in);
     raises zenoh.ZError when the endpoint does not answer or refuses the identity. With
     `door`, a session to its run's own endpoint goes through the run's local door when the
@@ -300,7 +303,7 @@ def socket_path(endpoint: str) -> Path | None:
 QUERY_TIMEOUT = 1.0  # s
 
 
-def answer(query, key: str, payload: bytes) -> None:
+def answer(query: Any, key: str, payload: bytes) -> None:
     """Reply to a zenoh query and finish it at once. zenoh ends a query (its asker stops
     waiting) only when the last reference to the Query object goes; one kept by a loop
     variable or a batch list made askers wait out their own timeout (swarm pause: 1.1 s)."""
@@ -310,7 +313,7 @@ def answer(query, key: str, payload: bytes) -> None:
         query.drop()
 
 
-def query_statuses(session, run: str, timeout: float = QUERY_TIMEOUT, expected=None) -> dict[int, dict]:
+def query_statuses(session: Any, run: str, timeout: float = QUERY_TIMEOUT, expected: Any = None) -> dict[int, dict]:
     """Each live agent's own status, from one query to every agent's status queryable
     (malformed replies skipped). It ends once every agent of `expected` (e.g. the live ones
     of the world's info) has answered, or at the query's timeout (`expected` None: always)."""

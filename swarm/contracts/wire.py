@@ -34,7 +34,7 @@ import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
 from itertools import chain, starmap
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 from swarm.contracts.fastpath import compiled as _c
 from swarm.contracts.frames import Contact, SensorFrame
@@ -184,7 +184,7 @@ def encode_sense(frame: SensorFrame) -> bytes:
 
 
 def encode_sense_tuples_py(
-    tick: int, time: float, agent: int, heading: float, target: tuple[float, float] | None, contacts
+    tick: int, time: float, agent: int, heading: float, target: tuple[float, float] | None, contacts: Any
 ) -> bytes:
     """encode_sense from plain values; contacts: (id, bearing, heading, range, hops) tuples
     (a Contact is one). The pure-Python reference of `encode_sense_tuples`."""
@@ -210,7 +210,18 @@ CONTACT_FIELDS = [
 
 
 def encode_sense_rows(
-    tick: int, time: float, rows, ids, heading, target_dx, target_dy, is_leader, sensed, bearing, ranges, hops
+    tick: int,
+    time: float,
+    rows: Any,
+    ids: Any,
+    heading: Any,
+    target_dx: Any,
+    target_dy: Any,
+    is_leader: Any,
+    sensed: Any,
+    bearing: Any,
+    ranges: Any,
+    hops: Any,
 ) -> list[bytes]:
     """encode_sense_rows_py, compiled where it was built (swarm/contracts/fastpath.py): the
     same bytes, written straight from the arrays (no copy of the matrices' rows)."""
@@ -227,7 +238,7 @@ def encode_sense_rows(
     )
 
 
-def _columns(kinds: str, *arrays) -> list:
+def _columns(kinds: str, *arrays: Any) -> list:
     """The arrays as the compiled module reads them, C-contiguous: kind i int64, f float64,
     ? bool (no copy where they already are)."""
     import numpy as np  # lazy: agent processes import wire and never load numpy
@@ -236,12 +247,25 @@ def _columns(kinds: str, *arrays) -> list:
     return [np.ascontiguousarray(a, dtype=dtypes[k]) for k, a in zip(kinds, arrays)]
 
 
-def _agent_columns(rows, ids, hops, heading, target_dx, target_dy, is_leader) -> list:
+def _agent_columns(
+    rows: Any, ids: Any, hops: Any, heading: Any, target_dx: Any, target_dy: Any, is_leader: Any
+) -> list:
     return _columns("iiifff?", rows, ids, hops, heading, target_dx, target_dy, is_leader)
 
 
 def encode_sense_rows_py(
-    tick: int, time: float, rows, ids, heading, target_dx, target_dy, is_leader, sensed, bearing, ranges, hops
+    tick: int,
+    time: float,
+    rows: Any,
+    ids: Any,
+    heading: Any,
+    target_dx: Any,
+    target_dy: Any,
+    is_leader: Any,
+    sensed: Any,
+    bearing: Any,
+    ranges: Any,
+    hops: Any,
 ) -> list[bytes]:
     """The encoded frames of the agents at indices `rows`, all at once, from the world's
     arrays: ids, heading, hops, is_leader and the target's offset from each agent
@@ -263,7 +287,19 @@ def encode_sense_rows_py(
 
 
 def encode_sense_pairs(
-    tick: int, time: float, rows, ids, heading, target_dx, target_dy, is_leader, i, j, bearing, ranges, hops
+    tick: int,
+    time: float,
+    rows: Any,
+    ids: Any,
+    heading: Any,
+    target_dx: Any,
+    target_dy: Any,
+    is_leader: Any,
+    i: Any,
+    j: Any,
+    bearing: Any,
+    ranges: Any,
+    hops: Any,
 ) -> list[bytes]:
     """encode_sense_pairs_py, compiled where it was built (swarm/contracts/fastpath.py): the
     same bytes, each frame written straight from the pairs."""
@@ -281,7 +317,19 @@ def encode_sense_pairs(
 
 
 def encode_sense_pairs_py(
-    tick: int, time: float, rows, ids, heading, target_dx, target_dy, is_leader, i, j, bearing, ranges, hops
+    tick: int,
+    time: float,
+    rows: Any,
+    ids: Any,
+    heading: Any,
+    target_dx: Any,
+    target_dy: Any,
+    is_leader: Any,
+    i: Any,
+    j: Any,
+    bearing: Any,
+    ranges: Any,
+    hops: Any,
 ) -> list[bytes]:
     """encode_sense_rows from the sensed pairs instead of (N, N) matrices: agent i senses
     agent j at `bearing`, `ranges` (arrays of the pairs, sorted by i, then j, as
@@ -309,7 +357,18 @@ def encode_sense_pairs_py(
     return _sense_frames(tick, time, rows, ids, heading, target_dx, target_dy, is_leader, blob, counts[rows])
 
 
-def _sense_frames(tick, time, rows, ids, heading, target_dx, target_dy, is_leader, blob, counts) -> list[bytes]:
+def _sense_frames(
+    tick: int,
+    time: Any,
+    rows: Any,
+    ids: Any,
+    heading: Any,
+    target_dx: Any,
+    target_dy: Any,
+    is_leader: Any,
+    blob: Any,
+    counts: Any,
+) -> list[bytes]:
     """One frame per row: its header, then its `counts` contact records from `blob` (the
     rows' records one after another)."""
     ids_l, head_l, lead_l = ids.tolist(), heading.tolist(), is_leader.tolist()
@@ -479,7 +538,9 @@ def next_seq(seq: int) -> int:
     return seq % (SEQ_MOD - 1) + 1
 
 
-def encode_truth(tick: int, time: float, ids, x, y, heading, u, out, states: list[str], seq: int = 0) -> bytes:
+def encode_truth(
+    tick: int, time: float, ids: Any, x: Any, y: Any, heading: Any, u: Any, out: Any, states: list[str], seq: int = 0
+) -> bytes:
     """`seq`: the message's sequence number (`next_seq`; 0: not numbered), so that an observer
     can count messages that did not reach it (`truth_seq`)."""
     import numpy as np  # lazy: agent processes import wire and never load numpy
@@ -499,7 +560,7 @@ def truth_seq(buf: bytes) -> int:
     return buf[2] | buf[3] << 8 if len(buf) >= 4 else 0
 
 
-def decode_truth(buf: bytes):
+def decode_truth(buf: bytes) -> Any:
     """(tick, time, records): records is a numpy structured array with TRUTH_FIELDS."""
     import numpy as np  # lazy: agent processes import wire and never load numpy
 
@@ -511,7 +572,7 @@ def decode_truth(buf: bytes):
 
 
 # --- JSON cold path ----------------------------------------------------------------------
-def _reject_constant(name: str):
+def _reject_constant(name: str) -> None:
     raise WireError(f"JSON: {name} is not allowed")
 
 
@@ -542,7 +603,7 @@ def decode_json(buf: bytes, what: str = "message", versions: tuple[int, ...] = (
     return obj
 
 
-def _field(obj: dict, name: str, types, what: str, optional: bool = False):
+def _field(obj: dict, name: str, types: Any, what: str, optional: bool = False) -> Any:
     if name not in obj:
         if optional:
             return None
@@ -595,7 +656,7 @@ def encode_join_request(agent: int, pid: int, host: str, spec: dict | None = Non
     return encode_json({"id": agent, "pid": pid, "host": host, **({"spec": spec} if spec is not None else {})})
 
 
-def encode_join_reply(ok: bool, *, error: str | None = None, own_laws: bool = False, **fields) -> bytes:
+def encode_join_reply(ok: bool, *, error: str | None = None, own_laws: bool = False, **fields: Any) -> bytes:
     """world -> agent: ok with run, agent, tick, key, clock, pose, brain; or an error.
     `own_laws`: the brain's "law" names other than the built-in laws: version 2
     (JOIN_REPLY_LAW_VERSION), so that only an agent that reads "law" accepts it."""
@@ -641,7 +702,7 @@ SUPERVISE_CMDS = ("fault_done", "agent_exit")  # on world/supervise (the launche
 EXIT_LOG_LINES, EXIT_LINE_CHARS = 20, 500  # agent_exit: at most this much of the agent's log
 
 
-def encode_admin(cmd: str, **fields) -> bytes:
+def encode_admin(cmd: str, **fields: Any) -> bytes:
     """operator -> world/admin query: pause, resume, stop (with `by`); launcher -> world/supervise
     query: fault_done (with `index`), agent_exit (see `encode_agent_exit`)."""
     return encode_json({"cmd": cmd, **fields})
@@ -693,7 +754,7 @@ def decode_admin(buf: bytes, cmds: tuple[str, ...] = ADMIN_CMDS + SUPERVISE_CMDS
     return obj
 
 
-def encode_admin_reply(ok: bool, *, error: str | None = None, **fields) -> bytes:
+def encode_admin_reply(ok: bool, *, error: str | None = None, **fields: Any) -> bytes:
     return encode_json({"ok": True, **fields} if ok else {"ok": False, "error": error})
 
 
