@@ -33,7 +33,6 @@ import logging
 import os
 import signal
 import socket
-import sys
 import time
 from typing import Any
 
@@ -64,6 +63,8 @@ from swarm.world.report import run_info
 from swarm.world.reports import Reports
 from swarm.world.roster import CHURN_EVENTS
 from swarm.world.state import RunState
+
+log = logging.getLogger(__name__)
 
 STALL_S = 0.8  # s the world's main thread may go without reaching its inbox (the link lease is 1 s)
 REJOIN_WAIT = 2.0  # s a token lost just after a stall of the world has to come back

@@ -18,7 +18,6 @@ zenoh keys, publishing and the results. world/main.py runs it from start to end.
 from __future__ import annotations
 
 import logging
-import sys
 import time
 from collections.abc import Iterable
 from typing import Any, cast
