@@ -14,24 +14,30 @@ Pure: no I/O.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from swarm.agents import batch_maths as bm
 from swarm.agents.cc_plan import plan_cc
 from swarm.agents.leader import arc_rate, leader_phase, on_orbit_command, orbit_hold
+from swarm.contracts.brain_config import AgentConf
 from swarm.contracts.vocabulary import Phase
 
 SCALAR_MAX = 8  # leaders on their orbits: up to this many, one on_orbit_command call each
+
+
+def _orbit(a: AgentConf) -> float:
+    """A leader's orbit radius (a leader has one: checked with its scenario or its BrainConf)."""
+    return cast(float, a.orbit_radius)
 
 
 class BatchLeaders:
     """The leaders among (B, N) agents: `where` = (members, columns) of each, and per
     leader its spec's speed, orbit radius, direction sign and turn-rate limit."""
 
-    def __init__(self, specs: list[list], dt: float):
-        """specs: per member, the scenario's AgentSpecs in column order."""
+    def __init__(self, specs: list[list[AgentConf]], dt: float):
+        """specs: per member, its agents' AgentConfs (their BrainConfs') in column order."""
         where = [(b, i) for b, row in enumerate(specs) for i, a in enumerate(row) if a.role == "leader"]
         self.b = np.array([b for b, _ in where], dtype=np.int64)
         self.i = np.array([i for _, i in where], dtype=np.int64)
@@ -50,7 +56,7 @@ class BatchLeaders:
     def plan(self, tick: int, px: np.ndarray, py: np.ndarray, heading: np.ndarray) -> None:
         """plan_cc for every leader from its first frame (own position relative to the target)."""
         paths = [
-            plan_cc(float(x), float(y), float(g), a.speed, a.orbit_radius, a.direction_sign, a.max_turn_rate)
+            plan_cc(float(x), float(y), float(g), a.speed, _orbit(a), a.direction_sign, a.max_turn_rate)
             for x, y, g, a in zip(px.tolist(), py.tolist(), heading.tolist(), self.specs)
         ]
         self.t1 = np.array([p.t1 for p in paths], dtype=float)
@@ -77,7 +83,7 @@ class BatchLeaders:
         if 0 < len(k) <= SCALAR_MAX:  # a few leaders: the brain's own function is quicker
             for j, x, y, g in zip(k.tolist(), px[k].tolist(), py[k].tolist(), heading[k].tolist()):
                 spec = self.specs[j]
-                u[j] = on_orbit_command(x, y, g, spec.speed, spec.orbit_radius, spec.direction_sign, spec.max_turn_rate)
+                u[j] = on_orbit_command(x, y, g, spec.speed, _orbit(spec), spec.direction_sign, spec.max_turn_rate)
         elif len(k):
             u[k] = on_orbit(px[k], py[k], heading[k], self.v[k], self.radius[k], self.sign[k], self.limit[k])
         return bm.saturate(u, self.limit)
