@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import socket
+from typing import Any
 
 from swarm.contracts import wire
 from swarm.contracts.vocabulary import ExitCode
@@ -17,7 +18,7 @@ class AgentExit(BaseException):  # also raised by signal handlers: never swallow
         self.message = message
 
 
-def claim(session, run: str, agent_id: int, timeout: float = 5.0, spec: dict | None = None) -> dict:
+def claim(session: Any, run: str, agent_id: int, timeout: float = 5.0, spec: dict | None = None) -> dict:
     """Ask the world for agent_id (a new agent brings its spec); returns the reply or raises AgentExit."""
     req = wire.encode_join_request(agent_id, os.getpid(), socket.gethostname(), spec)
     replies = list(session.get(wire.agent_key(run, agent_id, "join"), payload=req, timeout=timeout))

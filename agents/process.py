@@ -24,6 +24,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 from swarm.agents.joining import AgentExit, claim
 from swarm.agents.node import AgentNode
@@ -104,7 +105,7 @@ def run_agent(
 
 def _connect(
     agent_id: int, connect: str, run: str | None, creds_file: Path | None, world_wait: float, stops: StopSignals
-):
+) -> Any:
     """(session, credentials) of agent `agent_id` on `connect`, or the exit code, said in one
     line: ExitCode.NO_WORLD when nothing listens there (started before its world, which it waits
     for as long as a connection may take), ExitCode.REFUSED when there are no usable credentials
@@ -154,11 +155,11 @@ def _connect(
     return session, creds
 
 
-def _close(session, code: int) -> None:
+def _close(session: Any, code: int) -> None:
     """Close the session, but exit with `code` anyway if that takes more than a moment: with a
     silent hub, zenoh's close waits for its reconnection attempt (up to ~10 s)."""
 
-    def force():
+    def force() -> None:
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(code)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import logging
 import traceback
+from typing import Any
 
 from swarm.contracts import log as logs
 from swarm.contracts.identities import CredentialsError
@@ -85,7 +86,7 @@ def run_world(cfg: WorldConfig) -> int:
         stops.restore()
 
 
-def _free_socket(sock) -> bool:
+def _free_socket(sock: Any) -> bool:
     """Remove a stale socket of a crashed run; False when a live one (another run's) answers."""
     if sock is None or not sock.exists():
         return True
@@ -183,7 +184,7 @@ def _stop_plant(world: World) -> None:
         log.error("internal error while stopping the robots")
 
 
-def _serve(world: World, cfg: WorldConfig, live, stops: StopSignals, tell: Announcer) -> int:
+def _serve(world: World, cfg: WorldConfig, live: Any, stops: StopSignals, tell: Announcer) -> int:
     """The run, listening, from its first tick to its results; its exit code."""
     code: int = ExitCode.OK
     try:

@@ -54,6 +54,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import Any
 
 import daqp
 import numpy as np
@@ -77,7 +78,7 @@ class Arena:
     offsets: np.ndarray = field(repr=False, compare=False)
 
     @classmethod
-    def polygon(cls, points) -> Arena:
+    def polygon(cls, points: Any) -> Arena:
         """A convex polygon from its corners in either order (ValueError otherwise)."""
         pts = [(float(x), float(y)) for x, y in points]
         if len(pts) < 3:
@@ -99,13 +100,13 @@ class Arena:
     def rectangle(cls, xmin: float, ymin: float, xmax: float, ymax: float) -> Arena:
         return cls.polygon([(xmin, ymin), (xmax, ymin), (xmax, ymax), (xmin, ymax)])
 
-    def depth(self, x, y) -> np.ndarray:
+    def depth(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """(..., K) signed distance of each point inside each wall (negative: outside it)."""
         return (
             np.asarray(x)[..., None] * self.normals[:, 0] + np.asarray(y)[..., None] * self.normals[:, 1] - self.offsets
         )
 
-    def inside(self, x, y) -> np.ndarray:
+    def inside(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         return np.asarray((self.depth(x, y) >= 0.0).all(axis=-1))
 
 
@@ -182,7 +183,7 @@ class Conditions:
         o = self.other
         return self.ua * u[self.a] + self.va * v[self.a] + self.ub * u[o] + self.vb * v[o] - self.rhs
 
-    def on(self, rows: np.ndarray, members: np.ndarray, n: int, u: np.ndarray, v: np.ndarray):
+    def on(self, rows: np.ndarray, members: np.ndarray, n: int, u: np.ndarray, v: np.ndarray) -> Any:
         """The rows as matrices on the commands of `members` (of n agents): (cu, cv), each
         (len(rows), len(members)), and the rows' right sides less the terms of the agents
         that are not members, whose commands are (u, v)."""
@@ -201,7 +202,7 @@ class Conditions:
         return cu, cv, self.rhs[rows] - fixed
 
 
-def conditions(bar: Barriers, x, y, g, present: np.ndarray) -> Conditions:
+def conditions(bar: Barriers, x: np.ndarray, y: np.ndarray, g: Any, present: np.ndarray) -> Conditions:
     """Every barrier condition between present agents (pairs i < j) and of each present
     agent with each wall. x, y, g: (N,) poses (m, m, rad)."""
     x, y, g = (np.asarray(a, dtype=float) for a in (x, y, g))
@@ -279,12 +280,12 @@ class Filtered:
 
 def safe_commands(
     bar: Barriers,
-    x,
-    y,
-    g,
-    v0,
-    u_law,
-    u_max,
+    x: Any,
+    y: Any,
+    g: Any,
+    v0: Any,
+    u_law: Any,
+    u_max: Any,
     present: np.ndarray,
     controlled: np.ndarray | None = None,
 ) -> Filtered:
@@ -322,7 +323,7 @@ def safe_commands(
     umax_c = np.where(ctl, u_max, 0.0)
     o = cond.other
 
-    def least(cu, cv, col):
+    def least(cu: Any, cv: Any, col: Any) -> Any:
         """The least of cu u[col] + cv v[col] over the box (fixed commands: their value)."""
         with np.errstate(invalid="ignore"):  # 0 x inf, in the branch not taken
             lu = np.where(ctl[col], np.where(cu != 0.0, -np.abs(cu) * umax_c[col], 0.0), cu * u_in[col])
@@ -383,7 +384,7 @@ def _groups(cond: Conditions, rows: np.ndarray, ctl: np.ndarray, n: int) -> list
     return out
 
 
-def _solve(bar: Barriers, cond: Conditions, rows, members, u_in, v_in, umax_c):
+def _solve(bar: Barriers, cond: Conditions, rows: Any, members: Any, u_in: Any, v_in: Any, umax_c: Any) -> Any:
     """One group's QP: (u, v) of its members, whether they keep every condition, and the
     active rows. Falls back to the stop (speed may change) or the least violating command."""
     m = len(members)
@@ -430,7 +431,7 @@ def _solve(bar: Barriers, cond: Conditions, rows, members, u_in, v_in, umax_c):
     return gu, vd.copy(), False, rows.tolist()
 
 
-def _qp(H, z0, A, b, lo, hi) -> tuple[np.ndarray, int]:
+def _qp(H: Any, z0: Any, A: Any, b: Any, lo: Any, hi: Any) -> tuple[np.ndarray, int]:
     """min 1/2 z'Hz - (H z0)'z s.t. A z >= b, lo <= z <= hi, by DAQP: (z, exit flag; 1 = optimal)."""
     nz = len(z0)
     bupper = np.concatenate([hi, np.full(len(b), INF)])
@@ -454,7 +455,7 @@ def _qp(H, z0, A, b, lo, hi) -> tuple[np.ndarray, int]:
     return z, int(flag)
 
 
-def distances(x, y, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+def distances(x: np.ndarray, y: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
     """Distances (m) between the agents of columns i and j (`pairs`)."""
     return np.hypot(np.asarray(x)[i] - np.asarray(x)[j], np.asarray(y)[i] - np.asarray(y)[j])
 

@@ -145,7 +145,7 @@ class SafetyWatch:
 
     # -- the figures -----------------------------------------------------------------------------
     def measure(
-        self, tick: int, x: np.ndarray, y: np.ndarray, present: np.ndarray, active: np.ndarray, u, limit
+        self, tick: int, x: np.ndarray, y: np.ndarray, present: np.ndarray, active: np.ndarray, u: Any, limit: Any
     ) -> None:
         """The figures of the poses of `tick` (x, y: (N,) m; present: in the world; active:
         controlled by a law, whose applied turn rate `u` is checked against `limit`). A pose
