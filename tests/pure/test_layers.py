@@ -46,7 +46,7 @@ MAY_IMPORT = {
     "api": {"api", "runtime", "offline", "plots", "live", "robots"} | BELOW_THE_SHELLS,
     "cli": {"cli", "root", "api", "runtime", "offline", "plots", "live", "study", "robots", "ros2", "env"}
     | BELOW_THE_SHELLS,
-    "root": {"root", "cli", "api", "contracts", "env"},  # swarm/__init__.py (its exports), swarm/__main__.py
+    "root": {"root", "cli", "api", "contracts", "env", "study"},  # swarm/__init__.py (its exports), swarm/__main__.py
 }
 PACKAGES = set(MAY_IMPORT) - {"root"}
 FOLDERS = {"swarm": "swarm", "agents": "swarm.agents", "world": "swarm.world"}  # folder -> import name
