@@ -39,6 +39,7 @@ from swarm.agents.batch_select import NONE, select
 from swarm.agents.batch_sticky import BatchSticky
 from swarm.agents.brain import follow_state
 from swarm.agents.laws import bearing_law, loiter_rate
+from swarm.agents.selection import advertised
 from swarm.contracts.laws import GAINS, resolve_law
 from swarm.contracts.vocabulary import FollowState, Phase
 from swarm.contracts.wire import FOLLOW_CODE, FOLLOW_STATES
@@ -196,7 +197,7 @@ class BatchBrains:
         # nobody (rooted) in sight: loiter the way it last turned (laws.loiter's rate)
         u = np.where(track, u, loiter_rate(self.c2, self.last_u, ops=bm.ARRAY))
         h_j = bm.take(hops_in, choice)
-        hops = np.where(track & rooted & (h_j >= 0) & (h_j < self.max_hops), h_j + 1, NONE)
+        hops = advertised(h_j, track & rooted, self.max_hops, NONE, bm.ARRAY)
         if self.sticky is not None:
             self.sticky.sight(tick, frames, kept, lam)
             # everybody who did not simply keep: one by one, written into choice, u, hops

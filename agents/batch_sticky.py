@@ -25,6 +25,7 @@ from swarm.agents.batch_select import NONE
 from swarm.agents.coast import Sighting
 from swarm.agents.laws import bearing_law, loiter_rate
 from swarm.agents.leader import on_orbit_command
+from swarm.agents.selection import advertised, feasible_kept, keeps_out
 from swarm.agents.sticky_follower import StickyFollower
 from swarm.contracts.vocabulary import FollowState
 
@@ -67,12 +68,14 @@ class BatchSticky:
     def keep(self, frames, follower: np.ndarray) -> np.ndarray:
         """(B, N) True where a committed follower (KEEP, HOLD, COAST) senses its out-neighbour
         and it advertises a path: the machine's "rooted" transition to KEEP (Sticky._rooted:
-        feasible updated; spell and silent 0)."""
+        feasible updated; spell and silent 0): selection.keeps_out and feasible_kept, what
+        Sticky's KEEP, HOLD and COAST handlers call, on arrays."""
         h_out = bm.take(frames.hops, self.out)
-        kept = follower & self.committed & (h_out >= 0)
-        if kept.any():
-            kept &= frames.sensed_pairs(self.out)
-        self.feasible = np.where(kept, np.minimum(self.feasible, h_out + 1), self.feasible)
+        sensed = follower & self.committed
+        if (sensed & (h_out >= 0)).any():  # (the sensing of pairs only when some may keep)
+            sensed &= frames.sensed_pairs(self.out)
+        kept = keeps_out(sensed, h_out)
+        self.feasible = np.where(kept, feasible_kept(self.feasible, h_out, bm.ARRAY), self.feasible)
         self.fresh &= ~kept
         return kept
 
@@ -148,7 +151,7 @@ class BatchSticky:
                 else:
                     u[b, i] = self.law(heading, c.heading, c.bearing, g.c1, g.c2)
                     choice[b, i] = col[c.id]
-                    hops[b, i] = c.hops + 1 if ch.rooted and 0 <= c.hops < self.max_hops else NONE
+                    hops[b, i] = advertised(c.hops, ch.rooted, self.max_hops, NONE)
 
     def _load(self, f: StickyFollower, b: int, i: int) -> None:
         """Bring the scalar follower up to date after keeps (what they changed)."""

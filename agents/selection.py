@@ -23,9 +23,9 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from operator import attrgetter
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
-from swarm.agents.ops import Num
+from swarm.agents.ops import SCALAR, Num, Ops
 from swarm.contracts.fastpath import compiled as _c
 from swarm.contracts.frames import Contact
 from swarm.contracts.orbits import wrap
@@ -80,6 +80,27 @@ def keeps_current(r_best: Num, r_current: Num, hysteresis: Num) -> Num:
     candidate (r_best) is closer than (1 - h) times its range. On floats, or on arrays of
     followers (agents/batch_select.py): the same test."""
     return r_best > (1.0 - hysteresis) * r_current
+
+
+def keeps_out(sensed: Any, hops_out: Num) -> Any:
+    """The "rooted" condition of a committed follower (KEEP, HOLD or COAST to KEEP;
+    docs/design/selection.md#states): its out-neighbour is sensed and advertises a path.
+    On one follower (a bool and an int: Sticky's handlers) or on arrays of followers
+    (agents/batch_sticky.py's keep): the same test."""
+    return sensed & (hops_out >= 0)
+
+
+def feasible_kept(feasible: Num, hops_out: Num, ops: Ops = SCALAR) -> Num:
+    """A follower's feasible count after that transition: no more than its out-neighbour's
+    hops + 1 (`SCALAR`: Sticky._rooted; `batch_maths.ARRAY`: the batch's keep)."""
+    return ops.minimum(feasible, hops_out + 1)
+
+
+def advertised(hops_out: Num, rooted: Any, max_hops: int, none: Any, ops: Ops = SCALAR) -> Num:
+    """The hop count a follower advertises through its out-neighbour (advertising hops_out):
+    hops_out + 1 where it is rooted (Choice.rooted) with 0 <= hops_out < max_hops, else `none`.
+    On one follower or on arrays of followers (agents/batch.py)."""
+    return ops.where(rooted & (hops_out >= 0) & (hops_out < max_hops), hops_out + 1, none)
 
 
 def select(
@@ -298,7 +319,7 @@ class Sticky:
         it if it left at the edge; else it is lost."""
         for c in contacts:
             if c.id == self.out:
-                if c.hops >= 0:
+                if keeps_out(True, c.hops):
                     return self._rooted(c)
                 if self.limits.hold > 0:  # hold on: it may root again
                     self.spell = 1
@@ -310,7 +331,7 @@ class Sticky:
         """HOLD: sensed without a path; KEEP when it roots again, lost when gone or held too long."""
         for c in contacts:
             if c.id == self.out:
-                if c.hops >= 0:
+                if keeps_out(True, c.hops):
                     return self._rooted(c)
                 if self.spell < self.limits.hold:
                     self.spell += 1
@@ -323,13 +344,13 @@ class Sticky:
         without a path, coasted too long, or the prediction fails."""
         for c in contacts:
             if c.id == self.out:
-                return self._rooted(c) if c.hops >= 0 else self._lose(contacts, coast, heading)
+                return self._rooted(c) if keeps_out(True, c.hops) else self._lose(contacts, coast, heading)
         return self._coasting(contacts, coast, heading)
 
     def _rooted(self, c: Contact) -> tuple[str, FollowState, Choice]:
-        """Its out-neighbour is sensed and advertises a path: KEEP."""
+        """Its out-neighbour is sensed and advertises a path (keeps_out): KEEP."""
         self.spell = 0
-        self.feasible = min(self.feasible, c.hops + 1)  # type: ignore[type-var]
+        self.feasible = feasible_kept(self.feasible, c.hops)  # type: ignore[type-var]
         return "rooted", FollowState.KEEP, Choice(c.id, c, False, True)
 
     def _coasting(self, contacts, coast, heading: float) -> tuple[str, FollowState, Choice]:
