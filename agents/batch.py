@@ -40,6 +40,7 @@ from swarm.agents.batch_sticky import BatchSticky
 from swarm.agents.brain import follow_state
 from swarm.agents.laws import bearing_law, loiter_rate
 from swarm.agents.selection import advertised
+from swarm.contracts.brain_config import AgentConf, GainsConf, SensingConf
 from swarm.contracts.laws import GAINS, resolve_law
 from swarm.contracts.vocabulary import FollowState, Phase
 from swarm.contracts.wire import FOLLOW_CODE, FOLLOW_STATES
@@ -63,7 +64,7 @@ def vectorised(law: object) -> bool:
     return getattr(law, "vectorised", False) is True
 
 
-def follower_law_of(gains: list) -> Callable[..., Any]:
+def follower_law_of(gains: list[GainsConf]) -> Callable[..., Any]:
     """The one follower law of a batch: laws.bearing_law itself, or a `[gains] law` of one's own
     declared vectorised (called with (B, N) arrays where the built-in is, and with floats for
     a follower that has just chosen); ValueError for anything else."""
@@ -84,9 +85,12 @@ def follower_law_of(gains: list) -> Callable[..., Any]:
 
 
 class BatchBrains:
-    def __init__(self, specs: list[list], gains: list, sensing: list, dt: float, max_hops: int):
-        """specs: per member the AgentSpecs in column order (same N); gains, sensing: per
-        member the scenario's GainsSpec / SensingSpec (one selection rule for all)."""
+    def __init__(
+        self, specs: list[list[AgentConf]], gains: list[GainsConf], sensing: list[SensingConf], dt: float, max_hops: int
+    ) -> None:
+        """The parts of the members' BrainConfs (BrainConf.from_scenario): specs, per member its
+        agents' AgentConfs in column order (same N); gains, sensing: per member its GainsConf /
+        SensingConf (one selection rule for all); max_hops: the agents of a member."""
         modes = {s.selection for s in sensing}
         if len(modes) != 1:
             raise ValueError(f"one selection rule per batch, got {sorted(modes)}")
@@ -117,7 +121,7 @@ class BatchBrains:
         self.follow = np.zeros(shape, dtype=np.int8)  # last tick: Decision.follow, as wire codes
 
     # -- selection ------------------------------------------------------------------------------
-    def _choose(self, frames) -> tuple[np.ndarray, np.ndarray]:
+    def _choose(self, frames: Any) -> tuple[np.ndarray, np.ndarray]:
         """(choice columns, rooted) (B, N) for the followers' rows (not sticky)."""
         ids = None if frames.ids_sorted else frames.ids
         choice = np.full(self.out.shape, NONE, dtype=np.int64)
@@ -180,7 +184,7 @@ class BatchBrains:
         return follow
 
     # -- one tick -------------------------------------------------------------------------------
-    def decide(self, tick: int, frames) -> BatchDecision:
+    def decide(self, tick: int, frames: Any) -> BatchDecision:
         """AgentBrain.decide for every agent of every member on this tick's frames."""
         heading, hops_in = frames.heading, frames.hops
         if self.sticky is not None:
