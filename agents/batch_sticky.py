@@ -71,10 +71,11 @@ class BatchSticky:
         feasible updated; spell and silent 0): selection.keeps_out and feasible_kept, what
         Sticky's KEEP, HOLD and COAST handlers call, on arrays."""
         h_out = bm.take(frames.hops, self.out)
-        sensed = follower & self.committed
-        if (sensed & (h_out >= 0)).any():  # (the sensing of pairs only when some may keep)
-            sensed &= frames.sensed_pairs(self.out)
-        kept = keeps_out(sensed, h_out)
+        # keeps_out(committed & sensed, h_out), with the sensing of pairs (the dearer part)
+        # and-ed in last, only when some committed follower's out-neighbour has a path
+        kept = keeps_out(follower & self.committed, h_out)
+        if kept.any():
+            kept &= frames.sensed_pairs(self.out)
         self.feasible = np.where(kept, feasible_kept(self.feasible, h_out, bm.ARRAY), self.feasible)
         self.fresh &= ~kept
         return kept
