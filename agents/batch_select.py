@@ -36,7 +36,9 @@ def nearest(cand: np.ndarray, rng: np.ndarray, ids: np.ndarray | None) -> np.nda
     return np.where(cand.any(axis=-1), best, NONE)
 
 
-def select(cand: np.ndarray, rng: np.ndarray, ids, current: np.ndarray, hysteresis) -> np.ndarray:
+def select(
+    cand: np.ndarray, rng: np.ndarray, ids: np.ndarray | None, current: np.ndarray, hysteresis: float | np.ndarray
+) -> np.ndarray:
     """selection.select after its candidate filter: the nearest candidate, or the current
     out-neighbour while it is a candidate and the nearest is not (1 - h) times closer.
     current: (M, N) columns (-1 none); hysteresis: scalar or (M, 1)."""

@@ -65,7 +65,7 @@ class BatchSticky:
         self.prev = _Sightings(shape)
 
     # -- the keep, over arrays --------------------------------------------------------------------
-    def keep(self, frames, follower: np.ndarray) -> np.ndarray:
+    def keep(self, frames: Any, follower: np.ndarray) -> np.ndarray:
         """(B, N) True where a committed follower (KEEP, HOLD, COAST) senses its out-neighbour
         and it advertises a path: the machine's "rooted" transition to KEEP (Sticky._rooted:
         feasible updated; spell and silent 0): selection.keeps_out and feasible_kept, what
@@ -80,7 +80,7 @@ class BatchSticky:
         self.fresh &= ~kept
         return kept
 
-    def sight(self, tick: int, frames, kept: np.ndarray, lam: np.ndarray) -> None:
+    def sight(self, tick: int, frames: Any, kept: np.ndarray, lam: np.ndarray) -> None:
         """Tracker.sighted (and SearchMemory's anchor) for the kept followers: lam the bearing
         to their out-neighbours."""
         if not kept.any():
@@ -104,7 +104,7 @@ class BatchSticky:
     def rest(
         self,
         tick: int,
-        frames,
+        frames: Any,
         need: np.ndarray,
         last_u: np.ndarray,
         choice: np.ndarray,
@@ -189,21 +189,31 @@ class _Sightings:
 
     FIELDS = ("time", "range", "bearing", "heading", "own")
 
-    def __init__(self, shape):
+    def __init__(self, shape: tuple[int, int]) -> None:
         self.valid = np.zeros(shape, dtype=bool)
         self.col = np.full(shape, NONE, dtype=np.int64)
         self.hops = np.full(shape, NONE, dtype=np.int64)
         # Sighting's float fields (FIELDS), each (B, N)
         self.time, self.range, self.bearing, self.heading, self.own = (np.zeros(shape) for _ in self.FIELDS)
 
-    def put(self, where, col, time, rng, bearing, heading, hops, own) -> None:
+    def put(
+        self,
+        where: np.ndarray,
+        col: np.ndarray,
+        time: Any,
+        rng: np.ndarray,
+        bearing: np.ndarray,
+        heading: np.ndarray,
+        hops: np.ndarray,
+        own: np.ndarray,
+    ) -> None:
         self.valid |= where
         self.col = np.where(where, col, self.col)
         self.hops = np.where(where, hops, self.hops)
         for name, v in zip(self.FIELDS, (time, rng, bearing, heading, own)):
             setattr(self, name, np.where(where, v, getattr(self, name)))
 
-    def assign(self, where, other: _Sightings, same) -> None:
+    def assign(self, where: np.ndarray, other: _Sightings, same: np.ndarray) -> None:
         """self = other where `where` and `same`, None where `where` and not `same`."""
         take = where & same
         self.valid = np.where(where, take & other.valid, self.valid)
@@ -212,7 +222,7 @@ class _Sightings:
         for name in self.FIELDS:
             setattr(self, name, np.where(take, getattr(other, name), getattr(self, name)))
 
-    def get(self, b: int, i: int, specs) -> Sighting | None:
+    def get(self, b: int, i: int, specs: Any) -> Sighting | None:
         if not self.valid[b, i]:
             return None
         return Sighting(

@@ -31,6 +31,9 @@ from swarm.contracts.frames import Contact
 from swarm.contracts.orbits import wrap
 from swarm.contracts.vocabulary import FollowState
 
+Contacts = tuple[Contact, ...]
+Coast = Callable[[int], Contact | None] | None  # where a coasted out-neighbour is predicted (agents/coast.py)
+
 LOSS_CHANGES = 4  # sticky: changes of out-neighbour one loss can cost, at most (docs/design/selection.md#switch-bound)
 
 
@@ -302,19 +305,19 @@ class Sticky:
         self.tally.step(ch.out != before, ch.rooted)
         return ch
 
-    def step(self, contacts, coast, heading: float) -> tuple[str, FollowState, Choice]:
+    def step(self, contacts: Contacts, coast: Coast, heading: float) -> tuple[str, FollowState, Choice]:
         """The current state's handler: (condition, next state, choice), a row of
         TRANSITIONS. Changes everything but `state` and `silent` (choose's)."""
         return _HANDLERS[self.state](self, contacts, coast, heading)
 
     # -- the handlers, one per state (ACQUIRE, LOST, SHADOW, SEARCH share one) ----------------------
-    def _late(self, contacts, coast, heading: float) -> tuple[str, FollowState, Choice]:
+    def _late(self, contacts: Contacts, coast: Coast, heading: float) -> tuple[str, FollowState, Choice]:
         """LATE: nobody for wait + 1 ticks after joining, then as ACQUIRE (quiet: LATE again)."""
         if self.silent <= self.limits.wait:
             return "patience", FollowState.LATE, _NOBODY
         return self._seek(contacts, coast, heading)
 
-    def _keep(self, contacts, coast, heading: float) -> tuple[str, FollowState, Choice]:
+    def _keep(self, contacts: Contacts, coast: Coast, heading: float) -> tuple[str, FollowState, Choice]:
         """KEEP: keep it while it is sensed and rooted; hold it if it lost its path, coast on
         it if it left at the edge; else it is lost."""
         for c in contacts:
@@ -327,7 +330,7 @@ class Sticky:
                 return self._lose(contacts, coast, heading)
         return self._coasting(contacts, coast, heading)
 
-    def _hold(self, contacts, coast, heading: float) -> tuple[str, FollowState, Choice]:
+    def _hold(self, contacts: Contacts, coast: Coast, heading: float) -> tuple[str, FollowState, Choice]:
         """HOLD: sensed without a path; KEEP when it roots again, lost when gone or held too long."""
         for c in contacts:
             if c.id == self.out:
@@ -339,7 +342,7 @@ class Sticky:
                 break
         return self._lose(contacts, coast, heading)
 
-    def _coast(self, contacts, coast, heading: float) -> tuple[str, FollowState, Choice]:
+    def _coast(self, contacts: Contacts, coast: Coast, heading: float) -> tuple[str, FollowState, Choice]:
         """COAST: steering by a prediction; KEEP when sensed rooted again; lost when sensed
         without a path, coasted too long, or the prediction fails."""
         for c in contacts:
@@ -353,16 +356,16 @@ class Sticky:
         self.feasible = feasible_kept(self.feasible, c.hops)  # type: ignore[type-var]
         return "rooted", FollowState.KEEP, Choice(c.id, c, False, True)
 
-    def _coasting(self, contacts, coast, heading: float) -> tuple[str, FollowState, Choice]:
+    def _coasting(self, contacts: Contacts, coast: Coast, heading: float) -> tuple[str, FollowState, Choice]:
         """KEEP or COAST, the out-neighbour not sensed: coast on its prediction, or lose it."""
-        if coast is not None and self.spell < self.limits.coast:
+        if coast is not None and self.out is not None and self.spell < self.limits.coast:
             p = coast(self.out)
             if p is not None:  # out of sight at the edge: steer by where it must be, silent
                 self.spell += 1
                 return "edge", FollowState.COAST, Choice(p.id, p, False, False)
         return self._lose(contacts, coast, heading)
 
-    def _lose(self, contacts, coast, heading: float) -> tuple[str, FollowState, Choice]:
+    def _lose(self, contacts: Contacts, coast: Coast, heading: float) -> tuple[str, FollowState, Choice]:
         """Lost (out of sight, gone, held or coasted too long): it seeks on this very tick;
         a commit is then a switch, a quiet wait LOST."""
         self.spell, self.shadowed, self.out = 0, False, None
@@ -370,7 +373,7 @@ class Sticky:
         cond, nxt, ch = self._seek(contacts, coast, heading)
         return _AFTER_LOSS.get(cond, cond), nxt, ch
 
-    def _seek(self, contacts, coast, heading: float) -> tuple[str, FollowState, Choice]:
+    def _seek(self, contacts: Contacts, coast: Coast, heading: float) -> tuple[str, FollowState, Choice]:
         """ACQUIRE, LOST, SHADOW, SEARCH (and LATE after its patience): nobody committed to.
         One rule for all: what differs between them is in `out` (a provisional choice or a
         shadow, kept while it may be) and in `acquired` and `late`."""
@@ -391,7 +394,7 @@ class Sticky:
             return "quiet", FollowState.LOST if self.acquired else FollowState.LATE, _NOBODY
         return self._shadow(contacts, heading)
 
-    def _take(self, best: Contact, contacts) -> tuple[str, FollowState, Choice]:
+    def _take(self, best: Contact, contacts: Contacts) -> tuple[str, FollowState, Choice]:
         """A feasible rooted agent: commit to it, or, never committed yet, wait for the nearest
         agent to root while it may (`waited` < wait), steering by `best` meanwhile."""
         if not self.acquired and self.waited < self.limits.wait:
@@ -405,7 +408,7 @@ class Sticky:
         self.feasible = best.hops + 1 if self.feasible is None else min(self.feasible, best.hops + 1)
         return "commit", FollowState.KEEP, Choice(best.id, best, False, True)
 
-    def _shadow(self, contacts, heading: float) -> tuple[str, FollowState, Choice]:
+    def _shadow(self, contacts: Contacts, heading: float) -> tuple[str, FollowState, Choice]:
         """Nobody feasible, and it may shadow: keep its shadow while it may, else take a new one
         (a rooted agent in reach, else a lower id in reach; after a loss only once), else search."""
         for c in contacts:
