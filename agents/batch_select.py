@@ -9,7 +9,7 @@ here makes the same choice, tie for tie, as its scalar original:
 - `select`: selection.select's hysteresis (keep the current one unless the nearest is
   closer than (1 - h) times its range: selection.keeps_current itself, on arrays);
 
-selection.Sticky itself is batched in agents/batch_sticky.py.
+sticky.Sticky itself is batched in agents/batch_sticky.py.
 
 Pure: arrays in, arrays out; no I/O.
 """

@@ -8,7 +8,7 @@ So a committed follower whose out-neighbour leaves the sensor's reach *at its ed
 last sighting was at `edge` x the range or more, or off its own heading by `edge` x half the
 field of view or more; SelectionTuning.edge, 0.8) keeps it for up to SelectionTuning.coast_s
 seconds (5), steering by where it predicts it. It advertises no path meanwhile (it cannot see
-whether there still is one): its own followers hold it for as long (agents/selection.Sticky). The prediction:
+whether there still is one): its own followers hold it for as long (agents/sticky.Sticky). The prediction:
 
 - from its last two sightings, the out-neighbour's speed (its displacement, with the
   follower's own dead-reckoned displacement taken out) and turn rate (the change of its

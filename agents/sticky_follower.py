@@ -1,6 +1,6 @@
 """One sticky follower's choice of the tick, with everything it keeps between ticks.
 
-`StickyFollower.step` is the whole of it: whom to steer by (agents/selection.Sticky),
+`StickyFollower.step` is the whole of it: whom to steer by (agents/sticky.Sticky),
 where the out-neighbour must be while it coasts out of sight (agents/coast.Tracker), and
 where to search while it has nobody (agents/search.SearchMemory). AgentBrain calls it on
 every frame; the batch brains (agents/batch.py) call it for the followers whose tick is
@@ -12,7 +12,8 @@ from __future__ import annotations
 
 from swarm.agents.coast import Tracker
 from swarm.agents.search import SearchMemory
-from swarm.agents.selection import Choice, Sticky, cone, nearest, reach
+from swarm.agents.selection import Choice, cone, nearest, reach
+from swarm.agents.sticky import Sticky
 from swarm.contracts.brain_config import AgentConf, GainsConf, SensingConf
 from swarm.contracts.frames import Contact
 from swarm.contracts.observation import Search
@@ -21,7 +22,7 @@ from swarm.contracts.vocabulary import FollowState
 
 
 class StickyFollower:
-    """A follower under selection = "sticky" (see agents/selection.Sticky)."""
+    """A follower under selection = "sticky" (see agents/sticky.Sticky)."""
 
     __slots__ = ("sticky", "tracker", "memory", "fresh", "state")
 

@@ -71,7 +71,7 @@ import numpy as np  # noqa: E402
 from bench_runtime import scenario_toml  # noqa: E402
 
 import swarm.world.core as core_mod  # noqa: E402
-from swarm.agents import selection, sticky_follower  # noqa: E402
+from swarm.agents import selection, sticky, sticky_follower  # noqa: E402
 from swarm.agents.brain import AgentBrain  # noqa: E402
 from swarm.contracts import fastpath, wire  # noqa: E402
 from swarm.contracts.brain_config import BrainConf  # noqa: E402
@@ -92,6 +92,7 @@ PATCHES: dict[str, list[tuple[object, str, object]]] = {
     "C off: decode": [(wire, "decode_sense", wire.decode_sense_py)],
     "C off: nearest": [
         (selection, "nearest", selection.nearest_py),
+        (sticky, "nearest", selection.nearest_py),
         (sticky_follower, "nearest", selection.nearest_py),
     ],
     "frames: reference": [],  # the tick below builds SensorFrames and encodes them one by one

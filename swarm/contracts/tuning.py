@@ -3,7 +3,7 @@ object in seconds and fractions, a scenario's optional `[sensing.tuning]` table.
 
 `SelectionTuning` holds what a user may set, with today's values as defaults: a scenario
 without the table runs exactly as before. `TuningTicks.of(tuning, dt)` converts it to
-ticks once, for the follower's state machine (agents/selection.Sticky), its coasting
+ticks once, for the follower's state machine (agents/sticky.Sticky), its coasting
 (agents/coast.py) and its search (agents/search.py). Pure: no I/O.
 """
 

@@ -107,7 +107,7 @@ class Phase(StrEnum):
 
 
 class FollowState(StrEnum):
-    """A follower's selection state under the sticky rule (agents/selection.py; the states and
+    """A follower's selection state under the sticky rule (agents/sticky.py; the states and
     their transitions: docs/design/selection.md#states), reported with its command. Its
     position in FOLLOW_STATES (swarm/contracts/wire.py) is its wire code."""
 

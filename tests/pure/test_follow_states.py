@@ -1,4 +1,4 @@
-"""The sticky rule's state machine (agents/selection.Sticky; docs/design/selection.md#states):
+"""The sticky rule's state machine (agents/sticky.Sticky; docs/design/selection.md#states):
 every row of its transition table walked with hand-built contacts, the state before and
 after and the choice asserted; the walk covers the whole table; StickyFollower's `state`.
 
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import pytest
 
-from swarm.agents.selection import TRANSITIONS, Sticky
+from swarm.agents.sticky import TRANSITIONS, Sticky
 from swarm.agents.sticky_follower import StickyFollower
 from swarm.contracts.brain_config import AgentConf, GainsConf, SensingConf
 from swarm.contracts.frames import Contact

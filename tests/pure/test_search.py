@@ -15,7 +15,7 @@ import pytest
 
 from swarm.agents.coast import Tracker
 from swarm.agents.search import SearchMemory, drift, radius
-from swarm.agents.selection import LOSS_CHANGES
+from swarm.agents.sticky import LOSS_CHANGES
 from swarm.contracts.frames import Contact
 from swarm.contracts.scenario import load_scenario
 from swarm.offline.batch import run_batch

@@ -1,4 +1,4 @@
-"""The sticky selection rule (agents/selection.Sticky): its state machine, and its guarantees as properties.
+"""The sticky selection rule (agents/sticky.Sticky): its state machine, and its guarantees as properties.
 
 Pure tier: `Sticky` fed scripted contacts, and a whole swarm of `Sticky` selectors on
 random, changing sensing graphs with agents dropping out (hypothesis), with no physics:
@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from swarm.agents.brain import AgentBrain
-from swarm.agents.selection import LOSS_CHANGES, TRANSITIONS, Sticky
+from swarm.agents.sticky import LOSS_CHANGES, TRANSITIONS, Sticky
 from swarm.contracts.brain_config import BrainConf
 from swarm.contracts.frames import Contact, SensorFrame
 from swarm.contracts.graph import analyse
@@ -32,7 +32,7 @@ def C(i, r, hops):
 
 
 class Checked(Sticky):
-    """A Sticky that checks every transition it takes against the table (selection.TRANSITIONS)
+    """A Sticky that checks every transition it takes against the table (sticky.TRANSITIONS)
     and records it in `seen` (the class's, over every run)."""
 
     __slots__ = ()
