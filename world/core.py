@@ -29,6 +29,7 @@ import numpy as np
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.scenario_tables import AgentSpec
 from swarm.contracts.vocabulary import AgentState, SwitchReason
+from swarm.world.core_cache import ACTIVE, COASTING, GONE, _Roster, _Sensed, _States
 from swarm.world.kinematics import step, step_one
 from swarm.world.sensing import (
     GRID_MIN_AGENTS,
@@ -39,78 +40,7 @@ from swarm.world.sensing import (
     sensing_pairs,
 )
 
-# The states as module names (world/, tests/pure/test_sim.py import them)
-ACTIVE, COASTING, GONE = AgentState.ACTIVE, AgentState.COASTING, AgentState.GONE
 STEP_ONE_BY_ONE = 32  # agents: up to this many, `step` goes agent by agent (world/kinematics.py)
-
-
-class _Sensed:
-    """One tick's sensing, each form made when first asked for (`WorldCore.sensing`,
-    `WorldCore.sensed_pairs`); the core forgets it when poses or presence change."""
-
-    __slots__ = ("matrices", "pairs")
-
-    def __init__(self) -> None:
-        self.matrices: tuple | None = None
-        self.pairs: tuple | None = None
-
-
-class _States(list):
-    """`WorldCore.state`: a list of the agents' states that counts its changes (`version`), so
-    that what the core derives from it each tick (`WorldCore._roster`) is made again only
-    after one, however the list is changed (every mutating method of list bumps it)."""
-
-    __slots__ = ("version",)
-
-    def __init__(self, items: Any = ()) -> None:
-        super().__init__(items)
-        self.version = 0
-
-
-def _bumping(name: str) -> Any:
-    base = getattr(list, name)
-
-    def changed(self: _States, *args: Any, **kwargs: Any) -> Any:
-        try:
-            return base(self, *args, **kwargs)
-        finally:  # after the change: a roster built meanwhile is of the old version, and stale
-            self.version += 1
-
-    changed.__name__ = changed.__qualname__ = name
-    return changed
-
-
-for _name in (
-    "__setitem__",
-    "__delitem__",
-    "__iadd__",
-    "__imul__",
-    "append",
-    "extend",
-    "insert",
-    "pop",
-    "remove",
-    "clear",
-    "sort",
-    "reverse",
-):
-    setattr(_States, _name, _bumping(_name))
-
-
-class _Roster:
-    """Who is where, derived from one version of the states (`WorldCore._roster`): the active
-    agents' ids, the alive and present masks, the coasting and the gone agents' indices."""
-
-    __slots__ = ("states", "version", "active_ids", "alive", "present", "coasting", "gone")
-
-    def __init__(self, states: _States, ids: np.ndarray):
-        self.states, self.version = states, states.version
-        ids_l = ids.tolist()
-        self.active_ids = [ids_l[k] for k, s in enumerate(states) if s == ACTIVE]
-        self.alive = np.array([s == ACTIVE for s in states], dtype=bool)
-        self.present = np.array([s != GONE for s in states], dtype=bool)
-        self.coasting = [k for k, s in enumerate(states) if s == COASTING]
-        self.gone = [k for k, s in enumerate(states) if s == GONE]
 
 
 class Physics(Protocol):
