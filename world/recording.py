@@ -27,15 +27,8 @@ from swarm.world.recorders import HasArrays, Recorder, StreamRecorder, static_ar
 from swarm.world.recorders import TickRecorder as TickRecorder
 from swarm.world.recorders import recording_arrays as recording_arrays
 from swarm.world.recorders import streamed_arrays as streamed_arrays
-from swarm.world.results_stream import (
-    Metrics,
-    Scan,
-    follow_counts,
-    scan,
-    state_seconds,
-    streamed,
-    write_npz,
-)
+from swarm.world.results_metrics import Metrics, follow_counts, state_seconds
+from swarm.world.results_stream import Scan, scan, streamed, write_npz
 from swarm.world.stream import RECORDING_FILE, RecordingError
 
 TRAJECTORY_FILE = "trajectory.npz"
@@ -140,7 +133,7 @@ class RunResult:
 
 
 def add_state_seconds(agents: dict, a: dict[str, np.ndarray], dt: float) -> None:
-    """Each follower's `state_s` (results_stream.state_seconds) into summary.json's `agents`,
+    """Each follower's `state_s` (results_metrics.state_seconds) into summary.json's `agents`,
     from whole arrays; a recording without `follow` (older runs) says none throughout."""
     follow = a.get("follow")
     if follow is None:
