@@ -40,7 +40,7 @@ from swarm.world.run_reader import RunReadError, load_run
 __all__ = ["AgentTrack", "Record", "Results", "RunReadError", "Summary", "open_run", "simulate"]
 
 #: Per-tick arrays of trajectory.npz (docs/reference/outputs.md#trajectory).
-TICK_ARRAYS = ("t", "x", "y", "heading", "u", "out", "alive", "missed")
+TICK_ARRAYS = ("t", "x", "y", "heading", "u", "out", "alive", "missed", "follow")
 #: Per-agent and per-run constants.
 STATIC_ARRAYS = ("ids", "role", "speed", "orbit_radius", "target", "dt")
 
@@ -95,6 +95,7 @@ class Results:
     target: np.ndarray
     heading: np.ndarray | None
     missed: np.ndarray | None
+    follow: np.ndarray | None  # FollowState codes (swarm.contracts.wire.FOLLOW_STATES); None in older runs
     speed: np.ndarray | None
     orbit_radius: np.ndarray | None
     dt: np.ndarray | None
@@ -285,7 +286,7 @@ def open_run(run_dir: str | Path, recover: bool = True) -> Results:
     if data.orbit_radius is not None:
         arrays["orbit_radius"] = data.orbit_radius
     with np.load(d / TRAJECTORY_FILE, allow_pickle=False) as z:  # what the plots do not need
-        for k in ("heading", "speed", "dt", "missed"):
+        for k in ("heading", "speed", "dt", "missed", "follow"):
             if k in z.files:
                 arrays[k] = np.asarray(z[k])
     return Results(arrays, data.summary, d, recovered)

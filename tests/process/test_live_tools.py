@@ -369,7 +369,8 @@ def test_logs_echo_and_stop_against_swarm_up(rt, tmp_path, monkeypatch):
     assert follower.wait(DEADLINE) == ExitCode.OK
     assert events.wait(DEADLINE) == ExitCode.OK
     seen = [json.loads(ln) for ln in events.text().splitlines() if ln.startswith("{")]
-    assert [d["kind"] for d in seen][-3:] == ["pause", "resume", "stop"]
+    # (a loaded machine may stall the realtime world meanwhile: its `late` events are not the point)
+    assert [d["kind"] for d in seen if d["kind"] != "late"][-3:] == ["pause", "resume", "stop"]
     assert all(d["key"] == f"swarm/{run}/events" for d in seen)
     whole = chatty_lines((out / "logs" / "agent-3.log").read_text())
     assert chatty_lines(follower.text()) == [t for t in whole if t >= first[0]]
