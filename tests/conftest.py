@@ -55,6 +55,11 @@ def pytest_collection_modifyitems(config, items):
     """Mark every test with its tier, the folder it is in; a test outside the tier folders, or
     one that starts processes (`rt`) outside tests/process, is an error. With
     SWARM_TEST_DEADLINE set, every test's time limit grows with it (`per_test_limit`)."""
+    # Run order: by file name across the tier folders (stable within a file), so that on two
+    # workers the tests that wait on processes and those that compute are mixed, as they were
+    # when every file sat in tests/ (folder by folder, both workers would start processes at
+    # once for the first half of the run).
+    items.sort(key=lambda item: item.path.name)
     misplaced = set()
     for item in items:
         if DEADLINE != DEFAULT:
