@@ -31,10 +31,10 @@ from typing import NamedTuple
 from swarm.agents.search import anchor_point, drift
 from swarm.contracts.frames import Contact
 from swarm.contracts.orbits import wrap
-from swarm.contracts.tuning import SelectionTuning
+from swarm.contracts.tuning_ticks import DEFAULT as DEFAULT_TUNING
 
 _new = tuple.__new__
-DEFAULT = SelectionTuning()  # the edge, when not given
+DEFAULT = DEFAULT_TUNING  # the edge, when not given
 
 
 class Sighting(NamedTuple):

@@ -42,9 +42,10 @@ import math
 from swarm.contracts.frames import Contact
 from swarm.contracts.observation import Search
 from swarm.contracts.orbits import wrap
-from swarm.contracts.tuning import SelectionTuning, TuningTicks
+from swarm.contracts.tuning_ticks import DEFAULT as DEFAULT_TUNING
+from swarm.contracts.tuning_ticks import Tuning, TuningTicks
 
-DEFAULT = SelectionTuning()  # the search's pitch and breaths, when not given
+DEFAULT = DEFAULT_TUNING  # the search's pitch and breaths, when not given
 SEEN = 0.25  # the circle about a rooted agent it sees but may not take yet, in first radii
 MIN_TURN_MARGIN = 1.25  # radius at least this times v / max_turn_rate (the tightest circle)
 
@@ -126,7 +127,7 @@ class SearchMemory:
         speed: float,
         c2: float,
         max_turn_rate: float | None,
-        tuning: SelectionTuning | TuningTicks = DEFAULT,
+        tuning: Tuning | TuningTicks = DEFAULT,
     ):
         self.rho0, self.pitch, self.rho_min = pattern(sensing_range, speed, c2, max_turn_rate, tuning.search_pitch)
         self.breaths = (tuning.search_first_out, tuning.search_growth)

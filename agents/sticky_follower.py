@@ -17,7 +17,7 @@ from swarm.agents.sticky import Sticky
 from swarm.contracts.brain_config import AgentConf, GainsConf, SensingConf
 from swarm.contracts.frames import Contact
 from swarm.contracts.observation import Search
-from swarm.contracts.tuning import TuningTicks
+from swarm.contracts.tuning_ticks import TuningTicks
 from swarm.contracts.vocabulary import FollowState
 
 

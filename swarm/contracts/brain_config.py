@@ -14,10 +14,8 @@ import math
 from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from pydantic import ValidationError
-
 from swarm.contracts.laws import MAX_LAW_PARAMS, follower_law_name
-from swarm.contracts.tuning import SelectionTuning
+from swarm.contracts.tuning_ticks import TuningValues, tuning_values
 
 if TYPE_CHECKING:
     from swarm.contracts.scenario import Scenario
@@ -58,7 +56,7 @@ class SensingConf:
     hysteresis: float
     range: float | None = None  # own sensor's range (m), None: unlimited (sets the search pattern)
     fov: float | None = None  # own sensor's field of view (rad), None: all round
-    tuning: SelectionTuning = SelectionTuning()  # sticky: [sensing.tuning] (swarm/contracts/tuning.py)
+    tuning: TuningValues = TuningValues()  # sticky: [sensing.tuning] (swarm/contracts/tuning.py)
 
 
 @dataclass(frozen=True, slots=True)
@@ -78,7 +76,7 @@ class BrainConf:
 
     def to_json(self) -> dict[str, Any]:
         d = asdict(self)
-        d["sensing"]["tuning"] = self.sensing.tuning.model_dump()
+        d["sensing"]["tuning"] = self.sensing.tuning._asdict()
         return d
 
     @classmethod
@@ -90,7 +88,7 @@ class BrainConf:
         return cls(
             AgentConf(a.id, a.role, a.speed, a.orbit_radius, a.direction, a.follow, a.max_turn_rate),
             GainsConf(g.c1, g.c2, g.law),
-            SensingConf(s.selection, s.hysteresis, s.range, s.fov, s.tuning),
+            SensingConf(s.selection, s.hysteresis, s.range, s.fov, TuningValues(**s.tuning.model_dump())),
             scenario.run.dt,
             len(scenario.agents),
             LawConf(scenario.law.follower, scenario.law.leader, dict(scenario.law.params)),
@@ -145,26 +143,12 @@ class BrainConf:
                 num(s, "hysteresis", "sensing"),
                 num(s, "range", "sensing", positive=True, optional=True),
                 num(s, "fov", "sensing", positive=True, optional=True),
-                _tuning(s.get("tuning") if isinstance(s, dict) else None),
+                tuning_values(s.get("tuning") if isinstance(s, dict) else None),
             ),
             num(d, "dt", "brain", positive=True),
             integer(d, "n_agents", "brain"),
             _law_conf(d.get("law")),
         )
-
-
-def _tuning(d: object) -> SelectionTuning:
-    """sensing.tuning of a join reply (absent: the defaults); ValueError names the field."""
-    if d is None:
-        return SelectionTuning()
-    if not isinstance(d, dict):
-        raise ValueError("sensing.tuning: expected an object")
-    try:
-        return SelectionTuning.model_validate(d)
-    except ValidationError as e:
-        err = e.errors()[0]
-        where = ".".join(str(p) for p in err["loc"])
-        raise ValueError(f"sensing.tuning.{where}: {err['msg']}") from None
 
 
 def _law_conf(d: object) -> LawConf:

@@ -9,10 +9,13 @@ ticks once, for the follower's state machine (agents/sticky.Sticky), its coastin
 
 from __future__ import annotations
 
-import math
-from typing import Annotated, NamedTuple
+from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field
+
+from swarm.contracts.tuning_ticks import TuningTicks, ticks
+
+__all__ = ["SelectionTuning", "TuningTicks", "ticks"]
 
 Seconds = Annotated[float, Field(gt=0, le=3600.0, allow_inf_nan=False)]
 Fraction = Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)]
@@ -48,32 +51,3 @@ class SelectionTuning(BaseModel):
     search_growth: Factor = Field(
         default=2.0, description="each later breath of the search spiral goes this many times further out"
     )
-
-
-def ticks(seconds: float, dt: float) -> int:
-    """`seconds` in ticks of dt, at least 1 (a whole number of seconds / dt stays exact)."""
-    return max(1, math.ceil(seconds / dt - 1e-9))
-
-
-class TuningTicks(NamedTuple):
-    """A SelectionTuning at a tick length: the spells in ticks, the fractions as they are."""
-
-    hold: int  # ticks
-    coast: int  # ticks
-    reach: float
-    edge: float
-    search_pitch: float
-    search_first_out: float
-    search_growth: float
-
-    @classmethod
-    def of(cls, tuning: SelectionTuning, dt: float) -> TuningTicks:
-        return cls(
-            ticks(tuning.hold_s, dt),
-            ticks(tuning.coast_s, dt),
-            tuning.reach,
-            tuning.edge,
-            tuning.search_pitch,
-            tuning.search_first_out,
-            tuning.search_growth,
-        )

@@ -508,10 +508,31 @@ def test_tuning_travels_to_agent_processes():
     s = parse_scenario({**_TWO, "sensing": {"range": 40.0, "tuning": {"coast_s": 2.0, "edge": 0.9}}})
     conf = BrainConf.from_scenario(s, 2)
     back = BrainConf.from_json(json.loads(json.dumps(conf.to_json())))
-    assert back == conf and back.sensing.tuning == s.sensing.tuning
+    assert back == conf and back.sensing.tuning._asdict() == s.sensing.tuning.model_dump()
     d = conf.to_json()
     del d["sensing"]["tuning"]  # an older world: the defaults
-    assert BrainConf.from_json(d).sensing.tuning == parse_scenario(_TWO).sensing.tuning
+    assert BrainConf.from_json(d).sensing.tuning._asdict() == parse_scenario(_TWO).sensing.tuning.model_dump()
     d["sensing"]["tuning"] = {"edge": 2.0}
     with pytest.raises(ValueError, match=r"sensing\.tuning\.edge"):
         BrainConf.from_json(d)
+
+
+def test_the_agents_plain_tuning_is_the_scenarios_with_the_same_defaults():
+    """BrainConf carries TuningValues (no pydantic in agent processes): the same fields and
+    defaults as the scenario's SelectionTuning, and a join reply's table checked by field."""
+    from swarm.contracts.tuning import SelectionTuning
+    from swarm.contracts.tuning_ticks import TuningValues, tuning_values
+
+    assert TuningValues._fields == tuple(SelectionTuning.model_fields)
+    assert TuningValues() == TuningValues(**SelectionTuning().model_dump())
+    for name, field in SelectionTuning.model_fields.items():  # the same bounds
+        from swarm.contracts.tuning_ticks import LIMITS
+
+        low, high = LIMITS[name]
+        gt = next(m.gt for m in field.metadata if hasattr(m, "gt"))
+        le = next(m.le for m in field.metadata if hasattr(m, "le"))
+        assert (gt, le) == (low, high), name
+    assert tuning_values({"coast_s": 2}) == TuningValues(coast_s=2.0)
+    for bad, field in (({"coast": 1.0}, "sensing.tuning.coast"), ({"hold_s": -1.0}, "sensing.tuning.hold_s")):
+        with pytest.raises(ValueError, match=field):
+            tuning_values(bad)
