@@ -59,7 +59,7 @@ from typing import Any
 import daqp
 import numpy as np
 
-from swarm.contracts.scenario_tables import SafetySpec, polygon_turns
+from swarm.contracts.scenario_tables import SafetySpec, is_convex_polygon, polygon_turns
 
 INF = 1e30  # DAQP's infinity (a bound at or beyond it is no bound)
 SLACK_WEIGHT = 1e6  # infeasible groups: cost of a unit of broken condition, per unit (rad/s)^2 of turn rate
@@ -83,9 +83,9 @@ class Arena:
         pts = [(float(x), float(y)) for x, y in points]
         if len(pts) < 3:
             raise ValueError(f"a polygon needs 3 corners or more, got {len(pts)}")
+        if not is_convex_polygon(pts):
+            raise ValueError("the polygon is not convex (or has repeated or collinear corners, or crosses itself)")
         turns = polygon_turns(pts)
-        if not all(t > 0 for t in turns) and not all(t < 0 for t in turns):
-            raise ValueError("the polygon is not convex (or has repeated or collinear corners)")
         p = np.array(pts)
         nxt = np.roll(p, -1, axis=0)
         edge = nxt - p

@@ -262,6 +262,22 @@ def polygon_turns(points: Any) -> list[float]:
     return out
 
 
+def is_convex_polygon(points: Any) -> bool:
+    """Whether corners (x, y) walked in order make a convex polygon: every turn the same way
+    (no repeated or collinear corners) and the turns adding up to one full turn, not two or
+    more (a star such as a pentagram turns the same way at every corner but crosses itself)."""
+    turns = polygon_turns(points)
+    if not (all(t > 0 for t in turns) or all(t < 0 for t in turns)):
+        return False
+    n = len(points)
+    total = 0.0
+    for k in range(n):
+        (x0, y0), (x1, y1), (x2, y2) = points[k - 1], points[k], points[(k + 1) % n]
+        ax, ay, bx, by = x1 - x0, y1 - y0, x2 - x1, y2 - y1
+        total += math.atan2(ax * by - ay * bx, ax * bx + ay * by)
+    return abs(abs(total) - 2 * math.pi) < 1e-6
+
+
 class SafetySpec(Strict):
     """[safety]: the safety filter between every law and every actuator (docs/design/safety.md):
     control barrier functions on the distance between agents and on the arena's walls, one
@@ -296,10 +312,10 @@ class SafetySpec(Strict):
                 raise ValueError(f"corner {k}: a corner is [x, y], got {len(p)} numbers")
         if len(arena) < 3:
             raise ValueError(f"a polygon needs 3 corners or more, got {len(arena)}")
-        turns = polygon_turns(arena)
-        if not (all(t > 0 for t in turns) or all(t < 0 for t in turns)):
+        if not is_convex_polygon(arena):
             raise ValueError(
-                "the polygon is not convex (or has repeated or collinear corners): the walls are its edges"
+                "the polygon is not convex (or has repeated or collinear corners, or crosses itself):"
+                " the walls are its edges"
             )
         return arena
 

@@ -266,6 +266,24 @@ def test_arena_polygons():
         Arena.polygon([(0, 0), (1, 0), (2, 0), (1, 1)])  # collinear corners
 
 
+def test_a_star_that_crosses_itself_is_no_arena():
+    """A pentagram turns the same way at every corner, as a convex polygon does, but goes round
+    twice: its 'walls' cross, so it is refused by the world and by the scenario's [safety] table."""
+    from pydantic import ValidationError
+
+    from swarm.contracts.scenario_tables import SafetySpec
+
+    star = [(math.cos(a), math.sin(a)) for a in (math.pi / 2 + 4 * math.pi * k / 5 for k in range(5))]
+    pentagon = [(math.cos(a), math.sin(a)) for a in (math.pi / 2 + 2 * math.pi * k / 5 for k in range(5))]
+    with pytest.raises(ValueError, match="crosses itself"):
+        Arena.polygon(star)
+    with pytest.raises(ValidationError, match="crosses itself"):
+        SafetySpec(radius=0.1, arena=[list(p) for p in star])
+    assert Arena.polygon(pentagon).inside(0.0, 0.0)
+    assert Arena.polygon(pentagon[::-1]).inside(0.0, 0.0)
+    assert SafetySpec(radius=0.1, arena=[list(p) for p in pentagon]).inside(0.0, 0.0)
+
+
 def test_a_wall_turns_an_agent_heading_out():
     """An agent heading straight at a wall of a triangle, near it: its command is changed
     to turn away, within its limit, and the wall's condition holds."""
