@@ -77,6 +77,32 @@ def check(scenario: ScenarioArg) -> None:
         )
         typer.echo(f"  fault at {f.at:g} s: {f.kind} {who}" + (f" ({more})" if more else ""))
     _warn_nearest_graph(s)
+    for line in arena_warnings(s):
+        typer.secho(f"  warning: {line}", fg=typer.colors.YELLOW)
+
+
+def arena_warnings(s: Scenario) -> list[str]:
+    """What in a scenario fights its [safety] arena: an agent starting within the lookahead of a
+    wall, and a leader's orbit (radius about the target, plus the lookahead) that
+    does not fit: the wall barriers would keep turning that leader off its orbit."""
+    sf = s.safety
+    if sf is None or sf.corners is None:
+        return []
+    out = []
+    margin = sf.lookahead_m
+    for a in s.agents:
+        c = sf.clearance(a.x, a.y)  # outside: refused by the scenario model already
+        if 0 <= c < margin:
+            out.append(f"agent {a.id} starts {c:.3g} m from a wall, within the lookahead ({margin:g} m)")
+    room = sf.clearance(s.target.x, s.target.y)
+    for a in s.agents:
+        if a.role == "leader" and a.orbit_radius is not None and a.orbit_radius + margin > room:
+            out.append(
+                f"leader {a.id}'s orbit (R = {a.orbit_radius:g} m about the target) does not fit in the arena: "
+                f"the nearest wall is {room:.3g} m from the target, the orbit needs R + lookahead = "
+                f"{a.orbit_radius + margin:.3g} m"
+            )
+    return out
 
 
 def _warn_nearest_graph(s: Scenario) -> None:

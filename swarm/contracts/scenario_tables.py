@@ -347,3 +347,18 @@ class SafetySpec(Strict):
             if (cross < 0) if ccw else (cross > 0):
                 return False
         return True
+
+    def clearance(self, x: float, y: float) -> float:
+        """The distance from (x, y) to the nearest wall's line (m): negative outside the arena,
+        infinite with no arena."""
+        pts = self.corners
+        if pts is None:
+            return math.inf
+        sign = 1.0 if polygon_turns(pts)[0] > 0 else -1.0
+        n = len(pts)
+        out = math.inf
+        for k in range(n):
+            (x0, y0), (x1, y1) = pts[k], pts[(k + 1) % n]
+            cross = (x1 - x0) * (y - y0) - (y1 - y0) * (x - x0)
+            out = min(out, sign * cross / math.hypot(x1 - x0, y1 - y0))
+        return out

@@ -296,3 +296,22 @@ def test_no_help_page_shows_a_flag_as_taking_a_value():
     assert lines["--csv"].split()[2] == "also" and lines["--help"].split()[2] == "Show"
     assert lines["--plots"].split()[2:4] == ["--no-plots", "render"]
     assert "<float>" in pages[("sim",)]
+
+
+def test_check_warns_of_an_arena_the_scenario_does_not_fit(tmp_path):
+    """lab6 with its arena shrunk to 2.8 x 3.2 m: leader 4's orbit (R = 1.5 m + lookahead) no
+    longer fits, and an agent starting within the lookahead of a wall is named; exit 0 (a warning)."""
+    text = Path("scenarios/lab6.toml").read_text()
+    assert "arena = [-2.0, -2.0, 2.0, 2.0]" in text
+    path = tmp_path / "small.toml"
+    path.write_text(text.replace("arena = [-2.0, -2.0, 2.0, 2.0]", "arena = [-1.2, -1.6, 1.6, 1.6]"))
+    res = invoke("check", path)
+    assert res.exit_code == 0, res.output
+    warnings = [ln.strip() for ln in res.output.splitlines() if "warning:" in ln]
+    assert any("leader 4's orbit" in w and "does not fit" in w for w in warnings), warnings
+    assert not any("leader 1's orbit" in w for w in warnings), warnings  # R = 0.7 m fits
+    assert any(w.startswith("warning: agent 2 starts") for w in warnings), warnings  # x = -1.15, the wall at -1.2
+    path.write_text(text.replace("arena = [-2.0, -2.0, 2.0, 2.0]", "arena = [-1.0, -2.0, 2.0, 2.0]"))
+    res = invoke("check", path)  # outside: an error, not a warning
+    assert res.exit_code == 2 and "agent 2 starts at (-1.15, 0.05), outside safety.arena" in res.output
+    assert "warning: agent" not in invoke("check", "scenarios/lab6.toml").output
