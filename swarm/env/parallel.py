@@ -5,10 +5,11 @@ drives `swarm.world.engine.Engine`: faults due -> frames -> commands -> record -
 integrate. Every agent keeps its `AgentBrain`: it chooses its out-neighbour and builds the
 `Observation` a law would be given; for an agent the environment controls, the brain's
 law is a stand-in that keeps that observation, and the action given to `step` is the
-turn rate (saturated at max_turn_rate, a NaN or inf holding the last one, as the brain
-does with a law's answer). So a policy acting here on `observation_array`s produces the
-same run as `policy_law(policy)` under `swarm sim`, to the bit, and `swarm up --clock
-lockstep` equals `swarm sim`.
+turn rate (saturated at max_turn_rate, as the brain does with a law's answer, or at
+pi / dt for an agent without one; bad actions are errors: swarm/env/checks.py). So a
+policy acting here on `observation_array`s produces the same run as `policy_law(policy)`
+under `swarm sim`, to the bit (while its answers stay within pi / dt), and `swarm up
+--clock lockstep` equals `swarm sim`.
 
 Agents: "agent_<id>" for each controlled agent of the scenario (its followers, or all its
 agents with agents="all"); the others run the scenario's laws. A scripted kill ends an
@@ -29,14 +30,15 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv  # type: ignore[import-untyped]  # pettingzoo ships no py.typed
 
-from swarm.agents.brain import AgentBrain, Decision, saturate
+from swarm.agents.brain import AgentBrain, Decision
 from swarm.api.runs import Results, in_memory
 from swarm.contracts.brain_config import BrainConf
 from swarm.contracts.observation import Observation
 from swarm.contracts.orbits import expected_radius, roots
 from swarm.contracts.scenario import Scenario, load_scenario
 from swarm.contracts.vocabulary import EventKind
-from swarm.env.observation import K_NEAREST, observation_array, size, turn_rate
+from swarm.env import checks
+from swarm.env.observation import K_NEAREST, observation_array, size
 from swarm.world.core import ACTIVE
 from swarm.world.engine import Engine
 
@@ -97,6 +99,15 @@ def radial_rate_reward(rate_weight: float = 1.0) -> Reward:
     return reward
 
 
+def base_scenario(scenario: Any) -> Scenario:
+    """A Scenario, or one loaded from a scenario file (its errors name the file and field)."""
+    if isinstance(scenario, Scenario):
+        return scenario
+    if not isinstance(scenario, str | Path):
+        raise checks.EnvTypeError(f"scenario must be a Scenario or a file path, not {type(scenario).__name__}")
+    return load_scenario(scenario)
+
+
 def agent_name(aid: int, life: int = 0) -> str:
     """The PettingZoo name of agent `aid` in its `life`-th stay in the world (0: from the start)."""
     return f"agent_{aid}" if life == 0 else f"agent_{aid}#{life}"
@@ -130,15 +141,19 @@ class SwarmEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         reward: (view, agent id) -> float (default `radial_rate_reward()`);
         position_jitter (m), heading_jitter (rad): each episode moves every agent's start
         by a uniform draw in +-that, from the environment's seeded generator."""
+        self.base = base_scenario(scenario)
         if agents not in ("followers", "all"):
-            raise ValueError(f"agents must be 'followers' or 'all', not {agents!r}")
-        self.base = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
-        self.k = k_nearest
+            raise checks.EnvError(f"agents must be 'followers' or 'all', not {agents!r}")
+        self.k = checks.k_nearest(k_nearest)
         self.controlled = [a.id for a in self.base.agents if agents == "all" or a.role == "follower"]
-        dt = self.base.run.dt
-        self.ticks = int(round((duration if duration is not None else self.base.run.duration) / dt))
+        dt = checks.run_dt(self.base.run.dt)
+        ticks = checks.duration_ticks(duration, dt, len(self.base.agents))
+        self.ticks = ticks if ticks is not None else self.base.run.ticks
+        if reward is not None and not callable(reward):
+            raise checks.EnvTypeError(f"reward must be a function (view, agent id) -> float, not {reward!r}")
         self.reward_fn = reward if reward is not None else radial_rate_reward()
-        self.position_jitter, self.heading_jitter = position_jitter, heading_jitter
+        self.position_jitter = checks.jitter(position_jitter, "position_jitter")
+        self.heading_jitter = checks.jitter(heading_jitter, "heading_jitter")
         lives = {  # its stays in the world: one, and one per scripted return within the episode
             aid: 1
             + sum(
@@ -150,9 +165,10 @@ class SwarmEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         box = spaces.Box(-np.inf, np.inf, shape=(size(self.k),), dtype=np.float32)
         self._obs_spaces = {name: box for name in self.possible_agents}
         self._act_spaces = {}
+        self.limits: dict[int, float] = {}  # controlled agent -> the largest turn rate an action gives
         for a in self.base.agents:
             if a.id in lives:
-                lim = a.max_turn_rate if a.max_turn_rate is not None else np.inf
+                lim = self.limits[a.id] = checks.action_limit(a.max_turn_rate, dt)
                 act = spaces.Box(-lim, lim, shape=(1,), dtype=np.float32)
                 for n in range(lives[a.id]):
                     self._act_spaces[agent_name(a.id, n)] = act
@@ -188,6 +204,7 @@ class SwarmEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         """A new episode. seed: seeds the environment's generator (start jitter) and is the
         run's seed (the fault plan's draws: noise, loss); without it the generator goes on
         (from the scenario's run.seed at first) and the run's seed stays. options: unused."""
+        seed = checks.seed(seed)
         if seed is not None:
             self._seed = seed
             self._rng = np.random.default_rng(seed)
@@ -300,14 +317,22 @@ class SwarmEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """Commands for this tick, then the world steps. `actions[name]`: a turn rate (a
-        number or an array of one), saturated at the agent's max_turn_rate; a NaN or inf
-        holds its last turn rate. An agent without an action, or without a fresh frame
-        this tick (`own.fresh` 0.0), holds its last command."""
+        real number or an array of one), saturated at the agent's max_turn_rate (pi / dt
+        without one); NaN or inf is an error naming the agent, as are a wrong type or shape
+        and a name that is no agent of the environment (`possible_agents`); an action for an
+        agent that has ended is ignored. A live agent without an action, or without a fresh
+        frame this tick (`own.fresh` 0.0), holds its last command."""
         e = self.engine
         if e is None or self._done:
             raise RuntimeError("step() before reset() or after the episode ended")
-        k = e.tick
+        actions = checks.actions_dict(actions)
+        checks.unknown_agents(actions, self.possible_agents)
         names = {agent_id(n): n for n in self.agents}
+        given = {}  # controlled agent -> its saturated turn rate, every action checked before any is used
+        for aid, n in names.items():
+            if n in actions:
+                given[aid] = checks.action(n, actions[n], self.limits[aid])
+        k = e.tick
         for aid, d, _ in self.pending:
             if isinstance(d, Exception):
                 cause = f"{type(d).__name__}: {d}"
@@ -317,18 +342,9 @@ class SwarmEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
                 continue
             u = d.u
             if aid in self.life:
-                b = self.brains[aid]
-                action = actions.get(names.get(aid, ""))
-                if action is None:
+                if aid not in given:
                     continue
-                u = turn_rate(action)
-                if math.isfinite(u):
-                    u = saturate(u, b.spec.max_turn_rate)
-                else:
-                    b.nonfinite += 1
-                    b.last_nonfinite = u
-                    u = b.last_u
-                b.last_u = u
+                u = self.brains[aid].last_u = given[aid]
             e.command(aid, k, u, d.out, d.hops, d.follow)
         e.end_tick()
         view = self.view()
