@@ -1,7 +1,7 @@
 """The sticky selection rule's tuning as agent processes hold it: plain values without pydantic
 (agent processes stay small and start fast; the scenario's validated `SelectionTuning` is in
-swarm/contracts/tuning.py), and `TuningTicks.of(tuning, dt)`, the conversion to ticks, done
-once. Pure: no I/O.
+swarm/contracts/tuning.py, with its fields from `KNOBS` here), and `TuningTicks.of(tuning, dt)`,
+the conversion to ticks, done once. Pure: no I/O.
 """
 
 from __future__ import annotations
@@ -29,29 +29,56 @@ class Tuning(Protocol):
     def search_growth(self) -> float: ...
 
 
+class Knob(NamedTuple):
+    """One tuning field: its default (today's value), its bounds (low exclusive, high
+    inclusive) and what it means."""
+
+    default: float
+    low: float
+    high: float
+    description: str
+
+
+# The one definition of the tuning's fields: TuningValues (agents) and the scenario's validated
+# SelectionTuning (swarm/contracts/tuning.py) both take their defaults, bounds and words from it.
+KNOBS: dict[str, Knob] = {
+    "hold_s": Knob(5.0, 0.0, 3600.0, "s a follower keeps steering by an out-neighbour that lost its path (HOLD)"),
+    "coast_s": Knob(
+        5.0, 0.0, 3600.0, "s a follower steers by the predicted place of an out-neighbour that left at the edge (COAST)"
+    ),
+    "reach": Knob(
+        0.85, 0.0, 1.0, "new choices within this fraction of the sensing range and of half the field of view"
+    ),
+    "edge": Knob(
+        0.8,
+        0.0,
+        1.0,
+        "a sighting at this fraction of the range (or half field of view) or beyond is at the edge "
+        "(an out-neighbour last seen there may be coasted on)",
+    ),
+    "search_pitch": Knob(0.5, 0.0, 10.0, "the search spiral's pitch and first radius, in sensing ranges"),
+    "search_first_out": Knob(
+        4.0, 1.0, 1000.0, "the search spiral's first breath goes out to this many first radii, then back in"
+    ),
+    "search_growth": Knob(2.0, 1.0, 1000.0, "each later breath of the search spiral goes this many times further out"),
+}
+
+
 class TuningValues(NamedTuple):
     """A SelectionTuning's values (its defaults: today's), as a BrainConf carries them."""
 
-    hold_s: float = 5.0
-    coast_s: float = 5.0
-    reach: float = 0.85
-    edge: float = 0.8
-    search_pitch: float = 0.5
-    search_first_out: float = 4.0
-    search_growth: float = 2.0
+    hold_s: float = KNOBS["hold_s"].default
+    coast_s: float = KNOBS["coast_s"].default
+    reach: float = KNOBS["reach"].default
+    edge: float = KNOBS["edge"].default
+    search_pitch: float = KNOBS["search_pitch"].default
+    search_first_out: float = KNOBS["search_first_out"].default
+    search_growth: float = KNOBS["search_growth"].default
 
 
 DEFAULT = TuningValues()
 # each field's bounds (low exclusive, high inclusive), as swarm/contracts/tuning.py validates them
-LIMITS = {
-    "hold_s": (0.0, 3600.0),
-    "coast_s": (0.0, 3600.0),
-    "reach": (0.0, 1.0),
-    "edge": (0.0, 1.0),
-    "search_pitch": (0.0, 10.0),
-    "search_first_out": (1.0, 1000.0),
-    "search_growth": (1.0, 1000.0),
-}
+LIMITS = {name: (k.low, k.high) for name, k in KNOBS.items()}
 
 
 def tuning_values(d: object) -> TuningValues:
