@@ -13,6 +13,7 @@ statement, at module level or inside functions:
     study      batch studies
     api        the Python API (`import swarm`)
     env        a PettingZoo environment over the in-process engine (learning-based laws)
+    testing    a law's unit tests: frames and observations from keywords, a fake world link (no zenoh)
     cli        the command line
 
 A package may import only the packages `MAY_IMPORT` lists for it; no module may be part of an
@@ -43,6 +44,9 @@ MAY_IMPORT = {
     # the PettingZoo environment over the in-process engine; its episode's results are the API's
     # `Results` (what swarm.simulate returns), so it sits above swarm.api
     "env": {"env", "offline", "api"} | BELOW_THE_SHELLS,
+    # a law author's test kit: the agent's brain, the wire's codecs, the world's kinematics and
+    # sensors; no zenoh (tests/pure/test_testing_kit.py)
+    "testing": {"testing"} | BELOW_THE_SHELLS,
     "api": {"api", "runtime", "offline", "plots", "live", "robots"} | BELOW_THE_SHELLS,
     "cli": {"cli", "root", "api", "runtime", "offline", "plots", "live", "study", "robots", "ros2", "env"}
     | BELOW_THE_SHELLS,
