@@ -45,7 +45,8 @@ class FakeWorldLink:
     """One agent in a fake world: its law (a function `law(obs) -> u`, or a name as in a
     scenario's [law] table: "module:function", "bearing", "cc"), what it is (`agent`, a
     FrameBuilder), where it starts (x, y, heading), where the target is (leaders) and its
-    neighbours (each moving at its own constant speed and turn rate).
+    neighbours (each moving at its own constant speed and turn rate; one given by bearing and
+    range is placed where the agent sees it at the start, and moves on from there).
 
     Each `tick()` sends the agent its frame for the current poses, records the command it
     answers with and moves everybody by one dt. What it records, tick by tick:
