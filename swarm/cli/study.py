@@ -42,12 +42,62 @@ def _progress(quiet: bool) -> bool:
 
 
 def _stopped(result: StudyResult) -> None:
+    if result.timeouts:
+        typer.echo(f"timeout: {result.timeouts} run(s) ended at --run-timeout (rows with status timeout)", err=True)
     if result.interrupted:
-        typer.echo(f"stopped: {len(result.rows)} of {result.runs} runs finished, kept in {result.runs_csv}", err=True)
+        typer.echo(
+            f"stopped: {len(result.rows)} of {result.runs} runs finished, kept in {result.runs_csv} "
+            f"(--resume {result.out} runs the rest)",
+            err=True,
+        )
+
+
+LABELS = {"workers": "--workers", "resume": "--resume", "run_timeout": "--run-timeout"}
+
+
+def _executor(scheduler: Optional[str]):
+    """The executor of --scheduler (a Dask cluster), or None: this machine's processes."""
+    if scheduler is None:
+        return None
+    from swarm.study.cluster import dask_executor  # lazy: a cluster's executor, only with --scheduler
+
+    return dask_executor(scheduler)
 
 
 DtOpt = Annotated[float, typer.Option(help="step (s)", min=1e-4)]
-JobsOpt = Annotated[int, typer.Option("--jobs", "-j", min=0, help="worker processes (0: one per core)")]
+JobsOpt = Annotated[
+    int,
+    typer.Option(
+        "--workers",
+        "--jobs",
+        "-j",
+        min=0,
+        help="worker processes, or tasks at a time on a cluster (0: one per core / worker thread; "
+        "capped at that and at the study's jobs)",
+    ),
+]
+ResumeOpt = Annotated[
+    Optional[Path],
+    typer.Option(
+        help="finish the study in DIR (run with the same options): runs already in DIR/runs.csv "
+        "are not run again, the others' rows appended; summary and figures of all"
+    ),
+]
+TimeoutOpt = Annotated[
+    Optional[float],
+    typer.Option(
+        help="end a run past S s of wall time (its process killed and replaced): its row says "
+        "status timeout, the study goes on",
+        min=1e-3,
+    ),
+]
+SchedulerOpt = Annotated[
+    Optional[str],
+    typer.Option(
+        help="run on the Dask cluster whose scheduler is at tcp://HOST:8786 (`dask scheduler`, "
+        "`dask worker`; the extra swarm-circumnav[cluster])"
+    ),
+]
 OutOpt = Annotated[
     Optional[Path], typer.Option("--out", "-o", help="output directory (default runs/study-<kind>-<time>)")
 ]
@@ -97,6 +147,9 @@ def swarms(
     plot: Annotated[bool, typer.Option(help="write study.png")] = True,
     batch: BatchOpt = True,
     quiet: QuietOpt = False,
+    resume: ResumeOpt = None,
+    run_timeout: TimeoutOpt = None,
+    scheduler: SchedulerOpt = None,
 ) -> None:
     """Random swarms through the in-process engine: converged fraction, settling, switches.
 
@@ -126,28 +179,37 @@ def swarms(
     pairs = sum(b < a for a in ns for b in ls)
     if not pairs:
         raise fail("--leaders: every setting has as many leaders as agents; a swarm needs a follower")
-    result = run_swarms(
-        n=ns,
-        leaders=ls,
-        selection=rules,
-        sensing_range=ranges,
-        fov=fov,
-        seeds=seeds,
-        area=area,
-        speeds=(vmin, vmax),
-        omega=omega,
-        c1=c1,
-        c2=c2,
-        duration=duration,
-        dt=dt,
-        safety_radius=safety_radius,
-        batch=batch,
-        workers=jobs,
-        out=out,
-        plot=plot,
-        say=typer.echo,
-        progress=_progress(quiet),
-    )
+    executor = _executor(scheduler)
+    try:
+        result = run_swarms(
+            n=ns,
+            leaders=ls,
+            selection=rules,
+            sensing_range=ranges,
+            fov=fov,
+            seeds=seeds,
+            area=area,
+            speeds=(vmin, vmax),
+            omega=omega,
+            c1=c1,
+            c2=c2,
+            duration=duration,
+            dt=dt,
+            safety_radius=safety_radius,
+            batch=batch,
+            workers=jobs,
+            out=out,
+            plot=plot,
+            say=typer.echo,
+            progress=_progress(quiet),
+            resume=resume,
+            run_timeout=run_timeout,
+            executor=executor,
+            labels=LABELS,
+        )
+    finally:
+        if executor is not None:
+            executor.close()
     _stopped(result)
     summary = result.summary
     table(
@@ -155,6 +217,7 @@ def swarms(
         [
             ("setting", "setting", str),
             ("runs", "runs", str),
+            *([("timeouts", "timeouts", str)] if result.timeouts or any(r.get("timeouts") for r in summary) else []),
             ("converged", "converged_fraction", num(".1%")),
             ("cut off (conv.)", "cut_off", str),
             ("", "cut_off_converged", lambda v: f"({v})"),
@@ -193,6 +256,9 @@ def gains(
     plot: Annotated[bool, typer.Option(help="write gains.png")] = True,
     batch: BatchOpt = True,
     quiet: QuietOpt = False,
+    resume: ResumeOpt = None,
+    run_timeout: TimeoutOpt = None,
+    scheduler: SchedulerOpt = None,
 ) -> None:
     """Where does the follower law settle? A map of (C1, C2) against speed ratio.
 
@@ -205,20 +271,29 @@ def gains(
     from swarm.study.api import run_gains  # lazy: numpy, the scenario model, the pool; not for `swarm --help`
 
     c1s, c2s, qs = floats("--c1", c1), floats("--c2", c2), floats("--ratios", ratios)
-    result = run_gains(
-        c1=c1s,
-        c2=c2s,
-        ratios=qs,
-        starts=starts,
-        duration=duration,
-        dt=dt,
-        batch=batch,
-        workers=jobs,
-        out=out,
-        plot=plot,
-        say=typer.echo,
-        progress=_progress(quiet),
-    )
+    executor = _executor(scheduler)
+    try:
+        result = run_gains(
+            c1=c1s,
+            c2=c2s,
+            ratios=qs,
+            starts=starts,
+            duration=duration,
+            dt=dt,
+            batch=batch,
+            workers=jobs,
+            out=out,
+            plot=plot,
+            say=typer.echo,
+            progress=_progress(quiet),
+            resume=resume,
+            run_timeout=run_timeout,
+            executor=executor,
+            labels=LABELS,
+        )
+    finally:
+        if executor is not None:
+            executor.close()
     _stopped(result)
     gain_table(result.summary)
     _done(result)
@@ -273,12 +348,13 @@ def scenario(
     engine: Annotated[
         str, typer.Option(help="auto (the batch engine where it runs every setting, else per-agent), batch, per-agent")
     ] = "auto",
-    jobs: Annotated[
-        int, typer.Option("--jobs", "-j", "--workers", min=0, help="worker processes (0: one per core)")
-    ] = 0,
+    jobs: JobsOpt = 0,
     out: OutOpt = None,
     plot: Annotated[bool, typer.Option(help="write study.png and sweep.png")] = True,
     quiet: QuietOpt = False,
+    resume: ResumeOpt = None,
+    run_timeout: TimeoutOpt = None,
+    scheduler: SchedulerOpt = None,
 ) -> None:
     """Your scenario, your law: vary it over seeds and settings; where does it converge?
 
@@ -319,28 +395,37 @@ def scenario(
     }
     labels.update({k: f"--{k}" for k in grid if k not in labels})
     labels["engine"] = "--engine batch"
-    result = run_scenario(
-        path,
-        grid=grid,
-        seeds=seeds,
-        positions=positions,
-        headings=spin,
-        speeds=speeds,
-        duration=duration,
-        engine=engine,
-        workers=jobs,
-        out=out,
-        plot=plot,
-        say=typer.echo,
-        progress=_progress(quiet),
-        labels=labels,
-    )
+    executor = _executor(scheduler)
+    try:
+        result = run_scenario(
+            path,
+            grid=grid,
+            seeds=seeds,
+            positions=positions,
+            headings=spin,
+            speeds=speeds,
+            duration=duration,
+            engine=engine,
+            workers=jobs,
+            out=out,
+            plot=plot,
+            say=typer.echo,
+            progress=_progress(quiet),
+            labels={**labels, **LABELS},
+            resume=resume,
+            run_timeout=run_timeout,
+            executor=executor,
+        )
+    finally:
+        if executor is not None:
+            executor.close()
     _stopped(result)
     table(
         result.summary,
         [
             ("setting", "setting", str),
             ("runs", "runs", str),
+            *([("timeouts", "timeouts", str)] if any(r.get("timeouts") for r in result.summary) else []),
             ("converged", "converged_fraction", num(".1%")),
             ("settle med s", "settling_median_s", num(".1f")),
             ("settle p90 s", "settling_p90_s", num(".1f")),

@@ -82,10 +82,15 @@ def num(fmt: str) -> Callable:
 
 
 def table(rows: list[dict], columns: list[tuple[str, str, Callable]]) -> None:
-    widths = [max(len(h), *(len(fmt(r[k])) for r in rows)) if rows else len(h) for h, k, fmt in columns]
+    """Rows under their headers; "-" where a row has no value (a setting whose runs all timed out)."""
+
+    def text(r: dict, k: str, fmt: Callable) -> str:
+        return "-" if r.get(k) is None else fmt(r[k])
+
+    widths = [max(len(h), *(len(text(r, k, fmt)) for r in rows)) if rows else len(h) for h, k, fmt in columns]
     typer.echo("  ".join(h.rjust(w) for (h, _, _), w in zip(columns, widths)))
     for r in rows:
-        typer.echo("  ".join(fmt(r[k]).rjust(w) for (_, k, fmt), w in zip(columns, widths)))
+        typer.echo("  ".join(text(r, k, fmt).rjust(w) for (_, k, fmt), w in zip(columns, widths)))
 
 
 def safety_table(summary: list[dict]) -> None:

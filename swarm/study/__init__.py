@@ -1,7 +1,8 @@
 """`swarm.study`: batch studies as Python functions (`run_swarms`, `run_gains`,
 `run_scenario`, each returning a `StudyResult`; `plan_*` and `execute` to run a study's jobs
-with an executor of one's own: swarm/study/api.py, swarm/study/plan.py;
-docs/reference/api.md#study). `swarm study` is the command line over them.
+with an executor: this machine's processes, a Dask cluster (`dask_executor`) or one's own:
+swarm/study/api.py, swarm/study/plan.py, swarm/study/cluster.py; docs/reference/api.md#study).
+`swarm study` is the command line over them.
 
 The modules: random swarms (`swarms`), gains (`gains`), one's own scenario (`scenario`, with
 `sweeps` for what it may vary), run on a process pool (`pool`) or the batch engine (`batch`),
@@ -13,7 +14,8 @@ from importlib import import_module
 
 _EXPORTS = {
     "api": ("plan_gains", "plan_scenario", "plan_swarms", "run_gains", "run_scenario", "run_swarms"),
-    "plan": ("Executor", "StudyPlan", "StudyResult", "execute", "local_executor"),
+    "plan": ("Executor", "StudyExecutor", "StudyPlan", "StudyResult", "execute", "local_executor"),
+    "cluster": ("dask_executor",),
 }
 _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 

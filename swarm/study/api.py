@@ -19,9 +19,29 @@ from typing import Any
 from swarm.contracts.errors import UsageError
 from swarm.contracts.scenario import load_scenario
 from swarm.study.batch import chunk_size, gain_chunks, run_gain_chunk, run_swarm_chunk, swarm_chunks
-from swarm.study.gains import gain_columns, gain_jobs, run_gain, summarise_gains
-from swarm.study.plan import Executor, StudyPlan, StudyResult, default_out, execute, local_executor, workers_of
+from swarm.study.gains import (
+    gain_columns,
+    gain_jobs,
+    gain_key_columns,
+    gain_stubs,
+    gain_subset,
+    run_gain,
+    summarise_gains,
+)
+from swarm.study.plan import (
+    Executor,
+    StudyExecutor,
+    StudyPlan,
+    StudyResult,
+    capped,
+    default_out,
+    execute,
+    local_executor,
+    workers_of,
+)
+from swarm.study.pool import cores
 from swarm.study.scenario import (
+    KEY_COLUMNS,
     Jitter,
     Template,
     columns,
@@ -30,10 +50,21 @@ from swarm.study.scenario import (
     run_chunk,
     run_one,
     settings_of,
+    stubs,
+    subset,
     summarise,
     varied,
 )
-from swarm.study.swarms import SwarmSetting, run_swarm, summarise_swarms, swarm_columns, swarm_jobs
+from swarm.study.swarms import (
+    SwarmSetting,
+    run_swarm,
+    summarise_swarms,
+    swarm_columns,
+    swarm_jobs,
+    swarm_key_columns,
+    swarm_stubs,
+    swarm_subset,
+)
 from swarm.study.sweeps import grid_axes
 
 SELECTIONS = ("sticky", "rooted", "nearest")
@@ -44,20 +75,43 @@ def _list(value: Any) -> list:
 
 
 def _run(
-    plan: StudyPlan,
+    make: Callable[[int], StudyPlan],
     out: Path | str | None,
     executor: Executor | None,
     workers: int,
     progress: bool,
     say: Callable[[str], None] | None,
-) -> StudyResult:
+    resume: Path | str | None = None,
+    run_timeout: float | None = None,
+    labels: Mapping[str, str] | None = None,
+) -> tuple[StudyPlan, StudyResult]:
+    """The plan (made for the workers there are: `make(workers)`) run with the executor (the
+    local one by default), `workers` capped at what it has and at the jobs, with a line saying
+    so; into `out`, or the study in `resume` finished."""
+    labels = dict(labels or {})
+    if workers < 0:
+        raise UsageError(f"{labels.get('workers', 'workers')}: {workers} must be 0 (all there are) or more")
+    if resume is not None:
+        if out is not None and Path(out).resolve() != Path(resume).resolve():
+            label = labels.get("resume", "resume")
+            raise UsageError(f"{label}: give the study's directory once (resume or out, not both)")
+        out = resume
+    ex = executor if executor is not None else local_executor(workers)
+    capacity, why = ex.capacity() if isinstance(ex, StudyExecutor) else (cores(), "this machine's cores")
+    plan = make(min(workers or capacity, capacity))
+    n, line = capped(workers, capacity, why, len(plan.jobs), labels.get("workers", "workers"))
+    if isinstance(ex, StudyExecutor):
+        ex.workers = n
     where = Path(out) if out is not None else default_out(plan.kind)
     if say is not None:
-        for line in plan.notes:
+        if line:
             say(line)
-        on = f" on {workers_of(workers)} process(es)" if executor is None else ""
+        for note in plan.notes:
+            say(note)
+        on = f" {ex.where(n)}" if isinstance(ex, StudyExecutor) else ""
         say(f"{plan.describe}{on}; rows -> {where / 'runs.csv'}")
-    return execute(plan, where, executor or local_executor(workers), progress)
+    result = execute(plan, where, ex, progress, resume is not None, run_timeout, say, labels)
+    return plan, result
 
 
 # -- swarms ------------------------------------------------------------------------------------
@@ -129,7 +183,9 @@ def plan_swarms(
         f"{len(jobs)} batches" if batch else "per-agent engine"
     )
     engine = "batch" if batch else "per-agent"
-    return StudyPlan("swarms", worker, jobs, swarm_columns(), summarise_swarms, runs, engine, describe)
+    plan = StudyPlan("swarms", worker, jobs, swarm_columns(), summarise_swarms, runs, engine, describe)
+    plan.key_columns, plan.stubs, plan.subset = swarm_key_columns(), swarm_stubs, swarm_subset
+    return plan
 
 
 def run_swarms(
@@ -140,6 +196,9 @@ def run_swarms(
     executor: Executor | None = None,
     progress: bool = True,
     say: Callable[[str], None] | None = None,
+    resume: Path | str | None = None,
+    run_timeout: float | None = None,
+    labels: Mapping[str, str] | None = None,
     **options: Any,
 ) -> StudyResult:
     """Random swarms through the in-process engine (`swarm study swarms`): one setting per
@@ -150,12 +209,21 @@ def run_swarms(
         r = swarm.study.run_swarms(n=8, sensing_range=[math.inf, 60], seeds=20, duration=100)
         r.summary[0]["converged_fraction"]
     """
-    plan = plan_swarms(workers=workers, **options)
-    result = _run(plan, out, executor, workers, progress, say)
-    if plot and result.summary:
+    _, result = _run(
+        lambda w: plan_swarms(workers=w, **options),
+        out,
+        executor,
+        workers,
+        progress,
+        say,
+        resume,
+        run_timeout,
+        labels,
+    )
+    if plot and result.finished:
         from swarm.study.figures import plot_swarms  # lazy: matplotlib (~0.3 s), for the figure only
 
-        result.plots.append(plot_swarms(result.summary, result.rows, result.out / "study.png"))
+        result.plots.append(plot_swarms(result.summary, result.finished, result.out / "study.png"))
     return result
 
 
@@ -188,7 +256,9 @@ def plan_gains(
         worker, jobs = run_gain, list(runs)
     describe = f"{len(runs)} runs of {duration:g} s, " + (f"{len(jobs)} batches" if batch else "per-agent engine")
     engine = "batch" if batch else "per-agent"
-    return StudyPlan("gains", worker, jobs, gain_columns(), summarise_gains, len(runs), engine, describe)
+    plan = StudyPlan("gains", worker, jobs, gain_columns(), summarise_gains, len(runs), engine, describe)
+    plan.key_columns, plan.stubs, plan.subset = gain_key_columns(), gain_stubs, gain_subset
+    return plan
 
 
 def run_gains(
@@ -199,13 +269,25 @@ def run_gains(
     executor: Executor | None = None,
     progress: bool = True,
     say: Callable[[str], None] | None = None,
+    resume: Path | str | None = None,
+    run_timeout: float | None = None,
+    labels: Mapping[str, str] | None = None,
     **options: Any,
 ) -> StudyResult:
     """Where does the follower law settle (`swarm study gains`): one follower behind a leader on
     its orbit (omega = 1 rad/s) for every (C1, C2, speed ratio), `starts` random starts each.
     Options: those of `plan_gains`. Writes runs.csv, summary.csv and (`plot`) gains.png."""
-    plan = plan_gains(workers=workers, **options)
-    result = _run(plan, out, executor, workers, progress, say)
+    _, result = _run(
+        lambda w: plan_gains(workers=w, **options),
+        out,
+        executor,
+        workers,
+        progress,
+        say,
+        resume,
+        run_timeout,
+        labels,
+    )
     if plot and result.summary:
         from swarm.study.figures import plot_gains  # lazy: matplotlib (~0.3 s), for the figure only
 
@@ -287,6 +369,7 @@ def plan_scenario(
     )
     plan.title = f"swarm study scenario {path.name}: {seeds} seeds" + (f" ({varies})" if varies else "")
     plan.swept = [k for k, v in sweeps.items() if len(v) > 1]
+    plan.key_columns, plan.stubs, plan.subset = list(KEY_COLUMNS), stubs, subset
     return plan
 
 
@@ -301,6 +384,9 @@ def run_scenario(
     executor: Executor | None = None,
     progress: bool = True,
     say: Callable[[str], None] | None = None,
+    resume: Path | str | None = None,
+    run_timeout: float | None = None,
+    labels: Mapping[str, str] | None = None,
     **options: Any,
 ) -> StudyResult:
     """Your scenario, your law, over seeds and settings (`swarm study scenario`).
@@ -313,12 +399,22 @@ def run_scenario(
     the scenario's) and `engine` ("auto", "batch", "per-agent"). Writes runs.csv, summary.csv and
     (`plot`) study.png, and sweep.png when something is swept, into `out`.
     """
-    plan = plan_scenario(path, grid=grid, seeds=seeds, workers=workers, **options)
-    result = _run(plan, out, executor, workers, progress, say)
-    if plot and result.summary:
+    plan, result = _run(
+        lambda w: plan_scenario(path, grid=grid, seeds=seeds, workers=w, labels=labels, **options),
+        out,
+        executor,
+        workers,
+        progress,
+        say,
+        resume,
+        run_timeout,
+        labels,
+    )
+    if plot and result.finished:
         from swarm.study.figures import plot_scenario_study, plot_sweep  # lazy: matplotlib (~0.3 s), figures only
 
-        result.plots.append(plot_scenario_study(result.summary, result.rows, result.out / "study.png", plan.title))
+        rows = result.finished
+        result.plots.append(plot_scenario_study(result.summary, rows, result.out / "study.png", plan.title))
         if plan.swept:
-            result.plots.append(plot_sweep(result.rows, plan.swept, result.out / "sweep.png", plan.title))
+            result.plots.append(plot_sweep(rows, plan.swept, result.out / "sweep.png", plan.title))
     return result

@@ -82,15 +82,35 @@ def gain_jobs(c1s, c2s, ratios, starts: int, duration: float, dt: float) -> list
     return [GainJob(a, b, q, k, duration, dt) for a, b, q, k in itertools.product(c1s, c2s, ratios, range(starts))]
 
 
+def gain_stubs(job: GainJob | tuple[GainJob, ...]) -> list[dict]:
+    """The key columns of each run of a job (one pair, or a chunk of them)."""
+    return [asdict(j) for j in (job if isinstance(job, tuple) else (job,))]
+
+
+def gain_subset(job: GainJob | tuple[GainJob, ...], keep: list[int]) -> GainJob | tuple[GainJob, ...]:
+    """The job with only the runs `keep` (indices into a chunk)."""
+    return tuple(job[i] for i in keep) if isinstance(job, tuple) else job
+
+
+def gain_key_columns() -> list[str]:
+    """What names a run of the gain map: its pair's fields (`start` is its seed)."""
+    return [f.name for f in fields(GainJob)]
+
+
 def gain_columns() -> list[str]:
     return [f.name for f in fields(GainJob)] + ["settling_time"]
 
 
 def summarise_gains(rows: list[dict]) -> list[dict]:
-    """Worst settling time over the starts, per (c1, c2, ratio); nan: some start never settled."""
+    """Worst settling time over the starts, per (c1, c2, ratio); nan: some start never settled
+    (or ended at the run timeout, counted in `timeouts`)."""
     groups: dict[tuple, list[float]] = {}
+    late: dict[tuple, int] = {}
     for r in rows:
-        groups.setdefault((float(r["c1"]), float(r["c2"]), float(r["ratio"])), []).append(float(r["settling_time"]))
+        key = (float(r["c1"]), float(r["c2"]), float(r["ratio"]))
+        timeout = r.get("status") not in (None, "ok")
+        late[key] = late.get(key, 0) + timeout
+        groups.setdefault(key, []).append(math.nan if timeout else float(r["settling_time"]))
     return [
         {
             "c1": k[0],
@@ -98,6 +118,7 @@ def summarise_gains(rows: list[dict]) -> list[dict]:
             "ratio": k[2],
             "starts": len(v),
             "worst_settling_s": max(v) if all(math.isfinite(x) for x in v) else math.nan,
+            "timeouts": late[k],
         }
         for k, v in sorted(groups.items())
     ]

@@ -220,6 +220,21 @@ def jobs_of(template: Template, settings: Sequence[Setting], jitter: Jitter, see
     ]
 
 
+def stubs(job: Job) -> list[dict]:
+    """The key columns (setting, its values, seed) of each run of a job."""
+    _, setting, _, seeds = job
+    return [{"setting": setting.label(), **dict(setting.values), "seed": sd} for sd in seeds]
+
+
+def subset(job: Job, keep: list[int]) -> Job:
+    """The job with only the runs `keep` (indices into its seeds)."""
+    template, setting, jitter, seeds = job
+    return (template, setting, jitter, tuple(seeds[i] for i in keep))
+
+
+KEY_COLUMNS = ["setting", "seed"]  # what names a run of a scenario study
+
+
 def row(setting: Setting, seed: int, res, wall: float) -> dict:
     """The CSV row of one run."""
     crashes = sum(1 for e in res.events if e.get("kind") == EventKind.CRASH)
@@ -257,17 +272,19 @@ def columns(settings: Sequence[Setting]) -> list[str]:
 
 
 def summarise(rows: list[dict], settings: Sequence[Setting]) -> list[dict]:
-    """One line per setting (in the settings' order; settings with no finished run left
-    out): runs, converged share over every run, settling times of the converged runs,
-    switches per follower, crashes."""
+    """One line per setting (in the settings' order; settings with no row left out): runs
+    (and how many ended at the run timeout), converged share over every run (a timed-out one
+    did not converge), settling times of the converged runs, switches per follower, crashes
+    (over the runs that finished)."""
     groups: dict[str, list[dict]] = {}
     for r in rows:
         groups.setdefault(str(r["setting"]), []).append(r)
     out = []
     for st in settings:
-        rs = groups.get(st.label(), [])
-        if not rs:
+        every = groups.get(st.label(), [])
+        if not every:
             continue
+        rs = [r for r in every if r.get("status") in (None, "ok")]
         conv = [r for r in rs if is_true(r["converged"])]
         settle = sorted(float(r["settling_time"]) for r in conv if math.isfinite(float(r["settling_time"])))
         per_agent = [int(c) for r in rs for c in str(r["switch_counts"]).split(";") if c != ""]
@@ -275,9 +292,10 @@ def summarise(rows: list[dict], settings: Sequence[Setting]) -> list[dict]:
             {
                 "setting": st.label(),
                 **{k: v for k, v in st.values},
-                "runs": len(rs),
+                "runs": len(every),
+                "timeouts": len(every) - len(rs),
                 "converged": len(conv),
-                "converged_fraction": len(conv) / len(rs),
+                "converged_fraction": len(conv) / len(every),
                 "settling_median_s": statistics.median(settle) if settle else math.nan,
                 "settling_p90_s": settle[min(len(settle) - 1, int(0.9 * len(settle)))] if settle else math.nan,
                 "switches_median": statistics.median(per_agent) if per_agent else math.nan,

@@ -237,6 +237,30 @@ def safety_totals(rows: list[dict]) -> dict:
     }
 
 
+def finished(rows: list[dict]) -> list[dict]:
+    """The rows of runs that finished (not ended at the run timeout: swarm/study/plan.py)."""
+    return [r for r in rows if r.get("status") in (None, "ok")]
+
+
+def swarm_key_columns() -> list[str]:
+    """What names a run of the swarms study: its setting's columns and its seed."""
+    return [f.name for f in fields(SwarmSetting)] + ["seed"]
+
+
+def swarm_stubs(job: tuple[SwarmSetting, int | tuple[int, ...]]) -> list[dict]:
+    """The key columns of each run of a job (one seed, or a chunk's seeds)."""
+    setting, seeds = job
+    return [{**asdict(setting), "seed": sd} for sd in (seeds if isinstance(seeds, tuple) else (seeds,))]
+
+
+def swarm_subset(job: tuple[SwarmSetting, int | tuple[int, ...]], keep: list[int]) -> tuple:
+    """The job with only the runs `keep` (indices into its seeds)."""
+    setting, seeds = job
+    if not isinstance(seeds, tuple):
+        return job
+    return (setting, tuple(seeds[i] for i in keep))
+
+
 def swarm_jobs(settings: Iterable[SwarmSetting], seeds: Iterable[int]) -> list[tuple[SwarmSetting, int]]:
     seeds = list(seeds)
     return [(st, sd) for st in settings for sd in seeds]
@@ -252,15 +276,17 @@ def setting_of(row: dict) -> tuple:
 
 
 def summarise_swarms(rows: list[dict]) -> list[dict]:
-    """One line per setting: runs, converged fraction over every run (and, apart, how
-    many were cut off at t = 0 and how those fared), settling times, switches per
-    follower, time spent searching and the worst loss's switches."""
+    """One line per setting: runs (and how many ended at the run timeout), converged fraction
+    over every run (a timed-out one did not converge; and, apart, how many were cut off at
+    t = 0 and how those fared), settling times, switches per follower, time spent searching and
+    the worst loss's switches (over the runs that finished)."""
     groups: dict[tuple, list[dict]] = {}
     for r in rows:
         groups.setdefault(setting_of(r), []).append(r)
     out = []
-    for key, rs in groups.items():
+    for key, every in groups.items():
         setting = SwarmSetting(*key)
+        rs = finished(every)  # a run ended at the timeout counts as a run that did not converge
         cut = [r for r in rs if is_true(r["cut_off"])]
         conv = [r for r in rs if is_true(r["converged"])]
         settle = sorted(float(r["settling_time"]) for r in conv if math.isfinite(float(r["settling_time"])))
@@ -269,11 +295,12 @@ def summarise_swarms(rows: list[dict]) -> list[dict]:
         out.append(
             {
                 "setting": setting.label(),
-                "runs": len(rs),
+                "runs": len(every),
+                "timeouts": len(every) - len(rs),
                 "cut_off": len(cut),
                 "cut_off_converged": sum(1 for r in cut if is_true(r["converged"])),
                 "converged": len(conv),
-                "converged_fraction": len(conv) / len(rs) if rs else math.nan,
+                "converged_fraction": len(conv) / len(every),
                 "settling_median_s": statistics.median(settle) if settle else math.nan,
                 "settling_p90_s": settle[min(len(settle) - 1, int(0.9 * len(settle)))] if settle else math.nan,
                 "switches_median": statistics.median(per_agent) if per_agent else math.nan,

@@ -183,3 +183,98 @@ def test_progress_is_off_with_q_here_or_swarm_q(monkeypatch, flag, level, shown)
 
     monkeypatch.setenv("SWARM_LOG_LEVEL", level)
     assert _progress(flag) is shown
+
+
+# -- rows keyed by (setting, seed): resume, no duplicate; the workers' cap ------------------------
+
+
+class Counting:
+    """A serial executor that counts the runs it runs and stops (Ctrl-C) after `stop_after` rows."""
+
+    def __init__(self, stop_after: int | None = None, twice: bool = False):
+        self.ran, self.stop_after, self.twice = 0, stop_after, twice
+
+    def __call__(self, worker, jobs, on_row):
+        for job in jobs:
+            rows = worker(job)
+            for row in rows if isinstance(rows, list) else [rows]:
+                if self.stop_after is not None and self.ran == self.stop_after:
+                    raise KeyboardInterrupt
+                self.ran += 1
+                on_row(row)
+                if self.twice:  # a task run again after its worker died: its rows come back twice
+                    on_row(dict(row))
+
+
+def test_resume_runs_only_the_runs_not_finished_and_each_row_is_written_once(tmp_path):
+    opts = dict(SMALL, seeds=5, batch=False)  # 2 settings x 5 seeds, one run per job
+    first = Counting(stop_after=3)
+    cut = swarm.study.run_swarms(**opts, out=tmp_path / "s", executor=first, plot=False, progress=False)
+    assert cut.interrupted and len(read(cut.runs_csv)) == 3 and first.ran == 3
+    lines = []
+    second = Counting()
+    done = swarm.study.run_swarms(
+        **opts, resume=tmp_path / "s", executor=second, plot=False, progress=False, say=lines.append
+    )
+    assert second.ran == 10 - 3  # the three finished runs were not run again
+    assert done.resumed == 3 and not done.interrupted and done.duplicates == 0
+    assert "resume: 3 of 10 runs already in" in "\n".join(lines) and "7 to run" in "\n".join(lines)
+    rows = read(done.runs_csv)
+    assert sorted((r["range"], r["seed"]) for r in rows) == sorted(
+        (g, str(s)) for g in ("inf", "40.0") for s in range(5)
+    )
+    assert rows[:3] == read(cut.runs_csv)[:3]
+    assert [int(line["runs"]) for line in read(done.summary_csv)] == [5, 5]
+    third = Counting()
+    again = swarm.study.run_swarms(**opts, resume=tmp_path / "s", executor=third, plot=False, progress=False)
+    assert third.ran == 0 and len(read(again.runs_csv)) == 10  # nothing left to run
+
+
+def test_a_row_that_comes_back_twice_is_written_once(tmp_path):
+    r = swarm.study.run_swarms(**SMALL, out=tmp_path / "s", executor=Counting(twice=True), plot=False, progress=False)
+    assert r.duplicates == 4 and len(read(r.runs_csv)) == 4 and len(r.rows) == 4
+
+
+def test_resume_drops_a_line_cut_short_and_refuses_another_studys_csv(tmp_path):
+    swarm.study.run_swarms(**SMALL, out=tmp_path / "s", workers=1, plot=False, progress=False)
+    csv_path = tmp_path / "s" / "runs.csv"
+    text = csv_path.read_text()
+    csv_path.write_text(text[: text.rindex("\n", 0, len(text) - 1) + 12])  # the last row cut short by a kill
+    runner = Counting()
+    r = swarm.study.run_swarms(**SMALL, resume=tmp_path / "s", executor=runner, plot=False, progress=False)
+    assert runner.ran == 1 and r.resumed == 3 and len(read(csv_path)) == 4
+    with pytest.raises(UsageError, match="columns of another study"):
+        swarm.study.run_gains(c1=[1], c2=[0.5], ratios=[1], starts=1, duration=2, resume=tmp_path / "s", workers=1)
+    with pytest.raises(UsageError, match="nothing to resume"):
+        swarm.study.run_swarms(**SMALL, resume=tmp_path / "nothing", workers=1)
+
+
+def test_a_run_timeout_needs_an_executor_that_can_end_a_run(tmp_path):
+    with pytest.raises(UsageError, match="run_timeout: this executor cannot end a run"):
+        swarm.study.run_swarms(**SMALL, out=tmp_path / "s", executor=Counting(), run_timeout=5)
+    with pytest.raises(UsageError, match="run_timeout: -1 must be a positive number"):
+        swarm.study.run_swarms(**SMALL, out=tmp_path / "s", workers=1, run_timeout=-1)
+
+
+@pytest.mark.parametrize(
+    "asked, capacity, jobs, got, line",
+    [
+        (1000, 2, 2, 2, "--workers 1000 capped at 2: this machine has 2 cores"),
+        (1000, 8, 3, 3, "--workers 1000 capped at 3: the study has 3 jobs"),
+        (0, 2, 40, 2, None),  # 0: all there are, nothing to say
+        (2, 2, 40, 2, None),
+        (3, 4, 1, 1, "--workers 3 capped at 1: the study has 1 job"),
+    ],
+)
+def test_workers_are_capped_at_the_machine_and_the_jobs_with_one_line(asked, capacity, jobs, got, line):
+    from swarm.study.plan import capped
+
+    assert capped(asked, capacity, "this machine has 2 cores", jobs, "--workers") == (got, line)
+
+
+def test_a_key_cell_is_the_same_from_a_fresh_row_and_from_its_csv_text():
+    from swarm.study.plan import cell, typed
+
+    for fresh, text in [(10, "10"), (40.0, "40.0"), (40, "40.0"), (math.inf, "inf"), (True, "True"), (None, "")]:
+        assert cell(fresh) == cell(text) == cell(typed(text))
+    assert cell("sticky") == "sticky" and typed("1;0;2") == "1;0;2" and typed("3") == 3

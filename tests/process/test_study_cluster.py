@@ -1,0 +1,144 @@
+"""`swarm study --scheduler`: a study on a Dask cluster of three machines, for real: a network
+namespace for the scheduler and the study (`s`), one for each `dask worker` process (`a`, `b`),
+nothing shared but the network (tests/process/test_multihost.py's `Lan`: a bridge in `s`, a
+veth pair to each worker; docs/design/studies.md#cluster).
+
+- a study of 400 runs gives the rows the same study gives on this machine's processes, each
+  run once;
+- one worker SIGKILLed mid-study: the scheduler runs its tasks on the other one, and every
+  run's row is there exactly once.
+
+Needs root (`ip netns add`) and the package distributed (in the `test` extra); skips, saying
+why, where either is missing. Every namespace is the test's own and deleted at the end, even on
+failure; only processes the test started are ever signalled (by process group).
+"""
+
+from __future__ import annotations
+
+import csv
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from deadlines import DEADLINE
+from test_multihost import lan_or_skip
+
+from swarm.contracts.vocabulary import ExitCode
+from swarm.runtime.procs import Group, wait_until
+
+pytestmark = pytest.mark.slow
+
+pytest.importorskip("distributed", reason="the cluster executor needs distributed (the extra swarm-circumnav[cluster])")
+
+ROOT = Path(__file__).resolve().parents[2]
+PORT = 8786
+DASK = [sys.executable, "-m", "dask"]
+# 400 tiny runs (4 agents, 4 s of 0.1 s ticks) in 8 batches of 50 (the batch engine, 4 per worker)
+STUDY = ["swarms", "--n", "4", "--leaders", "1", "--seeds", "400", "--duration", "4", "--dt", "0.1"]
+STUDY += ["--no-plot", "-q"]
+
+
+def rows(path: Path) -> list[dict]:
+    with path.open() as f:
+        return list(csv.DictReader(f))
+
+
+def without_wall(rs: list[dict]) -> list[dict]:
+    return sorted(({k: v for k, v in r.items() if k != "wall_s"} for r in rs), key=lambda r: int(r["seed"]))
+
+
+@pytest.fixture
+def cluster(tmp_path):
+    """A scheduler in namespace `s` (the bridge's address), a `dask worker` (one thread, no
+    nanny: one process) in each of `a` and `b`; yields (lan, scheduler address, {name: group})."""
+    lan = lan_or_skip()
+    groups: dict[str, Group] = {}
+    logs = {}
+    try:
+        address = f"tcp://{lan.address['w']}:{PORT}"
+
+        def start(name: str, where: str, args: list) -> None:
+            logs[name] = (tmp_path / f"{name}.log").open("w")
+            groups[name] = Group(session=True)
+            groups[name].start(lan.cmd(where, args), cwd=ROOT, stdout=logs[name], stderr=subprocess.STDOUT)
+
+        start("scheduler", "w", [*DASK, "scheduler", "--host", lan.address["w"], "--port", PORT, "--no-dashboard"])
+        for h in ("a", "b"):
+            start(
+                h,
+                h,
+                [*DASK, "worker", address, "--nthreads", 1, "--no-nanny", "--no-dashboard", "--name", h]
+                + ["--host", lan.address[h]],
+            )
+        yield lan, address, groups
+    finally:
+        for g in groups.values():
+            g.kill()
+        for f in logs.values():
+            f.close()
+        errors = lan.down()
+        assert not errors, errors
+
+
+def study_in(lan, args: list, **kw) -> subprocess.Popen:
+    return subprocess.Popen(
+        lan.cmd("w", [sys.executable, "-m", "swarm", "study", *args]),
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        **kw,
+    )
+
+
+def test_a_study_on_two_workers_gives_the_local_rows_and_survives_a_killed_worker(cluster, tmp_path):
+    lan, address, groups = cluster
+    t0 = time.monotonic()
+    local = subprocess.run(
+        [sys.executable, "-m", "swarm", "study", *STUDY, "--workers", "2", "--out", tmp_path / "local"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=4 * DEADLINE,
+    )
+    local_s = time.monotonic() - t0
+    assert local.returncode == ExitCode.OK, local.stdout + local.stderr
+    expected = without_wall(rows(tmp_path / "local" / "runs.csv"))
+    assert len(expected) == 400
+
+    t0 = time.monotonic()
+    p = study_in(lan, [*STUDY, "--scheduler", address, "--workers", 1000, "--out", tmp_path / "dask"])
+    output, _ = p.communicate(timeout=4 * DEADLINE)
+    cluster_s = time.monotonic() - t0
+    assert p.returncode == ExitCode.OK, output
+    assert f"--workers 1000 capped at 2: the cluster at {address} has 2 worker threads" in output
+    assert f"on the Dask cluster at {address}" in output
+    got = rows(tmp_path / "dask" / "runs.csv")
+    assert without_wall(got) == expected  # the same rows, each run once
+    print(f"400 runs: {cluster_s:.1f} s on the cluster, {local_s:.1f} s on 2 local processes")
+
+    out = tmp_path / "killed"
+    p = study_in(lan, [*STUDY, "--scheduler", address, "--out", out])
+    try:
+
+        def some_rows() -> bool:
+            assert p.poll() is None, p.stdout.read() if p.stdout else ""
+            return (out / "runs.csv").exists() and len(rows(out / "runs.csv")) >= 1
+
+        assert wait_until(some_rows, 4 * DEADLINE, interval=0.05), "no row within the deadline"
+        at_kill = len(rows(out / "runs.csv"))
+        groups["a"].signal(signal.SIGKILL)  # worker a's process, mid-study
+        output, _ = p.communicate(timeout=4 * DEADLINE)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    assert at_kill < 400, "the study was over before the worker was killed"
+    assert p.returncode == ExitCode.OK, output
+    after = rows(out / "runs.csv")
+    assert sorted(int(r["seed"]) for r in after) == list(range(400))  # every run exactly once
+    assert without_wall(after) == expected
+    print(f"worker a killed at {at_kill} rows of 400; all 400 rows once")
