@@ -63,6 +63,9 @@ class BatchSticky:
         # the last sighting of the agent steered by (Tracker.last), and the one before (prev)
         self.last = _Sightings(shape)
         self.prev = _Sightings(shape)
+        # (b, i) -> the contact `rest` steered it by at its last step there (None: nobody): what
+        # its Observation.out was (a predicted one while it coasts); swarm.env's vector env reads it
+        self.chosen: dict[tuple[int, int], Any] = {}
 
     # -- the keep, over arrays --------------------------------------------------------------------
     def keep(self, frames: Any, follower: np.ndarray) -> np.ndarray:
@@ -132,6 +135,7 @@ class BatchSticky:
                 )
                 self._store(f, b, i, col)
                 c, g = ch.contact, self.gains[b]
+                self.chosen[(b, i)] = c
                 rooted[b, i], searching[b, i] = ch.rooted, search is not None
                 if c is None:
                     spec = self.specs[b][i]

@@ -18,12 +18,19 @@ from typing import TYPE_CHECKING, Any
 from swarm.env.observation import FIELDS, K_NEAREST, fields, index, observation_array, policy_law, size, turn_rate
 
 if TYPE_CHECKING:
+    from swarm.env.checks import EnvError, EnvTypeError
     from swarm.env.parallel import SwarmEnv, WorldView, agent_id, agent_name, radial_rate_reward
+    from swarm.env.vector import VectorSwarmEnv, vector_actions
+    from swarm.env.view import VectorSwarmView
 
 __all__ = [
     "FIELDS",
     "K_NEAREST",
+    "EnvError",
+    "EnvTypeError",
     "SwarmEnv",
+    "VectorSwarmEnv",
+    "VectorSwarmView",
     "WorldView",
     "agent_id",
     "agent_name",
@@ -34,8 +41,11 @@ __all__ = [
     "radial_rate_reward",
     "size",
     "turn_rate",
+    "vector_actions",
 ]
 _PARALLEL = {"SwarmEnv", "WorldView", "agent_id", "agent_name", "radial_rate_reward"}
+_LAZY = {"EnvError": "checks", "EnvTypeError": "checks", "VectorSwarmEnv": "vector", "vector_actions": "vector"}
+_LAZY["VectorSwarmView"] = "view"  # needs the `env` extra, as SwarmEnv
 
 
 def __getattr__(name: str) -> Any:
@@ -44,4 +54,19 @@ def __getattr__(name: str) -> Any:
         from swarm.env import parallel
 
         return getattr(parallel, name)
+    if _LAZY.get(name) == "checks":
+        # lazy: the checks import the scenario's limits (pydantic), which a policy law's agent process does without
+        from swarm.env import checks
+
+        return getattr(checks, name)
+    if _LAZY.get(name) == "vector":
+        # lazy: the batch engine, only for who asks for the vector env
+        from swarm.env import vector
+
+        return getattr(vector, name)
+    if _LAZY.get(name) == "view":
+        # lazy: pettingzoo and gymnasium, as for SwarmEnv
+        from swarm.env import view
+
+        return getattr(view, name)
     raise AttributeError(f"module 'swarm.env' has no attribute {name!r}")
