@@ -13,7 +13,7 @@ from __future__ import annotations
 from swarm.agents.coast import Tracker
 from swarm.agents.search import SearchMemory
 from swarm.agents.selection import Choice, cone, nearest, reach
-from swarm.agents.sticky import Sticky
+from swarm.agents.sticky import LATE, LOST, SEARCH, Sticky
 from swarm.contracts.brain_config import AgentConf, GainsConf, SensingConf
 from swarm.contracts.frames import Contact
 from swarm.contracts.observation import Search
@@ -71,7 +71,7 @@ class StickyFollower:
         seen = None if c is not None else nearest(tuple(k for k in contacts if k.hops >= 0))
         search = self.memory.update(c, seen, heading, time, last_u, predicted)
         state = self.sticky.state
-        if c is None and state is not FollowState.LATE:  # LOST, SEARCH: what it flies
-            state = FollowState.LOST if search is None else FollowState.SEARCH
+        if c is None and state is not LATE:  # LOST, SEARCH: what it flies
+            state = LOST if search is None else SEARCH
         self.state = state
         return choice, search
