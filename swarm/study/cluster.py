@@ -20,6 +20,7 @@ its budget (a thread cannot be ended; a process can), and the task reports the j
 from __future__ import annotations
 
 import math
+import re
 from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -66,11 +67,20 @@ def run_task(worker: Worker, jobs: list[tuple[Any, int]], run_timeout: float | N
     return [outcome[id(j)] for j, _ in jobs]
 
 
+ADDRESS = re.compile(r"^(tcp|tls)://[^\s/:]+:[0-9]{1,5}$")
+
+
 def dask_executor(address: str, workers: int = 0) -> StudyExecutor:
     """Run a study's jobs on the Dask cluster whose scheduler is at `address`
     ("tcp://HOST:8786"), at most `workers` tasks at a time (0: one per worker thread; a study
     caps it at that). Connects when first used; `close()` lets go of the connection. Needs the
-    extra `swarm-circumnav[cluster]`."""
+    extra `swarm-circumnav[cluster]`. UsageError for an address that is not tcp:// or tls://
+    HOST:PORT."""
+    if not ADDRESS.match(address):
+        raise UsageError(
+            f"--scheduler: {address!r} is not a scheduler's address: give tcp://HOST:PORT, e.g. tcp://10.0.0.1:8786"
+        )
+    _distributed()  # the extra's absence said now, before anything runs
     return DaskExecutor(address, workers)
 
 

@@ -5,8 +5,10 @@ veth pair to each worker; docs/design/studies.md#cluster).
 
 - a study of 400 runs gives the rows the same study gives on this machine's processes, each
   run once;
+- a law that hangs, with --run-timeout: its runs are `timeout` rows (the task's child process
+  killed on the worker), the others finish;
 - one worker SIGKILLed mid-study: the scheduler runs its tasks on the other one, and every
-  run's row is there exactly once.
+  run's row is there exactly once (the last test: the cluster has one worker after it).
 
 Needs root (`ip netns add`) and the package distributed (in the `test` extra); skips, saying
 why, where either is missing. Every namespace is the test's own and deleted at the end, even on
@@ -25,6 +27,7 @@ from pathlib import Path
 import pytest
 from deadlines import DEADLINE
 from test_multihost import lan_or_skip
+from test_study_runs import HANG_LAW, HANG_SCENARIO
 
 from swarm.contracts.vocabulary import ExitCode
 from swarm.runtime.procs import Group, wait_until
@@ -50,11 +53,12 @@ def without_wall(rs: list[dict]) -> list[dict]:
     return sorted(({k: v for k, v in r.items() if k != "wall_s"} for r in rs), key=lambda r: int(r["seed"]))
 
 
-@pytest.fixture
-def cluster(tmp_path):
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory):
     """A scheduler in namespace `s` (the bridge's address), a `dask worker` (one thread, no
     nanny: one process) in each of `a` and `b`; yields (lan, scheduler address, {name: group})."""
     lan = lan_or_skip()
+    tmp_path = tmp_path_factory.mktemp("cluster")
     groups: dict[str, Group] = {}
     logs = {}
     try:
@@ -92,6 +96,56 @@ def study_in(lan, args: list, **kw) -> subprocess.Popen:
         text=True,
         **kw,
     )
+
+
+def test_a_law_that_hangs_on_the_cluster_gives_timeout_rows(cluster, tmp_path):
+    lan, address, _ = cluster
+    (tmp_path / "hanglaw.py").write_text(HANG_LAW)
+    src = tmp_path / "hang.toml"
+    src.write_text(HANG_SCENARIO)
+    args = ["scenario", src, "--seeds", 2, "--param", "hang=0,1", "--run-timeout", 5, "--no-plot", "-q"]
+    p = study_in(lan, [*args, "--scheduler", address, "--out", tmp_path / "o"])
+    output, _ = p.communicate(timeout=4 * DEADLINE)
+    assert p.returncode == ExitCode.OK, output
+    got = {(r["param.hang"], r["seed"]): r["status"] for r in rows(tmp_path / "o" / "runs.csv")}
+    assert got == {("0.0", "0"): "ok", ("0.0", "1"): "ok", ("1.0", "0"): "timeout", ("1.0", "1"): "timeout"}
+    assert "timeout: 2 run(s) ended at --run-timeout" in output
+
+
+def test_ctrl_c_then_resume_on_the_cluster_runs_the_rest_once(cluster, tmp_path):
+    lan, address, _ = cluster
+    out = tmp_path / "s"
+    args = [*STUDY, "--per-agent", "--scheduler", address, "--out", out]  # 400 jobs in tasks of 50
+    group = Group(session=True)
+    p = group.start(
+        lan.cmd("w", [sys.executable, "-m", "swarm", "study", *args]),
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+
+        def some_rows() -> bool:
+            assert p.poll() is None, p.stdout.read() if p.stdout else ""
+            return (out / "runs.csv").exists() and len(rows(out / "runs.csv")) >= 1
+
+        assert wait_until(some_rows, 4 * DEADLINE, interval=0.05), "no row within the deadline"
+        group.signal(signal.SIGINT)  # a terminal's Ctrl-C
+        output, _ = p.communicate(timeout=DEADLINE)
+    finally:
+        group.kill()
+    assert p.returncode == ExitCode.INTERRUPTED, output
+    assert "Traceback" not in output and output.count("stopped:") == 1, output
+    before = rows(out / "runs.csv")
+    assert 1 <= len(before) < 400
+    again = study_in(lan, [*args[:-2], "--resume", out])
+    output, _ = again.communicate(timeout=4 * DEADLINE)
+    assert again.returncode == ExitCode.OK, output
+    assert f"resume: {len(before)} of 400 runs already in" in output and f"{400 - len(before)} to run" in output
+    after = rows(out / "runs.csv")
+    assert sorted(int(r["seed"]) for r in after) == list(range(400)) and after[: len(before)] == before
+    print(f"Ctrl-C at {len(before)} rows of 400; resumed: {400 - len(before)} run, 400 rows once")
 
 
 def test_a_study_on_two_workers_gives_the_local_rows_and_survives_a_killed_worker(cluster, tmp_path):

@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import math
 import re
+import sys
 from pathlib import Path
 
 import pytest
@@ -278,3 +279,18 @@ def test_a_key_cell_is_the_same_from_a_fresh_row_and_from_its_csv_text():
     for fresh, text in [(10, "10"), (40.0, "40.0"), (40, "40.0"), (math.inf, "inf"), (True, "True"), (None, "")]:
         assert cell(fresh) == cell(text) == cell(typed(text))
     assert cell("sticky") == "sticky" and typed("1;0;2") == "1;0;2" and typed("3") == 3
+
+
+def test_a_scheduler_address_is_checked_and_the_missing_extra_named(monkeypatch, tmp_path):
+    from swarm.study.cluster import dask_executor
+
+    with pytest.raises(UsageError, match="'nonsense' is not a scheduler's address: give tcp://HOST:PORT"):
+        dask_executor("nonsense")
+    res = CliRunner().invoke(
+        app, ["study", "swarms", "--seeds", "2", "--scheduler", "10.0.0.1", "--out", str(tmp_path / "x")]
+    )
+    assert res.exit_code == 2 and "--scheduler: '10.0.0.1' is not a scheduler's address" in res.output
+    assert not (tmp_path / "x").exists()
+    monkeypatch.setitem(sys.modules, "distributed", None)  # as if not installed
+    with pytest.raises(UsageError, match=r"pip install 'swarm-circumnav\[cluster\]'"):
+        dask_executor("tcp://10.0.0.1:8786")
