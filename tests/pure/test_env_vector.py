@@ -150,8 +150,10 @@ def test_one_policy_object_acts_in_both_environments_and_as_a_law():
     env.step({n: gains_policy(o) for n, o in sobs.items()})
     kept = [o for _, _, o in env.pending if o is not None]  # the Observations the followers' laws would be given
     assert len(kept) == 4
+    vlaw = policy_law(vectorised)  # the vectorised one runs as a law too, on one array
     for o in kept:
         assert law(o) == gains_policy(observation_array(o))
+        assert vlaw(o) == float(vectorised(observation_array(o)))
 
 
 # -- the PettingZoo view --------------------------------------------------------------------------
