@@ -3,11 +3,13 @@ finishes, and its tables written as CSV (appended and flushed row by row, so a s
 finished row).
 
 `run_jobs` is the pool: `processes` child processes (`python -m swarm.study.child`, speaking
-pickles over their stdin/stdout), each given one job at a time. A pool of our own rather than
-`multiprocessing.Pool` or `concurrent.futures`, because a run that hangs must be ended without
-ending the others: a job past its time budget has its process killed (SIGKILL: a hung law may
-ignore anything gentler) and replaced, and the study goes on (`Timeouts`). Neither standard pool
-can kill one worker (`ProcessPoolExecutor` breaks as a whole when one dies; `Pool.terminate`
+pickles over their stdin/stdout), each running one job at a time with the next one already
+queued on it (so a busy machine's scheduling of this process never leaves a child waiting).
+A pool of our own rather than `multiprocessing.Pool` or `concurrent.futures`, because a run
+that hangs must be ended without ending the others: a job past its time budget has its process
+killed (SIGKILL: a hung law may ignore anything gentler) and replaced, and the study goes on
+(`Timeouts`); the jobs queued behind it go to the other children. Neither standard pool can
+kill one worker (`ProcessPoolExecutor` breaks as a whole when one dies; `Pool.terminate`
 ends them all), and pebble would be a new dependency for some 150 lines. Plain subprocesses,
 not `multiprocessing.Process`, so the same pool also runs inside a Dask worker (a daemonic
 process, which multiprocessing refuses children: swarm/study/cluster.py).
@@ -35,6 +37,7 @@ from pathlib import Path
 from typing import Any
 
 Rows = list[dict]
+PIPELINE = 2  # jobs queued on a child at most: the next is there when one ends (no round trip between)
 STARTUP_S = 60.0  # a worker's imports before a job's run starts (its time budget) may take this long
 
 
@@ -101,19 +104,36 @@ class _Slot:
         self.recv = Connection(os.dup(self.proc.stdout.fileno()), writable=False)
         self.proc.stdin.close()
         self.proc.stdout.close()
-        self.tag: int | None = None
-        self.job: Any = None
-        self.started = 0.0
-        self.budget = float("inf")
+        self.jobs: deque[tuple[int, Any, float]] = deque()  # (tag, job, budget): the first one runs
+        self.started = 0.0  # when the first one's run started
 
-    def give(self, tag: int, worker: Callable, job: Any, budget: float) -> None:
+    @property
+    def job(self) -> Any:
+        """The job running (None: idle)."""
+        return self.jobs[0][1] if self.jobs else None
+
+    @property
+    def budget(self) -> float:
+        return self.jobs[0][2] if self.jobs else float("inf")
+
+    def _clock(self) -> None:
         # the clock starts when the child says STARTED (its imports done: seconds on a busy
         # machine); until then it has STARTUP_S more, for a module that hangs as it is imported
-        self.tag, self.job, self.started, self.budget = tag, job, time.monotonic() + STARTUP_S, budget
+        self.started = time.monotonic() + STARTUP_S
+
+    def give(self, tag: int, worker: Callable, job: Any, budget: float) -> None:
+        """Queue a job on this child (it runs them in turn; the next is sent while one runs)."""
+        self.jobs.append((tag, job, budget))
+        if len(self.jobs) == 1:
+            self._clock()
         self.send.send_bytes(pickle.dumps((worker, job)))
 
-    def idle(self) -> None:
-        self.tag, self.job, self.budget = None, None, float("inf")
+    def done(self) -> tuple[int, Any]:
+        """The running job finished: its (tag, job); the next one's clock set."""
+        tag, job, _ = self.jobs.popleft()
+        if self.jobs:
+            self._clock()
+        return tag, job
 
     def end(self, kill: bool = False) -> None:
         """Ask the child to exit (or kill it), and reap it."""
@@ -159,32 +179,39 @@ def run_jobs(
     tags = len(queue)
     died: set[int] = set()
     slots: list[_Slot] = []
+
+    def lost(s: _Slot) -> tuple[int, Any, float]:
+        """A slot's child is gone: its queued jobs back to the front of the queue; the one it ran."""
+        head, *rest = s.jobs
+        queue.extendleft(reversed([(t, j) for t, j, _ in rest]))
+        return head
+
     try:
         slots = [_Slot() for _ in range(max(1, min(processes, len(queue))))]
-        while queue or any(s.job is not None for s in slots):
-            for s in slots:
-                if s.job is None and queue:
-                    tag, job = queue.popleft()
-                    s.give(tag, worker, job, timeouts.budget(job) if timeouts else float("inf"))
-            busy = [s for s in slots if s.job is not None]
+        while queue or any(s.jobs for s in slots):
+            for depth in range(1, PIPELINE + 1):  # every child one job, then a second one queued
+                for s in slots:
+                    if len(s.jobs) < depth and queue:
+                        tag, job = queue.popleft()
+                        s.give(tag, worker, job, timeouts.budget(job) if timeouts else float("inf"))
+            busy = [s for s in slots if s.jobs]
             now = time.monotonic()
             left = min(s.started + s.budget - now for s in busy)
             ready = wait([s.recv for s in busy], None if left == float("inf") else max(0.0, left))
             for k, s in enumerate(slots):
-                if s.job is None:
+                if not s.jobs:
                     continue
                 if s.recv in ready:
                     try:
                         ok, payload = pickle.loads(s.recv.recv_bytes())
                     except (EOFError, OSError):  # the child died without a reply
-                        lost, job = s.tag, s.job
-                        assert lost is not None
+                        tag, job, _ = lost(s)
                         s.end(kill=True)
-                        if lost in died:
+                        if tag in died:
                             code = s.proc.returncode
                             raise WorkerDied(f"a worker died twice on one job (exit code {code})") from None
-                        died.add(lost)
-                        queue.appendleft((lost, job))
+                        died.add(tag)
+                        queue.appendleft((tag, job))
                         slots[k] = _Slot()
                         continue
                     if ok is None:  # the child has the job and its modules: the run starts now
@@ -193,11 +220,11 @@ def run_jobs(
                     if not ok:
                         exc, tb = payload
                         raise exc from RemoteTraceback(tb)
-                    job = s.job
-                    s.idle()
+                    _, job = s.done()
                     on_rows(job, _as_rows(payload))
                 elif timeouts is not None and time.monotonic() - s.started >= s.budget:
-                    job, elapsed = s.job, time.monotonic() - s.started
+                    elapsed = time.monotonic() - s.started
+                    _, job, _ = lost(s)
                     s.end(kill=True)
                     slots[k] = _Slot()
                     for again in timeouts.timed_out(job, elapsed):
