@@ -145,7 +145,12 @@ BAD_ARGUMENTS = [
 ]
 
 
-@pytest.mark.parametrize(("kwargs", "kind", "pattern"), BAD_ARGUMENTS, ids=[str(c[0])[:40] for c in BAD_ARGUMENTS])
+def case_id(kwargs: dict) -> str:
+    """A test id the same in every xdist worker (a function's name, not its address)."""
+    return ",".join(f"{k}={getattr(v, '__name__', repr(v))}" for k, v in kwargs.items())
+
+
+@pytest.mark.parametrize(("kwargs", "kind", "pattern"), BAD_ARGUMENTS, ids=[case_id(c[0]) for c in BAD_ARGUMENTS])
 def test_a_bad_constructor_argument_is_an_error_naming_it(kwargs, kind, pattern):
     kwargs = dict(kwargs)
     scenario = kwargs.pop("scenario", CASE2)
