@@ -6,6 +6,9 @@
     obs, infos = env.reset(seed=0)
     law = policy_law(lambda a: 0.5 * a[16])          # obs array -> turn rate, as a law
 
+`VectorSwarmEnv` (swarm/env/vector.py) steps B swarms at once as arrays over the batch
+engine, each equal to `SwarmEnv` to the bit; `VectorSwarmView` is its PettingZoo view.
+
 `policy_law` and the observation layout (swarm/env/observation.py) need only numpy: agent
 processes import them when they run such a law. `SwarmEnv` (swarm/env/parallel.py) imports
 pettingzoo and gymnasium when it is first asked for.

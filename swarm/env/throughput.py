@@ -50,32 +50,11 @@ policy.vectorised = True  # type: ignore[attr-defined]
 
 
 def scenario(selection: str = "sticky", seed: int = 0) -> Any:
-    """`swarm study swarms`' random swarm `seed` of 10 agents (swarm.study.swarms.random_swarm
-    with SwarmSetting(n=10, selection=...), made here again: swarm.env sits below the study):
-    uniform in a 120 m square, speeds 15-40 m/s, 2 leaders at omega = 1 rad/s, dt 0.05 s."""
-    # lazy: a script; the scenario's model (pydantic) only when it runs
-    from swarm.contracts.scenario import parse_scenario
+    """`swarm study swarms`' random swarm `seed` of 10 agents (swarm.env.vector.random_scenario)."""
+    # lazy: the scenario's model (pydantic) only when it runs
+    from swarm.env.vector import random_scenario
 
-    n, leaders = 10, 2
-    rng = np.random.default_rng([seed, n, leaders])
-    xy = rng.uniform(-60.0, 60.0, size=(n, 2))
-    heading = rng.uniform(-math.pi, math.pi, size=n)
-    speed = rng.uniform(15.0, 40.0, size=n)
-    agents = []
-    for k in range(n):
-        a = {"id": k + 1, "role": "leader" if k < leaders else "follower", "x": float(xy[k, 0])}
-        a.update(y=float(xy[k, 1]), heading=float(heading[k]), speed=float(speed[k]))
-        if k < leaders:
-            a["orbit_radius"] = float(speed[k])
-        agents.append(a)
-    data = {
-        "name": f"study-{seed}",
-        "run": {"dt": 0.05, "duration": 10_000.0, "seed": seed},
-        "gains": {"c1": 1.0, "c2": 0.5},
-        "sensing": {"selection": selection},
-        "agents": agents,
-    }
-    return parse_scenario(data, f"random swarm (seed {seed})")
+    return random_scenario(10, seed, selection)
 
 
 def measure_vector(s: Any, b: int, steps: int) -> float:

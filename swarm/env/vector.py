@@ -9,9 +9,11 @@ engine (docs/guides/learning.md#vector).
 
 Constructor: `VectorSwarmEnv(scenario, num_envs=1, *, seed=0, agents="followers",
 k_nearest=6, duration=None, rate_weight=1.0, position_jitter=0.0, heading_jitter=0.0)`;
-scenario a Scenario or a scenario file (any number of agents n; a random one of n agents:
-`swarm.study.swarms.random_swarm(SwarmSetting(n=10), seed)`); A = the agents it controls
-(`possible_agents`, in scenario order). `step(actions)` takes a real (B, A) array.
+scenario a Scenario, a scenario file, or a number of agents n: `random_scenario(n)`, the
+random swarm of n agents `swarm study swarms` makes (seed 0: 2 leaders, n - 2 followers);
+A = the agents it controls (`possible_agents`, in scenario order: the followers, or every
+agent with agents="all"). `step(actions)` takes a real (B, A) array. So
+`VectorSwarmEnv(10, 4096, seed=0, agents="all")` is 4096 swarms of 10 agents, all controlled.
 
 The same episode as `SwarmEnv`, swarm by swarm and to the bit: swarm b of a vector env
 seeded s is `SwarmEnv` reset with seed s + b (tests/pure/test_env_vector.py), with the
@@ -47,7 +49,7 @@ from swarm.agents import batch_maths as bm
 from swarm.agents.batch import BatchBrains
 from swarm.contracts.brain_config import BrainConf
 from swarm.contracts.orbits import wrap_array as wrap
-from swarm.contracts.scenario import Scenario, load_scenario
+from swarm.contracts.scenario import Scenario, load_scenario, parse_scenario
 from swarm.env import checks
 from swarm.env.observation import K_NEAREST, size, turn_rate
 from swarm.offline.batch import refusal
@@ -96,6 +98,33 @@ class _Frames(BatchFrames):
         return s if w.everyone else s & _take(w.present[b], j)
 
 
+def random_scenario(n: int = 10, seed: int = 0, selection: str = "sticky", duration: float = 10_000.0) -> Scenario:
+    """`swarm study swarms`' random swarm `seed` of n agents (swarm.study.swarms.random_swarm
+    with SwarmSetting(n=n, selection=selection), made here again: swarm.env sits below the
+    study): 2 leaders (ids 1, 2) orbiting ccw at omega = 1 rad/s, uniform in a 120 m square,
+    speeds 15-40 m/s, unlimited sensing, dt 0.05 s, gains 1.0 / 0.5."""
+    leaders = 2
+    rng = np.random.default_rng([seed, n, leaders])
+    xy = rng.uniform(-60.0, 60.0, size=(n, 2))
+    heading = rng.uniform(-math.pi, math.pi, size=n)
+    speed = rng.uniform(15.0, 40.0, size=n)
+    agents = []
+    for k in range(n):
+        a: dict[str, Any] = {"id": k + 1, "role": "leader" if k < leaders else "follower", "x": float(xy[k, 0])}
+        a.update(y=float(xy[k, 1]), heading=float(heading[k]), speed=float(speed[k]))
+        if k < leaders:
+            a["orbit_radius"] = float(speed[k])
+        agents.append(a)
+    data = {
+        "name": f"study-{seed}",
+        "run": {"dt": 0.05, "duration": duration, "seed": seed},
+        "gains": {"c1": 1.0, "c2": 0.5},
+        "sensing": {"selection": selection},
+        "agents": agents,
+    }
+    return parse_scenario(data, f"random swarm (seed {seed})")
+
+
 class VectorSwarmEnv:
     """B swarms of one scenario as arrays: observations (B, A, F), actions (B, A)."""
 
@@ -112,13 +141,19 @@ class VectorSwarmEnv:
         position_jitter: float = 0.0,
         heading_jitter: float = 0.0,
     ):
-        """scenario: a Scenario or a scenario file; num_envs: B, the swarms; seed: swarm b's
+        """scenario: a Scenario, a scenario file or a number of agents (`random_scenario`); num_envs: B; seed: swarm b's
         is seed + b (or a sequence of B seeds): it seeds the swarm's start jitter, as
         SwarmEnv.reset(seed) does; agents, k_nearest, duration, position_jitter,
         heading_jitter: as SwarmEnv's; rate_weight: the default reward's
         (`radial_rate_reward(rate_weight)`, computed on arrays)."""
+        if isinstance(scenario, int | np.integer) and not isinstance(scenario, bool):
+            if scenario < 3:
+                raise checks.EnvError(f"scenario: a random swarm needs 3 agents or more (2 leaders), not {scenario}")
+            scenario = random_scenario(int(scenario))
         if not isinstance(scenario, Scenario) and not isinstance(scenario, str | Path):
-            raise checks.EnvTypeError(f"scenario must be a Scenario or a file path, not {type(scenario).__name__}")
+            raise checks.EnvTypeError(
+                f"scenario must be a Scenario, a file path or a number of agents, not {type(scenario).__name__}"
+            )
         self.base = base = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer):
             raise checks.EnvTypeError(f"num_envs must be an int >= 1, not {type(num_envs).__name__} {num_envs!r}")

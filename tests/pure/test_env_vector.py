@@ -129,6 +129,16 @@ def test_observations_are_the_documented_arrays_and_rewards_are_finite():
     assert (obs[..., index("own.last_u", 3)] == np.float32(math.pi / 0.01)).all()
 
 
+def test_a_number_of_agents_is_the_random_swarm_of_swarm_study_swarms():
+    from swarm.study.swarms import SwarmSetting, random_swarm
+
+    vec = VectorSwarmEnv(10, 2, agents="all", duration=0.5)
+    ref = random_swarm(SwarmSetting(n=10, duration=0.5), 0)
+    assert vec.base.agents == ref.agents and vec.base.sensing == ref.sensing and vec.base.gains == ref.gains
+    obs, _ = vec.reset()
+    assert obs.shape == (2, 10, size(6)) and vec.possible_agents == [f"agent_{i}" for i in range(1, 11)]
+
+
 # -- one policy object: the vector env, SwarmEnv, and a law --------------------------------------
 def test_one_policy_object_acts_in_both_environments_and_as_a_law():
     s = scenario(faults=[], duration=0.3)
@@ -219,7 +229,8 @@ BAD_CONSTRUCTION = [
     ({"k_nearest": 1.5}, EnvTypeError, r"k_nearest must be an int >= 0, not float 1.5"),
     ({"rate_weight": math.inf}, EnvError, r"rate_weight must be a finite number >= 0, not inf"),
     ({"agents": "some"}, EnvError, r"agents must be 'followers' or 'all', not 'some'"),
-    ({"scenario": 3}, EnvTypeError, r"scenario must be a Scenario or a file path, not int"),
+    ({"scenario": 2}, EnvError, r"scenario: a random swarm needs 3 agents or more \(2 leaders\), not 2"),
+    ({"scenario": 3.0}, EnvTypeError, r"scenario must be a Scenario, a file path or a number of agents, not float"),
 ]
 
 
