@@ -119,6 +119,11 @@ def test_every_selection_rule_sensing_and_dropout_is_swarm_env(name, faults, run
     assert_same_episodes(s, 2, 3, agents=agents, position_jitter=2.0, heading_jitter=0.1)
 
 
+@pytest.mark.parametrize("k", [0, 1, 12])  # no contact blocks; one; more blocks than contacts (padding)
+def test_any_number_of_contacts_is_swarm_env(k):
+    assert_same_episodes(scenario(duration=0.4), 2, 1, k_nearest=k, agents="all", heading_jitter=0.5)
+
+
 def test_observations_are_the_documented_arrays_and_rewards_are_finite():
     vec = VectorSwarmEnv(scenario(faults=[], duration=0.5), 4, k_nearest=3)
     obs, info = vec.reset()
