@@ -280,8 +280,12 @@ class VectorSwarmEnv:
         self.decision = d = brains.decide(self.tick, frames)
         brains.last_u[:, self.cols] = last_u[:, self.cols]  # the action sets it (step)
         fresh = self._observe(frames, d.out, last_u)
-        self.obs = np.where(self.live[..., None], fresh, self.obs)
-        self.obs[..., 0] = np.where(self.live, 1.0, 0.0)
+        if self.live.all():
+            fresh[..., 0] = 1.0
+            self.obs = fresh
+        else:  # the agents that ended keep their last array, marked not fresh (SwarmEnv's _stale)
+            self.obs = np.where(self.live[..., None], fresh, self.obs)
+            self.obs[..., 0] = np.where(self.live, 1.0, 0.0)
 
     def _observe(self, frames: _Frames, out: np.ndarray, last_u: np.ndarray) -> np.ndarray:
         """`observation_array` of every controlled agent of every swarm (float64, cast later)."""
@@ -420,6 +424,8 @@ class VectorSwarmEnv:
         cur = np.broadcast_to(C, (self.num_envs, len(C))).copy()
         for _ in range(w.n + 1):  # orbits.roots: follow the out-neighbours to a live leader
             stop = (cur < 0) | _take(lead, cur)
+            if stop.all():  # (every walk has ended: the rest of the loop would change nothing)
+                break
             nxt = np.where(_take(alive, cur), _take(self.out, cur), -1)
             cur = np.where(stop, cur, nxt)
         root = np.where((cur >= 0) & _take(lead, cur), cur, -1)
