@@ -33,7 +33,7 @@ from swarm.contracts import wire  # noqa: E402
 from swarm.contracts.brain_config import BrainConf  # noqa: E402
 from swarm.contracts.fastpath import path as wire_path  # noqa: E402
 from swarm.contracts.scenario import load_scenario  # noqa: E402
-from swarm.contracts.vocabulary import ExitCode  # noqa: E402
+from swarm.contracts.vocabulary import ExitCode, FollowState  # noqa: E402
 from swarm.world.engine import Engine  # noqa: E402
 
 JUNK = np.zeros(8 << 20, np.uint8)  # written between calls: evicts the caches
@@ -75,14 +75,15 @@ def main(argv: list[str] | None = None) -> int:
         eng.end_tick()
     spec = sc.agent(who)
     decoded = [wire.decode_sense(b) for b in frames]
-    cmds = [wire.encode_cmd_fields(who, k, 0.1 * (k % 7), 2, "track", 1, 12345) for k in range(len(frames))]
+    keep = FollowState.KEEP
+    cmds = [wire.encode_cmd_fields(who, k, 0.1 * (k % 7), 2, "track", 1, 12345, keep) for k in range(len(frames))]
     count = len(frames)
 
     def whole(brain: AgentBrain) -> Callable[[int], object]:
         def f(i: int) -> bytes:
             fr = wire.decode_sense(frames[i])
             d = brain.decide(fr)
-            return wire.encode_cmd_fields(who, fr.tick, d.u, d.out, d.phase, d.hops, 7)
+            return wire.encode_cmd_fields(who, fr.tick, d.u, d.out, d.phase, d.hops, 7, d.follow)  # as agents/node.py
 
         return f
 
@@ -101,7 +102,7 @@ def main(argv: list[str] | None = None) -> int:
         ("    nearest contact alone, cold", timed(lambda i: nearest(decoded[i].contacts), count, a.reps, True)),
         (
             "  encode the command alone, cold",
-            timed(lambda i: wire.encode_cmd_fields(who, i, 0.1, 2, "track", 1, 7), count, a.reps, True),
+            timed(lambda i: wire.encode_cmd_fields(who, i, 0.1, 2, "track", 1, 7, keep), count, a.reps, True),
         ),
         ("the world's decode of a command, cold", timed(lambda i: wire.decode_cmd(cmds[i]), count, a.reps, True)),
         ("nothing (the harness), cold", timed(lambda i: None, count, a.reps, True)),

@@ -479,6 +479,9 @@ def encode_cmd(c: Command) -> bytes:
 _PHASE_CODE: dict[str, int] = {p: k for k, p in enumerate(PHASES)}
 
 
+_pack_cmd = CMD.pack  # bound once: the agent's path packs a command every tick
+
+
 def encode_cmd_fields(
     agent: int,
     tick: int,
@@ -490,7 +493,7 @@ def encode_cmd_fields(
     follow: str = FollowState.NONE,
 ) -> bytes:
     """encode_cmd without making a Command first (an agent's path every tick)."""
-    return CMD.pack(
+    return _pack_cmd(
         KIND_CMD,
         VERSION,
         _PHASE_CODE[phase],
