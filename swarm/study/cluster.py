@@ -151,7 +151,11 @@ class DaskExecutor(StudyExecutor):
             submit()
             for future in done:
                 task = running.pop(future)
-                for (job, _), (kind, payload) in zip(task, future.result()):
+                try:
+                    outcomes = future.result()
+                except distributed.KilledWorker as e:  # the task's workers died, again and again
+                    raise ClusterError(f"--scheduler {self.address}: a task's workers kept dying ({e})") from None
+                for (job, _), (kind, payload) in zip(task, outcomes):
                     if kind == "rows":
                         for row in payload:
                             on_row(row)

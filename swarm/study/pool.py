@@ -36,6 +36,8 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 from typing import Any
 
+from swarm.contracts.errors import SwarmError
+
 Rows = list[dict]
 PIPELINE = 2  # jobs queued on a child at most: the next is there when one ends (no round trip between)
 STARTUP_S = 60.0  # a worker's imports before a job's run starts (its time budget) may take this long
@@ -61,8 +63,9 @@ class RemoteTraceback(Exception):
         return "\n" + str(self.args[0])
 
 
-class WorkerDied(RuntimeError):
-    """A worker process ended without a reply, twice for the same job (not a timeout of ours)."""
+class WorkerDied(SwarmError):
+    """A worker process ended without a reply, twice for the same job (not a timeout of ours):
+    one line, exit 1, the rows finished before it kept."""
 
 
 def cores() -> int:
@@ -208,8 +211,8 @@ def run_jobs(
                         tag, job, _ = lost(s)
                         s.end(kill=True)
                         if tag in died:
-                            code = s.proc.returncode
-                            raise WorkerDied(f"a worker died twice on one job (exit code {code})") from None
+                            why = f"a study's worker process died twice on one job (exit code {s.proc.returncode})"
+                            raise WorkerDied(why) from None
                         died.add(tag)
                         queue.appendleft((tag, job))
                         slots[k] = _Slot()

@@ -179,3 +179,35 @@ def test_a_law_that_hangs_gives_timeout_rows_and_the_study_completes(tmp_path):
     summary = {r["setting"]: r for r in rows(out / "summary.csv")}
     assert (summary["hang=1"]["runs"], summary["hang=1"]["timeouts"]) == ("2", "2")
     assert (summary["hang=0"]["runs"], summary["hang=0"]["timeouts"]) == ("2", "0")
+
+
+DYING = '''
+import os
+import signal
+from pathlib import Path
+
+
+def work(job):
+    """Job (n, marker): dies (SIGKILL) while `marker` does not exist yet, once or always."""
+    n, marker, always = job
+    if marker and (always or not Path(marker).exists()):
+        Path(marker).touch()
+        os.kill(os.getpid(), signal.SIGKILL)
+    return {"n": n, "pid": os.getpid()}
+'''
+
+
+def test_a_worker_that_dies_has_its_job_run_again_once_then_one_error(tmp_path, monkeypatch):
+    (tmp_path / "dying.py").write_text(DYING)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path))  # the workers find it too
+    import dying
+
+    from swarm.study.pool import WorkerDied, run_jobs
+
+    got: list[dict] = []
+    jobs = [(n, str(tmp_path / "once") if n == 3 else "", False) for n in range(6)]
+    run_jobs(dying.work, jobs, 2, lambda _job, rows: got.extend(rows))
+    assert sorted(r["n"] for r in got) == list(range(6))  # job 3's worker died; run again, every row once
+    with pytest.raises(WorkerDied, match="died twice on one job"):
+        run_jobs(dying.work, [(0, str(tmp_path / "always"), True)], 2, lambda _job, rows: None)
