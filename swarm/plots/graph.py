@@ -15,6 +15,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import FancyArrowPatch
 
 from swarm.plots.context import Ctx
+from swarm.plots.rows import follower_rows, margin_column
 from swarm.plots.style import DEAD_COLOUR, FLAG_COLOUR, size_for
 from swarm.world.run_reader import final_graph, switch_count, switch_counts
 
@@ -156,17 +157,10 @@ def panel_neighbours(ax: Axes, ctx: Ctx) -> None:
                     fontsize=fs,
                     color=text_colour(face),
                 )
-    ax.set_yticks(range(len(followers)), [looks.labels[j] for j in followers], fontsize=fs)
-    for tick, j in zip(ax.get_yticklabels(), followers):
-        tick.set_bbox(dict(boxstyle="round,pad=0.15", fc=looks.colours[j], ec="none", alpha=0.55))
-    ax.set_ylim(max(len(followers), 1) - 0.5, -0.5)
-    ax.set_xlim(float(t[0]), t_end)
-    ax.set_xlabel("t (s)")
-    ax.set_ylabel("follower")
     counts = switch_counts(run)
     n_sw = sum(counts)
-    ax.set_title(f"out-neighbour of each follower over time ({n_sw} switch{'es' if n_sw != 1 else ''})")
-    ax.grid(True, axis="x", lw=0.3, alpha=0.5)
+    title = f"out-neighbour of each follower over time ({n_sw} switch{'es' if n_sw != 1 else ''})"
+    follower_rows(ax, ctx, followers, float(t[0]), t_end, fs, title)
     handles = [
         Line2D(
             [],
@@ -182,24 +176,4 @@ def panel_neighbours(ax: Axes, ctx: Ctx) -> None:
         Line2D([], [], ls="", marker="s", ms=8, mfc=DEAD_COLOUR, mec="none", label="not alive"),
     ]
     ax.figure.legend(handles=handles, fontsize=7, loc="outside lower center", ncol=3, framealpha=0.8)
-    ax.annotate(
-        "switches",
-        (1.0, 1.0),
-        xycoords="axes fraction",
-        xytext=(3, 2),
-        textcoords="offset points",
-        va="bottom",
-        fontsize=fs,
-        color="0.3",
-    )
-    for k, j in enumerate(followers):
-        ax.annotate(
-            f"{counts[j]}",
-            (1.0, k),
-            xycoords=("axes fraction", "data"),
-            xytext=(3, 0),
-            textcoords="offset points",
-            va="center",
-            fontsize=fs,
-            color="0.3",
-        )
+    margin_column(ax, "switches", [f"{counts[j]}" for j in followers], fs)

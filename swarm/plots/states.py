@@ -14,6 +14,7 @@ from matplotlib.patches import Patch
 from swarm.contracts.vocabulary import FollowState
 from swarm.contracts.wire import FOLLOW_STATES
 from swarm.plots.context import Ctx
+from swarm.plots.rows import follower_rows, margin_column
 from swarm.plots.style import DEAD_COLOUR, size_for
 
 #: One colour per follow state, the same in every run: committed in green, the ways of
@@ -62,7 +63,7 @@ def stretches(codes: np.ndarray) -> list[tuple[int, int, int]]:
 
 def panel_states(ax: Axes, ctx: Ctx) -> None:
     """One row per follower: its follow state over time; grey hatched: not alive."""
-    run, looks = ctx.run, ctx.looks
+    run = ctx.run
     assert run.follow is not None
     followers = run.followers()
     t = run.t
@@ -71,6 +72,7 @@ def panel_states(ax: Axes, ctx: Ctx) -> None:
     fs = size_for(run.n_agents, 7, 5)
     seen: set[int] = set()
     keep = FOLLOW_STATES.index(FollowState.KEEP)
+    shares: list[str] = []
     for row, j in enumerate(followers):
         codes = np.where(run.alive[:, j], run.follow[:, j].astype(np.int64), DEAD)
         by_code: dict[int, list[tuple[float, float]]] = {}
@@ -89,35 +91,9 @@ def panel_states(ax: Axes, ctx: Ctx) -> None:
             ax.broken_barh(spans, (row - 0.35, 0.7), **kw)
         alive = run.alive[:-1, j] if run.n_rows > 1 else run.alive[:, j]
         share = float((run.follow[: alive.size, j][alive] == keep).mean()) if alive.any() else 0.0
-        ax.annotate(
-            f"{100 * share:.0f}%",
-            (1.0, row),
-            xycoords=("axes fraction", "data"),
-            xytext=(3, 0),
-            textcoords="offset points",
-            va="center",
-            fontsize=fs,
-            color="0.3",
-        )
-    ax.annotate(
-        "keep",
-        (1.0, 1.0),
-        xycoords="axes fraction",
-        xytext=(3, 2),
-        textcoords="offset points",
-        va="bottom",
-        fontsize=fs,
-        color="0.3",
-    )
-    ax.set_yticks(range(len(followers)), [looks.labels[j] for j in followers], fontsize=fs)
-    for tick, j in zip(ax.get_yticklabels(), followers):
-        tick.set_bbox(dict(boxstyle="round,pad=0.15", fc=looks.colours[j], ec="none", alpha=0.55))
-    ax.set_ylim(max(len(followers), 1) - 0.5, -0.5)
-    ax.set_xlim(float(t[0]), t_end)
-    ax.set_xlabel("t (s)")
-    ax.set_ylabel("follower")
-    ax.set_title("follow state of each follower over time")
-    ax.grid(True, axis="x", lw=0.3, alpha=0.5)
+        shares.append(f"{100 * share:.0f}%")
+    margin_column(ax, "keep", shares, fs)
+    follower_rows(ax, ctx, followers, float(t[0]), t_end, fs, "follow state of each follower over time")
     handles = [
         Patch(facecolor=STATE_COLOURS[FOLLOW_STATES[c]], edgecolor="0.3", lw=0.3, label=STATE_WORDS[FOLLOW_STATES[c]])
         for c in sorted(seen)
