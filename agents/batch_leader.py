@@ -41,6 +41,10 @@ def _orbit(a: AgentConf) -> float:
     return cast(float, a.orbit_radius)
 
 
+# the "plan" of a leader steered from outside (BatchLeaders.given): on its orbit from the start
+GIVEN = CCPath(math.inf, math.inf, 0.0, 0.0, 0.0, 0.0, (math.nan, math.nan, math.nan), 0.0)
+
+
 class BatchLeaders:
     """The leaders among (B, N) agents: `where` = (members, columns) of each, and per
     leader its spec's speed, orbit radius, direction sign and turn-rate limit."""
@@ -58,6 +62,9 @@ class BatchLeaders:
         self.limit = np.array([a.max_turn_rate or math.inf for a in lead], dtype=float)
         self.dt = dt
         self.planned = False
+        # leaders whose turn rate is given from outside (swarm.env's vector env, a policy steering
+        # them): not planned (a plan costs ~0.2 s and would be thrown away), decided as on orbit
+        self.given = np.zeros(len(lead), dtype=bool)
         self.path_tick = 0
         self.a = 0.0  # path time of the last tick decided (s)
         self.t1 = self.t2 = self.u1 = self.u2 = np.zeros(len(lead))
@@ -65,8 +72,10 @@ class BatchLeaders:
     def plan(self, tick: int, px: np.ndarray, py: np.ndarray, heading: np.ndarray) -> None:
         """plan_cc for every leader from its first frame (own position relative to the target)."""
         paths = [
-            _plan(float(x), float(y), float(g), a.speed, _orbit(a), a.direction_sign, a.max_turn_rate)
-            for x, y, g, a in zip(px.tolist(), py.tolist(), heading.tolist(), self.specs)
+            GIVEN
+            if given
+            else _plan(float(x), float(y), float(g), a.speed, _orbit(a), a.direction_sign, a.max_turn_rate)
+            for x, y, g, a, given in zip(px.tolist(), py.tolist(), heading.tolist(), self.specs, self.given.tolist())
         ]
         self.t1 = np.array([p.t1 for p in paths], dtype=float)
         self.t2 = np.array([p.t2 for p in paths], dtype=float)

@@ -245,6 +245,8 @@ class VectorSwarmEnv:
         self.brains = BatchBrains(
             [[x.agent for x in c]] * B, [c[0].gains] * B, [c[0].sensing] * B, self.dt, c[0].n_agents
         )
+        lead = self.brains.leaders  # leaders the policy steers: their brains' turn rates are replaced
+        lead.given = np.isin(lead.i, self.cols)  # by the actions, so they plan no path (~0.2 s each)
         self.out = np.full((B, n), -1, dtype=np.int64)  # Engine.out, as columns
         self.live = np.ones((B, self.n_agents), dtype=bool)  # controlled agents in the world
         self.ended = np.zeros((B, self.n_agents), dtype=bool)  # ended at the last tick begun

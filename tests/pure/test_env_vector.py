@@ -262,3 +262,21 @@ def test_what_it_does_not_run_it_refuses_saying_why(faults, pattern):
         VectorSwarmEnv(load_scenario(ROOT / "scenarios" / "lab10.toml"), 2)
     with pytest.raises(EnvError, match=r"a PettingZoo view is of a vector env of one swarm, not 2"):
         VectorSwarmView(VectorSwarmEnv(scenario(faults=[]), 2))
+
+
+def test_leaders_the_policy_steers_plan_no_path(monkeypatch):
+    """A leader whose turn rate the actions give plans no circle-circle path (~0.2 s a leader,
+    thrown away): with agents="all" the planner is never called; with the leaders left to
+    their law it is, once per leader and start."""
+    import swarm.agents.batch_leader as batch_leader
+
+    calls = []
+    real = batch_leader.plan_cc
+    monkeypatch.setattr(batch_leader, "plan_cc", lambda *a: calls.append(a) or real(*a))
+    batch_leader._plan.cache_clear()
+    env = VectorSwarmEnv(10, 4, seed=0, agents="all", position_jitter=5.0, duration=0.5)
+    env.reset(seed=0)
+    env.step(np.zeros((4, env.n_agents)))
+    assert calls == []
+    VectorSwarmEnv(10, 4, seed=0, position_jitter=5.0, duration=0.5).reset(seed=0)
+    assert len(calls) == 8  # 2 leaders x 4 swarms, each its own start
