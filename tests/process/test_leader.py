@@ -445,6 +445,7 @@ def test_on_orbit_stays_on_orbit(direction):
         assert abs(math.hypot(x, y) - radius) < 1e-9
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "radius, v, direction, factor",
     [(10.0, 1.0, 1, 1.02), (10.0, 1.0, -1, 0.98), (2.0, 3.0, 1, 0.98), (50.0, 10.0, -1, 1.02)],

@@ -295,6 +295,7 @@ def test_one_switch_is_one_switch(tmp_path):
     assert "after 1 switch" in titles and "(1 switch)" in titles and "switches" not in titles, titles
 
 
+@pytest.mark.slow
 def test_no_id_left_to_add_is_said_so(base, write_toml):
     from swarm.cli.up import attach_hints
 

@@ -68,6 +68,7 @@ def distance(arrays) -> np.ndarray:
     return np.hypot(arrays["x"][:, 0] - arrays["x"][:, 1], arrays["y"][:, 0] - arrays["y"][:, 1])
 
 
+@pytest.mark.slow
 def test_without_the_filter_they_collide_and_with_it_they_do_not():
     bare = run_sim(overtake())
     assert "safety" not in bare.summary()
@@ -100,6 +101,7 @@ def test_without_the_filter_they_collide_and_with_it_they_do_not():
     assert np.all(np.abs(u) <= 2.0)
 
 
+@pytest.mark.slow
 def test_an_arena_is_kept_and_exits_are_counted_without_the_filter():
     """An arena whose west wall cuts the orbit (x = -9 m, the orbit reaches -10 m): without the
     filter both leaders leave it on every lap (each spell one exit); with it they stay in, turned
@@ -121,6 +123,7 @@ def test_an_arena_is_kept_and_exits_are_counted_without_the_filter():
     assert kept["arena"] == [[-9.0, -11.0], [11.0, -11.0], [11.0, 11.0], [-9.0, 11.0]]
 
 
+@pytest.mark.slow
 def test_the_batch_engine_equals_sim_with_the_filter():
     scens = [overtake({"radius": RADIUS}), overtake({"radius": RADIUS, "arena": [-9.0, -11.0, 11.0, 11.0]})]
     for s, b in zip(scens, run_batch(scens)):
@@ -220,6 +223,7 @@ def test_a_plant_gets_the_filtered_turn_rates_and_speeds():
     np.testing.assert_array_equal(np.array([u for u, _ in plant.sent]), res.recorder.arrays()["u"][:2000])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("engine", ["per-agent", "batch"])
 def test_a_study_row_carries_the_figures_and_the_filter_may_be_swept(engine):
     """`swarm study scenario --safety 0,1`: the same starts with the filter off (measured) and

@@ -271,6 +271,7 @@ def _command_paths(command, path=()):
         yield from _command_paths(sub, (*path, name))
 
 
+@pytest.mark.slow
 def test_no_help_page_shows_a_flag_as_taking_a_value():
     # issue 33: typer's rich help printed every flag (--force, --plots/--no-plots, --help) with `<bool>`
     import typer

@@ -9,6 +9,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 from synthetic_run import make_run
 from typer.testing import CliRunner
 
@@ -118,6 +119,7 @@ def test_a_runs_layout_has_its_agents_and_the_docs_layout_is_case2s(tmp_path: Pa
     assert (ROOT / "docs" / "foxglove-layout.json").read_text() == layout_text(*scenario_agents(load_scenario(CASE2)))
 
 
+@pytest.mark.slow
 def test_swarm_plot_writes_the_runs_layout(tmp_path: Path) -> None:
     """`swarm plot` writes foxglove-layout.json next to the figures, for the run's agents."""
     run_dir = make_run(tmp_path / "run", ticks=60, n_leaders=2, n_followers=3)

@@ -201,6 +201,7 @@ def regroup(run_dir: Path, n_leaders: int) -> Path:
     return run_dir
 
 
+@pytest.mark.slow
 def test_save_figure_writes_every_format(tmp_path: Path) -> None:
     fig, ax = plt.subplots(figsize=(2, 2))
     ax.plot([0, 1], [0, 1], label="L1")
@@ -418,6 +419,7 @@ def test_states_png_is_a_row_per_follower_in_the_colours_of_its_states(tmp_path:
         plt.close(fig)
 
 
+@pytest.mark.slow
 def test_a_run_without_follow_states_plots_everything_else(tmp_path: Path) -> None:
     """An older run directory (trajectory.npz without `follow`): every figure but states.png."""
     run_dir = make_run(tmp_path / "run", ticks=60, follow=False)
@@ -509,6 +511,7 @@ def test_a_leader_starting_at_the_target_is_drawn_above_it(tmp_path: Path) -> No
         plt.close(fig)
 
 
+@pytest.mark.slow
 def test_the_clipped_note_leaves_the_title_clear(tmp_path: Path) -> None:
     """A leader's spike at t = 0.1 s (a realtime run's first ticks) is clipped and named in a
     note over the top edge: the panel's title is drawn above it, in the single figure and in

@@ -277,6 +277,7 @@ def peak_bytes(fn) -> int:
         tracemalloc.stop()
 
 
+@pytest.mark.slow
 def test_memory_does_not_grow_with_the_run_length(tmp_path, monkeypatch):
     """tracemalloc's peak while the results of a recording of T and of 4T ticks are written:
     about the same when streamed, about 4 times when every row is read into memory."""
