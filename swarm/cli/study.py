@@ -4,10 +4,12 @@ files and plots; Ctrl-C keeps every finished row (exit 130)."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+from collections.abc import Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Optional
+from typing import TYPE_CHECKING, Annotated, Any, Optional
 
 import typer
 
@@ -62,6 +64,37 @@ def _executor(scheduler: Optional[str]):
     from swarm.study.cluster import dask_executor  # lazy: a cluster's executor, only with --scheduler
 
     return dask_executor(scheduler)
+
+
+@contextlib.contextmanager
+def _running(
+    scheduler: Optional[str],
+    jobs: int,
+    out: Optional[Path],
+    plot: bool,
+    quiet: bool,
+    resume: Optional[Path],
+    run_timeout: Optional[float],
+    labels: dict[str, str] = LABELS,
+) -> Iterator[dict[str, Any]]:
+    """The keyword arguments every `swarm.study.run_*` takes from the options every study command
+    has (where it runs, its output, resume, run timeout), the cluster's client closed at the end."""
+    executor = _executor(scheduler)
+    try:
+        yield dict(
+            workers=jobs,
+            out=out,
+            plot=plot,
+            say=typer.echo,
+            progress=_progress(quiet),
+            resume=resume,
+            run_timeout=run_timeout,
+            executor=executor,
+            labels=labels,
+        )
+    finally:
+        if executor is not None:
+            executor.close()
 
 
 DtOpt = Annotated[float, typer.Option(help="step (s)", min=1e-4)]
@@ -179,8 +212,7 @@ def swarms(
     pairs = sum(b < a for a in ns for b in ls)
     if not pairs:
         raise fail("--leaders: every setting has as many leaders as agents; a swarm needs a follower")
-    executor = _executor(scheduler)
-    try:
+    with _running(scheduler, jobs, out, plot, quiet, resume, run_timeout) as common:
         result = run_swarms(
             n=ns,
             leaders=ls,
@@ -197,19 +229,8 @@ def swarms(
             dt=dt,
             safety_radius=safety_radius,
             batch=batch,
-            workers=jobs,
-            out=out,
-            plot=plot,
-            say=typer.echo,
-            progress=_progress(quiet),
-            resume=resume,
-            run_timeout=run_timeout,
-            executor=executor,
-            labels=LABELS,
+            **common,
         )
-    finally:
-        if executor is not None:
-            executor.close()
     _stopped(result)
     summary = result.summary
     table(
@@ -271,8 +292,7 @@ def gains(
     from swarm.study.api import run_gains  # lazy: numpy, the scenario model, the pool; not for `swarm --help`
 
     c1s, c2s, qs = floats("--c1", c1), floats("--c2", c2), floats("--ratios", ratios)
-    executor = _executor(scheduler)
-    try:
+    with _running(scheduler, jobs, out, plot, quiet, resume, run_timeout) as common:
         result = run_gains(
             c1=c1s,
             c2=c2s,
@@ -281,19 +301,8 @@ def gains(
             duration=duration,
             dt=dt,
             batch=batch,
-            workers=jobs,
-            out=out,
-            plot=plot,
-            say=typer.echo,
-            progress=_progress(quiet),
-            resume=resume,
-            run_timeout=run_timeout,
-            executor=executor,
-            labels=LABELS,
+            **common,
         )
-    finally:
-        if executor is not None:
-            executor.close()
     _stopped(result)
     gain_table(result.summary)
     _done(result)
@@ -395,8 +404,7 @@ def scenario(
     }
     labels.update({k: f"--{k}" for k in grid if k not in labels})
     labels["engine"] = "--engine batch"
-    executor = _executor(scheduler)
-    try:
+    with _running(scheduler, jobs, out, plot, quiet, resume, run_timeout, {**labels, **LABELS}) as common:
         result = run_scenario(
             path,
             grid=grid,
@@ -406,19 +414,8 @@ def scenario(
             speeds=speeds,
             duration=duration,
             engine=engine,
-            workers=jobs,
-            out=out,
-            plot=plot,
-            say=typer.echo,
-            progress=_progress(quiet),
-            labels={**labels, **LABELS},
-            resume=resume,
-            run_timeout=run_timeout,
-            executor=executor,
+            **common,
         )
-    finally:
-        if executor is not None:
-            executor.close()
     _stopped(result)
     table(
         result.summary,
