@@ -66,9 +66,26 @@ def agent_cmd(agent_id: int, endpoint: str, run: str) -> list[str]:
     return [sys.executable, "-m", "swarm.agents.process", str(agent_id), endpoint, run]
 
 
-def wait_for(cond: Callable[[], object], timeout: float, what: str, interval: float = 0.01):
-    """Poll `cond` until it returns something truthy (returned) or fail after `timeout` s."""
-    value = wait_until(cond, timeout, interval)
+BACKOFF_MAX_S = 0.1  # wait_for's polling slows down to this
+
+
+def wait_for(cond: Callable[[], object], timeout: float, what: str, interval: float | None = None):
+    """Poll `cond` until it returns something truthy (returned) or fail after `timeout` s. By
+    default every 10 ms at first, then less and less often, down to every BACKOFF_MAX_S: a
+    long wait polls 10 times a second, not 100 (conditions read logs, scan the process table,
+    ask the bus: on two cores that polling took CPU from the processes waited for); an explicit
+    `interval` polls at that rate throughout."""
+    if interval is not None:
+        value = wait_until(cond, timeout, interval)
+    else:
+        t_end, step = time.monotonic() + timeout, 0.01
+        while True:
+            late = time.monotonic() >= t_end
+            value = cond()
+            if value or late:
+                break
+            time.sleep(step)
+            step = min(step * 1.5, BACKOFF_MAX_S)
     if not value:
         raise AssertionError(f"timed out after {timeout} s waiting for {what}")
     return value
@@ -137,7 +154,7 @@ class Seen:
 class ProcessTracker:
     """Starts processes in their own sessions and remembers every descendant."""
 
-    POLL_S = 0.05
+    POLL_S = 0.2  # a poll scans the whole process table (psutil's children): ~20% of a core at 0.05 s
 
     def __init__(self, env: dict, log_dir: Path, cwd: Path | None = None):
         self.env = env
