@@ -12,7 +12,7 @@ Every test carries one tier marker, what it needs to run (`pytest -m pure`, `-m 
 A file's tier is the folder it is in (tests/pure, tests/seam, tests/zenoh, tests/process): what
 its most demanding test needs. A test that takes the `rt` fixture (a private runtime for
 processes) belongs in tests/process. `slow` is the other axis: the long tests of every tier
-(`-m "not slow"` is the fast tier, about 25 s). What the tests share (fakes, the process
+(`-m "not slow"` is the fast tier: docs/testing.md#time). What the tests share (fakes, the process
 tracker, deadlines, corpora) is in tests/support, on sys.path (pyproject: pythonpath).
 """
 
