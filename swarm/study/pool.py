@@ -129,7 +129,12 @@ class _Slot:
         self.jobs.append((tag, job, budget))
         if len(self.jobs) == 1:
             self._clock()
-        self.send.send_bytes(pickle.dumps((worker, job)))
+        try:
+            self.send.send_bytes(pickle.dumps((worker, job)))
+        except BrokenPipeError:
+            # the child died since its last reply (its pipe's end of file is waiting to be
+            # read): the job stays queued on it, and the loss is handled there (`lost`)
+            pass
 
     def done(self) -> tuple[int, Any]:
         """The running job finished: its (tag, job); the next one's clock set."""

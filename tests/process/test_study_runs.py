@@ -211,3 +211,24 @@ def test_a_worker_that_dies_has_its_job_run_again_once_then_one_error(tmp_path, 
     assert sorted(r["n"] for r in got) == list(range(6))  # job 3's worker died; run again, every row once
     with pytest.raises(WorkerDied, match="died twice on one job"):
         run_jobs(dying.work, [(0, str(tmp_path / "always"), True)], 2, lambda _job, rows: None)
+
+
+def test_a_job_given_to_a_child_that_has_just_died_is_not_an_error(tmp_path, monkeypatch):
+    """The race CI met: a child dies after its reply, and the next job is queued on it before
+    its end of file is read. The send's broken pipe is not the study's error: the job stays on
+    the slot, whose end of file then hands it back (run again, every row once)."""
+    (tmp_path / "dying.py").write_text(DYING)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path))
+    import dying
+
+    from swarm.study.pool import _Slot
+
+    s = _Slot()
+    s.proc.kill()
+    s.proc.wait()
+    s.give(0, dying.work, (0, "", False), float("inf"))  # broken pipe: no error here
+    assert s.job == (0, "", False)  # still queued on the slot
+    with pytest.raises(EOFError):  # where run_jobs learns of the death and queues the job again
+        s.recv.recv_bytes()
+    s.end(kill=True)
