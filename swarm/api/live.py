@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -70,6 +70,7 @@ class Live:
     def __init__(self, lr):
         self._lr = lr  # a swarm.live.client.LiveRun, open
         self._patience = None
+        self._watching = False  # inside a watching loop's read (`again`)
 
     @property
     def run(self) -> str:
@@ -100,8 +101,7 @@ class Live:
     def info(self, sensing: bool = False) -> dict:
         """The world's info: tick, clock, paused, and per agent pose, state, out, errors...
         (`sensing`: who senses whom too)."""
-        with talking():
-            return self._lr.info(sensing=sensing)
+        return self._patiently(lambda: self._lr.info(sensing=sensing))
 
     def statuses(self, expected: Iterable[int] | None = None) -> dict[int, dict]:
         """Each live agent's own status by id (ends once every id of `expected` answered)."""
@@ -113,8 +113,24 @@ class Live:
         # lazy: swarm.live.data (with contracts.graph) is for reading: `swarm pause` / `kill` start without it
         from swarm.live.data import snapshot
 
-        with talking():
-            return snapshot(self._lr, sensing)
+        return self._patiently(lambda: snapshot(self._lr, sensing))
+
+    def _patiently(self, read: Callable[[], Any]) -> Any:
+        """One read of the world, asked again while the world is there and has not stopped
+        answering (`Patience`, the watchers' rule: a loaded world that misses one query's
+        time is not an ended one); NoRunError once it has ended or stayed silent."""
+        if self._watching:  # a watching loop's read (`again`): its own patience decides
+            with talking():
+                return read()
+        patience: Patience | None = None
+        while True:
+            try:
+                with talking():
+                    return read()
+            except NoRunError:
+                patience = patience or Patience(self._lr)
+                if patience.ended():
+                    raise
 
     def agents(self) -> list[dict]:
         """One row per agent, sorted by id: `swarm agents --json`'s `agents`."""
@@ -181,6 +197,7 @@ class Live:
         (`swarm.live.client.Patience`)."""
         if self._patience is None:
             self._patience = Patience(self._lr)
+        self._watching = True
         try:
             value = read()
         except NoRunError:
@@ -192,6 +209,8 @@ class Live:
                     "or more without ending (stalled, starved, or cut off from here)"
                 ) from None
             raise
+        finally:
+            self._watching = False
         self._patience.answered()
         return value
 

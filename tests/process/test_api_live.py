@@ -85,6 +85,56 @@ def test_a_watcher_tells_a_world_that_ended_from_one_that_stopped_answering(monk
     assert not isinstance(e.value, swarm.StoppedAnswering)
 
 
+def test_a_one_shot_read_asks_a_world_that_missed_a_query_again(monkeypatch):
+    """Live.info / agents (a script's one read, README's `live.agents()`): a world that is there
+    but missed a query's time (a loaded machine) is asked again, as a watcher would; NoRunError
+    at once when it is gone, and after ENDED_FAILURES misses over ENDED_SILENT_S when it stays
+    silent. Inside a watching loop (`again`) a read is one query: the loop's patience decides."""
+    import swarm.live.client as live_mod
+    from swarm.api.live import Live
+
+    class FakeRun:
+        ref = live_mod.RunRef("r1", "unixsock-stream//nowhere")
+        gone_now = False
+        misses = 0  # queries this world misses before it answers
+        asked = 0
+
+        def watch_end(self):
+            pass
+
+        def gone(self):
+            return self.gone_now
+
+        def info(self, sensing=False):
+            self.asked += 1
+            if self.asked <= self.misses:
+                raise swarm.NoRunError(f"the world of run {self.ref.run} did not answer (it may have ended)")
+            return {"tick": 7, "sensing": sensing}
+
+    monkeypatch.setattr(live_mod, "ENDED_SILENT_S", 0.0)
+    fake = FakeRun()
+    fake.misses = 2
+    assert Live(fake).info() == {"tick": 7, "sensing": False} and fake.asked == 3  # two misses, asked again
+
+    fake = FakeRun()
+    fake.misses = 1
+    live = Live(fake)
+    assert live.again(live.info, "last") == "last" and fake.asked == 1  # a watcher's read: one query
+    assert live.again(live.info, "last") == {"tick": 7, "sensing": False}
+
+    fake = FakeRun()
+    fake.misses, fake.gone_now = 10, True
+    with pytest.raises(swarm.NoRunError):
+        Live(fake).info()
+    assert fake.asked == 1  # ended: not asked again
+
+    fake = FakeRun()
+    fake.misses = 10
+    with pytest.raises(swarm.NoRunError, match="did not answer"):
+        Live(fake).info()
+    assert fake.asked == live_mod.ENDED_FAILURES  # silent: given up after the watchers' patience
+
+
 @pytest.fixture
 def empty_runtime(monkeypatch):
     import shutil
