@@ -34,6 +34,30 @@ from deadlines import DEADLINE, DEFAULT
 if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
+
+def _cache_bytecode() -> None:
+    """Compiled modules kept between processes, also where PYTHONDONTWRITEBYTECODE is set (as
+    in CI's image): without them every `swarm` process the tests start compiles the project
+    from source again (0.07-0.15 s of CPU each, some thousands of processes), and every
+    pytest worker rewrites the test modules' asserts again at collection (about 5 s of the
+    13 s collection). This process writes its own caches (its imports, pytest's rewritten test
+    modules); the project's packages are compiled once ahead for the child processes (the
+    variable only stops writing: Python still reads a cache that is there). Not on xdist's
+    workers: their controller has done it."""
+    import os
+    import sys
+
+    sys.dont_write_bytecode = False
+    if os.environ.get("PYTEST_XDIST_WORKER") is None:
+        import compileall
+
+        root = Path(__file__).resolve().parent.parent
+        for package in ("swarm", "agents", "world"):  # (swarm/agents and swarm/world link to the last two)
+            compileall.compile_dir(root / package, quiet=1)
+
+
+_cache_bytecode()
+
 TIER_NAMES = ("pure", "seam", "zenoh", "process")  # a folder each, in this order of need
 
 
