@@ -24,6 +24,8 @@ import cycle. A law named in a scenario is imported by name at run time
 from __future__ import annotations
 
 import ast
+import functools
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -72,34 +74,48 @@ def package_of(module: str) -> str | None:
     return parts[1] if len(parts) > 1 and parts[1] in PACKAGES else "root"
 
 
-def imports_of(path: Path, here: str | None = None) -> list[tuple[int, str, bool]]:
+@functools.cache
+def import_statements(path: Path) -> tuple[tuple[ast.Import | ast.ImportFrom, bool], ...]:
+    """(import statement, inside a function) of a file, parsed once for every check of this
+    module (the statements alone are kept: whole trees kept alive made the collector slow)."""
+    tree = ast.parse(path.read_text(), str(path))
+    return tuple((s, inside) for s, inside in statements(tree) if isinstance(s, (ast.Import, ast.ImportFrom)))
+
+
+def statements(node: ast.AST, in_function: bool = False) -> Iterator[tuple[ast.AST, bool]]:
+    """(statement, inside a function) for every statement under `node`, through the bodies of
+    compound statements only: an import is a statement, so no expression needs a visit (a
+    walk of every node took seconds over the project and its tests)."""
+    for field in ("body", "orelse", "finalbody", "handlers", "cases"):
+        for child in getattr(node, field, ()):
+            yield child, in_function
+            yield from statements(child, in_function or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)))
+
+
+@functools.cache
+def imports_of(path: Path, here: str | None = None) -> tuple[tuple[int, str, bool], ...]:
     """(line, module, inside a function) for every import in the file (module `here`, by
     default the file's own); `from swarm.x import y` counts as swarm.x.y when swarm/x/y is a
     module, and relative imports are resolved."""
     here = here or module_of_file(path)
     found = []
 
-    def visit(node, in_function):
-        for child in ast.iter_child_nodes(node):
-            inner = in_function or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))
-            if isinstance(child, ast.Import):
-                found.extend((child.lineno, a.name, in_function) for a in child.names)
-            elif isinstance(child, ast.ImportFrom):
-                if child.level:
-                    base = here.split(".")[: len(here.split(".")) - child.level + (path.name == "__init__.py")]
-                    module = ".".join(base + ([child.module] if child.module else []))
-                else:
-                    module = child.module or ""
-                found.append((child.lineno, module, in_function))
-                found.extend(
-                    (child.lineno, f"{module}.{a.name}", in_function)
-                    for a in child.names
-                    if f"{module}.{a.name}" in MODULES
-                )
-            visit(child, inner)
-
-    visit(ast.parse(path.read_text(), str(path)), False)
-    return found
+    for child, in_function in import_statements(path):
+        if isinstance(child, ast.Import):
+            found.extend((child.lineno, a.name, in_function) for a in child.names)
+        elif isinstance(child, ast.ImportFrom):
+            if child.level:
+                base = here.split(".")[: len(here.split(".")) - child.level + (path.name == "__init__.py")]
+                module = ".".join(base + ([child.module] if child.module else []))
+            else:
+                module = child.module or ""
+            found.append((child.lineno, module, in_function))
+            found.extend(
+                (child.lineno, f"{module}.{a.name}", in_function)
+                for a in child.names
+                if f"{module}.{a.name}" in MODULES
+            )
+    return tuple(found)
 
 
 def project_files() -> list[Path]:
@@ -135,7 +151,7 @@ def test_no_project_module_imports_the_folders_by_their_folder_names():
 def imports_of_any(path: Path) -> list[tuple[int, str, bool]]:
     """imports_of for files outside the packages too (tests): absolute imports only."""
     out = []
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+    for node, _ in import_statements(path):
         if isinstance(node, ast.Import):
             out += [(node.lineno, a.name, False) for a in node.names]
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
