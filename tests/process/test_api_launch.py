@@ -40,6 +40,7 @@ def test_launch_refuses_before_starting_anything(base, tmp_path):
     assert children() == before
 
 
+@pytest.mark.slow
 def test_a_launch_that_never_runs_leaves_no_temporary_scenario(base, tmp_path):
     """A scenario that is not a file is written to a temporary one for the run; a Launch built
     and dropped without running removes it too (as does a failed start, whose object goes)."""

@@ -160,6 +160,7 @@ def test_connect_without_a_run_raises_one_line(empty_runtime, monkeypatch):
     assert swarm.runs() == []
 
 
+@pytest.mark.slow
 def test_a_live_command_process_imports_only_its_group(empty_runtime):
     """`swarm pause` as a process: no scenario model, no numpy, none of the other command groups."""
     code = (

@@ -36,6 +36,7 @@ def _server():
     )
 
 
+@pytest.mark.slow
 def test_a_bad_request_is_an_error_reply_and_the_end_of_stdin_ends_the_server():
     p = _server()
     try:
@@ -55,6 +56,7 @@ def _child(code: int | None, sleep: float = 0.0) -> Forked:
     return Forked(pid, ["child"])
 
 
+@pytest.mark.slow
 def test_forked_reads_the_exit_code_once_from_two_threads():
     f = _child(7, sleep=0.2)
     assert f.poll() is None

@@ -42,6 +42,7 @@ def free_port() -> int:
     return port
 
 
+@pytest.mark.slow
 def test_recording_lists_the_topics(tmp_path):
     from mcap.reader import make_reader
 
@@ -66,6 +67,7 @@ def test_recording_lists_the_topics(tmp_path):
     assert all(isinstance(r["u"], float) for r in agents[-2]["agents"])
 
 
+@pytest.mark.slow
 def test_port_in_use_is_one_line():
     held, port = busy_port()
     try:

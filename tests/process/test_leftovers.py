@@ -17,12 +17,14 @@ pytestmark = pytest.mark.process
 SLOW_EXIT = "import time; time.sleep(1.5)"  # a process still exiting as the test ends
 
 
+@pytest.mark.slow
 def test_a_process_still_exiting_is_waited_for(tmp_path):
     with Runtime(tmp_path) as r:
         p = r.tracker.spawn([sys.executable, "-c", SLOW_EXIT], "slow")
     assert p.poll() == 0  # it was let finish, not killed
 
 
+@pytest.mark.slow
 def test_a_process_that_stays_is_a_leftover(tmp_path, monkeypatch):
     monkeypatch.setattr(runtime_helpers, "DEADLINE", 1.0)  # (a real leftover is waited for DEADLINE s)
     with pytest.raises(AssertionError, match="processes left alive after the test"):

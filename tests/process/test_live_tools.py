@@ -68,6 +68,7 @@ def test_keys_taken(name, leaf, agent):
     assert key.startswith("swarm/r1/") and wire.run_of_key(key) == "r1"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "name,words",
     [
@@ -198,6 +199,7 @@ def test_log_sources():
     assert res.exit_code == ExitCode.USAGE and "'fred': give an agent id or `world`" in one_line(res.stderr)
 
 
+@pytest.mark.slow
 def test_follow_prints_lines_as_written_and_the_last_one_at_the_end(tmp_path):
     log = tmp_path / "agent-3.log"
     log.write_text("old 1\nold 2\nhalf")
@@ -227,6 +229,7 @@ def test_follow_prints_lines_as_written_and_the_last_one_at_the_end(tmp_path):
     assert seen == ["half done", "new 1", "new 2", "no newline"]
 
 
+@pytest.mark.slow
 def test_logs_of_an_output_directory(tmp_path):
     logs = tmp_path / "run" / "logs"
     logs.mkdir(parents=True)

@@ -128,6 +128,7 @@ def test_stop_terms_then_waits_no_longer_than_needed(groups):
     assert p.returncode == -signal.SIGTERM and reaped(p) and not g.alive()
 
 
+@pytest.mark.slow
 def test_stop_kills_a_group_that_ignores_sigterm_after_the_grace(groups):
     g = groups()
     # sh and its sleep both ignore SIGTERM (an ignored signal stays ignored across exec).

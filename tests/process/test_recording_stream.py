@@ -147,6 +147,7 @@ def test_out_dir_is_never_overwritten_without_force(tmp_path):
         claim_out_dir(tmp_path / "file", force=False)
 
 
+@pytest.mark.slow
 def test_sim_refuses_an_out_with_results_then_force(tmp_path):
     out = tmp_path / "run"
     args = ["sim", str(CASE2), "--out", str(out), "--no-plots", "--duration", "1"]

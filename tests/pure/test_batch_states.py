@@ -180,6 +180,7 @@ def test_batch_sticky_decides_as_the_scalar_machine(case):
         assert batch == mine, (scenario.sensing, [a.id for a in scenario.agents])
 
 
+@pytest.mark.slow
 def test_the_random_sequences_reach_every_state():
     """The generator is not idle: over a fixed set of runs, the scalar machines pass through
     KEEP, HOLD, COAST, and LOST or SEARCH, and the batch keeps over arrays."""

@@ -79,12 +79,14 @@ def gains_policy(a: np.ndarray) -> float:
     return 1.0 * float(a[HEADING]) + 0.5 * math.sin(float(a[BEARING]))
 
 
+@pytest.mark.slow
 def test_parallel_api_test_passes_with_dropouts_and_returns(capsys):
     parallel_api_test(SwarmEnv(faulty(), agents="all"), num_cycles=400)
     parallel_api_test(SwarmEnv(CASE2, duration=1.0), num_cycles=200)
     assert capsys.readouterr().out.count("Passed Parallel API test") == 2
 
 
+@pytest.mark.slow
 def test_agents_leave_and_come_back_as_the_faults_say():
     env = SwarmEnv(faulty())
     assert env.possible_agents == ["agent_2", "agent_2#1", "agent_3", "agent_4", "agent_4#1", "agent_5"]
@@ -115,6 +117,7 @@ def test_agents_leave_and_come_back_as_the_faults_say():
     assert stale > 0, "the lossy network delivered every frame: no stale observation was seen"
 
 
+@pytest.mark.slow
 def test_a_policy_in_the_env_is_the_run_swarm_sim_gives_with_it_as_a_law(tmp_path, monkeypatch):
     """Faults of every kind, every agent a policy (leaders too): the same trajectories,
     out-neighbours and events, to the bit."""
@@ -229,6 +232,7 @@ def test_rewards_are_replaceable_and_the_default_is_radial_and_rate_error():
     assert r(off, 2) == pytest.approx(-(0.2 + 2.0 * abs(35.0 / 42.0 - 1.0)))
 
 
+@pytest.mark.slow
 def test_episodes_are_reproducible_from_the_seed():
     def episode(env: SwarmEnv, seed: int | None) -> tuple[np.ndarray, list[float]]:
         obs, _ = env.reset(seed=seed)
@@ -269,6 +273,7 @@ def test_the_guides_first_block_runs_and_its_result_is_swarm_sims_results(tmp_pa
     np.testing.assert_array_equal(saved.x, res.x)
 
 
+@pytest.mark.slow
 def test_policy_law_is_a_law_a_scenario_can_name_and_swarm_env_stays_light(tmp_path):
     law = policy_law(gains_policy)
     assert law.__name__ == "policy_law(gains_policy)"

@@ -177,6 +177,7 @@ def test_k_nearest_zero_is_the_out_block_only_and_numpy_ints_are_fine():
     assert {o.shape for o in obs.values()} == {(18,)}
 
 
+@pytest.mark.slow
 def test_parallel_api_test_still_passes(capsys):
     parallel_api_test(SwarmEnv(CASE2, duration=1.0, k_nearest=0), num_cycles=120)
     assert "Passed Parallel API test" in capsys.readouterr().out

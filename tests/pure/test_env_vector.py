@@ -93,17 +93,20 @@ def assert_same_episodes(s: Scenario, num_envs: int, seed: int, episodes: int = 
     return seen
 
 
+@pytest.mark.slow
 def test_one_swarm_is_swarm_env_to_the_bit_over_episodes_with_dropouts():
     seen = assert_same_episodes(scenario(), 1, 7, episodes=2, position_jitter=3.0, heading_jitter=0.2)
     assert seen["steps"] == 400
     assert seen["ended_early"] == {("agent_4", "terminated", 50), ("agent_2", "truncated", 120)}
 
 
+@pytest.mark.slow
 def test_swarm_b_of_many_is_swarm_env_seeded_seed_plus_b():
     seen = assert_same_episodes(scenario(duration=1.0), 3, 11, position_jitter=5.0, heading_jitter=0.3)
     assert seen["terminated"] == 3 and seen["steps"] == 100
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("name", "faults", "run", "agents"),
     [
@@ -172,6 +175,7 @@ def test_one_policy_object_acts_in_both_environments_and_as_a_law():
 
 
 # -- the PettingZoo view --------------------------------------------------------------------------
+@pytest.mark.slow
 def test_the_pettingzoo_view_passes_the_api_test_and_is_swarm_env(capsys):
     s = scenario(duration=1.0)
     parallel_api_test(VectorSwarmView(VectorSwarmEnv(s, 1)), num_cycles=250)
@@ -264,6 +268,7 @@ def test_what_it_does_not_run_it_refuses_saying_why(faults, pattern):
         VectorSwarmView(VectorSwarmEnv(scenario(faults=[]), 2))
 
 
+@pytest.mark.slow
 def test_leaders_the_policy_steers_plan_no_path(monkeypatch):
     """A leader whose turn rate the actions give plans no circle-circle path (~0.2 s a leader,
     thrown away): with agents="all" the planner is never called; with the leaders left to

@@ -66,6 +66,7 @@ def test_a_module_of_another_api_is_not_used(monkeypatch):
 
 
 # -- encoding -----------------------------------------------------------------------------------
+@pytest.mark.slow
 @needs_c
 @SETTINGS
 @given(
@@ -119,6 +120,7 @@ def world_arrays(draw):
     return rows, ids, heading, tdx, tdy, lead, sensed, bearing, ranges, hops
 
 
+@pytest.mark.slow
 @needs_c
 @SETTINGS
 @given(st.integers(0, 2**40), st.floats(0, 1e6), world_arrays())
@@ -127,6 +129,7 @@ def test_encode_sense_rows_gives_the_same_bytes(tick, time, arrays):
     assert wire.encode_sense_rows(tick, time, *arrays) == want
 
 
+@pytest.mark.slow
 @needs_c
 @SETTINGS
 @given(st.integers(0, 2**40), st.floats(0, 1e6), world_arrays())
@@ -187,6 +190,7 @@ def same_objects(a, b) -> bool:
     )
 
 
+@pytest.mark.slow
 @needs_c
 @SETTINGS
 @given(
@@ -266,6 +270,7 @@ def test_encode_sense_tuples_is_safe_against_a_list_changed_while_encoding():
 
 
 # -- selection ----------------------------------------------------------------------------------
+@pytest.mark.slow
 @needs_c
 @settings(max_examples=300, deadline=None)
 @given(st.lists(st.tuples(st.integers(-3, 6), st.sampled_from([0.0, -0.0, 1.0, 1.0, 2.5, 1e-300, math.inf]))))

@@ -242,6 +242,7 @@ def test_follower_settles_at_speed_ratio_radius(ratio, start):
     assert summary["converged"]
 
 
+@pytest.mark.slow
 def test_follower_of_clockwise_leader_turns_clockwise():
     res = run_sim(_pair(1.5, (0.0, -3.0, 0.0), direction="cw", dt=0.05))
     r, w = _final_radius_and_rate(res, 1, 10 / OMEGA)

@@ -61,6 +61,7 @@ def test_straight_line_when_u_is_zero():
     assert g == 0.7
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("u, dt", [(0.8, 0.5), (-3.0, 0.2), (1e-7, 1.0), (12.0, 0.3)])
 def test_matches_fine_rk4(u, dt):
     x0, y0, g0, v = 0.3, -0.2, 2.9, 1.7
@@ -121,6 +122,7 @@ def test_wrap_minus_pi_is_pi():
     assert wrap(-math.pi) == math.pi
 
 
+@pytest.mark.slow
 def test_step_one_is_step_to_the_bit():
     """The one-agent step on Python floats gives the array step's bits (WorldCore uses the
     first for small swarms and the second for large ones; the batch engine the second)."""

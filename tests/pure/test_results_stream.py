@@ -136,6 +136,7 @@ def faults_scenario(dt: float = 0.1) -> Scenario:
     return s.model_copy(update={"run": s.run.model_copy(update={"dt": dt})})
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("chunk", [7, 64, 4096])
 def test_streamed_results_equal_the_memory_results_on_a_synthetic_recording(tmp_path, monkeypatch, chunk):
     monkeypatch.setattr(results_stream, "CHUNK", chunk)
@@ -153,6 +154,7 @@ def test_streamed_results_equal_the_memory_results_on_a_synthetic_recording(tmp_
     assert not list(new.glob(".results-*"))  # the temporary files are gone
 
 
+@pytest.mark.slow
 def test_streamed_arrays_equal_the_memory_arrays(tmp_path, monkeypatch):
     monkeypatch.setattr(results_stream, "CHUNK", 5)
     s = faults_scenario()

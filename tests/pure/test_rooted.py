@@ -22,6 +22,7 @@ def _final_graph(result):
     return analyse(out, leaders)
 
 
+@pytest.mark.slow
 def test_nearest_selection_forms_a_follower_only_cycle_that_the_graph_flags():
     s = load_scenario(ROOTED)
     s = s.model_copy(update={"sensing": s.sensing.model_copy(update={"selection": "nearest"})})

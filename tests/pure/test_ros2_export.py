@@ -75,6 +75,7 @@ def angle_gap(a: float, b: float) -> float:
     return abs((a - b + math.pi) % (2 * math.pi) - math.pi)
 
 
+@pytest.mark.slow
 def test_the_bag_directory_holds_metadata_and_one_mcap(exported):
     assert sorted(p.name for p in exported.iterdir()) == ["metadata.yaml", "ros2.mcap"]
     assert not list(exported.parent.glob(".ros2*"))  # no staging left behind
@@ -149,6 +150,7 @@ def test_rosbags_reads_the_types_counts_and_the_poses_of_trajectory_npz(exported
         assert rows == expected_counts(case2)
 
 
+@pytest.mark.slow
 def test_the_stamps_start_at_the_summarys_start_wall_time(case2, tmp_path):
     assert start_ns({}) == 0
     assert start_ns({"start_wall_time": 1764144000.25}) == 1764144000_250000000
@@ -179,6 +181,7 @@ def test_a_gone_agent_has_no_pose_and_no_command_while_gone(case2, tmp_path):
     assert bag.counts[f"/agent_{other}/cmd_vel"] == rows - 1
 
 
+@pytest.mark.slow
 def test_exporting_again_replaces_the_bag(exported, case2):
     before = (exported / "ros2.mcap").stat().st_mtime_ns
     (exported / "stray.txt").write_text("from an earlier bag")

@@ -194,6 +194,7 @@ def _odometry(stamp, frame, child, pose, twist, cov=0.0):
     )
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None)
 @given(stamps, frames, frames, finite, finite, yaws, floats, floats)
 def test_odometry_matches_rosbags(stamp, frame, child, x, y, yaw, vx, wz):
@@ -300,6 +301,7 @@ def test_bad_strings_are_cdr_errors(decode):
         decode(cdr.HEADER + struct.pack("<iI", 1, NS) + struct.pack("<I", 1) + b"\0" + tail)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(st.binary(max_size=900), st.booleans())
 def test_random_bytes_raise_only_cdr_error(data, with_header):
@@ -428,6 +430,7 @@ names = st.from_regex(r"[a-z][a-z0-9_]{0,10}", fullmatch=True)
 namespaces = st.lists(names, max_size=3).map(lambda parts: "/" + "/".join(parts))
 
 
+@pytest.mark.slow
 @settings(max_examples=100, deadline=None)
 @given(
     st.integers(0, 232), st.integers(0, 10**6), st.integers(0, 10**6), st.sampled_from(["MP", "MS"]), namespaces,
@@ -452,6 +455,7 @@ def test_entity_token_round_trip(domain, node_id, entity_id, kind, ns, node, top
     )
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(st.lists(st.sampled_from(["@ros2_lv", "0", "12", "", "%", "MS", "NN", "x", "\u00b2", "%a%b"]), max_size=15))
 def test_parse_never_raises(chunks):

@@ -163,6 +163,7 @@ def test_bad_input_rejected_by_load_scenario(base, write_toml, mutate, fragments
         assert frag in msg, f"{frag!r} not in {msg!r}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mutate, fragments", [pytest.param(m, f, id=i) for i, m, f in BAD])
 def test_bad_input_rejected_by_cli_check(base, write_toml, mutate, fragments):
     mutate(base)

@@ -90,6 +90,7 @@ def swarms(draw, max_n: int = 70):
     return x, y, g, present, sense_range, fov
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(swarms())
 def test_grid_senses_what_every_pair_senses(swarm):
@@ -129,6 +130,7 @@ def test_grid_falls_back_to_every_pair_where_no_grid_fits(case):
         assert_same_sensing(x, y, g, present, sense_range, 2.5)
 
 
+@pytest.mark.slow
 def test_the_grid_on_a_large_swarm_with_about_eight_in_sight():
     """1000 agents, a range with about 8 in sight, some absent, a field of view."""
     rs = np.random.default_rng(11)
@@ -155,6 +157,7 @@ def ring_scenario(n: int, sense_range: float | None, fov: float | None = None):
     return parse_scenario(tomllib.loads("\n".join(lines)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "n, sense_range, fov",
     [
@@ -216,6 +219,7 @@ def frames_inputs(draw):
     return x, y, g, present, None if unlimited else sense_range, fov, ids, lead, hops, live
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(frames_inputs())
 def test_frames_encoded_from_flat_indices_and_from_pairs_are_the_frames_built_one_by_one(inputs):
@@ -276,6 +280,7 @@ def outcome(decode, buf: bytes):
 BAD = [math.nan, math.inf, -math.inf]
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(
     st.sampled_from([0, 1, 2, 7, 99, wire.CONTACTS_CACHED, wire.CONTACTS_CACHED + 1]),
@@ -331,6 +336,7 @@ def reference_nearest(contacts):
     return best
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(st.lists(st.tuples(st.integers(0, 6), st.sampled_from([0.0, 1.0, 1.0, 2.5, 3.0]), st.integers(-1, 3))))
 def test_nearest_is_the_loop_it_replaced(raw):

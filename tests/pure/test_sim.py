@@ -28,6 +28,7 @@ KEYS = {
 # -- engine ---------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_run_sim_is_deterministic():
     s = load_scenario(SCENARIOS / "case2.toml")
     r1, r2 = run_sim(s, duration=5.0), run_sim(s, duration=5.0)

@@ -314,6 +314,7 @@ def test_each_loss_costs_at_most_loss_changes(seed, n, leaders, p_sense, p_drop,
         assert all(s.worst_loss <= LOSS_CHANGES for s in sel.values())
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 14), leaders=st.integers(1, 3))
 def test_without_losses_the_graph_stops_changing(seed, n, leaders):
@@ -332,6 +333,7 @@ def test_without_losses_the_graph_stops_changing(seed, n, leaders):
 # -- random swarms through the in-process engine ---------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [3, 17, 101])
 def test_random_swarm_switches_stay_under_the_bound(seed):
     setting = SwarmSetting(n=8, leaders=2, duration=30.0, dt=0.05)

@@ -42,6 +42,7 @@ def test_swarm_study_is_reached_from_import_swarm():
     assert swarm.study.run_scenario is swarm.study.api.run_scenario
 
 
+@pytest.mark.slow
 def test_run_swarms_writes_the_clis_files_and_rows(tmp_path, capsys):
     r = swarm.study.run_swarms(**SMALL, workers=1, out=tmp_path / "api", plot=False)
     assert "study swarms: 4/4 runs" in capsys.readouterr().err  # no terminal: a line, not a bar
@@ -59,6 +60,7 @@ def test_run_swarms_writes_the_clis_files_and_rows(tmp_path, capsys):
     assert read(tmp_path / "cli" / "summary.csv") == read(r.summary_csv)
 
 
+@pytest.mark.slow
 def test_an_executor_of_ones_own_runs_the_same_jobs(tmp_path):
     seen = []
 
@@ -76,6 +78,7 @@ def test_an_executor_of_ones_own_runs_the_same_jobs(tmp_path):
     assert without_wall(mine.rows) == without_wall(local.rows)
 
 
+@pytest.mark.slow
 def test_run_scenario_sweeps_a_law_parameter_and_names_its_column(tmp_path):
     r = swarm.study.run_scenario(
         ROOT / "scenarios" / "case2.toml",
@@ -163,6 +166,7 @@ def test_time_per_state_is_the_mean_over_followers_and_nan_without_it():
     assert state_totals([absent]) == {}
 
 
+@pytest.mark.slow
 def test_the_python_api_pages_study_example_runs(tmp_path, monkeypatch, capsys):
     """docs/reference/api.md#study's block, as written (its output folder moved to tmp_path)."""
     text = (ROOT / "docs" / "reference" / "api.md").read_text()
@@ -207,6 +211,7 @@ class Counting:
                     on_row(dict(row))
 
 
+@pytest.mark.slow
 def test_resume_runs_only_the_runs_not_finished_and_each_row_is_written_once(tmp_path):
     opts = dict(SMALL, seeds=5, batch=False)  # 2 settings x 5 seeds, one run per job
     first = Counting(stop_after=3)
@@ -231,11 +236,13 @@ def test_resume_runs_only_the_runs_not_finished_and_each_row_is_written_once(tmp
     assert third.ran == 0 and len(read(again.runs_csv)) == 10  # nothing left to run
 
 
+@pytest.mark.slow
 def test_a_row_that_comes_back_twice_is_written_once(tmp_path):
     r = swarm.study.run_swarms(**SMALL, out=tmp_path / "s", executor=Counting(twice=True), plot=False, progress=False)
     assert r.duplicates == 4 and len(read(r.runs_csv)) == 4 and len(r.rows) == 4
 
 
+@pytest.mark.slow
 def test_resume_drops_a_line_cut_short_and_refuses_another_studys_csv(tmp_path):
     swarm.study.run_swarms(**SMALL, out=tmp_path / "s", workers=1, plot=False, progress=False)
     csv_path = tmp_path / "s" / "runs.csv"

@@ -277,6 +277,7 @@ def test_a_named_leader_law_runs_in_a_fake_link():
 # -- layers --------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_the_kit_imports_no_zenoh():
     """Statically: importing swarm.testing and running it loads no module that imports zenoh
     (the modules its files import, theirs at module level, and every parent package's)."""

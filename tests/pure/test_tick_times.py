@@ -66,6 +66,7 @@ def test_durations_out_of_range_count_at_the_ends_and_stay_exact_in_max_and_mean
     )
 
 
+@pytest.mark.slow
 def test_memory_is_bounded_whatever_the_ticks():
     t = TickTimes()
     for k in range(200_000):

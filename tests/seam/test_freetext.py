@@ -190,6 +190,7 @@ def test_truth_numbers_and_the_final_state_decoded():
     assert _tap("truth").decode("swarm/r1/truth", _truth(100, 3, math.inf)).error is not None
 
 
+@pytest.mark.slow
 def test_missing_numbers_of_truth_and_events_are_counted():
     tap = _tap("truth")
     for seq in (5, 6, 9, 9, 12, 65535, 2):  # 7-8 lost, a repeat, 10-11 lost, ..., 1 lost across the wrap
@@ -205,6 +206,7 @@ def test_missing_numbers_of_truth_and_events_are_counted():
     assert [m.dropped for m in tap.messages()] == [0, 0, 1, 0]  # unnumbered (an older world): nothing to count
 
 
+@pytest.mark.slow
 def test_a_backlog_past_its_bound_is_counted_and_said():
     size = len(_truth(1, 1))
     tap = _tap("truth", max_backlog=3 * size)

@@ -183,6 +183,7 @@ def _law_next_to_scenario(tmp_path, write_toml, base, source: str, where: str):
     return write_toml(base), mod
 
 
+@pytest.mark.slow
 def test_check_and_sim_import_a_law_next_to_the_scenario(tmp_path, write_toml, base, monkeypatch):
     monkeypatch.setattr(sys, "path", list(sys.path))  # the scenario's dir is appended: undone after
     path, mod = _law_next_to_scenario(tmp_path, write_toml, base, "def law(obs):\n    return 0.2\n", "leader")
@@ -196,6 +197,7 @@ def test_check_and_sim_import_a_law_next_to_the_scenario(tmp_path, write_toml, b
         assert np.all(z["u"][:-1, 0] == 0.2)
 
 
+@pytest.mark.slow
 def test_a_raising_law_under_swarm_sim_is_a_crash_event_and_exit_4(tmp_path, write_toml, base, monkeypatch):
     """As under swarm up (tests/process/test_supervision_runtime.py): no traceback, a crash event with
     its cause, the agent dropped, the results written, one line, exit 4."""

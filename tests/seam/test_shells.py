@@ -5,6 +5,7 @@ network, no processes: the middle tier between the pure tests and the multi-proc
 
 from __future__ import annotations
 
+import pytest
 import zenoh
 from fakes import FakeQuery, FakeSession
 
@@ -352,6 +353,7 @@ def test_a_rogues_flood_on_an_agents_key_costs_that_agent_nothing():
     assert [e["kind"] for e in world.engine.events].count("rogue") == 1
 
 
+@pytest.mark.slow
 def test_a_flapping_token_is_seen_at_its_latest_state_and_its_churn_is_capped():
     """100,000 toggles of agent 2's token while the world is busy: one inbox entry, the
     latest state; churn past CHURN_EVENTS is counted, not written."""

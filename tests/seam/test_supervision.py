@@ -295,6 +295,7 @@ def _exit_of(check):
     return None
 
 
+@pytest.mark.slow
 def test_agent_waits_for_a_silent_world_then_exits_5(tmp_path):
     from swarm.agents.world_link import RESUMED, WAITING
 

@@ -9,6 +9,7 @@ import math
 import random
 
 import numpy as np
+import pytest
 import zenoh
 from fakes import FakeQuery, FakeSession
 
@@ -86,6 +87,7 @@ def frames_from_matrices(world: World, sensed, bearing, rng) -> dict[int, bytes]
     return dict(zip(active, frames))
 
 
+@pytest.mark.slow
 def test_frames_from_the_sensed_pairs_are_the_matrices_bytes():
     """A ranged swarm past GRID_MIN_AGENTS, some agents dropped (coasting: sensed, sent nothing)
     and some turning with hop counts of their own, over a few ticks: every frame the world
@@ -212,6 +214,7 @@ def test_an_agent_that_never_leaves_holds_the_world_up_no_longer_than_the_wait(m
     assert 10 <= len(ses.token_gets) <= process.END_WAIT_S / 0.02 + 2, len(ses.token_gets)
 
 
+@pytest.mark.slow
 def test_a_stalled_realtime_world_re_anchors_instead_of_bursting(tmp_path):
     """Realtime, 20 ticks of 50 ms; the world stalls 0.35 s (7 periods) in tick 5. Before, it
     ran the missed ticks back to back (frames and commands a few ms apart, from stale poses);

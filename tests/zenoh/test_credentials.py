@@ -290,6 +290,7 @@ def _cli(*args):
     return CliRunner().invoke(app, [str(a) for a in args])
 
 
+@pytest.mark.slow
 def test_swarm_credentials_exports_one_identity_or_says_why_not(rtdir, tmp_path, monkeypatch):
     C.write(
         C.new_credentials("r1", "unixsock-stream/x.sock", pid=os.getpid(), ids=(1, 2), added_ids=(3, 10)),

@@ -110,6 +110,7 @@ finite = st.floats(-50, 50, allow_nan=False)
 angle = st.floats(-math.pi, math.pi, allow_nan=False)
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(finite, finite, angle, finite, finite, angle)
 def test_odom_to_world_inverts_the_fleets_odom_pose(x0, y0, h0, x, y, g):
@@ -519,6 +520,7 @@ def test_a_world_with_a_plant_runs_realtime_only():
         world_with(RecordingPlant(), clock="lockstep")
 
 
+@pytest.mark.slow
 def test_the_worlds_ticks_go_through_the_plant_which_is_stopped_at_the_end(signals_back):
     plant = RecordingPlant()
     world, _ = world_with(plant)
@@ -585,6 +587,7 @@ def held_then_driven(calls: list[str], driven_before: int) -> int:
     return holds
 
 
+@pytest.mark.slow
 def test_after_a_stall_the_plant_stands_still_then_starts_from_its_latest_poses(signals_back):
     """The world stalls 0.5 s (ten of its 50 ms periods) in tick 1, before its commands went
     out: no burst of the missed ticks, and tick 1's commands (computed before the stall) are
@@ -595,6 +598,7 @@ def test_after_a_stall_the_plant_stands_still_then_starts_from_its_latest_poses(
     held_then_driven(plant.calls, driven_before=1)  # tick 0 driven, the stall before tick 1's commands
 
 
+@pytest.mark.slow
 def test_a_stall_within_a_tick_sends_a_zero_twist_instead_of_that_ticks_stale_commands(signals_back):
     """The stall comes right after tick 1's frames went out: tick 1's commands were computed
     from poses the stall made stale, so they are never sent; the plant holds from tick 1 on."""
@@ -780,6 +784,7 @@ def test_robots_with_the_lockstep_clock_is_a_usage_error(command, tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["world", "up"])
 def test_a_robots_file_that_does_not_fit_the_scenario_is_one_line_and_exit_2(command, tmp_path):
     bad = tmp_path / "robots.toml"
