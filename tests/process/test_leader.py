@@ -23,19 +23,21 @@ from swarm.agents.cc_plan import (
 )
 from swarm.agents.leader import on_orbit_command
 from swarm.contracts.orbits import wrap
-from swarm.world.kinematics import step
+from swarm.world.kinematics import step_one
 
 ROOT = Path(__file__).resolve().parents[2]
 
-# Sample sizes: the fast tier checks a sample, the long tier the whole of it.
+# Sample sizes: the fast tier checks a sample (6 cases: a plan costs 10-30 ms of CPU here, the
+# fast tier's tests stay under 0.2 s), the long tier the whole of it.
 SAMPLE = pytest.mark.parametrize(
-    "n", [pytest.param(50, id="sample"), pytest.param(None, id="all", marks=pytest.mark.slow)]
+    "n", [pytest.param(6, id="sample"), pytest.param(None, id="all", marks=pytest.mark.slow)]
 )
 
 
 def arc_step(x, y, g, v, u, t):
-    """One exact arc of the world's integrator, as Python floats."""
-    return tuple(float(a) for a in step(x, y, g, v, u, t))
+    """One exact arc of the world's integrator, as Python floats (`step_one`: `step`'s bits,
+    tests/pure/test_kinematics.py, without numpy's cost per scalar call)."""
+    return step_one(float(x), float(y), float(g), float(v), float(u), float(t))
 
 
 HALF_PI = 0.5 * math.pi
@@ -96,9 +98,10 @@ def _check_path(path: CCPath, x, y, heading, v, radius, direction, max_turn_rate
 
 def test_p3_paper_form_equals_derivation():
     rng = np.random.default_rng(0)
-    for _ in range(2000):
-        ax, ay = rng.uniform(-50, 50, size=2)
-        alpha, beta = rng.uniform(-math.pi, math.pi, size=2)
+    n = 2000  # the draws up front (numpy's per-call cost was most of the test's time)
+    axs, ays = rng.uniform(-50, 50, size=(2, n)).tolist()
+    alphas, betas = rng.uniform(-math.pi, math.pi, size=(2, n)).tolist()
+    for ax, ay, alpha, beta in zip(axs, ays, alphas, betas):
         if 1 - math.cos(alpha - beta) < 1e-3:
             continue
         p1, p2, p3 = cc_coefficients(ax, ay, alpha, beta)
@@ -109,20 +112,24 @@ def test_p3_paper_form_equals_derivation():
 
 def test_lemma1_hyperbola_gives_tangent_circles():
     rng = np.random.default_rng(1)
-    for _ in range(2000):
-        ax, ay = rng.uniform(-20, 20, size=2)
-        alpha, beta = rng.uniform(-math.pi, math.pi, size=2)
+    n = 2000  # the draws up front, the geometry on Python floats (numpy's per-call cost)
+    axs, ays = rng.uniform(-20, 20, size=(2, n)).tolist()
+    alphas, betas = rng.uniform(-math.pi, math.pi, size=(2, n)).tolist()
+    r_as = (rng.choice([-1, 1], size=n) * rng.uniform(0.5, 30, size=n)).tolist()
+    checked = 0
+    for ax, ay, alpha, beta, r_a in zip(axs, ays, alphas, betas, r_as):
         if 1 - math.cos(alpha - beta) < 1e-3:
             continue
         p1, p2, p3 = cc_coefficients(ax, ay, alpha, beta)
-        r_a = rng.choice([-1, 1]) * rng.uniform(0.5, 30)
         if abs(r_a - p1) < 1e-3:
             continue
         r_b = cc_radius_b(r_a, p1, p2, p3)
-        o_a = np.array([ax + r_a * math.sin(alpha), ay - r_a * math.cos(alpha)])
-        o_b = np.array([-r_b * math.sin(beta), r_b * math.cos(beta)])
-        gap = np.linalg.norm(o_a - o_b)
+        o_a = (ax + r_a * math.sin(alpha), ay - r_a * math.cos(alpha))
+        o_b = (-r_b * math.sin(beta), r_b * math.cos(beta))
+        gap = math.hypot(o_a[0] - o_b[0], o_a[1] - o_b[1])
         assert gap == pytest.approx(abs(r_a + r_b), rel=1e-6, abs=1e-9)
+        checked += 1
+    assert checked > 1900
 
 
 def test_cc_radius_b_straight_line_raises():
@@ -220,7 +227,7 @@ def test_plan_cc_near_orbit_poses(n):
 def test_plan_cc_is_reasonably_short(n):
     """The coarse default grid is within 1 % of a 10x finer entry grid."""
     rng = np.random.default_rng(7)
-    for _ in range(n // 5 if n else 60):
+    for _ in range(max(1, n // 5) if n else 60):
         radius, v = rng.uniform(1, 20), rng.uniform(0.5, 5)
         direction = int(rng.choice([1, -1]))
         dist, theta, heading = radius * rng.uniform(0.1, 5), rng.uniform(-3, 3), rng.uniform(-3, 3)
@@ -371,6 +378,7 @@ def test_already_on_orbit(direction):
         assert path.entry == pytest.approx((x, y, wrap(heading)), abs=1e-12)
 
 
+@pytest.mark.slow  # 24 plans (about 0.3 s of CPU): the long tier
 @pytest.mark.parametrize("direction", [1, -1])
 def test_start_at_grid_entry_pose_and_grid_headings(direction):
     radius, v, n_entry = 8.0, 1.0, 72
@@ -404,6 +412,7 @@ def test_start_at_target(heading, direction):
         _check_path(path, 0.0, 0.0, heading, v, radius, direction, max_rate)
 
 
+@pytest.mark.slow  # 18 plans (about 0.4 s of CPU): the long tier
 def test_far_away_and_pointing_away():
     radius, v = 5.0, 1.0
     for heading in np.linspace(-math.pi, math.pi, 9):

@@ -72,13 +72,12 @@ def distance(arrays) -> np.ndarray:
 def test_without_the_filter_they_collide_and_with_it_they_do_not():
     bare = run_sim(overtake())
     assert "safety" not in bare.summary()
-    assert distance(bare.recorder.arrays()).min() < RADIUS
-    measured = run_sim(overtake({"radius": RADIUS, "enabled": False})).summary()
-    a = run_sim(overtake()).recorder.arrays()
+    a = bare.recorder.arrays()
+    assert distance(a).min() < RADIUS
+    measuring = run_sim(overtake({"radius": RADIUS, "enabled": False}))  # (one run: its arrays and summary)
+    measured = measuring.summary()
     # enabled = false: the same run, measured: one collision spell, no intervention
-    np.testing.assert_array_equal(
-        run_sim(overtake({"radius": RADIUS, "enabled": False})).recorder.arrays()["x"], a["x"]
-    )
+    np.testing.assert_array_equal(measuring.recorder.arrays()["x"], a["x"])
     s = measured["safety"]
     assert s["collisions"] == 1 and s["collision_ticks"] > 0 and s["min_distance"] < RADIUS
     assert s["interventions"] == 0 and not any(e["kind"] == EventKind.SAFETY for e in measured["events"])
@@ -125,7 +124,10 @@ def test_an_arena_is_kept_and_exits_are_counted_without_the_filter():
 
 @pytest.mark.slow
 def test_the_batch_engine_equals_sim_with_the_filter():
-    scens = [overtake({"radius": RADIUS}), overtake({"radius": RADIUS, "arena": [-9.0, -11.0, 11.0, 11.0]})]
+    """Equal to the bit over 20 s (the filter's spells start at tick 177; with the arena, infeasible
+    spells and saturations too: equality over a prefix holds on the whole run)."""
+    arena = [-9.0, -11.0, 11.0, 11.0]
+    scens = [overtake({"radius": RADIUS}, duration=20.0), overtake({"radius": RADIUS, "arena": arena}, duration=20.0)]
     for s, b in zip(scens, run_batch(scens)):
         r = run_sim(s)
         ra, ba = r.recorder.arrays(), b.recorder.arrays()
@@ -137,8 +139,9 @@ def test_the_batch_engine_equals_sim_with_the_filter():
         assert {k: v["safety"] for k, v in bs["agents"].items()} == {k: v["safety"] for k, v in rs["agents"].items()}
 
 
+@pytest.mark.slow  # a whole run and its files (about 0.5 s): the long tier
 def test_summary_json_carries_the_figures(tmp_path):
-    summ = write_run(run_sim(overtake({"radius": RADIUS}, duration=20.0)), tmp_path)
+    summ = write_run(run_sim(overtake({"radius": RADIUS}, duration=10.0)), tmp_path)
     on_disk = json.loads((tmp_path / "summary.json").read_text())
     assert on_disk["safety"]["collisions"] == summ["safety"]["collisions"] == 0
     for key in ("min_distance", "collisions", "boundary_exits", "saturations", "interventions", "infeasible"):
@@ -161,9 +164,10 @@ def test_the_table_is_checked():
 @pytest.mark.slow
 def test_lockstep_up_equals_sim_with_the_filter(rt, tmp_path):
     """`swarm up --clock lockstep` runs the filter in the world process: the same turn rates,
-    poses, "safety" events and figures as `swarm sim`, to the bit."""
+    poses, "safety" events and figures as `swarm sim`, to the bit. Over 10 s (1000 ticks): seven
+    "safety" events, infeasible spells and saturations among them, in `swarm sim` of it."""
     scen = tmp_path / "overtake.toml"
-    scen.write_text(OVERTAKE.format(duration=20.0) + f"\n[safety]\nradius = {RADIUS}\narena = [-9, -11, 11, 11]\n")
+    scen.write_text(OVERTAKE.format(duration=10.0) + f"\n[safety]\nradius = {RADIUS}\narena = [-9, -11, 11, 11]\n")
     sim, sim_summ = run_sim_process(rt.tracker, scen, tmp_path / "sim")
     up = start_up(rt.tracker, scen, tmp_path / "up", "--clock", "lockstep")
     rc = up.launcher.wait(120)
@@ -201,6 +205,7 @@ class _Plant:
         core.x, core.y, core.heading = step(core.x, core.y, core.heading, core.speed, u, core.dt)
 
 
+@pytest.mark.slow  # 2000 ticks in this process (the speed cuts start at tick 1371): the long tier
 def test_a_plant_gets_the_filtered_turn_rates_and_speeds():
     """Robots mode: the plant is handed the filter's turn rates and, with speed = true, drives
     at its speeds (slowed for the overtake), the agents' own speeds untouched."""
@@ -230,7 +235,9 @@ def test_a_study_row_carries_the_figures_and_the_filter_may_be_swept(engine):
     on; every row has collisions, boundary exits, saturations and the least distance."""
     from swarm.study.scenario import Jitter, Template, run_chunk, run_one, settings_of, summarise
 
-    template = Template(overtake({"radius": RADIUS, "arena": [-9.0, -11.0, 11.0, 11.0]}).model_dump(), "overtake")
+    # 20 s: the unfiltered runs collide (at about 17 s) and leave the arena 4 times (was 40 s: 7 times)
+    arena = [-9.0, -11.0, 11.0, 11.0]
+    template = Template(overtake({"radius": RADIUS, "arena": arena}, duration=20.0).model_dump(), "overtake")
     settings = settings_of({"safety": [0.0, 1.0]})
     work = run_one if engine == "per-agent" else run_chunk
     rows = [r for st in settings for r in work((template, st, Jitter(positions=0.5), (0, 1)))]
@@ -285,6 +292,7 @@ def test_swarm_check_shows_the_table_and_warns_of_unbounded_turn_rates(tmp_path)
     assert "agents 1 have no max_turn_rate" in res.output
 
 
+@pytest.mark.slow  # a whole run (20 s: the collision is at about 17 s) through the CLI: the long tier
 def test_swarm_sim_prints_the_figures(tmp_path):
     from typer.testing import CliRunner
 
@@ -328,19 +336,20 @@ def test_the_builder_makes_the_table():
         b.safety(0.3, arena=[-1, -1, 1, 1]).build()
 
 
+@pytest.mark.slow  # three runs of a 6-agent swarm: the long tier
 def test_a_swarms_study_measures_collisions_at_a_radius():
     """`swarm study swarms --safety-radius R`: random swarms with a measuring [safety] table,
     the same rows through either engine, the law unchanged."""
     from swarm.study.batch import run_swarm_chunk
     from swarm.study.swarms import SwarmSetting, random_swarm, run_swarm
 
-    setting = SwarmSetting(n=6, duration=30.0, safety_radius=2.0)
+    setting = SwarmSetting(n=6, duration=15.0, safety_radius=2.0)  # (was 30 s: the same claims on any length)
     assert random_swarm(setting, 0).safety is not None and not random_swarm(setting, 0).safety.enabled
     one = run_swarm((setting, 0))
     (batched,) = run_swarm_chunk((setting, (0,)))
     for key in ("collisions", "boundary_exits", "saturations", "min_distance", "interventions", "converged"):
         assert one[key] == batched[key], key
     assert one["interventions"] == 0 and one["min_distance"] > 0
-    bare = run_swarm((SwarmSetting(n=6, duration=30.0), 0))  # the same swarm, not measured
+    bare = run_swarm((SwarmSetting(n=6, duration=15.0), 0))  # the same swarm, not measured
     assert bare["collisions"] is None and bare["min_distance"] is None
     assert (bare["converged"], bare["switches"]) == (one["converged"], one["switches"])  # the law unchanged
