@@ -3,12 +3,14 @@ namespace for the scheduler and the study (`s`), one for each `dask worker` proc
 nothing shared but the network (tests/process/test_multihost.py's `Lan`: a bridge in `s`, a
 veth pair to each worker; docs/design/studies.md#cluster).
 
-- a study of 400 runs gives the rows the same study gives on this machine's processes, each
-  run once;
 - a law that hangs, with --run-timeout: its runs are `timeout` rows (the task's child process
   killed on the worker), the others finish;
-- one worker SIGKILLed mid-study: the scheduler runs its tasks on the other one, and every
-  run's row is there exactly once (the last test: the cluster has one worker after it).
+- a study of 400 runs, Ctrl-C'd after its first rows, then resumed, and one worker SIGKILLed
+  mid-resume: the scheduler runs its tasks on the other one; the study ends with the rows the
+  same study gives on this machine's processes, each run's row exactly once, the rows of before
+  the Ctrl-C kept as they were (the last test: the cluster has one worker after it). One study
+  on the cluster for the three (they were three studies of 400 runs: a run costs about 25 ms of
+  CPU, most of it not its ticks, so the cost is the count of runs, which is the claim).
 
 Needs root (`ip netns add`) and the package distributed (in the `test` extra); skips, saying
 why, where either is missing. Every namespace is the test's own and deleted at the end, even on
@@ -112,43 +114,17 @@ def test_a_law_that_hangs_on_the_cluster_gives_timeout_rows(cluster, tmp_path):
     assert "timeout: 2 run(s) ended at --run-timeout" in output
 
 
-def test_ctrl_c_then_resume_on_the_cluster_runs_the_rest_once(cluster, tmp_path):
-    lan, address, _ = cluster
-    out = tmp_path / "s"
-    args = [*STUDY, "--per-agent", "--scheduler", address, "--out", out]  # 400 jobs in tasks of 50
-    group = Group(session=True)
-    p = group.start(
-        lan.cmd("w", [sys.executable, "-m", "swarm", "study", *args]),
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    try:
+def some_rows_of(p: subprocess.Popen, out: Path, more_than: int = 0):
+    """A wait condition: runs.csv under `out` has more than `more_than` rows (the study still running)."""
 
-        def some_rows() -> bool:
-            assert p.poll() is None, p.stdout.read() if p.stdout else ""
-            return (out / "runs.csv").exists() and len(rows(out / "runs.csv")) >= 1
+    def condition() -> bool:
+        assert p.poll() is None, p.stdout.read() if p.stdout else ""
+        return (out / "runs.csv").exists() and len(rows(out / "runs.csv")) > more_than
 
-        assert wait_until(some_rows, 4 * DEADLINE, interval=0.05), "no row within the deadline"
-        group.signal(signal.SIGINT)  # a terminal's Ctrl-C
-        output, _ = p.communicate(timeout=DEADLINE)
-    finally:
-        group.kill()
-    assert p.returncode == ExitCode.INTERRUPTED, output
-    assert "Traceback" not in output and output.count("stopped:") == 1, output
-    before = rows(out / "runs.csv")
-    assert 1 <= len(before) < 400
-    again = study_in(lan, [*args[:-2], "--resume", out])
-    output, _ = again.communicate(timeout=4 * DEADLINE)
-    assert again.returncode == ExitCode.OK, output
-    assert f"resume: {len(before)} of 400 runs already in" in output and f"{400 - len(before)} to run" in output
-    after = rows(out / "runs.csv")
-    assert sorted(int(r["seed"]) for r in after) == list(range(400)) and after[: len(before)] == before
-    print(f"Ctrl-C at {len(before)} rows of 400; resumed: {400 - len(before)} run, 400 rows once")
+    return condition
 
 
-def test_a_study_on_two_workers_gives_the_local_rows_and_survives_a_killed_worker(cluster, tmp_path):
+def test_ctrl_c_resume_and_a_killed_worker_on_the_cluster_give_the_local_rows_once(cluster, tmp_path):
     lan, address, groups = cluster
     t0 = time.monotonic()
     local = subprocess.run(
@@ -163,26 +139,33 @@ def test_a_study_on_two_workers_gives_the_local_rows_and_survives_a_killed_worke
     expected = without_wall(rows(tmp_path / "local" / "runs.csv"))
     assert len(expected) == 400
 
-    t0 = time.monotonic()
-    p = study_in(lan, [*STUDY, "--scheduler", address, "--workers", 1000, "--out", tmp_path / "dask"])
-    output, _ = p.communicate(timeout=4 * DEADLINE)
-    cluster_s = time.monotonic() - t0
-    assert p.returncode == ExitCode.OK, output
-    assert f"--workers 1000 capped at 2: the cluster at {address} has 2 worker threads" in output
-    assert f"on the Dask cluster at {address}" in output
-    got = rows(tmp_path / "dask" / "runs.csv")
-    assert without_wall(got) == expected  # the same rows, each run once
-    print(f"400 runs: {cluster_s:.1f} s on the cluster, {local_s:.1f} s on 2 local processes")
-
-    out = tmp_path / "killed"
-    p = study_in(lan, [*STUDY, "--scheduler", address, "--out", out])
+    # the study on the cluster (8 batches of 50 as tasks), Ctrl-C'd after its first rows
+    out = tmp_path / "dask"
+    args = [*STUDY, "--scheduler", address, "--workers", 1000, "--out", out]
+    group = Group(session=True)
+    p = group.start(
+        lan.cmd("w", [sys.executable, "-m", "swarm", "study", *args]),
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     try:
+        assert wait_until(some_rows_of(p, out), 4 * DEADLINE, interval=0.05), "no row within the deadline"
+        group.signal(signal.SIGINT)  # a terminal's Ctrl-C
+        output, _ = p.communicate(timeout=DEADLINE)
+    finally:
+        group.kill()
+    assert p.returncode == ExitCode.INTERRUPTED, output
+    assert "Traceback" not in output and output.count("stopped:") == 1, output
+    before = rows(out / "runs.csv")
+    assert 1 <= len(before) < 400
 
-        def some_rows() -> bool:
-            assert p.poll() is None, p.stdout.read() if p.stdout else ""
-            return (out / "runs.csv").exists() and len(rows(out / "runs.csv")) >= 1
-
-        assert wait_until(some_rows, 4 * DEADLINE, interval=0.05), "no row within the deadline"
+    # resumed; worker a SIGKILLed once the resumed study has written rows of its own
+    t0 = time.monotonic()
+    p = study_in(lan, [*args[:-2], "--resume", out])
+    try:
+        assert wait_until(some_rows_of(p, out, len(before)), 4 * DEADLINE, interval=0.05), "no row resumed"
         at_kill = len(rows(out / "runs.csv"))
         groups["a"].signal(signal.SIGKILL)  # worker a's process, mid-study
         output, _ = p.communicate(timeout=4 * DEADLINE)
@@ -190,9 +173,16 @@ def test_a_study_on_two_workers_gives_the_local_rows_and_survives_a_killed_worke
         if p.poll() is None:
             p.kill()
             p.wait()
+    cluster_s = time.monotonic() - t0
     assert at_kill < 400, "the study was over before the worker was killed"
     assert p.returncode == ExitCode.OK, output
+    assert f"--workers 1000 capped at 2: the cluster at {address} has 2 worker threads" in output
+    assert f"on the Dask cluster at {address}" in output
+    assert f"resume: {len(before)} of 400 runs already in" in output and f"{400 - len(before)} to run" in output
     after = rows(out / "runs.csv")
-    assert sorted(int(r["seed"]) for r in after) == list(range(400))  # every run exactly once
-    assert without_wall(after) == expected
-    print(f"worker a killed at {at_kill} rows of 400; all 400 rows once")
+    assert sorted(int(r["seed"]) for r in after) == list(range(400)) and after[: len(before)] == before  # once each
+    assert without_wall(after) == expected  # the rows of this machine's processes
+    print(
+        f"Ctrl-C at {len(before)} rows of 400; resumed, worker a killed at {at_kill} rows: all 400 rows once, "
+        f"the local ones ({cluster_s:.1f} s resumed on the cluster, {local_s:.1f} s for 400 on 2 local processes)"
+    )
