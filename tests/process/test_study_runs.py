@@ -88,7 +88,7 @@ def interrupt(args: list, csv_path: Path, at_rows: int) -> tuple[subprocess.Pope
 
 def test_ctrl_c_then_resume_runs_each_run_once_and_no_finished_one_again(tmp_path):
     out = tmp_path / "s"
-    seeds = 120
+    seeds = 40  # (was 120: Ctrl-C at 4 rows leaves 36 runs of 20 s to interrupt and resume)
     args = [*TINY, "--duration", "20", "--seeds", seeds, "--per-agent", "--workers", "1000", "--out", out]
     proc, output, workers = interrupt(args, out / "runs.csv", 4)
     assert proc.returncode == ExitCode.INTERRUPTED, output
