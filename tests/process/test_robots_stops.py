@@ -50,10 +50,24 @@ def test_a_killed_world_leaves_every_robot_zero_twisted_by_swarm_up(rt, tmp_path
         wire.report("SIGKILL of the world", ns, event)
     text = up.launcher.text()
     assert "robots: zero twist sent to 2 robots (the world exited: killed by SIGKILL)" in text, text[-3000:]
+    # `swarm estop` from another terminal, its world killed (the estop test's third case, on this
+    # run: one fleet and one run less): it zero-twists every robot again and says the run is over
+    event = time.monotonic()
+    estop = rt.tracker.spawn(swarm_cmd("estop"), "estop")  # the run's robots file: from its record
+    assert estop.wait(DEADLINE) == ExitCode.OK, estop.text()[-3000:]
+    for ns in ROBOT.values():
+        wait_for(lambda ns=ns: last_is_zero_after(wire, ns, event), DEADLINE, f"a zero twist for {ns}")
+        wire.report("swarm estop, world killed", ns, event)
+    out = estop.text()
+    assert "estop: zero twist sent to 2 robots" in out, out
+    assert "its world was gone" in out or "had ended" in out, out
+    ended = time.monotonic()
+    for ns in ROBOT.values():
+        assert last_is_zero_after(wire, ns, event) and not wire.moving_since(ns, ended)
     assert stop_fleet(rt, fleet).count("stopped by a zero twist") == 2
 
 
-@pytest.mark.parametrize("world_state", ["running", "stalled", "killed"])
+@pytest.mark.parametrize("world_state", ["running", "stalled"])  # (killed: the test above)
 def test_estop_from_another_terminal_zero_twists_every_robot_and_ends_the_run(rt, tmp_path, world_state):
     fleet, robots, wire = start_fleet(rt, tmp_path, "--cmd-timeout", "3600")
     up = start_up(rt.tracker, TURTLEBOT, tmp_path / "run", "--robots", robots, "--duration", 120)
