@@ -22,14 +22,16 @@ from runtime_helpers import (
     check_time_column,
     events_of,
     has_started,
+    load_trajectory,
     observe_world,
     replay_events,
-    run_sim,
     start_ticking,
     start_up,
     swarm_cmd,
 )
+from typer.testing import CliRunner
 
+from swarm.cli.main import app
 from swarm.contracts.vocabulary import AgentState, EventKind, ExitCode
 from swarm.runtime.procs import wait_until
 
@@ -176,6 +178,7 @@ def test_restarted_agent_rejoins_from_its_drop_pose(fault_run):
     assert rj["pid"] == res["again"].pid, f"rejoin names pid {rj['pid']}, restarted pid {res['again'].pid}"
     assert rj["pid"] != res["pids"][4]
     kd, kr = drop["tick"], rj["tick"]
+    print(f"\n[info] agent 4 dropped at tick {kd}, rejoined at tick {kr} of {summ['ticks']}")
     assert kd < kr < summ["ticks"], (kd, kr)
     assert traj["alive"][:kd, col].all()
     assert not traj["alive"][kd:kr, col].any()
@@ -299,7 +302,9 @@ def test_agents_exit_when_the_world_vanishes(rt, tmp_path):
 def test_a_world_stopped_5_s_mid_run_still_equals_sim(rt, tmp_path):
     """SIGSTOP to the world for 5 s mid-run: its stall is not the agents' (no missed tick),
     the tick's frames go again, and the run equals `swarm sim` to the bit, reproducible."""
-    up, _, _ = start_ticking(rt.tracker, tmp_path / "run", 40)
+    # 20 s (2000 ticks): the stop lands once the world ticks, and the stalled world cannot end
+    # the run meanwhile (deadline_restarts below says the stall was mid-run).
+    up, _, _ = start_ticking(rt.tracker, tmp_path / "run", 20)
     world = rt.tracker.world_pid(up.launcher)
     os.kill(world, signal.SIGSTOP)
     try:
@@ -307,8 +312,13 @@ def test_a_world_stopped_5_s_mid_run_still_equals_sim(rt, tmp_path):
     finally:
         os.kill(world, signal.SIGCONT)
     summ, traj = up.results(180)
-    sim, _ = run_sim(rt.tracker, SCENARIOS / "case2.toml", tmp_path / "sim", "--duration", "40")
-    assert summ["ticks"] == 4000
+    # `swarm sim` of the same 20 s, in this process (no process start; not during the stop:
+    # on a loaded machine it could outlast the agents' 10 s of --world-grace)
+    sim_args = ["sim", str(SCENARIOS / "case2.toml"), "--out", str(tmp_path / "sim"), "--no-plots"]
+    res = CliRunner().invoke(app, [*sim_args, "--duration", "20"])
+    assert res.exit_code == ExitCode.OK, res.output[-3000:]
+    sim = load_trajectory(tmp_path / "sim")
+    assert summ["ticks"] == 2000
     for key in ("t", "x", "y", "heading", "u", "out", "alive"):
         np.testing.assert_array_equal(traj[key], sim[key], err_msg=key)
     assert summ["reproducible"] is True, summ["not_reproducible"]
@@ -318,8 +328,9 @@ def test_a_world_stopped_5_s_mid_run_still_equals_sim(rt, tmp_path):
 
 # --- 9. a frozen agent ----------------------------------------------------------------------------
 def test_frozen_agent_is_dropped(rt, tmp_path):
-    # Long enough (6000 ticks, ~10 s) that the freeze surely lands mid-run (it lasts ~1 s).
-    up, pids, _ = start_ticking(rt.tracker, tmp_path / "run", 60)
+    # 2000 ticks: the freeze lands once the world ticks, and the world, waiting for the frozen
+    # agent's command, cannot end the run before it drops it.
+    up, pids, _ = start_ticking(rt.tracker, tmp_path / "run", 20)
     victim = pids[3]
     t_stop = time.time()
     os.kill(victim, signal.SIGSTOP)
