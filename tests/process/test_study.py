@@ -13,8 +13,9 @@ from pathlib import Path
 import numpy as np
 import psutil
 import pytest
+from click.testing import CliRunner
 from deadlines import DEADLINE
-from typer.testing import CliRunner
+from typer.main import get_command
 
 from swarm.cli.main import app
 from swarm.contracts.scenario import load_scenario
@@ -31,8 +32,11 @@ from swarm.study.swarms import SwarmSetting, cut_off_at_start, random_swarm, run
 ROOT = Path(__file__).resolve().parents[2]
 
 
+_COMMAND = get_command(app)  # built once (typer's CliRunner builds it on every call: ~0.1 s of CPU)
+
+
 def invoke(*args):
-    return CliRunner().invoke(app, [str(a) for a in args])
+    return CliRunner().invoke(_COMMAND, [str(a) for a in args])
 
 
 def rows(path: Path) -> list[dict]:
@@ -71,9 +75,11 @@ def test_swarms_study_compares_rules_on_the_same_swarms(tmp_path):
 
 @pytest.mark.slow  # a whole run in-process: the long tier
 def test_on_a_known_swarm_sticky_settles_where_rooted_chatters_and_nearest_cycles():
-    # seed 0 of the default setting (10 agents, 2 leaders, unlimited sensing), 120 s
+    # seed 0 of the default setting (10 agents, 2 leaders, unlimited sensing), 60 s (was 120 s:
+    # sticky settles at 46 s either way with 4 switches; rooted switches 96 times in 60 s, 189
+    # in 120 s; nearest leaves 8 followers unrooted in both)
 
-    base = dict(n=10, leaders=2, duration=120.0)
+    base = dict(n=10, leaders=2, duration=60.0)
     sticky, rooted, nearest = (
         run_swarm((SwarmSetting(selection=r, **base), 0)) for r in ("sticky", "rooted", "nearest")
     )
@@ -184,7 +190,8 @@ def test_bad_options_name_the_option(tmp_path, args, message):
 @pytest.mark.parametrize("engine", ["--batch", "--per-agent"])
 def test_ctrl_c_keeps_finished_rows_and_leaves_no_worker(tmp_path, engine):
     out = tmp_path / "s"
-    args = ["swarms", "--seeds", "60", "--n", "6", "--duration", "60", "-j", "2", "--out", str(out), engine]
+    # 20 s runs (was 60 s: the CPU spent before the second row; 60 runs still outlast the Ctrl-C)
+    args = ["swarms", "--seeds", "60", "--n", "6", "--duration", "20", "-j", "2", "--out", str(out), engine]
     output, workers = interrupt_study(args, out)
     assert "stopped:" in output and "Traceback" not in output
     finished = rows(out / "runs.csv")
@@ -307,6 +314,7 @@ def vector_scenario(tmp_path: Path) -> Path:
     return p
 
 
+@pytest.mark.slow  # 12 runs and two figures in-process (about 2 s): the long tier
 def test_a_study_of_ones_own_scenario_and_law_streams_rows_and_counts_them(tmp_path):
     (tmp_path / "mine").mkdir()
     src = own_scenario(tmp_path / "mine", OBS_LAW)
@@ -375,6 +383,7 @@ def test_a_vectorised_law_goes_through_the_batch_engine_with_the_per_agent_rows(
     assert any(r["switches"] != "0" or r["converged"] == "True" for r in a)  # runs that did something
 
 
+@pytest.mark.slow  # three runs in each engine (about 0.35 s): the long tier
 def test_a_vectorised_law_in_the_batch_engine_flies_the_per_agent_trajectories(tmp_path):
 
     spec = load_scenario(vector_scenario(tmp_path))
@@ -422,6 +431,7 @@ def test_ctrl_c_keeps_a_scenario_studys_finished_rows(tmp_path):
     assert_workers_gone(workers)
 
 
+@pytest.mark.slow  # a figure drawn (about 0.6 s): the long tier
 def test_a_small_gain_maps_title_and_colour_bar_label_fit_in_the_figure():
     # swarm study gains --c1 0.5,1,2 --c2 0.25,0.5 --ratios 0.5,1.5 --starts 2 cut both off (issue 25)
     summary = [
