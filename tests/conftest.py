@@ -22,6 +22,7 @@ import copy
 import json
 import math
 import signal
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -167,23 +168,57 @@ def write_toml(tmp_path):
     return write
 
 
+@dataclass(frozen=True)
+class SimResult:
+    """What the tests read of a `swarm sim` CLI result (typer's Result), as written to files
+    by the worker that ran it."""
+
+    exit_code: int
+    stdout: str
+    output: str
+
+
 @pytest.fixture(scope="session")
 def shipped_sim(tmp_path_factory):
-    """shipped_sim(name) -> (CLI result, out dir): scenarios/<name>.toml run in full by
-    `swarm sim --no-plots` in this process, once per session (the convergence checks and
-    the `swarm up` equivalence tests share it)."""
+    """shipped_sim(name) -> (result, out dir): scenarios/<name>.toml run in full by
+    `swarm sim --no-plots` in-process, once per session (the convergence checks and the
+    `swarm up` equivalence tests share it). Once across xdist's workers too: the first worker
+    to need a scenario runs it under a lock on a file in the session's shared temporary
+    directory, the others wait for it and read its results (`SimResult`: exit_code, stdout,
+    output) and out dir."""
+    import fcntl
+    import os
+    import shutil
+    import traceback
+
     from typer.testing import CliRunner
 
     from swarm.cli.main import app
 
     scenarios = Path(__file__).resolve().parent.parent / "scenarios"
-    cache: dict[str, tuple] = {}
+    base = tmp_path_factory.getbasetemp()
+    shared = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "shipped-sim"
+    shared.mkdir(exist_ok=True)
+    cache: dict[str, tuple[SimResult, Path]] = {}
 
-    def run(name: str):
+    def run(name: str) -> tuple[SimResult, Path]:
         if name not in cache:
-            out = tmp_path_factory.mktemp(f"sim-{name}")
-            res = CliRunner().invoke(app, ["sim", str(scenarios / f"{name}.toml"), "--out", str(out), "--no-plots"])
-            cache[name] = (res, out)
+            out, done = shared / name, shared / f"{name}.result.json"
+            with open(shared / f"{name}.lock", "w") as lock:
+                fcntl.flock(lock, fcntl.LOCK_EX)  # released when closed: the run below is whole by then
+                if not done.exists():
+                    shutil.rmtree(out, ignore_errors=True)  # (a worker that died mid-run)
+                    res = CliRunner().invoke(
+                        app, ["sim", str(scenarios / f"{name}.toml"), "--out", str(out), "--no-plots"]
+                    )
+                    output = res.output
+                    if res.exc_info is not None and not isinstance(res.exception, SystemExit):
+                        output += "".join(traceback.format_exception(*res.exc_info))
+                    text = json.dumps({"exit_code": res.exit_code, "stdout": res.stdout, "output": output})
+                    tmp = done.with_suffix(".tmp")
+                    tmp.write_text(text, encoding="utf-8")
+                    tmp.replace(done)
+                cache[name] = (SimResult(**json.loads(done.read_text(encoding="utf-8"))), out)
         return cache[name]
 
     return run
