@@ -9,10 +9,13 @@ from __future__ import annotations
 import csv
 import json
 import math
+from functools import cache
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 import pytest
+from typer.main import get_command
 from typer.testing import CliRunner
 
 from swarm.agents.batch_maths import wrap as batch_wrap
@@ -54,20 +57,46 @@ def assert_same_run(ref, got, *, full: bool = True) -> None:
     assert got.extra["engine"] == "sim-batch"
 
 
+def assert_same_as_written(out: Path, got) -> None:
+    """`got` (batch) is the `swarm sim` run written in `out` (conftest.shipped_sim: the
+    session's one run of a shipped scenario): assert_same_run, read from its trajectory.npz
+    and summary.json (events included; "engine" and the wall-clock figures apart)."""
+    with np.load(out / "trajectory.npz") as z:
+        a = {k: z[k] for k in z.files}
+    b = got.recorder.arrays()
+    assert a["x"].shape == b["x"].shape
+    assert max(float(np.max(np.abs(a[k] - b[k]))) for k in ("x", "y")) <= TOL
+    np.testing.assert_array_equal(a["out"], b["out"])
+    np.testing.assert_array_equal(a["follow"], b["follow"])
+    np.testing.assert_allclose(a["u"], b["u"], rtol=0, atol=1e-9, equal_nan=True)
+    ref = json.loads((out / "summary.json").read_text())
+    mine = json.loads(json.dumps(got.summary(), default=lambda o: o.item()))  # as written
+    assert ref.pop("engine") == "sim" and mine.pop("engine") == "sim-batch"
+    for k in ("wall_time", "sim_seconds_per_wall_second"):
+        ref.pop(k)
+    assert mine["events"] == ref["events"]
+    assert json.dumps(mine, sort_keys=True) == json.dumps(ref, sort_keys=True)
+
+
 # -- whole runs --------------------------------------------------------------------------------
+# The shipped scenarios' `swarm sim` runs are the session's (conftest.shipped_sim), shared with
+# the tests that check them (tests/pure/test_cli_offline.py, the lockstep tests): only the batch
+# run is this file's.
 
 
 @pytest.mark.slow  # 30,000 ticks each way
-def test_case1_whole_run_equals_swarm_sim():
-    s = load_scenario(SCENARIOS / "case1.toml")
-    assert_same_run(run_sim(s), run_batch([s])[0])
+def test_case1_whole_run_equals_swarm_sim(shipped_sim):
+    res, out = shipped_sim("case1")
+    assert res.exit_code == 0, res.output
+    assert_same_as_written(out, run_batch([load_scenario(SCENARIOS / "case1.toml")])[0])
 
 
 @pytest.mark.slow
-def test_case2_whole_run_equals_swarm_sim():
-    s = load_scenario(SCENARIOS / "case2.toml")
-    ref, (got,) = run_sim(s), run_batch([s])
-    assert_same_run(ref, got)
+def test_case2_whole_run_equals_swarm_sim(shipped_sim):
+    res, out = shipped_sim("case2")
+    assert res.exit_code == 0, res.output
+    (got,) = run_batch([load_scenario(SCENARIOS / "case2.toml")])
+    assert_same_as_written(out, got)
     assert [e["kind"] for e in got.events] == ["switch"] * 5  # 2 tracks 1 for a tick, then 4
 
 
@@ -87,17 +116,25 @@ def test_random_30_agent_swarm_whole_run_equals_swarm_sim():
     [
         ("range 40 m", lambda: random_swarm(SwarmSetting(range=40.0, duration=150.0), 7)),
         ("range 60 m, fov 180 deg", lambda: random_swarm(SwarmSetting(range=60.0, fov=math.pi, duration=150.0), 8)),
-        ("case2-range", lambda: load_scenario(SCENARIOS / "case2-range.toml")),
-        ("case2-fov", lambda: load_scenario(SCENARIOS / "case2-fov.toml")),
+        ("case2-range", None),  # shipped: `swarm sim`'s run is the session's
+        ("case2-fov", None),
     ],
 )
-def test_limited_sensing_whole_run_equals_swarm_sim(name, make):
+def test_limited_sensing_whole_run_equals_swarm_sim(name, make, shipped_sim):
     """Holds, coasts, shadows and searches (the followers' slow path, one by one) beside
     keeps over arrays: the same bits, the same events, the same loss figures."""
-    s = make()
-    ref, (got,) = run_sim(s), run_batch([s])
-    assert_same_run(ref, got)
-    a, b = ref.summary()["agents"], got.summary()["agents"]
+    if make is None:
+        res, out = shipped_sim(name)
+        assert res.exit_code == 0, res.output
+        (got,) = run_batch([load_scenario(SCENARIOS / f"{name}.toml")])
+        assert_same_as_written(out, got)  # the summaries' loss figures among the rest
+        a = json.loads((out / "summary.json").read_text())["agents"]
+    else:
+        s = make()
+        ref, (got,) = run_sim(s), run_batch([s])
+        assert_same_run(ref, got)
+        a = ref.summary()["agents"]
+    b = got.summary()["agents"]
     assert {k: (v.get("losses"), v.get("loss_switches_max")) for k, v in a.items()} == {
         k: (v.get("losses"), v.get("loss_switches_max")) for k, v in b.items()
     }
@@ -216,8 +253,13 @@ def test_members_of_one_batch_must_share_dt_ticks_agents_and_rule():
 # -- the commands --------------------------------------------------------------------------------
 
 
-def invoke(*args):
-    return CliRunner().invoke(app, [str(a) for a in args])
+cli = cache(get_command)  # once: typer's CliRunner.invoke builds it from the app at every call (0.1 s of CPU)
+
+
+def invoke(*args, **kwargs):
+    """`swarm ARGS` in-process (typer's CliRunner), on the click command built once (`cli`)."""
+    with mock.patch("typer.testing._get_command", cli):
+        return CliRunner().invoke(app, [str(a) for a in args], **kwargs)
 
 
 @pytest.mark.slow  # a whole run in-process

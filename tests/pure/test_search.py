@@ -7,6 +7,7 @@ now converge, with every loss under the bound."""
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -147,17 +148,23 @@ def test_swarms_that_used_to_stay_lost_now_converge():
         assert max(counts) <= 10, (s.name, counts)
 
 
-@pytest.mark.slow  # three whole runs, in one batch
-def test_the_limited_sensing_scenarios_converge_and_their_graphs_stop_changing():
+@pytest.mark.slow  # three whole runs (the session's: conftest.shipped_sim)
+def test_the_limited_sensing_scenarios_converge_and_their_graphs_stop_changing(shipped_sim):
     """case2-range, case2-fov and swarm30-range: the graph changes while agents settle
-    (losses), then never again: relative positions are fixed on the orbits."""
+    (losses), then never again: relative positions are fixed on the orbits. Read from the
+    session's `swarm sim` runs of them, which tests/pure/test_cli_offline.py checks too (the
+    batch engine's runs are those, to the bit: tests/pure/test_batch.py)."""
     root = Path(__file__).resolve().parents[2] / "scenarios"
-    scenarios = [load_scenario(root / f"{n}.toml") for n in ("case2-range", "case2-fov", "swarm30-range")]
-    for s, res in zip(scenarios, [run_batch([s])[0] for s in scenarios]):
-        summ = res.summary()
+    for name in ("case2-range", "case2-fov", "swarm30-range"):
+        s = load_scenario(root / f"{name}.toml")
+        res, out = shipped_sim(name)
+        assert res.exit_code == 0, res.output
+        summ = json.loads((out / "summary.json").read_text())
         assert summ["converged"], s.name
         assert sum(a.get("losses", 0) for a in summ["agents"].values()) > 0, s.name  # it did change
-        a = res.recorder.arrays()
-        last = max(int(k[-1]) for k in switch_ticks(a["out"], a["alive"]) if len(k))
+        with np.load(out / "trajectory.npz") as z:
+            out_, alive = z["out"], z["alive"]
+        assert out_.shape[0] == s.run.ticks + 1  # the whole run
+        last = max(int(k[-1]) for k in switch_ticks(out_, alive) if len(k))
         settled = max(v["settling_time"] for v in summ["agents"].values())
         assert last * s.run.dt < 25.0 < settled, (s.name, last * s.run.dt, settled)
