@@ -11,6 +11,7 @@ already safe is passed through unchanged.
 from __future__ import annotations
 
 import math
+from functools import cache, lru_cache
 
 import numpy as np
 import pytest
@@ -32,16 +33,27 @@ def lookahead_points(bar: Barriers, x, y, g):
 
 def _walls(bar: Barriers):
     """Each wall's start corner, unit direction, and the polygon's orientation (+1: ccw)."""
-    verts = np.array(bar.arena.vertices)
+    return _walls_of(bar.arena.vertices)
+
+
+@lru_cache(maxsize=64)
+def _walls_of(vertices):  # (once per arena: the checks ask for it a few times per configuration)
+    verts = np.array(vertices)
     edge = np.roll(verts, -1, axis=0) - verts
     length = np.hypot(edge[:, 0], edge[:, 1])
     return verts, edge / length[:, None], np.sign(polygon_area(verts))
 
 
+@cache
+def pairs(n: int):
+    """The pairs i < j of n agents, in np.triu_indices' order."""
+    return np.triu_indices(n, 1)
+
+
 def barrier_values(bar: Barriers, x, y, g) -> np.ndarray:
     """Every barrier: pairs (i < j) then (agent, wall) in agent-major order."""
     qx, qy = lookahead_points(bar, x, y, g)
-    i, j = np.triu_indices(len(x), 1)
+    i, j = pairs(len(x))
     out = [np.hypot(qx[i] - qx[j], qy[i] - qy[j]) - (bar.radius + 2 * bar.lookahead)]
     if bar.arena is not None:
         start, unit, orient = _walls(bar)
@@ -71,7 +83,7 @@ def barrier_rates_exact(bar: Barriers, x, y, g, v, u) -> np.ndarray:
     la = bar.lookahead
     dqx = v * np.cos(g) - la * u * np.sin(g)
     dqy = v * np.sin(g) + la * u * np.cos(g)
-    i, j = np.triu_indices(len(x), 1)
+    i, j = pairs(len(x))
     dx, dy = qx[i] - qx[j], qy[i] - qy[j]
     out = [(dx * (dqx[i] - dqx[j]) + dy * (dqy[i] - dqy[j])) / np.hypot(dx, dy)]
     if bar.arena is not None:
@@ -102,7 +114,8 @@ def random_arena(rng) -> Arena:
 
 
 def random_config(rng, speed: bool):
-    """2-10 unicycles near each other and the walls, every barrier >= 0 to start with."""
+    """2-10 unicycles near each other and the walls, every barrier >= 0 to start with: candidate
+    points about a centre, each kept when it clears the walls and the points kept before."""
     n = int(rng.integers(2, 11))
     while True:
         arena = random_arena(rng)
@@ -115,24 +128,29 @@ def random_config(rng, speed: bool):
         )
         verts = np.array(arena.vertices)
         lo, hi = verts.min(axis=0), verts.max(axis=0)
+        cx, cy = rng.uniform(lo, hi).tolist()  # a cluster, somewhere (often by a wall)
+        # the checks of a candidate on Python floats (a few points and walls: numpy's per-call
+        # cost was most of this test's time); the random draws as they were, one by one
+        la, gap, margin = bar.lookahead, bar.pair_distance, bar.wall_margin
+        walls = [(float(a), float(b), float(c)) for (a, b), c in zip(arena.normals, arena.offsets, strict=True)]
         xs: list[float] = []
         ys: list[float] = []
         gs: list[float] = []
-        centre = rng.uniform(lo, hi)  # a cluster, somewhere (often by a wall)
+        qs: list[tuple[float, float]] = []
         for _ in range(400):
             if len(xs) == n:
                 break
-            p = centre + rng.normal(0.0, 1.2, 2)
-            gg = rng.uniform(-np.pi, np.pi)
-            la = bar.lookahead
-            qx, qy = p[0] + la * math.cos(gg), p[1] + la * math.sin(gg)
-            ox = np.array(xs) + la * np.cos(gs)
-            oy = np.array(ys) + la * np.sin(gs)
-            near = np.hypot(ox - qx, oy - qy) - (bar.radius + 2 * la)
-            if (near >= 0).all() and (arena.depth(qx, qy) >= bar.wall_margin).all():
-                xs.append(p[0])
-                ys.append(p[1])
+            dx, dy = rng.normal(0.0, 1.2, 2).tolist()
+            gg = float(rng.uniform(-np.pi, np.pi))
+            px, py = cx + dx, cy + dy
+            qx, qy = px + la * math.cos(gg), py + la * math.sin(gg)
+            if all(math.hypot(ox - qx, oy - qy) - gap >= 0 for ox, oy in qs) and all(
+                a * qx + b * qy - c >= margin for a, b, c in walls
+            ):
+                xs.append(px)
+                ys.append(py)
                 gs.append(gg)
+                qs.append((qx, qy))
         if len(xs) == n:
             break
     x, y, g = np.array(xs), np.array(ys), np.array(gs)
@@ -296,6 +314,7 @@ def test_a_wall_turns_an_agent_heading_out():
     assert kept(bar, x, y, g, np.array([1.0]), f.u).all()
 
 
+@pytest.mark.slow  # 200 examples: 0.6 s
 @settings(max_examples=200, deadline=None)
 @given(
     dist=st.floats(3.0, 20.0),
@@ -314,6 +333,7 @@ def test_far_apart_agents_pass_unchanged_to_the_bit(dist, bearing, g0, g1, u0, u
     assert np.array_equal(f.u, u_law) and not f.changed.any()
 
 
+@pytest.mark.slow  # 200 examples: 0.6 s
 @settings(max_examples=200, deadline=None)
 @given(
     k=st.integers(3, 8),
