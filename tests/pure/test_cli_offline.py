@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import json
+from functools import cache
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 import pytest
+from typer.main import get_command
 from typer.testing import CliRunner
 
 from swarm.cli.main import app
@@ -20,8 +23,13 @@ KEYS = {
 COMMANDS = ["check", "schema", "sim", "plot", "export"]
 
 
-def invoke(*args: str):
-    return CliRunner().invoke(app, [str(a) for a in args])
+cli = cache(get_command)  # once: typer's CliRunner.invoke builds it from the app at every call (0.1 s of CPU)
+
+
+def invoke(*args, **kwargs):
+    """`swarm ARGS` in-process (typer's CliRunner), on the click command built once (`cli`)."""
+    with mock.patch("typer.testing._get_command", cli):
+        return CliRunner().invoke(app, [str(a) for a in args], **kwargs)
 
 
 @pytest.fixture
@@ -274,15 +282,14 @@ def _command_paths(command, path=()):
 @pytest.mark.slow
 def test_no_help_page_shows_a_flag_as_taking_a_value():
     # issue 33: typer's rich help printed every flag (--force, --plots/--no-plots, --help) with `<bool>`
-    import typer
 
     from swarm.cli.main import LAZY, build
 
-    paths = list(_command_paths(typer.main.get_command(app)))
+    paths = list(_command_paths(cli(app)))
     assert {("export",), ("study",), ("study", "scenario"), ("robots",), ("up",), ("kill",)} <= set(paths)
     pages = {}
     for path in paths:
-        res = CliRunner().invoke(app, [*path, "--help"], env={"COLUMNS": "200"})
+        res = invoke(*path, "--help", env={"COLUMNS": "200"})
         assert res.exit_code == 0, (path, res.output)
         pages[path] = res.output
     # a live command's process builds its group alone (swarm/cli/main.py LAZY): its pages too

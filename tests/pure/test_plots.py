@@ -6,13 +6,16 @@ import csv
 import json
 import math
 import xml.etree.ElementTree as ET
+from functools import cache
 from pathlib import Path
+from unittest import mock
 
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 from matplotlib.colors import to_rgba
 from synthetic_run import make_run
+from typer.main import get_command
 from typer.testing import CliRunner
 
 from swarm.cli.main import app
@@ -56,6 +59,15 @@ EXPECTED_PNGS = [
 ]
 
 
+cli = cache(get_command)  # once: typer's CliRunner.invoke builds it from the app at every call (0.1 s of CPU)
+
+
+def invoke(*args, **kwargs):
+    """`swarm ARGS` in-process (typer's CliRunner), on the click command built once (`cli`)."""
+    with mock.patch("typer.testing._get_command", cli):
+        return CliRunner().invoke(app, [str(a) for a in args], **kwargs)
+
+
 def assert_pngs(run_dir: Path, paths: list[Path], expected: list[str] = EXPECTED_PNGS) -> None:
     """`paths` are the documented files, in order, and exactly the PNGs now in `run_dir`."""
     assert paths == [run_dir / name for name in expected]
@@ -67,11 +79,21 @@ def assert_pngs(run_dir: Path, paths: list[Path], expected: list[str] = EXPECTED
         assert data[:8] == PNG_MAGIC, name
 
 
-@pytest.mark.slow  # a whole run in-process
-def test_render_writes_every_png(tmp_path: Path) -> None:
-    run_dir = make_run(tmp_path / "run")
-    assert not list(run_dir.glob("*.png"))
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory) -> dict:
+    """A synthetic run's figures rendered once (render_plots): its dir, the paths returned, and
+    matplotlib's open figures before and after (the two tests below read it)."""
+    run_dir = make_run(tmp_path_factory.mktemp("rendered") / "run")
+    pngs_before = list(run_dir.glob("*.png"))
+    before = len(plt.get_fignums())
     paths = render_plots(run_dir)
+    return {"run_dir": run_dir, "pngs_before": pngs_before, "paths": paths, "figs": (before, len(plt.get_fignums()))}
+
+
+@pytest.mark.slow  # a whole run in-process
+def test_render_writes_every_png(rendered) -> None:
+    run_dir, paths = rendered["run_dir"], rendered["paths"]
+    assert not rendered["pngs_before"]
     assert_pngs(run_dir, paths)
     assert list(PLOT_FILES) == EXPECTED_PNGS  # the public list names what is written
 
@@ -107,11 +129,9 @@ def test_render_decimates_long_run(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow  # many renders: the long tier
-def test_render_does_not_leak_figures(tmp_path: Path) -> None:
-    run_dir = make_run(tmp_path / "run", ticks=100)
-    before = len(plt.get_fignums())
-    render_plots(run_dir)
-    assert len(plt.get_fignums()) == before
+def test_render_does_not_leak_figures(rendered) -> None:
+    before, after = rendered["figs"]  # (the render of test_render_writes_every_png)
+    assert after == before
 
 
 @pytest.mark.slow  # renders every figure: the long tier
@@ -292,16 +312,19 @@ def test_export_csv_matches_the_trajectory(tmp_path: Path) -> None:
 
 def test_cli_refuses_a_bad_format_and_exports_csv(tmp_path: Path) -> None:
     run_dir = make_run(tmp_path / "run", ticks=20)
-    res = CliRunner().invoke(app, ["plot", str(run_dir), "--format", "png,jpg"])
+    res = invoke("plot", run_dir, "--format", "png,jpg")
     assert res.exit_code == ExitCode.USAGE and "--format" in res.stderr and "'jpg'" in res.stderr
     assert len(res.stderr.strip().splitlines()) == 1 and "Traceback" not in res.output
     assert not list(run_dir.glob("*.png"))  # refused before any work
-    res = CliRunner().invoke(app, ["export", str(run_dir), "--csv", "--no-plots"])
+    res = invoke("export", run_dir, "--csv", "--no-plots")
     assert res.exit_code == ExitCode.OK, res.output
     assert len(list((run_dir / "csv").glob("agent-*.csv"))) == 3
 
 
-@pytest.mark.parametrize("flag, written", [("--csv", "csv"), ("--ros2", "ros2")])
+@pytest.mark.parametrize(
+    "flag, written",
+    [("--csv", "csv"), pytest.param("--ros2", "ros2", marks=pytest.mark.slow)],  # (a bag: 0.8 s)
+)
 def test_export_writes_only_what_was_asked_unless_the_results_are_missing(
     tmp_path: Path, monkeypatch, flag, written
 ) -> None:
@@ -316,7 +339,7 @@ def test_export_writes_only_what_was_asked_unless_the_results_are_missing(
     data = {n: (run_dir / n).read_bytes() for n in ("trajectory.npz", "summary.json")}
 
     def export(*args: str) -> str:
-        res = CliRunner().invoke(app, ["export", str(run_dir), *args])
+        res = invoke("export", run_dir, *args)
         assert res.exit_code == ExitCode.OK, res.output
         return res.output
 
@@ -558,6 +581,7 @@ def _sweep_rows(converged: bool) -> list[dict]:
     ]
 
 
+@pytest.mark.slow  # figures drawn and written: 0.6 s each
 @pytest.mark.parametrize("converged", [False, True])
 def test_sweep_axes_span_the_swept_values_even_when_no_run_converged(tmp_path, converged):
     # issue 33: with no converged run the settling panel had no data and its axis read -0.04..0.04, not k
