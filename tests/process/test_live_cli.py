@@ -380,6 +380,48 @@ def test_merge_and_graph_offline():
     assert [(a, b) for a, b, at in d["edges"] if at.get("style") == "dotted"] == [("2", "1"), ("4", "5")]
 
 
+# --- with no swarm (before the live swarm of the module starts: it would run all along) ---------
+@pytest.mark.slow
+@pytest.mark.parametrize("args", LIVE_COMMANDS, ids=lambda a: " ".join(a))
+def test_no_swarm_fails_fast(args, monkeypatch):
+    empty = short_runtime_dir()  # its own: two xdist workers run these side by side
+    try:
+        monkeypatch.setenv("SWARM_RUNTIME_DIR", empty)
+        res = invoke(*args)
+        assert res.exit_code == 1, res.output
+        lines = res.stderr.strip().splitlines()
+        assert len(lines) == 1 and "no swarm is running" in lines[0], res.stderr
+        assert "Traceback" not in res.output
+        if args == ["runs", "--json"]:
+            assert json.loads(res.stdout) == []
+    finally:
+        shutil.rmtree(empty, ignore_errors=True)
+
+
+@pytest.mark.slow
+def test_no_swarm_as_processes():
+    """The same, end to end as real processes (imports included), and for an endpoint or run
+    that does not exist."""
+    empty = short_runtime_dir()  # its own: two xdist workers run these side by side
+    env = dict(os.environ, SWARM_RUNTIME_DIR=empty)
+    try:
+        for args, what in [
+            (["agents"], "no swarm is running"),
+            (["watch"], "no swarm is running"),
+            (["graph", "--connect", "tcp/127.0.0.1:9"], "tcp/127.0.0.1:9"),
+            (["kill", "1", "--connect", f"unixsock-stream/{empty}/none.sock"], "none.sock"),
+            (["pause", "--run", "nope"], "run 'nope' not found"),
+        ]:
+            p = subprocess.run(
+                swarm_cmd(*args), env=env, capture_output=True, text=True, timeout=DEADLINE, stdin=subprocess.DEVNULL
+            )
+            assert p.returncode == 1, (args, p.stdout, p.stderr)
+            assert len(p.stderr.strip().splitlines()) == 1 and what in p.stderr, (args, p.stderr)
+            assert "Traceback" not in p.stderr
+    finally:
+        shutil.rmtree(empty, ignore_errors=True)
+
+
 # --- against a live swarm -----------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def live(tmp_path_factory):
@@ -1000,44 +1042,3 @@ def test_a_world_that_stops_answering_is_not_an_ended_one(live, tmp_path):
     finally:
         os.kill(world.pid, signal.SIGINT)
         assert world.wait(DEADLINE) == 130, world.text()[-3000:]
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("args", LIVE_COMMANDS, ids=lambda a: " ".join(a))
-def test_no_swarm_fails_fast(args, monkeypatch):
-    empty = short_runtime_dir()  # its own: two xdist workers run these side by side
-    try:
-        monkeypatch.setenv("SWARM_RUNTIME_DIR", empty)
-        res = invoke(*args)
-        assert res.exit_code == 1, res.output
-        lines = res.stderr.strip().splitlines()
-        assert len(lines) == 1 and "no swarm is running" in lines[0], res.stderr
-        assert "Traceback" not in res.output
-        if args == ["runs", "--json"]:
-            assert json.loads(res.stdout) == []
-    finally:
-        shutil.rmtree(empty, ignore_errors=True)
-
-
-@pytest.mark.slow
-def test_no_swarm_as_processes():
-    """The same, end to end as real processes (imports included), and for an endpoint or run
-    that does not exist."""
-    empty = short_runtime_dir()  # its own: two xdist workers run these side by side
-    env = dict(os.environ, SWARM_RUNTIME_DIR=empty)
-    try:
-        for args, what in [
-            (["agents"], "no swarm is running"),
-            (["watch"], "no swarm is running"),
-            (["graph", "--connect", "tcp/127.0.0.1:9"], "tcp/127.0.0.1:9"),
-            (["kill", "1", "--connect", f"unixsock-stream/{empty}/none.sock"], "none.sock"),
-            (["pause", "--run", "nope"], "run 'nope' not found"),
-        ]:
-            p = subprocess.run(
-                swarm_cmd(*args), env=env, capture_output=True, text=True, timeout=DEADLINE, stdin=subprocess.DEVNULL
-            )
-            assert p.returncode == 1, (args, p.stdout, p.stderr)
-            assert len(p.stderr.strip().splitlines()) == 1 and what in p.stderr, (args, p.stderr)
-            assert "Traceback" not in p.stderr
-    finally:
-        shutil.rmtree(empty, ignore_errors=True)
