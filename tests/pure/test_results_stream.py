@@ -159,7 +159,7 @@ def test_streamed_arrays_equal_the_memory_arrays(tmp_path, monkeypatch):
     rec = tmp_path / RECORDING_FILE
     synthetic(rec, s, 300, seed=4)
     sr = StreamRecorder.__new__(StreamRecorder)  # only its arrays(): the recording is written
-    sr.path, sr._arrays = rec, None
+    sr.path, sr._arrays, sr.memory = rec, None, None
     sr.writer = type("Closed", (), {"close": lambda self: None})()
     a, b = sr.arrays(), recording_arrays(read_recording(rec))
     assert list(a) == list(b)
