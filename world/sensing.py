@@ -158,11 +158,14 @@ def build_frames(
     if hops is None:
         hops = np.full(len(ids), -1)
     frames: dict[int, SensorFrame] = {}
+    # Python lists once per tick (the same ints and floats as int()/float() of each element)
+    id_l, heading_l, hops_l = np.asarray(ids).tolist(), np.asarray(heading).tolist(), np.asarray(hops).tolist()
+    tick, time = int(tick), float(time)
     for i in receivers:
+        b_i, r_i = bearing[i].tolist(), rng[i].tolist()
         contacts = tuple(
-            Contact(int(ids[j]), float(bearing[i, j]), float(heading[j]), float(rng[i, j]), int(hops[j]))
-            for j in np.flatnonzero(s[i])
+            [Contact(id_l[j], b_i[j], heading_l[j], r_i[j], hops_l[j]) for j in np.flatnonzero(s[i]).tolist()]
         )
         tgt = (float(target[0] - x[i]), float(target[1] - y[i])) if is_leader[i] else None
-        frames[int(ids[i])] = SensorFrame(int(tick), float(time), int(ids[i]), float(heading[i]), contacts, tgt)
+        frames[id_l[i]] = SensorFrame(tick, time, id_l[i], heading_l[i], contacts, tgt)
     return frames
