@@ -27,6 +27,7 @@ from swarm.world.recording import (
     RunResult,
     StreamRecorder,
     _Loaded,
+    _write_streamed,
     recording_arrays,
     recover_run,
     write_run,
@@ -261,6 +262,11 @@ def test_a_real_run_with_faults_streams_the_same_results(tmp_path):
     old_write(tmp_path / RECORDING_FILE, old, res.scenario, res.events, res.extra, res.agent_extra)
     assert_same_results(new, old)
     assert json.loads((new / SUMMARY_FILE).read_text())["faults"][0]["kind"] == "kill"
+    # run_sim keeps its ticks (write_run wrote from those): the recording streamed, the same files
+    streamed = tmp_path / "streamed"
+    streamed.mkdir()
+    _write_streamed(tmp_path / RECORDING_FILE, streamed, res)
+    assert_same_results(streamed, old)
 
 
 def import_reader() -> None:
