@@ -145,9 +145,14 @@ class StreamRecorder:
     """The recorder of a run with an output directory: each tick goes to recording.mcap
     as it is recorded (world/stream.py) and nothing stays in memory, so memory is flat
     however long the run and however many agents join. `arrays()` finishes the file and
-    reads it back."""
+    reads it back.
 
-    def __init__(self, scenario: Scenario, ticks: int, path: Path):
+    `keep`: the ticks are also kept in memory (a `Recorder`, `memory`), for a shell that
+    returns the arrays anyway (`swarm sim`, `swarm.simulate`): `arrays()` and `write_run`
+    then use them instead of reading the recording back (the same arrays and files, to the
+    bit: tests/pure/test_results_stream.py)."""
+
+    def __init__(self, scenario: Scenario, ticks: int, path: Path, keep: bool = False):
         self.scenario = scenario
         self.ticks = ticks
         self.path = path
@@ -156,11 +161,14 @@ class StreamRecorder:
         self.t_last = 0.0
         self.writer = StreamWriter(path, scenario, ticks)
         self._arrays: dict[str, np.ndarray] | None = None
+        self.memory = Recorder(scenario, ticks) if keep else None
 
     def add_agent(self, scenario: Scenario) -> None:
         self.scenario = scenario
         self.ids = np.array(scenario.ids, dtype=np.int64)
         self.writer.add_agent(scenario.agents[-1], self.t_last)
+        if self.memory is not None:
+            self.memory.add_agent(scenario)
 
     def event(self, ev: dict) -> None:
         self.writer.event(ev)
@@ -179,6 +187,8 @@ class StreamRecorder:
         follow: Any = None,
     ) -> None:
         self.writer.tick(tick, time, self.ids, x, y, heading, u, out, alive, missed, follow)
+        if self.memory is not None:
+            self.memory.record(tick, time, x, y, heading, u, out, alive, missed, follow)
         self.t_last = time
         self.rows = max(self.rows, tick + 1)
 
@@ -195,9 +205,22 @@ class StreamRecorder:
         self.writer.close()
         return self.path
 
+    def kept(self) -> Recorder | None:
+        """The ticks kept in memory (`keep`), once the recording is finished and whole; None
+        otherwise (not kept, or the file stops at its last good flush: read it back)."""
+        if self.memory is None:
+            return None
+        self.finished()
+        return None if self.torn else self.memory
+
     def arrays(self) -> dict[str, np.ndarray]:
         if self._arrays is None:
-            self._arrays = streamed_arrays(self.finished())
+            kept = self.kept()
+            if kept is None:
+                self._arrays = streamed_arrays(self.finished())
+            else:  # in the order of streamed_arrays (trajectory.npz's members)
+                a = kept.arrays()
+                self._arrays = {**static_arrays(kept.scenario), **{k: a[k] for k in PER_TICK}}
         return self._arrays
 
 

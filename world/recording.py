@@ -176,10 +176,14 @@ def _write_summary(summary: dict, out_dir: Path) -> dict:
 def write_run(result: RunResult, out_dir: Path) -> dict:
     """Write trajectory.npz and summary.json into out_dir (each atomically); returns the summary.
     A run recorded to recording.mcap (`StreamRecorder`) has them written by streaming the
-    recording (world/results_stream.py): memory does not grow with the run's length."""
+    recording (world/results_stream.py): memory does not grow with the run's length; unless
+    its ticks were also kept in memory (`StreamRecorder(keep=True)`: `swarm sim`), then they
+    are written from those, as a run without a recording (the same files, to the bit)."""
     out_dir.mkdir(parents=True, exist_ok=True)
+    kept = getattr(result.recorder, "kept", None)
+    memory = None if kept is None else kept()  # the ticks also kept in memory (`swarm sim`)
     finished = getattr(result.recorder, "finished", None)
-    if finished is not None:
+    if finished is not None and memory is None:
         return _write_streamed(finished(), out_dir, result)
     arrays = result.recorder.arrays()
     _write_atomic(out_dir / TRAJECTORY_FILE, lambda f: np.savez_compressed(f, **arrays))  # type: ignore[arg-type]  # numpy's stubs: **kw could be allow_pickle

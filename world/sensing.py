@@ -158,11 +158,20 @@ def build_frames(
     if hops is None:
         hops = np.full(len(ids), -1)
     frames: dict[int, SensorFrame] = {}
+    # Python lists once per tick (the same ints and floats as int()/float() of each element)
+    id_l, heading_l, hops_l = np.asarray(ids).tolist(), np.asarray(heading).tolist(), np.asarray(hops).tolist()
+    tick, time = int(tick), float(time)
+    # the sensed pairs once, row by row (receiver i's: ks[i] to ks[i + 1]), with their bearings and ranges
+    row, col = np.nonzero(s)
+    ks = np.searchsorted(row, np.arange(len(id_l) + 1)).tolist()
+    j_l, b_l, r_l = col.tolist(), bearing[row, col].tolist(), rng[row, col].tolist()
     for i in receivers:
         contacts = tuple(
-            Contact(int(ids[j]), float(bearing[i, j]), float(heading[j]), float(rng[i, j]), int(hops[j]))
-            for j in np.flatnonzero(s[i])
+            [
+                Contact(id_l[j], b_l[k], heading_l[j], r_l[k], hops_l[j])
+                for k, j in zip(range(ks[i], ks[i + 1]), j_l[ks[i] : ks[i + 1]])
+            ]
         )
         tgt = (float(target[0] - x[i]), float(target[1] - y[i])) if is_leader[i] else None
-        frames[int(ids[i])] = SensorFrame(int(tick), float(time), int(ids[i]), float(heading[i]), contacts, tgt)
+        frames[id_l[i]] = SensorFrame(tick, time, id_l[i], heading_l[i], contacts, tgt)
     return frames

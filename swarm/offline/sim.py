@@ -36,7 +36,8 @@ def run_sim(
     """
     dt = scenario.run.dt
     ticks = int(round((duration if duration is not None else scenario.run.duration) / dt))
-    engine = Engine(scenario, ticks, recording=recording)
+    # the ticks also kept in memory: the caller gets the arrays (no reading the recording back)
+    engine = Engine(scenario, ticks, recording=recording, keep=True)
 
     def brain(aid: int) -> AgentBrain:
         return AgentBrain(BrainConf.from_scenario(scenario, aid))

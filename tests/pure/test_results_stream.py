@@ -27,6 +27,7 @@ from swarm.world.recording import (
     RunResult,
     StreamRecorder,
     _Loaded,
+    _write_streamed,
     recording_arrays,
     recover_run,
     write_run,
@@ -161,7 +162,7 @@ def test_streamed_arrays_equal_the_memory_arrays(tmp_path, monkeypatch):
     rec = tmp_path / RECORDING_FILE
     synthetic(rec, s, 300, seed=4)
     sr = StreamRecorder.__new__(StreamRecorder)  # only its arrays(): the recording is written
-    sr.path, sr._arrays = rec, None
+    sr.path, sr._arrays, sr.memory = rec, None, None
     sr.writer = type("Closed", (), {"close": lambda self: None})()
     a, b = sr.arrays(), recording_arrays(read_recording(rec))
     assert list(a) == list(b)
@@ -263,6 +264,11 @@ def test_a_real_run_with_faults_streams_the_same_results(tmp_path):
     old_write(tmp_path / RECORDING_FILE, old, res.scenario, res.events, res.extra, res.agent_extra)
     assert_same_results(new, old)
     assert json.loads((new / SUMMARY_FILE).read_text())["faults"][0]["kind"] == "kill"
+    # run_sim keeps its ticks (write_run wrote from those): the recording streamed, the same files
+    streamed = tmp_path / "streamed"
+    streamed.mkdir()
+    _write_streamed(tmp_path / RECORDING_FILE, streamed, res)
+    assert_same_results(streamed, old)
 
 
 def import_reader() -> None:
