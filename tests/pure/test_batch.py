@@ -9,17 +9,13 @@ from __future__ import annotations
 import csv
 import json
 import math
-from functools import cache
 from pathlib import Path
-from unittest import mock
 
 import numpy as np
 import pytest
-from typer.main import get_command
-from typer.testing import CliRunner
+from cli_invoke import invoke
 
 from swarm.agents.batch_maths import wrap as batch_wrap
-from swarm.cli.main import app
 from swarm.contracts.orbits import wrap
 from swarm.contracts.scenario import load_scenario, parse_scenario
 from swarm.offline.batch import BatchRefused, refusal, run_batch
@@ -251,15 +247,6 @@ def test_members_of_one_batch_must_share_dt_ticks_agents_and_rule():
 
 
 # -- the commands --------------------------------------------------------------------------------
-
-
-cli = cache(get_command)  # once: typer's CliRunner.invoke builds it from the app at every call (0.1 s of CPU)
-
-
-def invoke(*args, **kwargs):
-    """`swarm ARGS` in-process (typer's CliRunner), on the click command built once (`cli`)."""
-    with mock.patch("typer.testing._get_command", cli):
-        return CliRunner().invoke(app, [str(a) for a in args], **kwargs)
 
 
 @pytest.mark.slow  # a whole run in-process

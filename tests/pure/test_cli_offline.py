@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 import json
-from functools import cache
 from pathlib import Path
-from unittest import mock
 
 import numpy as np
 import pytest
-from typer.main import get_command
+from cli_invoke import command, invoke
 from typer.testing import CliRunner
 
 from swarm.cli.main import app
@@ -21,15 +19,6 @@ KEYS = {
     "follow",
 }
 COMMANDS = ["check", "schema", "sim", "plot", "export"]
-
-
-cli = cache(get_command)  # once: typer's CliRunner.invoke builds it from the app at every call (0.1 s of CPU)
-
-
-def invoke(*args, **kwargs):
-    """`swarm ARGS` in-process (typer's CliRunner), on the click command built once (`cli`)."""
-    with mock.patch("typer.testing._get_command", cli):
-        return CliRunner().invoke(app, [str(a) for a in args], **kwargs)
 
 
 @pytest.fixture
@@ -285,7 +274,7 @@ def test_no_help_page_shows_a_flag_as_taking_a_value():
 
     from swarm.cli.main import LAZY, build
 
-    paths = list(_command_paths(cli(app)))
+    paths = list(_command_paths(command(app)))
     assert {("export",), ("study",), ("study", "scenario"), ("robots",), ("up",), ("kill",)} <= set(paths)
     pages = {}
     for path in paths:

@@ -6,19 +6,15 @@ import csv
 import json
 import math
 import xml.etree.ElementTree as ET
-from functools import cache
 from pathlib import Path
-from unittest import mock
 
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
+from cli_invoke import invoke
 from matplotlib.colors import to_rgba
 from synthetic_run import make_run
-from typer.main import get_command
-from typer.testing import CliRunner
 
-from swarm.cli.main import app
 from swarm.contracts.scenario import load_scenario
 from swarm.contracts.vocabulary import EventKind, ExitCode, FollowState
 from swarm.offline.csv_export import COLUMNS, csv_name, write_agent_csvs
@@ -57,15 +53,6 @@ EXPECTED_PNGS = [
     "neighbours.png",
     "states.png",
 ]
-
-
-cli = cache(get_command)  # once: typer's CliRunner.invoke builds it from the app at every call (0.1 s of CPU)
-
-
-def invoke(*args, **kwargs):
-    """`swarm ARGS` in-process (typer's CliRunner), on the click command built once (`cli`)."""
-    with mock.patch("typer.testing._get_command", cli):
-        return CliRunner().invoke(app, [str(a) for a in args], **kwargs)
 
 
 def assert_pngs(run_dir: Path, paths: list[Path], expected: list[str] = EXPECTED_PNGS) -> None:
