@@ -123,6 +123,18 @@ def _stop(up, sig=signal.SIGINT, timeout=DEADLINE) -> int:
     return up.launcher.wait(timeout)
 
 
+def assert_equals_sim_prefix(traj: dict, sim_traj: dict, sim_summ: dict, ticks: int, label: str) -> None:
+    """The `swarm up` run `traj` is the first `ticks` ticks of the whole `swarm sim` run: positions
+    to 1e-9 m (the distance printed after `label`), out-neighbours, alive and missed exactly."""
+    sim_traj, _ = first_ticks(sim_traj, sim_summ, ticks)
+    assert traj["x"].shape == sim_traj["x"].shape
+    dist = max(np.max(np.abs(traj["x"] - sim_traj["x"])), np.max(np.abs(traj["y"] - sim_traj["y"])))
+    print(f"{label}: max |dx|, |dy| = {dist:.3g} m")
+    assert dist < 1e-9
+    for key in ("out", "alive", "missed"):
+        np.testing.assert_array_equal(traj[key], sim_traj[key], err_msg=key)
+
+
 # --- 1. scenarios/faults.toml: one fault of each kind -------------------------------------------
 # Every fault is over by t = 65 s and the last recovery ends at t = 91.33 s: the first 120 s of the
 # 200 s scenario hold every fault, every recovery (each recovery time equal to the whole run's) and
@@ -192,13 +204,7 @@ def test_faults_toml_through_up(rt, tmp_path, shipped_sim):
     res, sim_out = shipped_sim("faults")  # the session's whole run of faults.toml (conftest)
     assert res.exit_code == ExitCode.OK, res.output[-3000:]
     sim_traj, sim_summ = sim_results(sim_out)
-    sim_traj, _ = first_ticks(sim_traj, sim_summ, ticks)  # the same first 120 s
-    assert traj["x"].shape == sim_traj["x"].shape
-    dist = max(np.max(np.abs(traj["x"] - sim_traj["x"])), np.max(np.abs(traj["y"] - sim_traj["y"])))
-    print(f"  swarm up vs swarm sim: max |dx|, |dy| = {dist:.3g} m")
-    assert dist < 1e-9
-    for key in ("out", "alive", "missed"):
-        np.testing.assert_array_equal(traj[key], sim_traj[key], err_msg=key)
+    assert_equals_sim_prefix(traj, sim_traj, sim_summ, ticks, "  swarm up vs swarm sim")  # the same first 120 s
     # every recovery is inside the first 120 s: its time is the whole run's
     assert [f["recovery_time"] for f in faults] == [f["recovery_time"] for f in sim_summ["faults"]]
 
@@ -313,13 +319,8 @@ def test_soak_kills_and_restarts(rt, tmp_path):
     assert sim.wait(DEADLINE) == ExitCode.OK, sim.text()[-3000:]
     sim_traj, sim_summ = sim_results(tmp_path / "sim")
     assert sim_summ["ticks"] == round(SOAK_DURATION / 0.01)
-    sim_traj, _ = first_ticks(sim_traj, sim_summ, ticks)
-    assert traj["x"].shape == sim_traj["x"].shape
-    dist = max(np.max(np.abs(traj["x"] - sim_traj["x"])), np.max(np.abs(traj["y"] - sim_traj["y"])))
-    print(f"[soak] swarm up vs swarm sim over {SOAK_UP_DURATION:g} s: max |dx|, |dy| = {dist:.3g} m")
-    assert dist < 1e-9
-    for key in ("out", "alive", "missed"):
-        np.testing.assert_array_equal(traj[key], sim_traj[key], err_msg=key)
+    label = f"[soak] swarm up vs swarm sim over {SOAK_UP_DURATION:g} s"
+    assert_equals_sim_prefix(traj, sim_traj, sim_summ, ticks, label)
 
     # each fault's recovery window but the last ends at the next fault, inside the `swarm up` run
     def recoveries(faults: list[dict]) -> list:
