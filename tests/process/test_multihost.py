@@ -15,6 +15,10 @@ over it (TLS, as across machines), its agents connect to that router on a Unix s
 - Ctrl-C on a host stops its agents (the world drops them); a world killed makes the
   other host close its router, its agents exit 4 at once and the host exits 1.
 
+The world's machine is watched by one observer process in `w` (the operator's view, as
+`swarm agents --json` gives it, read every 0.1 s over one session: `swarm.connect`), not by
+a `swarm agents` process per look.
+
 Needs root (`ip netns add`); skips, saying why, where namespaces cannot be made. Every
 namespace, and with it every link and address, is the test's own and is deleted at the
 end, even on failure. Only processes the test started are ever signalled.
@@ -28,6 +32,7 @@ import secrets
 import shutil
 import signal
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -156,6 +161,28 @@ def lan():
         assert not any(ns in names for ns in net.ns.values()), names
 
 
+# The observer on the world's machine: `swarm agents --json`'s document every 0.1 s over one
+# operator session (swarm.connect, what `swarm agents` is made of), null while the run does not answer.
+OBSERVER = """\
+import json, sys, time
+from swarm.api.live import connect
+from swarm.contracts.errors import NoRunError
+run = sys.argv[1]
+while True:
+    try:
+        with connect(run=run) as live:
+            while True:
+                snap = live.snapshot()
+                info = snap["info"]
+                doc = {k: info.get(k) for k in ("run", "scenario", "clock", "paused", "tick", "ticks", "time")}
+                print(json.dumps({**doc, "agents": snap["agents"]}), flush=True)
+                time.sleep(0.1)
+    except NoRunError:
+        print("null", flush=True)
+        time.sleep(0.1)
+"""
+
+
 class Machines:
     """One run's processes on the three namespaces, each with a runtime dir of its own."""
 
@@ -213,16 +240,25 @@ class Machines:
             )
         return self.hosts
 
-    def agents_json(self) -> dict | None:
-        """`swarm agents --json` on the world's machine (as its operator), or None."""
-        r = subprocess.run(
-            self.lan.cmd("w", swarm_cmd("agents", "--json", "--run", self.run)),
-            env=self.env["w"],
-            capture_output=True,
-            text=True,
-            timeout=DEADLINE,
+    def observe(self) -> None:
+        """Start the observer on the world's machine (as its operator): one process that
+        prints `swarm agents --json`'s document (its tick and rows) every 0.1 s, or null
+        while the run does not answer, until `stop_observing`."""
+        self.observer = self.rt.tracker.spawn(
+            self.lan.cmd("w", [sys.executable, "-c", OBSERVER, self.run]), "observer", env=self.env["w"]
         )
-        return json.loads(r.stdout) if r.returncode == ExitCode.OK else None
+
+    def agents_json(self) -> dict | None:
+        """The observer's latest `swarm agents --json` document (None before its first or when
+        the run did not answer)."""
+        self.observer.check_running("the run to answer")
+        text = self.observer.text()
+        lines = text.splitlines() if text.endswith("\n") else text.splitlines()[:-1]  # (not a line being written)
+        return json.loads(lines[-1]) if lines else None
+
+    def stop_observing(self) -> None:
+        os.kill(self.observer.pid, signal.SIGTERM)
+        self.observer.wait(DEADLINE)
 
     def agent_pids(self) -> dict[str, dict[int, int]]:
         return {h: self.rt.tracker.wait_agent_pids(t, len(HOSTS[h]), timeout=DEADLINE) for h, t in self.hosts.items()}
@@ -252,17 +288,19 @@ def machines(lan, rt, tmp_path):
 
 def test_lockstep_over_veth_links_equals_sim(machines):
     m = machines(7447)
-    m.start_world("--duration", "20")
+    # 10 s of case2: every choice of an out-neighbour is made by tick 1, then 1000 ticks of frames
+    # and commands cross the links
+    m.start_world("--duration", "10")
     m.start_hosts()
     pids = m.agent_pids()
-    sim, _ = run_sim(m.rt.tracker, SCENARIOS / "case2.toml", m.tmp / "sim", "--duration", "20")
+    sim, _ = run_sim(m.rt.tracker, SCENARIOS / "case2.toml", m.tmp / "sim", "--duration", "10")
     assert m.world.wait(120) == ExitCode.OK, m.why()
     for h, t in m.hosts.items():
         assert t.wait(DEADLINE) == ExitCode.OK, m.why()
         assert f"host {h}: agents {', '.join(map(str, HOSTS[h]))}: exit code 0" in t.text(), t.text()
     m.rt.tracker.assert_none_left(timeout=DEADLINE)
     traj = load_trajectory(m.out)
-    assert len(traj["t"]) == len(sim["t"]) == 2001
+    assert len(traj["t"]) == len(sim["t"]) == 1001
     for key in ("t", "x", "y", "heading", "u", "out", "alive"):
         np.testing.assert_array_equal(traj[key], sim[key], err_msg=key)
     summary = json.loads((m.out / "summary.json").read_text())
@@ -273,6 +311,7 @@ def test_lockstep_over_veth_links_equals_sim(machines):
             ag = summary["agents"][str(aid)]
             assert (ag["pid"], ag["joins"], ag["commands"]) == (pids[h][aid], 1, summary["ticks"]), (aid, ag)
     assert events_of(summary, EventKind.DROP) == []
+    assert events_of(summary, EventKind.SWITCH), "no runtime choice in the run compared"
     m.host_dirs_empty()
     print(f"lockstep over the veth links: {summary['ticks_per_second']:.0f} ticks/s")
 
@@ -281,6 +320,7 @@ def test_a_kill_on_one_host_is_noticed_by_the_world(machines):
     m = machines(7448)
     m.start_world("--duration", "600")
     m.start_hosts()
+    m.observe()
     pids = m.agent_pids()
 
     def all_live(doc):
@@ -302,6 +342,7 @@ def test_a_kill_on_one_host_is_noticed_by_the_world(machines):
         "host b to report the kill",
     )
 
+    m.stop_observing()
     os.kill(m.world.pid, signal.SIGINT)
     assert m.world.wait(DEADLINE) == ExitCode.INTERRUPTED, m.why()
     for t in m.hosts.values():
@@ -319,6 +360,7 @@ def test_a_host_stopped_and_a_world_killed(machines):
     m = machines(7449)
     m.start_world("--duration", "600")
     m.start_hosts()
+    m.observe()
     pids = m.agent_pids()
     wait_for(
         lambda: (d := m.agents_json()) is not None and d["tick"] > 0 and all(a["alive"] for a in d["agents"]),
@@ -333,6 +375,7 @@ def test_a_host_stopped_and_a_world_killed(machines):
         DEADLINE,
         "the world to drop a's agents",
     )
+    m.stop_observing()
     os.kill(m.world.pid, signal.SIGKILL)
     assert m.hosts["b"].wait(DEADLINE) == ExitCode.FAILED, m.why()  # its agents saw the world gone: exit 4, at once
     text = m.hosts["b"].text()
