@@ -32,6 +32,7 @@ from swarm.contracts import credentials, wire
 from swarm.contracts.errors import UsageError
 from swarm.contracts.frames import Contact, SensorFrame
 from swarm.contracts.vocabulary import ExitCode
+from swarm.live import client
 from swarm.live import logs as L
 from swarm.live.tap import Message, Tap, Topic, parse_topic
 
@@ -341,7 +342,10 @@ def test_logs_echo_and_stop_against_swarm_up(rt, tmp_path, monkeypatch):
         assert res.exit_code == ExitCode.FAILED and "no swarm is running" in one_line(res.stderr)
     own = credentials.read(Path(rt.dir) / f"{run}{credentials.SUFFIX}")
     forged = credentials.write(credentials.new_credentials(run, own.endpoint), tmp_path / "forged.cred")
-    res = invoke("stop", "--credentials", forged)
+    with monkeypatch.context() as mp:  # the hub's refusal is waited out for 1 s, not the 3 s of OPEN_TIMEOUT_S
+        real = client._probe
+        mp.setattr(client, "_probe", lambda ref, timeout=0.5, open_timeout=1.0: real(ref, timeout, open_timeout))
+        res = invoke("stop", "--credentials", forged)
     assert res.exit_code == ExitCode.FAILED and one_line(res.stderr)
     agent_file = credentials.write(own.export("agent-3"), tmp_path / "agent3.cred")
     res = invoke("echo", "truth", "-c", "1", "--credentials", agent_file)

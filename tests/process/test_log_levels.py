@@ -1,11 +1,12 @@
 """`swarm -v` / `swarm -q` and $SWARM_LOG_LEVEL reach the processes `swarm up` starts
 (swarm/contracts/log.py, docs/reference/cli.md#log-levels): the world's and the agents' logs carry
-their debug lines with -v, and no info line with -q (tier process)."""
+their debug lines with -v, and no info line with -q (tier process). Each run is a leader and a
+follower for 0.1 s (lockstep): the logs are the point, not the swarm."""
 
 from __future__ import annotations
 
 import pytest
-from runtime_helpers import SCENARIOS, swarm_cmd
+from runtime_helpers import ring_scenario, swarm_cmd
 
 from swarm.contracts.log import ENV_LEVEL
 from swarm.contracts.vocabulary import ExitCode
@@ -14,7 +15,8 @@ pytestmark = pytest.mark.slow
 
 
 def up(rt, out, *flags, env=None):
-    args = swarm_cmd(*flags, "up", SCENARIOS / "case2.toml", "--out", out, "--no-plots", "--duration", "0.5")
+    scenario = ring_scenario(rt.tracker.log_dir / f"{out.name}.toml", 2, leaders=1, clock="lockstep", duration=0.1)
+    args = swarm_cmd(*flags, "up", scenario, "--out", out, "--no-plots")
     p = rt.tracker.spawn(args, f"up-{out.name}", env={**rt.env, **(env or {})})
     assert p.wait(120) == ExitCode.OK, p.text()[-3000:]
     return (out / "logs" / "world.log").read_text(), (out / "logs" / "agent-1.log").read_text()

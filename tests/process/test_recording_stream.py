@@ -196,17 +196,18 @@ def test_full_disk_is_one_line_and_leaves_no_half_file(tmp_path):
 
 @pytest.mark.slow  # a real `swarm up`
 def test_sigkilled_world_loses_at_most_a_second(rt, tmp_path):
-    """The issue's test: the world of a realtime run is SIGKILLed about 5 s in. What reached
-    the disk is rebuilt into a valid run directory covering every tick up to at most 1 s
-    before the kill, and `swarm plot` renders it."""
+    """The issue's test: the world of a realtime run is SIGKILLed about 3 s in (six of its
+    0.5 s flushes: world/stream.py FLUSH_PERIOD). What reached the disk is rebuilt into a
+    valid run directory covering every tick up to at most 1 s before the kill, and `swarm
+    plot` renders it (in this process: the command, not its start-up, is the point)."""
     import signal
 
-    from runtime_helpers import start_up, swarm_cmd
+    from runtime_helpers import start_up
 
     out = tmp_path / "run"
     up = start_up(rt.tracker, CASE2, out, "--clock", "realtime", "--duration", "60")
     up.wait_started(DEADLINE)
-    up.wait_info(lambda i: i["time"] >= 5.0, DEADLINE, "5 s of simulated time")
+    up.wait_info(lambda i: i["time"] >= 3.0, DEADLINE, "3 s of simulated time")
     info = up.info()
     t_before = info["time"]  # the world has recorded at least up to here
     os.kill(info["pid"], signal.SIGKILL)
@@ -217,9 +218,9 @@ def test_sigkilled_world_loses_at_most_a_second(rt, tmp_path):
     assert "recovered" in said and "complete: false" in said, said[-3000:]  # swarm up rebuilt them
     for name in ("summary.json", "trajectory.npz", "overview.png"):
         (out / name).unlink(missing_ok=True)  # (no plots: started with --no-plots)
-    p = rt.tracker.spawn(swarm_cmd("plot", out), "plot")  # and so does swarm plot
-    assert p.wait(120) == ExitCode.OK, p.text()[-2000:]
-    assert "recovered" in p.text() and "complete: false" in p.text()
+    res = CliRunner().invoke(app, ["plot", str(out)])  # and so does swarm plot
+    assert res.exit_code == ExitCode.OK, res.output[-2000:]
+    assert "recovered" in res.output and "complete: false" in res.output
     summ = json.loads((out / "summary.json").read_text())
     assert summ["complete"] is False and summ["recording_finished"] is False
     run = load_run(out)
