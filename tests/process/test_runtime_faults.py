@@ -21,17 +21,16 @@ from runtime_helpers import (
     agent_info,
     check_time_column,
     events_of,
+    first_ticks,
     has_started,
-    load_trajectory,
     observe_world,
     replay_events,
+    sim_results,
     start_ticking,
     start_up,
     swarm_cmd,
 )
-from typer.testing import CliRunner
 
-from swarm.cli.main import app
 from swarm.contracts.vocabulary import AgentState, EventKind, ExitCode
 from swarm.runtime.procs import wait_until
 
@@ -298,13 +297,17 @@ def test_agents_exit_when_the_world_vanishes(rt, tmp_path):
     rt.tracker.assert_none_left(timeout=DEADLINE)
 
 
+# case2 through lockstep `swarm up` for the stalls below: long enough for a stall to land mid-run
+STALL_RUN_S = 10.0
+
+
 # --- a frozen world: lockstep stays lockstep (docs/guides/faults.md#lockstep-under-stalls) ---------------
-def test_a_world_stopped_5_s_mid_run_still_equals_sim(rt, tmp_path):
+def test_a_world_stopped_5_s_mid_run_still_equals_sim(rt, tmp_path, shipped_sim):
     """SIGSTOP to the world for 5 s mid-run: its stall is not the agents' (no missed tick),
     the tick's frames go again, and the run equals `swarm sim` to the bit, reproducible."""
-    # 20 s (2000 ticks): the stop lands once the world ticks, and the stalled world cannot end
-    # the run meanwhile (deadline_restarts below says the stall was mid-run).
-    up, _, _ = start_ticking(rt.tracker, tmp_path / "run", 20)
+    # 10 s (1000 ticks): the stop lands once the world ticks (a few ms later), and the stalled
+    # world cannot end the run meanwhile (deadline_restarts below says the stall was mid-run).
+    up, _, _ = start_ticking(rt.tracker, tmp_path / "run", STALL_RUN_S)
     world = rt.tracker.world_pid(up.launcher)
     os.kill(world, signal.SIGSTOP)
     try:
@@ -312,15 +315,18 @@ def test_a_world_stopped_5_s_mid_run_still_equals_sim(rt, tmp_path):
     finally:
         os.kill(world, signal.SIGCONT)
     summ, traj = up.results(180)
-    # `swarm sim` of the same 20 s, in this process (no process start; not during the stop:
-    # on a loaded machine it could outlast the agents' 10 s of --world-grace)
-    sim_args = ["sim", str(SCENARIOS / "case2.toml"), "--out", str(tmp_path / "sim"), "--no-plots"]
-    res = CliRunner().invoke(app, [*sim_args, "--duration", "20"])
+    # the first 10 s of the session's `swarm sim` run of case2 (conftest.shipped_sim; in this
+    # process, after the stop: on a loaded machine a sim during it could outlast the agents'
+    # 10 s of --world-grace)
+    res, sim_out = shipped_sim("case2")
     assert res.exit_code == ExitCode.OK, res.output[-3000:]
-    sim = load_trajectory(tmp_path / "sim")
-    assert summ["ticks"] == 2000
-    for key in ("t", "x", "y", "heading", "u", "out", "alive"):
+    ticks = round(STALL_RUN_S / 0.01)
+    sim, _ = first_ticks(*sim_results(sim_out), ticks)
+    assert summ["ticks"] == ticks
+    for key in ("t", "x", "y", "heading", "out", "alive"):
         np.testing.assert_array_equal(traj[key], sim[key], err_msg=key)
+    # the commands: every row but the last (a run's last row has none; the whole run's goes on)
+    np.testing.assert_array_equal(traj["u"][:-1], sim["u"][:-1], err_msg="u")
     assert summ["reproducible"] is True, summ["not_reproducible"]
     assert all(a["missed_ticks"] == 0 and a["drops"] == 0 for a in summ["agents"].values()), summ["agents"]
     assert summ["deadline_restarts"] >= 1, "the world did not notice its own stall"
@@ -328,9 +334,9 @@ def test_a_world_stopped_5_s_mid_run_still_equals_sim(rt, tmp_path):
 
 # --- 9. a frozen agent ----------------------------------------------------------------------------
 def test_frozen_agent_is_dropped(rt, tmp_path):
-    # 2000 ticks: the freeze lands once the world ticks, and the world, waiting for the frozen
-    # agent's command, cannot end the run before it drops it.
-    up, pids, _ = start_ticking(rt.tracker, tmp_path / "run", 20)
+    # 1000 ticks: the freeze lands once the world ticks (a few ms later), and the world, waiting
+    # for the frozen agent's command, cannot end the run before it drops it.
+    up, pids, _ = start_ticking(rt.tracker, tmp_path / "run", STALL_RUN_S)
     victim = pids[3]
     t_stop = time.time()
     os.kill(victim, signal.SIGSTOP)
