@@ -830,57 +830,59 @@ def test_agent_before_its_world(live, tmp_path):
     10 s by default; 2 s here), its own exit code (6, not 3, a refused id's) and one line, no
     zenoh source path; a SIGTERM while it connects: one line, exit 143, no traceback. (One
     whose world comes meanwhile joins: test_environment_picks_one_of_two_runs.)"""
-    tr = live["tracker"]
-    early = tr.spawn(
-        swarm_cmd(
-            "agent",
-            "--id",
-            1,
-            "--connect",
-            f"unixsock-stream/{live['runtime']}/later.sock",
-            "--run",
-            "later-run",
-            "--world-wait",
-            "2",
-        ),
-        "agent-early",
-    )
-    refused = tr.spawn(
-        swarm_cmd("agent", "--id", 1, "--connect", "tcp/127.0.0.1:9", "--run", "later-run", "--world-wait", "2"),
-        "agent-refused",
-    )
-    t0 = time.monotonic()
-    assert early.wait(DEADLINE) == 6, early.text()
-    print(f"\n[timing] an agent with no world to join exited 6 after {time.monotonic() - t0:.1f} s")
-    out = early.text().strip().splitlines()
-    assert len(out) == 1 and "no world at" in out[0] and "later.sock" in out[0] and "for 2 s" in out[0], out
-    tcp = early.text()
-    assert refused.wait(DEADLINE) == 6 and len(refused.text().strip().splitlines()) == 1, refused.text()
-    # a listener that never answers zenoh's handshake: the agent waits in its connection
     import socket
 
+    tr = live["tracker"]
+    # a listener that never answers zenoh's handshake: the agent waits in its connection, and
+    # a stop then waits for zenoh.open to return (its 10 s connect timeout): started first, so
+    # that the two agents with no world wait out their 2 s meanwhile
     lsn = socket.socket()
     lsn.bind(("127.0.0.1", 0))
     lsn.listen(8)
-    lsn.settimeout(20)
+    lsn.settimeout(DEADLINE)
     port = lsn.getsockname()[1]
     creds = os.path.join(live["runtime"], f"{live['run']}.cred")
     hang = tr.spawn(
         swarm_cmd("agent", "--id", 1, "--connect", f"tcp/127.0.0.1:{port}", "--credentials", creds), "agent-hang"
     )
+    conns = []
     try:
-        conns = [lsn.accept()[0] for _ in range(2)]  # its probe of the endpoint, then zenoh's connection
+        conns += [lsn.accept()[0] for _ in range(2)]  # its probe of the endpoint, then zenoh's connection
+        early = tr.spawn(
+            swarm_cmd(
+                "agent",
+                "--id",
+                1,
+                "--connect",
+                f"unixsock-stream/{live['runtime']}/later.sock",
+                "--run",
+                "later-run",
+                "--world-wait",
+                "2",
+            ),
+            "agent-early",
+        )
+        refused = tr.spawn(
+            swarm_cmd("agent", "--id", 1, "--connect", "tcp/127.0.0.1:9", "--run", "later-run", "--world-wait", "2"),
+            "agent-refused",
+        )
+        t0 = time.monotonic()
         time.sleep(0.3)
         assert hang.poll() is None, hang.text()
         os.kill(hang.pid, signal.SIGTERM)
+        assert early.wait(DEADLINE) == 6, early.text()
+        print(f"\n[timing] an agent with no world to join exited 6 after {time.monotonic() - t0:.1f} s")
+        assert refused.wait(DEADLINE) == 6 and len(refused.text().strip().splitlines()) == 1, refused.text()
         assert hang.wait(DEADLINE) == 143, hang.text()  # a stop during zenoh.open waits for the open to return
     finally:
         lsn.close()
+        for c in conns:
+            c.close()
+    out = early.text().strip().splitlines()
+    assert len(out) == 1 and "no world at" in out[0] and "later.sock" in out[0] and "for 2 s" in out[0], out
     text = hang.text().strip()
-    for c in conns:
-        c.close()
     assert text.splitlines() == [f"swarm agent 1: stopped by SIGTERM while connecting to tcp/127.0.0.1:{port}"], text
-    for t in (tcp, refused.text(), text):
+    for t in (early.text(), refused.text(), text):
         assert "Traceback" not in t and ".rs:" not in t, t
 
 
@@ -952,6 +954,48 @@ def test_watch_renders_in_a_terminal(live):
             p.kill()
         p.wait(DEADLINE)
         os.close(master)
+
+
+@pytest.mark.slow
+def test_spawned_agent_logs_in_the_runs_logs(live):
+    """`swarm spawn` of a new id: its log is the run's logs/agent-<id>.log; of a live id:
+    refused at once, in one line, nothing started. (Agent 7 stays in the run: after the
+    tests that count six agents.)"""
+    from pathlib import Path
+
+    up, tr = live["up"], live["tracker"]
+    sp = tr.spawn(
+        swarm_cmd(
+            "spawn",
+            "--id",
+            "7",
+            "--x",
+            "10",
+            "--y",
+            "-5",
+            "--heading",
+            "0",
+            "--speed",
+            "20",
+            "--follow",
+            "1",
+            "--timeout",
+            DEADLINE,
+        ),
+        "spawn-7",
+    )
+    assert sp.wait(DEADLINE) == 0, sp.text()
+    m = re.search(r"agent 7 is live: pid (\d+) \(log (.+)\)", sp.text())
+    assert m, sp.text()
+    pid = int(m[1])
+    live["extra_pids"].append((pid, psutil.Process(pid).create_time()))
+    log = up.out.resolve() / "logs" / "agent-7.log"
+    assert Path(m[2]) == log and log.exists()
+    assert not (Path(live["runtime"]) / "logs").exists()
+    again = tr.spawn(swarm_cmd("spawn", "--id", "3"), "spawn-3-again")
+    assert again.wait(DEADLINE) == 1
+    lines = again.text().strip().splitlines()
+    assert len(lines) == 1 and "agent 3 is already live" in lines[0], lines
 
 
 @pytest.mark.slow

@@ -1,7 +1,8 @@
 """Start-up and its files: a world or an agent stopped in its first
 second exits and leaves nothing behind; `swarm up` waits for the world's own word that it
 listens (swarm/contracts/startup.py), not a fixed time; the files of a killed world are
-swept by the next `swarm runs`; a spawned agent logs into the run's `logs/`.
+swept by the next `swarm runs`. (A spawned agent logs into the run's `logs/`:
+test_live_cli.py, on its shared run.)
 
 Real processes, real zenoh on Unix sockets in private runtime dirs; outcomes only, with
 generous deadlines (a loaded 2-core machine must pass), never elapsed times.
@@ -12,7 +13,6 @@ from __future__ import annotations
 import fcntl
 import json
 import os
-import re
 import shutil
 import signal
 import subprocess
@@ -21,10 +21,9 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-import psutil
 import pytest
 from deadlines import DEADLINE
-from runtime_helpers import SCENARIOS, Runtime, agent_cmd, live_swarm, short_runtime_dir, swarm_cmd, wait_for
+from runtime_helpers import SCENARIOS, Runtime, agent_cmd, short_runtime_dir, swarm_cmd, wait_for
 from typer.testing import CliRunner
 
 from swarm.cli.main import app
@@ -266,43 +265,3 @@ def test_up_waits_for_a_slow_world(tmp_path):
         code = up.wait(240)
         assert code == ExitCode.OK, up.text()[-3000:]
         assert "cannot reach" not in up.text() and (tmp_path / "run" / "summary.json").exists()
-
-
-@pytest.mark.slow
-def test_spawned_agent_logs_in_the_runs_logs(tmp_path):
-    """`swarm spawn` of a new id: its log is the run's logs/agent-<id>.log; of a live id:
-    refused at once, in one line, nothing started."""
-    with live_swarm(tmp_path, SCENARIOS / "case2.toml", 6, "--duration", "600") as state:
-        up, tr = state["up"], state["tracker"]
-        sp = tr.spawn(
-            swarm_cmd(
-                "spawn",
-                "--id",
-                "7",
-                "--x",
-                "10",
-                "--y",
-                "-5",
-                "--heading",
-                "0",
-                "--speed",
-                "20",
-                "--follow",
-                "1",
-                "--timeout",
-                DEADLINE,
-            ),
-            "spawn-7",
-        )
-        assert sp.wait(DEADLINE) == ExitCode.OK, sp.text()
-        m = re.search(r"agent 7 is live: pid (\d+) \(log (.+)\)", sp.text())
-        assert m, sp.text()
-        pid = int(m[1])
-        state["extra_pids"].append((pid, psutil.Process(pid).create_time()))
-        log = up.out.resolve() / "logs" / "agent-7.log"
-        assert Path(m[2]) == log and log.exists()
-        assert not (Path(state["runtime"]) / "logs").exists()
-        again = tr.spawn(swarm_cmd("spawn", "--id", "3"), "spawn-3")
-        assert again.wait(DEADLINE) == ExitCode.FAILED
-        lines = again.text().strip().splitlines()
-        assert len(lines) == 1 and "agent 3 is already live" in lines[0], lines
