@@ -157,8 +157,9 @@ def test_insider_reads_nothing_but_its_own(run):
     run's owner) may read them."""
     got = []
     sub = run["insider"].declare_subscriber(f"{wire.run_prefix(run['run'])}/**", lambda s: got.append(str(s.key_expr)))
-    try:
-        time.sleep(2.0)
+    try:  # 20 ticks of the run (1 s at 20 Hz; longer on a loaded machine): a truth, 6 frames and 6 commands each
+        t0 = info(run)["tick"]
+        wait_for(lambda: info(run)["tick"] >= t0 + 20, DEADLINE, "20 ticks with the insider listening")
     finally:
         sub.undeclare()
     assert got == [], f"the insider read {len(got)} samples, e.g. {sorted(set(got))[:5]}"

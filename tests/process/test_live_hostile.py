@@ -4,7 +4,7 @@ and `swarm echo` saying what it cannot give.
 One lockstep case 2, tapped from the start by `swarm echo truth --json` and `swarm echo
 events --json` (processes). Then: `swarm echo agent/99/cmd` (not in the run, and not an id
 it could add) is one line and exit 1; `agent/12/cmd` (an id `swarm spawn` may still add) is
-waited for, with a note first; 300 pauses and 300 resumes whose `by` carries terminal escape
+waited for, with a note first; 100 pauses and 100 resumes whose `by` carries terminal escape
 sequences, then a stop with a 60 KB reason of the same kind. The run ends as on Ctrl-C; its
 record holds a bounded number of pause/resume events (the rest counted in `over_limit`),
 ending with the clock's state; the stop's reason is bounded and escaped; no escape sequence
@@ -33,7 +33,7 @@ from swarm.live.client import open_run_session
 from swarm.world.inbox import ADMIN_BURST, ADMIN_RATE
 
 EVIL = "\x1b[2J\x1b[H\x1b]0;pwned\x07\nresults: /nonexistent\n"
-PAIRS = 300
+PAIRS = 100  # 200 admin queries: twenty times the budget's burst (ADMIN_BURST 10, then ADMIN_RATE 2 a second)
 
 
 def invoke(*args):

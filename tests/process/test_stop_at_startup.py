@@ -86,13 +86,20 @@ def marked(mark: str) -> list[psutil.Process]:
 # (where None), or after the file `where` (in the case's out dir or runtime dir) appeared: the
 # world's log (the launcher starts the world), agent logs (the launcher starts the agents; the
 # last one: the run goes), the world's socket (it listens), the recording (the sim runs).
-HANDLER = (0.0, 0.05, 0.2, 0.5, 1.0, 2.0)
+# Where the delays landed on a 2-core sandbox at load 2-5 (2026-11-29, s after the handler):
+# the command line's imports until 0.4-1.2 s (0.0 and 0.2 land in them, 0.5 in them or just
+# after); `up` starts the world at 0.9-1.8 s (1.0: before or as it starts; 2.0: while the world
+# imports or opens its hub; the files pin the later steps); `sim` builds its run until 1.3-2.0 s
+# (1.0 lands there; the recording pins the run), `world` listens from 1.2-2.0 s (2.0: waiting
+# for agents), `agent` waits for its world from about 0.8 s (2.0).
+HANDLER = (0.0, 0.2, 0.5, 1.0, 2.0)
 CASES = (
     [("up", sig, None, d) for sig in SIGNALS for d in HANDLER]
     + [("up", sig, "out/logs/world.log", d) for sig in SIGNALS for d in (0.0, 0.2)]
     + [("up", sig, "out/logs/agent-1.log", 0.0) for sig in SIGNALS]
     + [("up", sig, "out/logs/agent-5.log", d) for sig in SIGNALS for d in (0.0, 0.5)]
-    + [(name, sig, None, d) for name in ("sim", "world", "agent") for sig in SIGNALS for d in (0.0, 0.5, 2.0)]
+    + [("sim", sig, None, d) for sig in SIGNALS for d in (0.0, 0.5, 1.0)]
+    + [(name, sig, None, d) for name in ("world", "agent") for sig in SIGNALS for d in (0.0, 0.5, 2.0)]
     + [("sim", sig, "out/recording.mcap", 0.2) for sig in SIGNALS]
     + [("world", sig, "rt/w.sock", 0.0) for sig in SIGNALS]
 )
