@@ -430,6 +430,7 @@ def test_rooted_selection_keeps_every_follower_rooted(rt, tmp_path, shipped_sim)
 
 
 # --- 4. 10,000 malformed messages on every key -------------------------------------------------
+# (the test is the last of this file: it sends them on the launcher regression tests' run, and ends it)
 def garbage_plan(run: str, rng: random.Random) -> list[tuple[str, str, bytes]]:
     """10,000 (op, key or selector, payload): op put | get | token, over every key the runtime
     listens to. Nothing in it is a valid message that could change the run."""
