@@ -66,22 +66,34 @@ def assert_pngs(run_dir: Path, paths: list[Path], expected: list[str] = EXPECTED
         assert data[:8] == PNG_MAGIC, name
 
 
+ALL_FORMATS = ("png", "pdf", "svg")
+LONG_TICKS, FEW_POINTS = 9001, 500  # more rows than points per line: decimated
+
+
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory) -> dict:
-    """A synthetic run's figures rendered once (render_plots): its dir, the paths returned, and
-    matplotlib's open figures before and after (the two tests below read it)."""
-    run_dir = make_run(tmp_path_factory.mktemp("rendered") / "run")
+    """One synthetic run's figures rendered once, in every format, with fewer points per line
+    than it has rows (render_plots(max_points=FEW_POINTS): the stride and the min/max envelope),
+    leader 1 and followers 2 -> 1, 3 -> 2, 4 -> 3, 5 -> 4, 6 -> 5 of which follower 4 drops, so
+    that 5 and 6 have no leader path: its dir, the paths returned, and matplotlib's open figures
+    before and after (the tests below read it: a render in every format costs 10-15 s of CPU,
+    the PDFs' fonts most of it)."""
+    run_dir = make_run(tmp_path_factory.mktemp("rendered") / "run", ticks=LONG_TICKS, n_followers=5, drop=(2, 4000))
     pngs_before = list(run_dir.glob("*.png"))
     before = len(plt.get_fignums())
-    paths = render_plots(run_dir)
+    paths = render_plots(run_dir, max_points=FEW_POINTS, formats=ALL_FORMATS)
     return {"run_dir": run_dir, "pngs_before": pngs_before, "paths": paths, "figs": (before, len(plt.get_fignums()))}
+
+
+def pngs_of(rendered: dict) -> list[Path]:
+    return [p for p in rendered["paths"] if p.suffix == ".png"]
 
 
 @pytest.mark.slow  # a whole run in-process
 def test_render_writes_every_png(rendered) -> None:
-    run_dir, paths = rendered["run_dir"], rendered["paths"]
+    run_dir = rendered["run_dir"]
     assert not rendered["pngs_before"]
-    assert_pngs(run_dir, paths)
+    assert_pngs(run_dir, pngs_of(rendered))
     assert list(PLOT_FILES) == EXPECTED_PNGS  # the public list names what is written
 
 
@@ -109,28 +121,28 @@ def test_render_without_summary_and_single_row(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow  # long renders: the long tier
-def test_render_decimates_long_run(tmp_path: Path) -> None:
-    # more rows than MAX_POINTS: exercises the stride and min/max envelope paths
-    run_dir = make_run(tmp_path / "run", ticks=9001, n_followers=5, drop=(2, 4000))
-    assert_pngs(run_dir, render_plots(run_dir, max_points=500))
+def test_render_decimates_long_run(rendered) -> None:
+    # more rows than max_points: exercises the stride and min/max envelope paths
+    run = load_run(rendered["run_dir"])
+    assert run.n_rows == LONG_TICKS + 1 > 4 * FEW_POINTS and len(run.ids) == 6
+    assert_pngs(rendered["run_dir"], pngs_of(rendered))
 
 
 @pytest.mark.slow  # many renders: the long tier
 def test_render_does_not_leak_figures(rendered) -> None:
-    before, after = rendered["figs"]  # (the render of test_render_writes_every_png)
+    before, after = rendered["figs"]  # (the render of the module's run)
     assert after == before
 
 
 @pytest.mark.slow  # renders every figure: the long tier
-def test_final_graph_flags_orphans(tmp_path: Path) -> None:
-    # leader 1, followers 2 -> 1, 3 -> 2, 4 -> 3; follower 3 drops, so 4 has no leader path
-    run_dir = make_run(tmp_path / "run", n_followers=3, drop=(1, 300))
-    run = load_run(run_dir)
+def test_final_graph_flags_orphans(rendered) -> None:
+    # leader 1, followers 2 -> 1, ..., 6 -> 5; follower 4 drops, so 5 and 6 have no leader path
+    run = load_run(rendered["run_dir"])
     edges, dead, orphans = final_graph(run)
-    assert edges == {2: 1, 3: 2, 4: 3}  # 3's edge is from its last alive row
-    assert dead == {3}
-    assert orphans == {4}
-    assert_pngs(run_dir, render_plots(run_dir))
+    assert edges == {2: 1, 3: 2, 4: 3, 5: 4, 6: 5}  # 4's edge is from its last alive row
+    assert dead == {4}
+    assert orphans == {5, 6}
+    assert_pngs(rendered["run_dir"], pngs_of(rendered))  # drawn with them
 
 
 def test_missing_trajectory_raises(tmp_path: Path) -> None:
@@ -176,7 +188,6 @@ def test_bad_summary_raises(tmp_path: Path) -> None:
 # -- figures fit for a paper: formats, colours, the control range, labels, CSV, animation ------------
 
 PDF_MAGIC = b"%PDF"
-ALL_FORMATS = ("png", "pdf", "svg")
 
 
 def assert_valid_figure(path: Path) -> None:
@@ -348,10 +359,9 @@ def test_export_writes_only_what_was_asked_unless_the_results_are_missing(
     assert drawn == [run_dir] and (run_dir / "trajectory.npz").is_file()
 
 
-@pytest.mark.slow  # renders every figure three times: the long tier
-def test_render_writes_every_format(tmp_path: Path) -> None:
-    run_dir = make_run(tmp_path / "run", ticks=200)
-    paths = render_plots(run_dir, formats=ALL_FORMATS)
+@pytest.mark.slow  # renders every figure in three formats: the long tier
+def test_render_writes_every_format(rendered) -> None:
+    run_dir, paths = rendered["run_dir"], rendered["paths"]
     assert paths == [run_dir / Path(n).with_suffix("." + f).name for n in EXPECTED_PNGS for f in ALL_FORMATS]
     for p in paths:
         assert_valid_figure(p)
