@@ -1,5 +1,6 @@
 """The rooted selection rule (issue "Resilience", part 2): pure and in-process tiers."""
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -31,18 +32,24 @@ def test_nearest_selection_forms_a_follower_only_cycle_that_the_graph_flags():
     assert {2, 5} <= set(g["unrooted"])
 
 
-@pytest.mark.slow  # a whole run in-process: the long tier
-def test_rooted_selection_roots_every_follower_and_converges():
-    res = run_sim(load_scenario(ROOTED))
-    g = _final_graph(res)
+@pytest.mark.slow  # a whole run (the session's: conftest.shipped_sim)
+def test_rooted_selection_roots_every_follower_and_converges(shipped_sim):
+    """rooted.toml's whole `swarm sim` run, shared with tests/pure/test_cli_offline.py (which
+    checks it converges too) and the lockstep tests."""
+    res, out = shipped_sim("rooted")
+    assert res.exit_code == 0, res.output
+    with np.load(out / "trajectory.npz") as z:
+        a = {k: z[k] for k in ("t", "ids", "role", "out")}
+    assert len(a["t"]) == load_scenario(ROOTED).run.ticks + 1  # the whole run
+    leaders = {int(i) for i, r in zip(a["ids"], a["role"]) if r == "leader"}
+    g = analyse({int(i): (int(o) if o >= 0 else None) for i, o in zip(a["ids"], a["out"][-1])}, leaders)
     assert g["cycles"] == [] and g["unrooted"] == []
-    summary = res.summary()
+    summary = json.loads((out / "summary.json").read_text())
     assert summary["converged"], summary["agents"]
     # Once rooted, nobody ever sits in a follower-only cycle: check every 100th tick.
-    a = res.recorder.arrays()
     for k in range(0, len(a["t"]), 100):
-        out = {int(i): (int(o) if o >= 0 else None) for i, o in zip(a["ids"], a["out"][k])}
-        assert analyse(out, {1})["cycles"] == [], (k, out)
+        out_k = {int(i): (int(o) if o >= 0 else None) for i, o in zip(a["ids"], a["out"][k])}
+        assert analyse(out_k, {1})["cycles"] == [], (k, out_k)
 
 
 def _brain():
