@@ -162,11 +162,11 @@ def lan():
 
 
 # The observer on the world's machine: `swarm agents --json`'s document every 0.1 s over one
-# operator session (swarm.connect, what `swarm agents` is made of), null while the run does not answer.
+# operator session (swarm.connect, what `swarm agents` is made of), null (and why) while the run
+# does not answer; each on a line of its own starting "DOC " (whatever else it may print).
 OBSERVER = """\
 import json, sys, time
 from swarm.api.live import connect
-from swarm.contracts.errors import NoRunError
 run = sys.argv[1]
 while True:
     try:
@@ -175,10 +175,10 @@ while True:
                 snap = live.snapshot()
                 info = snap["info"]
                 doc = {k: info.get(k) for k in ("run", "scenario", "clock", "paused", "tick", "ticks", "time")}
-                print(json.dumps({**doc, "agents": snap["agents"]}), flush=True)
+                print("DOC", json.dumps({**doc, "agents": snap["agents"]}), flush=True)
                 time.sleep(0.1)
-    except NoRunError:
-        print("null", flush=True)
+    except Exception as e:  # no run (yet), or it stopped answering: said, and asked again
+        print("DOC null", repr(e), flush=True)
         time.sleep(0.1)
 """
 
@@ -254,7 +254,8 @@ class Machines:
         self.observer.check_running("the run to answer")
         text = self.observer.text()
         lines = text.splitlines() if text.endswith("\n") else text.splitlines()[:-1]  # (not a line being written)
-        return json.loads(lines[-1]) if lines else None
+        docs = [ln for ln in lines if ln.startswith("DOC ")]  # (not what else the process may say)
+        return None if not docs or docs[-1].startswith("DOC null") else json.loads(docs[-1][4:])
 
     def stop_observing(self) -> None:
         os.kill(self.observer.pid, signal.SIGTERM)
