@@ -129,12 +129,13 @@ def test_no_coasting_on_an_agent_that_vanished_mid_range():
     assert fov.at_edge()
 
 
-@pytest.mark.slow  # three whole runs, in one batch
+@pytest.mark.slow  # three runs of 250 s, in one batch
 def test_swarms_that_used_to_stay_lost_now_converge():
     """Seeds that once failed at 60 m (a follower loitered far from everyone for the
-    whole run): every run converges, every loss under the bound, nobody left without an
-    out-neighbour."""
-    setting = SwarmSetting(range=60.0)
+    study's whole 500 s run): every run converges within half of it (the last agent settles
+    at 65 s, every relative error under 1e-8 at 250 s), every loss under the bound, nobody
+    left without an out-neighbour."""
+    setting = SwarmSetting(range=60.0, duration=250.0)
     swarms = [random_swarm(setting, seed) for seed in (1, 2, 10)]
     for s, res in zip(swarms, run_batch(swarms)):
         summ = res.summary()
