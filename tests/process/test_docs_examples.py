@@ -1,8 +1,10 @@
 """The Python blocks of README.md's "Python API" section and of getting-started's "From Python"
 run top to bottom as written, in a fresh interpreter at the repository's root: only their output
-folders are moved to a temporary directory (the runs keep their lengths: a lockstep run much
-shorter than the block's live calls could end before them). A block that uses a name before it
-exists, or a live run after it has ended (swarm.NoRunError), fails here."""
+folders are moved to a temporary directory (the runs keep their lengths). A block that uses a
+name before it exists, or a live run after it has ended (swarm.NoRunError, swarm.UpError), fails
+here. A lockstep run goes as fast as its processes can, so a block whose live calls may reach a
+run after its end would flake on a loaded machine: getting-started's reads live state only from
+its realtime run (30 s of wall time, ended by its `with` block once its few calls are done)."""
 
 from __future__ import annotations
 
