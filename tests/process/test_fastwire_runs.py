@@ -1,10 +1,11 @@
 """Whole runs with and without the compiled hot path (swarm/contracts/_fastwire.c): the same
 trajectories to the bit (tier process, slow).
 
-- `swarm sim` in a process of its own with SWARM_PURE_PYTHON=1, and in this process (which
-  runs the compiled path: the tests are skipped otherwise), on the shipped scenarios whose
-  out-neighbours change at run time (`swarm sim` passes frames as objects: what differs
-  there is the nearest choice): every array of trajectory.npz equal;
+- `swarm sim` in a process of its own with SWARM_PURE_PYTHON=1 (one process for the four
+  scenarios), and in this process (which runs the compiled path: the test is skipped
+  otherwise), on the shipped scenarios whose out-neighbours change at run time (`swarm sim`
+  passes frames as objects: what differs there is the nearest choice): every array of
+  trajectory.npz equal;
 - a lockstep `swarm up` whose every process (world, agents) runs the pure path (frames
   encoded and decoded in Python) equals `swarm sim`; the equivalence tests of
   tests/process/test_runtime.py run `swarm up` on the compiled path where a compiler exists, so
@@ -19,10 +20,10 @@ import sys
 
 import numpy as np
 import pytest
+from cli_invoke import invoke
+from deadlines import DEADLINE
 from runtime_helpers import SCENARIOS, UpRun, load_trajectory, swarm_cmd
-from typer.testing import CliRunner
 
-from swarm.cli.main import app
 from swarm.contracts import fastpath
 from swarm.contracts.scenario import load_scenario
 from swarm.contracts.vocabulary import ExitCode
@@ -40,27 +41,42 @@ def env_of(rt, pure: bool) -> dict:
     return {**env, fastpath.PURE_ENV: "1"} if pure else env
 
 
-def sim(rt, scenario, out, pure: bool, duration: str = "20"):
-    """`swarm sim`: pure, a process of its own with SWARM_PURE_PYTHON=1; else in this process
-    (the path it imported: the compiled one where the tests that compare run)."""
-    args = ["sim", str(scenario), "--out", str(out), "--no-plots", "--duration", duration]
-    if pure:
-        p = rt.tracker.spawn(swarm_cmd(*args), f"sim-{out.name}", env=env_of(rt, pure))
-        assert p.wait(120) == ExitCode.OK, p.text()[-3000:]
-    else:
-        res = CliRunner().invoke(app, args)
-        assert res.exit_code == ExitCode.OK, res.output[-3000:]
+def sim(scenario, out, duration: str = "20"):
+    """`swarm sim` in this process (the path it imported: the compiled one where the tests that
+    compare run)."""
+    res = invoke("sim", scenario, "--out", out, "--no-plots", "--duration", duration)
+    assert res.exit_code == ExitCode.OK, res.output[-3000:]
     return load_trajectory(out)
 
 
+# `swarm sim SCENARIO --out OUT --duration D` for each (SCENARIO, OUT, D) of argv, in one process
+# (what `swarm` runs: its click command), on the path it imported (the pure one: asserted)
+PURE_SIMS = """
+import sys
+from typer.main import get_command
+from swarm.cli.main import app
+from swarm.contracts import fastpath
+assert fastpath.compiled is None, fastpath.path
+command = get_command(app)
+for k in range(1, len(sys.argv), 3):
+    scenario, out, duration = sys.argv[k : k + 3]
+    args = ["sim", scenario, "--out", out, "--no-plots", "--duration", duration]
+    command.main(args, prog_name="swarm", standalone_mode=False)
+"""
+
+
 @pytest.mark.skipif(fastpath.compiled is None, reason=f"the compiled path is not in use: {fastpath.path}")
-@pytest.mark.parametrize("name", SELECTING)
-def test_sim_is_the_same_with_and_without_the_compiled_path(rt, tmp_path, name):
-    scen = SCENARIOS / f"{name}.toml"
-    d = SELECTING[name]
-    compiled, pure = sim(rt, scen, tmp_path / "c", False, d), sim(rt, scen, tmp_path / "p", True, d)
-    for key in KEYS:
-        np.testing.assert_array_equal(compiled[key], pure[key], err_msg=f"{name}: {key}")
+def test_sim_is_the_same_with_and_without_the_compiled_path(rt, tmp_path):
+    """Each scenario of SELECTING, pure (the four in one process: one start, not four) and
+    compiled (in this process, meanwhile)."""
+    argv = [str(a) for name, d in SELECTING.items() for a in (SCENARIOS / f"{name}.toml", tmp_path / name / "p", d)]
+    pure = rt.tracker.spawn([sys.executable, "-c", PURE_SIMS, *argv], "sim-pure", env=env_of(rt, True))
+    compiled = {name: sim(SCENARIOS / f"{name}.toml", tmp_path / name / "c", d) for name, d in SELECTING.items()}
+    assert pure.wait(DEADLINE) == ExitCode.OK, pure.text()[-3000:]
+    for name in SELECTING:
+        theirs = load_trajectory(tmp_path / name / "p")
+        for key in KEYS:
+            np.testing.assert_array_equal(compiled[name][key], theirs[key], err_msg=f"{name}: {key}")
 
 
 def test_a_pure_lockstep_up_equals_sim(rt, tmp_path):
@@ -68,7 +84,7 @@ def test_a_pure_lockstep_up_equals_sim(rt, tmp_path):
     scen = SCENARIOS / "case2-range.toml"
     args = swarm_cmd("up", scen, "--out", tmp_path / "up", "--no-plots", "--clock", "lockstep", "--duration", "20")
     up = UpRun(rt.tracker.spawn(args, "up", env=env_of(rt, True)), tmp_path / "up", rt.tracker)
-    ref = sim(rt, scen, tmp_path / "sim", False)  # meanwhile
+    ref = sim(scen, tmp_path / "sim")  # meanwhile
     assert up.launcher.wait(120) == ExitCode.OK, up.launcher.text()[-3000:]
     traj = up.trajectory()
     assert len(traj["t"]) == round(20 / load_scenario(scen).run.dt) + 1
