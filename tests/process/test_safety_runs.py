@@ -13,8 +13,8 @@ import tomllib
 
 import numpy as np
 import pytest
-from runtime_helpers import run_sim as run_sim_process
-from runtime_helpers import start_up
+from cli_invoke import invoke
+from runtime_helpers import sim_results, start_up
 
 from swarm.contracts.scenario import ScenarioError, parse_scenario
 from swarm.contracts.vocabulary import EventKind, ExitCode
@@ -70,11 +70,13 @@ def distance(arrays) -> np.ndarray:
 
 @pytest.mark.slow
 def test_without_the_filter_they_collide_and_with_it_they_do_not():
-    bare = run_sim(overtake())
+    # 20 s (was 40 s): the collision spell is over by then (200 ticks from about 14.7 s, its
+    # least distance 0.002 m), and the filter's two spells are in it, as over 40 s
+    bare = run_sim(overtake(duration=20.0))
     assert "safety" not in bare.summary()
     a = bare.recorder.arrays()
     assert distance(a).min() < RADIUS
-    measuring = run_sim(overtake({"radius": RADIUS, "enabled": False}))  # (one run: its arrays and summary)
+    measuring = run_sim(overtake({"radius": RADIUS, "enabled": False}, duration=20.0))  # (its arrays and summary)
     measured = measuring.summary()
     # enabled = false: the same run, measured: one collision spell, no intervention
     np.testing.assert_array_equal(measuring.recorder.arrays()["x"], a["x"])
@@ -82,7 +84,7 @@ def test_without_the_filter_they_collide_and_with_it_they_do_not():
     assert s["collisions"] == 1 and s["collision_ticks"] > 0 and s["min_distance"] < RADIUS
     assert s["interventions"] == 0 and not any(e["kind"] == EventKind.SAFETY for e in measured["events"])
 
-    filtered = run_sim(overtake({"radius": RADIUS}))
+    filtered = run_sim(overtake({"radius": RADIUS}, duration=20.0))
     summ = filtered.summary()
     s = summ["safety"]
     assert s["collisions"] == 0 and s["collision_ticks"] == 0
@@ -105,10 +107,11 @@ def test_an_arena_is_kept_and_exits_are_counted_without_the_filter():
     """An arena whose west wall cuts the orbit (x = -9 m, the orbit reaches -10 m): without the
     filter both leaders leave it on every lap (each spell one exit); with it they stay in, turned
     by the wall, sometimes with no safe turn rate at their constant speed (recorded) and at
-    their turn-rate limit (saturations)."""
+    their turn-rate limit (saturations). Over 20 s (was 40 s): four exits unfiltered (seven in
+    40 s); filtered, 91 ticks with no safe turn rate in 5 spells and 48 saturations."""
     arena = [-9.0, -11.0, 11.0, 11.0]
-    out = run_sim(overtake({"radius": RADIUS, "arena": arena, "enabled": False})).summary()["safety"]
-    summ = run_sim(overtake({"radius": RADIUS, "arena": arena})).summary()
+    out = run_sim(overtake({"radius": RADIUS, "arena": arena, "enabled": False}, duration=20.0)).summary()["safety"]
+    summ = run_sim(overtake({"radius": RADIUS, "arena": arena}, duration=20.0)).summary()
     kept = summ["safety"]
     assert out["boundary_exits"] >= 4 and out["outside_ticks"] > 0 and out["saturations"] == 0
     assert kept["boundary_exits"] == 0 and kept["outside_ticks"] == 0 and kept["collisions"] == 0
@@ -124,16 +127,20 @@ def test_an_arena_is_kept_and_exits_are_counted_without_the_filter():
 
 @pytest.mark.slow
 def test_the_batch_engine_equals_sim_with_the_filter():
-    """Equal to the bit over 20 s (the filter's spells start at tick 177; with the arena, infeasible
-    spells and saturations too: equality over a prefix holds on the whole run)."""
+    """Equal to the bit over 15 s (was 20 s): the filter at work in both (the overtake's 258
+    interventions, none before 10 s; with the arena, 35 ticks with no safe turn rate, 3 such spells,
+    and 20 saturations too: equality over a prefix holds on the whole run)."""
     arena = [-9.0, -11.0, 11.0, 11.0]
-    scens = [overtake({"radius": RADIUS}, duration=20.0), overtake({"radius": RADIUS, "arena": arena}, duration=20.0)]
+    scens = [overtake({"radius": RADIUS}, duration=15.0), overtake({"radius": RADIUS, "arena": arena}, duration=15.0)]
     for s, b in zip(scens, run_batch(scens)):
         r = run_sim(s)
         ra, ba = r.recorder.arrays(), b.recorder.arrays()
         for key in ("x", "y", "heading", "u"):
             np.testing.assert_array_equal(ba[key], ra[key], err_msg=key)
         rs, bs = r.summary(), b.summary()
+        assert rs["safety"]["interventions"] > 0  # the prefix has the filter at work
+        if s.safety.corners:
+            assert rs["safety"]["infeasible_spells"] > 0 and rs["safety"]["saturations"] > 0
         assert bs["events"] == rs["events"]
         assert bs["safety"] == rs["safety"]
         assert {k: v["safety"] for k, v in bs["agents"].items()} == {k: v["safety"] for k, v in rs["agents"].items()}
@@ -168,8 +175,11 @@ def test_lockstep_up_equals_sim_with_the_filter(rt, tmp_path):
     "safety" events, infeasible spells and saturations among them, in `swarm sim` of it."""
     scen = tmp_path / "overtake.toml"
     scen.write_text(OVERTAKE.format(duration=10.0) + f"\n[safety]\nradius = {RADIUS}\narena = [-9, -11, 11, 11]\n")
-    sim, sim_summ = run_sim_process(rt.tracker, scen, tmp_path / "sim")
     up = start_up(rt.tracker, scen, tmp_path / "up", "--clock", "lockstep")
+    # `swarm sim` in this process while the run goes (its process is not the claim: its files are)
+    res = invoke("sim", scen, "--out", tmp_path / "sim", "--no-plots")
+    assert res.exit_code == ExitCode.OK, res.output[-3000:]
+    sim, sim_summ = sim_results(tmp_path / "sim")
     rc = up.launcher.wait(120)
     assert rc == ExitCode.OK, up.launcher.text()[-3000:]
     traj, summ = up.trajectory(), up.summary()
@@ -278,14 +288,10 @@ def test_a_robots_file_carries_the_table_for_its_robots():
 
 
 def test_swarm_check_shows_the_table_and_warns_of_unbounded_turn_rates(tmp_path):
-    from typer.testing import CliRunner
-
-    from swarm.cli.main import app
-
     path = tmp_path / "s.toml"
     text = OVERTAKE.format(duration=20.0).replace("max_turn_rate = 2.0\n", "", 1)
     path.write_text(text + "\n[safety]\nradius = 1.0\narena = [[-20, -15], [20, -15], [0, 25]]\n")
-    res = CliRunner().invoke(app, ["check", str(path)])
+    res = invoke("check", path)
     assert res.exit_code == 0, res.output
     assert "safety: filter, radius=1 m, lookahead=0.25 m, gamma=2/s, speed may not change" in res.output
     assert "arena: (-20, -15) (20, -15) (0, 25)" in res.output
@@ -294,13 +300,9 @@ def test_swarm_check_shows_the_table_and_warns_of_unbounded_turn_rates(tmp_path)
 
 @pytest.mark.slow  # a whole run (20 s: the collision is at about 17 s) through the CLI: the long tier
 def test_swarm_sim_prints_the_figures(tmp_path):
-    from typer.testing import CliRunner
-
-    from swarm.cli.main import app
-
     path = tmp_path / "s.toml"
     path.write_text(OVERTAKE.format(duration=20.0) + "\n[safety]\nradius = 1.0\nenabled = false\n")
-    res = CliRunner().invoke(app, ["sim", str(path), "--no-plots", "-o", str(tmp_path / "run")])
+    res = invoke("sim", path, "--no-plots", "-o", tmp_path / "run")
     assert res.exit_code == 0, res.output
     line = next(ln for ln in res.output.splitlines() if ln.startswith("safety"))
     assert line.startswith("safety (measured only, radius 1 m): collisions 1, boundary exits 0, saturations 0")
