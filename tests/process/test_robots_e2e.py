@@ -190,15 +190,31 @@ def test_the_turtlebot_run_drives_the_fleet_and_records_its_poses(rt, tmp_path):
         assert r[before].max() > 1.5
 
 
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory):
+    """One `swarm robots sim` for the runs of both `on_dropout` tests (a run takes the robots'
+    poses as they stand before its tick 0): (its robots file, the wire); its report, once it is
+    stopped after them, says it left both robots stopped by a zero twist."""
+    from runtime_helpers import Runtime
+
+    base = tmp_path_factory.mktemp("fleet")
+    with Runtime(base) as frt:
+        tracked, robots, wire = start_fleet(frt, base)
+        yield robots, wire
+        report = stop_fleet(frt, tracked)
+    assert report.count("stopped by a zero twist") == 2, report
+
+
 @pytest.mark.parametrize("on_dropout", ["leave", "coast"])
-def test_a_killed_agent_stops_its_robot_or_drives_it_straight_on(rt, tmp_path, on_dropout):
-    """... and then Ctrl-C of swarm up stops every robot (the run's Ctrl-C test: one fleet and
-    one run for both)."""
+def test_a_killed_agent_stops_its_robot_or_drives_it_straight_on(rt, tmp_path, on_dropout, fleet):
+    """... and then Ctrl-C of swarm up stops every robot (the run's Ctrl-C test: one run for
+    both, and one fleet for the two tests)."""
+    robots, wire = fleet
     scenario = tmp_path / "turtlebot.toml"
     scenario.write_text(TURTLEBOT.read_text().replace("[run]\n", f'[run]\non_dropout = "{on_dropout}"\n', 1))
-    fleet, robots, wire = start_fleet(rt, tmp_path, scenario=scenario)
+    since = time.monotonic()  # (the wire holds the other test's twists too)
     up = start_up(rt.tracker, scenario, tmp_path / "run", "--robots", robots, "--duration", 120)
-    wait_moving(up, wire)
+    wait_moving(up, wire, since)
     pids = rt.tracker.wait_agent_pids(up.launcher, 2)
     event = time.monotonic()
     os.kill(pids[2], signal.SIGKILL)
@@ -222,12 +238,14 @@ def test_a_killed_agent_stops_its_robot_or_drives_it_straight_on(rt, tmp_path, o
     for ns in ROBOT.values():
         wait_for(lambda ns=ns: wire.stopped_after(ns, event), DEADLINE, f"a zero twist for {ns}")
         wire.report(f"Ctrl-C of swarm up ({on_dropout})", ns, event)
-    assert stop_fleet(rt, fleet).count("stopped by a zero twist") == 2
 
 
 def test_stale_poses_stop_their_robot(rt, tmp_path):
-    fleet, robots, wire = start_fleet(rt, tmp_path, "--stop-poses", "2:2")
-    up = start_up(rt.tracker, TURTLEBOT, tmp_path / "run", "--robots", robots, "--duration", 8)
+    # robot 2 silent 1 s into the run, stale 0.5 s later (stale_after): the run goes on 2.5 s
+    # past that (was 2:2 in an 8 s run; the run's time is wall time, so a loaded machine
+    # only ends it later)
+    fleet, robots, wire = start_fleet(rt, tmp_path, "--stop-poses", "2:1")
+    up = start_up(rt.tracker, TURTLEBOT, tmp_path / "run", "--robots", robots, "--duration", 4)
     follower, leader = ROBOT[2], ROBOT[1]
     wait_for(
         lambda: up.running("the poses to stop") or "robot 2: poses stopped" in fleet.text(), DEADLINE, "poses to stop"

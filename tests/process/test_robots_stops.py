@@ -2,10 +2,10 @@
 real zenoh: `swarm up --robots` zero-twists every robot when its world exits (SIGKILL here),
 `swarm estop` from a second terminal (world running, stalled with SIGSTOP, killed), and
 `swarm robots guard` next to the fleet's router when the world's commands stop. The fleet
-(`swarm robots sim`) is the robots; the wire (a client of its router, test_robots_e2e.Wire)
-sees each twist as it arrives. The tests assert outcomes (the last twist each robot got is
-zero, and came after the fault; the run ended; nothing left); the delays are
-benchmarks/robots_stops.py's.
+(`swarm robots sim`, one for the module: `fleet`) is the robots; the wire (a client of its
+router, test_robots_e2e.Wire) sees each twist as it arrives. The tests assert outcomes (the last
+twist each robot got is zero, and came after the fault; the run ended; nothing left); the delays
+are benchmarks/robots_stops.py's.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import time
 
 import pytest
 from deadlines import DEADLINE
-from runtime_helpers import start_up, swarm_cmd, wait_for
+from runtime_helpers import Runtime, start_up, swarm_cmd, wait_for
 from test_robots_e2e import ROBOT, TURTLEBOT, start_fleet, stop_fleet, wait_moving
 
 import swarm
@@ -36,10 +36,33 @@ def world_pid_of(rt, up) -> int:
     return wait_for(lambda: rt.tracker.world_pid(up.launcher), DEADLINE, "the world's pid")
 
 
-def test_a_killed_world_leaves_every_robot_zero_twisted_by_swarm_up(rt, tmp_path):
-    fleet, robots, wire = start_fleet(rt, tmp_path, "--cmd-timeout", "3600")  # no watchdog on the robots
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory):
+    """One `swarm robots sim` (no watchdog on the robots: --cmd-timeout 3600) for the module's
+    tests, each with runs of its own on it (a run takes its robots' poses as they stand before its
+    tick 0: a run after another starts where the robots were left): (its robots file, the wire).
+    Each test sees its robots' zero twists on the wire; the fleet's own report, when it is
+    stopped after the last test, says it left every robot stopped by a zero twist. (A fleet per
+    test was five starts and stops of `swarm robots sim`.)"""
+    base = tmp_path_factory.mktemp("fleet")
+    with Runtime(base) as frt:
+        tracked, robots, wire = start_fleet(frt, base, "--cmd-timeout", "3600")
+        yield robots, wire
+        report = stop_fleet(frt, tracked)
+    assert report.count("stopped by a zero twist") == 2, report
+
+
+def run_on(rt, tmp_path, robots, wire):
+    """`swarm up` of the turtlebot scenario on the fleet, once both robots move under it."""
+    since = time.monotonic()  # (the wire holds the twists of the module's earlier runs too)
     up = start_up(rt.tracker, TURTLEBOT, tmp_path / "run", "--robots", robots, "--duration", 120)
-    wait_moving(up, wire)
+    wait_moving(up, wire, since)
+    return up
+
+
+def test_a_killed_world_leaves_every_robot_zero_twisted_by_swarm_up(rt, tmp_path, fleet):
+    robots, wire = fleet
+    up = run_on(rt, tmp_path, robots, wire)
     world = world_pid_of(rt, up)
     event = time.monotonic()
     os.kill(world, signal.SIGKILL)
@@ -64,14 +87,12 @@ def test_a_killed_world_leaves_every_robot_zero_twisted_by_swarm_up(rt, tmp_path
     ended = time.monotonic()
     for ns in ROBOT.values():
         assert last_is_zero_after(wire, ns, event) and not wire.moving_since(ns, ended)
-    assert stop_fleet(rt, fleet).count("stopped by a zero twist") == 2
 
 
 @pytest.mark.parametrize("world_state", ["running", "stalled"])  # (killed: the test above)
-def test_estop_from_another_terminal_zero_twists_every_robot_and_ends_the_run(rt, tmp_path, world_state):
-    fleet, robots, wire = start_fleet(rt, tmp_path, "--cmd-timeout", "3600")
-    up = start_up(rt.tracker, TURTLEBOT, tmp_path / "run", "--robots", robots, "--duration", 120)
-    wait_moving(up, wire)
+def test_estop_from_another_terminal_zero_twists_every_robot_and_ends_the_run(rt, tmp_path, world_state, fleet):
+    robots, wire = fleet
+    up = run_on(rt, tmp_path, robots, wire)
     world = world_pid_of(rt, up)
     if world_state == "stalled":
         os.kill(world, signal.SIGSTOP)
@@ -96,11 +117,10 @@ def test_estop_from_another_terminal_zero_twists_every_robot_and_ends_the_run(rt
     ended = time.monotonic()
     for ns in ROBOT.values():
         assert last_is_zero_after(wire, ns, event) and not wire.moving_since(ns, ended)
-    assert stop_fleet(rt, fleet).count("stopped by a zero twist") == 2
 
 
-def test_estop_with_a_robots_file_and_no_run(rt, tmp_path):
-    fleet, robots, wire = start_fleet(rt, tmp_path, "--cmd-timeout", "3600")
+def test_estop_with_a_robots_file_and_no_run(rt, fleet):
+    robots, wire = fleet
     event = time.monotonic()
     estop = rt.tracker.spawn(swarm_cmd("estop", "--robots", robots), "estop")
     assert estop.wait(DEADLINE) == ExitCode.OK, estop.text()[-3000:]
@@ -110,15 +130,13 @@ def test_estop_with_a_robots_file_and_no_run(rt, tmp_path):
     nothing = rt.tracker.spawn(swarm_cmd("estop"), "estop-none")
     assert nothing.wait(DEADLINE) == ExitCode.USAGE
     assert "give --robots FILE" in nothing.text() and nothing.text().count("\n") == 1, nothing.text()
-    stop_fleet(rt, fleet)
 
 
-def test_the_guard_zero_twists_a_robot_whose_commands_stopped_and_lets_it_go_again(rt, tmp_path):
-    fleet, robots, wire = start_fleet(rt, tmp_path, "--cmd-timeout", "3600")
+def test_the_guard_zero_twists_a_robot_whose_commands_stopped_and_lets_it_go_again(rt, tmp_path, fleet):
+    robots, wire = fleet
     guard = rt.tracker.spawn(swarm_cmd("robots", "guard", "--robots", robots, "--cmd-timeout", "0.3"), "guard")
     wait_for(lambda: guard.check_running("the guard") or "Ctrl-C stops it" in guard.text(), DEADLINE, "the guard")
-    up = start_up(rt.tracker, TURTLEBOT, tmp_path / "run", "--robots", robots, "--duration", 120)
-    wait_moving(up, wire)
+    up = run_on(rt, tmp_path, robots, wire)
     assert "zero twist sent" not in guard.text(), guard.text()  # while commands flow: nothing
     world = world_pid_of(rt, up)
     os.kill(world, signal.SIGSTOP)  # its commands stop (its own watchdog with it)
@@ -130,12 +148,14 @@ def test_the_guard_zero_twists_a_robot_whose_commands_stopped_and_lets_it_go_aga
     os.kill(world, signal.SIGCONT)  # commands again: the guard lets them through
     wait_moving(up, wire, since=time.monotonic())
     wait_for(lambda: guard.text().count("commands again") == 2, DEADLINE, "the guard to see commands again")
+    event = time.monotonic()
     up.launcher.popen.send_signal(signal.SIGINT)
     assert up.launcher.wait(DEADLINE) == ExitCode.INTERRUPTED
+    for ns in ROBOT.values():  # the run's own zero twists at its end
+        wait_for(lambda ns=ns: last_is_zero_after(wire, ns, event), DEADLINE, f"the run's zero twist for {ns}")
     guard.popen.send_signal(signal.SIGINT)
     assert guard.wait(DEADLINE) == ExitCode.INTERRUPTED, guard.text()
     assert guard.text().count("zero twist sent") == 2, guard.text()  # the run's own end stopped the robots
-    assert stop_fleet(rt, fleet).count("stopped by a zero twist") == 2
 
 
 @pytest.mark.parametrize(
@@ -158,10 +178,9 @@ def test_a_bad_guard_table_is_refused_naming_its_field(guard, field):
         parse_robots({**robots_file(), "guard": guard}, "robots.toml")
 
 
-def test_estop_ready_stops_every_robot_on_enter_and_the_api_stops_them_too(rt, tmp_path, monkeypatch):
-    fleet, robots, wire = start_fleet(rt, tmp_path, "--cmd-timeout", "3600")
-    up = start_up(rt.tracker, TURTLEBOT, tmp_path / "run", "--robots", robots, "--duration", 120)
-    wait_moving(up, wire)
+def test_estop_ready_stops_every_robot_on_enter_and_the_api_stops_them_too(rt, tmp_path, monkeypatch, fleet):
+    robots, wire = fleet
+    up = run_on(rt, tmp_path, robots, wire)
     ready = subprocess.Popen(
         swarm_cmd("estop", "--ready"), env=rt.tracker.env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
     )
@@ -189,7 +208,6 @@ def test_estop_ready_stops_every_robot_on_enter_and_the_api_stops_them_too(rt, t
     assert done.robots == 2 and done.run is None and done.ended is None
     for ns in ROBOT.values():
         wait_for(lambda ns=ns: last_is_zero_after(wire, ns, event), DEADLINE, f"the API's zero twist for {ns}")
-    stop_fleet(rt, fleet)
 
 
 def test_the_stops_open_the_same_zenoh_client_as_the_rest_of_the_project(tmp_path):
