@@ -368,7 +368,7 @@ def test_what_a_study_varies(tmp_path):
 @pytest.mark.slow  # two studies in-process
 def test_a_vectorised_law_goes_through_the_batch_engine_with_the_per_agent_rows(tmp_path):
     src = vector_scenario(tmp_path)
-    common = ["--seeds", "4", "--positions", "5", "--headings", "0.5", "--c2", "0.3,0.5", "-j", "1"]
+    common = ["--seeds", "4", "--positions", "5", "--headings", "0.5", "--c2", "0.3,0.5", "-j", "1", "--no-plot"]
     auto = invoke("study", "scenario", src, *common, "--out", tmp_path / "a")
     per = invoke("study", "scenario", src, *common, "--engine", "per-agent", "--out", tmp_path / "p")
     assert auto.exit_code == per.exit_code == ExitCode.OK, auto.output + per.output

@@ -105,7 +105,8 @@ def test_a_law_that_hangs_on_the_cluster_gives_timeout_rows(cluster, tmp_path):
     (tmp_path / "hanglaw.py").write_text(HANG_LAW)
     src = tmp_path / "hang.toml"
     src.write_text(HANG_SCENARIO)
-    args = ["scenario", src, "--seeds", 2, "--param", "hang=0,1", "--run-timeout", 5, "--no-plot", "-q"]
+    # --run-timeout 2 (was 5): as in test_study_runs, the runs that do not hang take milliseconds
+    args = ["scenario", src, "--seeds", 2, "--param", "hang=0,1", "--run-timeout", 2, "--no-plot", "-q"]
     p = study_in(lan, [*args, "--scheduler", address, "--out", tmp_path / "o"])
     output, _ = p.communicate(timeout=4 * DEADLINE)
     assert p.returncode == ExitCode.OK, output
