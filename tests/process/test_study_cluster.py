@@ -5,12 +5,14 @@ veth pair to each worker; docs/design/studies.md#cluster).
 
 - a law that hangs, with --run-timeout: its runs are `timeout` rows (the task's child process
   killed on the worker), the others finish;
-- a study of 400 runs, Ctrl-C'd after its first rows, then resumed, and one worker SIGKILLed
+- a study of 200 runs, Ctrl-C'd after its first rows, then resumed, and one worker SIGKILLed
   mid-resume: the scheduler runs its tasks on the other one; the study ends with the rows the
   same study gives on this machine's processes, each run's row exactly once, the rows of before
   the Ctrl-C kept as they were (the last test: the cluster has one worker after it). One study
   on the cluster for the three (they were three studies of 400 runs: a run costs about 25 ms of
-  CPU, most of it not its ticks, so the cost is the count of runs, which is the claim).
+  CPU, most of it not its ticks, so the cost is the count of runs; 200 runs make the same 8
+  tasks of the batch engine, 25 runs each, so Ctrl-C, the resume and the kill meet the same
+  study, for half the CPU of 400).
 
 Needs root (`ip netns add`) and the package distributed (in the `test` extra); skips, saying
 why, where either is missing. Every namespace is the test's own and deleted at the end, even on
@@ -41,8 +43,9 @@ pytest.importorskip("distributed", reason="the cluster executor needs distribute
 ROOT = Path(__file__).resolve().parents[2]
 PORT = 8786
 DASK = [sys.executable, "-m", "dask"]
-# 400 tiny runs (4 agents, 4 s of 0.1 s ticks) in 8 batches of 50 (the batch engine, 4 per worker)
-STUDY = ["swarms", "--n", "4", "--leaders", "1", "--seeds", "400", "--duration", "4", "--dt", "0.1"]
+# 200 tiny runs (4 agents, 4 s of 0.1 s ticks) in 8 batches of 25 (the batch engine, 4 per worker)
+RUNS = 200
+STUDY = ["swarms", "--n", "4", "--leaders", "1", "--seeds", str(RUNS), "--duration", "4", "--dt", "0.1"]
 STUDY += ["--no-plot", "-q"]
 
 
@@ -138,9 +141,9 @@ def test_ctrl_c_resume_and_a_killed_worker_on_the_cluster_give_the_local_rows_on
     local_s = time.monotonic() - t0
     assert local.returncode == ExitCode.OK, local.stdout + local.stderr
     expected = without_wall(rows(tmp_path / "local" / "runs.csv"))
-    assert len(expected) == 400
+    assert len(expected) == RUNS
 
-    # the study on the cluster (8 batches of 50 as tasks), Ctrl-C'd after its first rows
+    # the study on the cluster (8 batches of 25 as tasks), Ctrl-C'd after its first rows
     out = tmp_path / "dask"
     args = [*STUDY, "--scheduler", address, "--workers", 1000, "--out", out]
     group = Group(session=True)
@@ -160,7 +163,7 @@ def test_ctrl_c_resume_and_a_killed_worker_on_the_cluster_give_the_local_rows_on
     assert p.returncode == ExitCode.INTERRUPTED, output
     assert "Traceback" not in output and output.count("stopped:") == 1, output
     before = rows(out / "runs.csv")
-    assert 1 <= len(before) < 400
+    assert 1 <= len(before) < RUNS
 
     # resumed; worker a SIGKILLed once the resumed study has written rows of its own
     t0 = time.monotonic()
@@ -175,15 +178,16 @@ def test_ctrl_c_resume_and_a_killed_worker_on_the_cluster_give_the_local_rows_on
             p.kill()
             p.wait()
     cluster_s = time.monotonic() - t0
-    assert at_kill < 400, "the study was over before the worker was killed"
+    assert at_kill < RUNS, "the study was over before the worker was killed"
     assert p.returncode == ExitCode.OK, output
     assert f"--workers 1000 capped at 2: the cluster at {address} has 2 worker threads" in output
     assert f"on the Dask cluster at {address}" in output
-    assert f"resume: {len(before)} of 400 runs already in" in output and f"{400 - len(before)} to run" in output
+    assert f"resume: {len(before)} of {RUNS} runs already in" in output and f"{RUNS - len(before)} to run" in output
     after = rows(out / "runs.csv")
-    assert sorted(int(r["seed"]) for r in after) == list(range(400)) and after[: len(before)] == before  # once each
+    assert sorted(int(r["seed"]) for r in after) == list(range(RUNS)) and after[: len(before)] == before  # once each
     assert without_wall(after) == expected  # the rows of this machine's processes
     print(
-        f"Ctrl-C at {len(before)} rows of 400; resumed, worker a killed at {at_kill} rows: all 400 rows once, "
-        f"the local ones ({cluster_s:.1f} s resumed on the cluster, {local_s:.1f} s for 400 on 2 local processes)"
+        f"Ctrl-C at {len(before)} rows of {RUNS}; resumed, worker a killed at {at_kill} rows: all {RUNS} rows "
+        f"once, the local ones ({cluster_s:.1f} s resumed on the cluster, {local_s:.1f} s for {RUNS} on 2 local "
+        "processes)"
     )
