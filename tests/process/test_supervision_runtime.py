@@ -171,7 +171,7 @@ def test_agent_gives_up_on_a_silent_world_after_its_grace(rt, tmp_path):
     )
     world = observe_world(rt.tracker, w, endpoint, run_id)
     agents = {
-        i: rt.tracker.spawn(agent_cmd(i, endpoint, run_id) + ["--world-grace", "2"], f"agent-{i}") for i in (1, 2)
+        i: rt.tracker.spawn(agent_cmd(i, endpoint, run_id) + ["--world-grace", "1"], f"agent-{i}") for i in (1, 2)
     }
     world.wait(
         lambda i: has_started(i) and i["tick"] > 0,
@@ -187,12 +187,12 @@ def test_agent_gives_up_on_a_silent_world_after_its_grace(rt, tmp_path):
         waited = time.monotonic() - t0
     finally:
         os.kill(w.pid, signal.SIGCONT)
-    print(f"\n[timing] world SIGSTOP -> agents exit (grace 2 s): {waited:.2f} s")
+    print(f"\n[timing] world SIGSTOP -> agents exit (grace 1 s): {waited:.2f} s")
     for i, a in agents.items():
         assert codes[i] == 5, a.text()
         last = a.text().strip().splitlines()[-1]
-        assert "has not answered for 2 s (--world-grace); exiting" in last, a.text()
-    assert waited >= 2.0  # not before its grace (how soon after it is a benchmark's matter)
+        assert "has not answered for 1 s (--world-grace); exiting" in last, a.text()
+    assert waited >= 1.0  # not before its grace (how soon after it is a benchmark's matter)
     w.group.signal(signal.SIGTERM)
     w.wait(DEADLINE)
     rt.tracker.assert_none_left(timeout=DEADLINE)
