@@ -78,8 +78,9 @@ print("figure:", figure)
 # The same scenario as a distributed system, one process per agent (lockstep equals
 # simulate to the bit); `with` stops whatever is left of it:
 #   with swarm.up(repo / "scenarios/case2.toml", clock="lockstep", duration=20) as run:
-#       print(run.state().graph.edges)                # live, over zenoh
-#       run.wait()
+#       run.wait()                                    # (a lockstep run may end before a live call)
 #   distributed = run.results()
+#   with swarm.up(repo / "scenarios/case2.toml") as run:  # realtime: live until the block ends
+#       print(run.state().graph.edges)                # live, over zenoh
 # A finished run directory of `swarm sim` or `swarm up`:
 #   again = swarm.open_run("runs/case2")
