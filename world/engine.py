@@ -61,13 +61,15 @@ class Engine:
         recording: Path | None = None,
         plant: Plant | None = None,
         keep: bool = False,
+        keep_max: int | None = None,
     ):
         """ticks: steps to record; joined: agents start in the world (sim) or join later
         (the world process); wall_clock: stamps events with `wall_time`; on_event: told of
         every event as it happens (the world publishes and prints them); recording: the
         recording.mcap to stream ticks and events to (None: keep them in memory); plant:
         what moves the agents instead of the kinematics (world/plant.py); keep: the recorded
-        ticks are also kept in memory (`StreamRecorder`), for a shell that returns them."""
+        ticks are also kept in memory (`StreamRecorder`), for a shell that returns them or
+        writes its results from them, up to keep_max agent-ticks (None: however many)."""
         self.core = WorldCore(scenario, joined=joined, plant=plant)
         self.plant = plant
         self.plant_stopped = False
@@ -87,7 +89,9 @@ class Engine:
         self.network = self.fault_plan.affects_network()  # frames and commands go through the fault plan
         self.ticks = ticks
         self.rec: TickRecorder = (
-            Recorder(scenario, ticks) if recording is None else StreamRecorder(scenario, ticks, recording, keep)
+            Recorder(scenario, ticks)
+            if recording is None
+            else StreamRecorder(scenario, ticks, recording, keep, keep_max)
         )
         self.events: list[dict] = []
         self.out = np.full(len(scenario.agents), -1, dtype=np.int64)  # chosen out-neighbour ids

@@ -43,6 +43,11 @@ __all__ = ["TRUTH_PERIOD", "World", "WorldConfig"]
 
 TRUTH_PERIOD = 0.02  # s of wall time between ground-truth messages (observers, not the recording)
 END_WAIT_S = 1.0  # s the world waits, after its end notice, for its agents' tokens to go (see `_close`)
+# A run of at most this many agent-ticks ((ticks + 1) x agents, agents added at run time
+# included) also keeps its ticks in memory (about 42 bytes each: 11 MB at most), and its
+# results are written from them, without reading recording.mcap back (world/recording.py
+# `write_run`: the same files to the bit); a larger one streams them from the recording.
+KEEP_MAX_AGENT_TICKS = 1 << 18
 
 
 class World:
@@ -72,6 +77,8 @@ class World:
             on_event=self._announce,
             recording=recording,
             plant=cfg.plant,
+            keep=True,  # up to KEEP_MAX_AGENT_TICKS: the results without reading the recording back
+            keep_max=KEEP_MAX_AGENT_TICKS,
         )
         self.rec = DeferredRecorder(self.engine.rec)  # written while the agents think (publish_frames)
         self.engine.rec = self.rec

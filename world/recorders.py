@@ -148,11 +148,14 @@ class StreamRecorder:
     reads it back.
 
     `keep`: the ticks are also kept in memory (a `Recorder`, `memory`), for a shell that
-    returns the arrays anyway (`swarm sim`, `swarm.simulate`): `arrays()` and `write_run`
-    then use them instead of reading the recording back (the same arrays and files, to the
-    bit: tests/pure/test_results_stream.py)."""
+    returns the arrays anyway (`swarm sim`, `swarm.simulate`) or a run small enough (the
+    world process, `keep_max`): `arrays()` and `write_run` then use them instead of reading
+    the recording back (the same arrays and files, to the bit: tests/pure/test_results_stream.py).
+    `keep_max`: agent-ticks ((ticks + 1) x agents) kept at most; a run larger than that from
+    the start, or once agents added at run time make it so, keeps nothing (memory flat: the
+    results are streamed from the recording)."""
 
-    def __init__(self, scenario: Scenario, ticks: int, path: Path, keep: bool = False):
+    def __init__(self, scenario: Scenario, ticks: int, path: Path, keep: bool = False, keep_max: int | None = None):
         self.scenario = scenario
         self.ticks = ticks
         self.path = path
@@ -161,14 +164,22 @@ class StreamRecorder:
         self.t_last = 0.0
         self.writer = StreamWriter(path, scenario, ticks)
         self._arrays: dict[str, np.ndarray] | None = None
-        self.memory = Recorder(scenario, ticks) if keep else None
+        self.keep_max = keep_max
+        self.memory = Recorder(scenario, ticks) if keep and self._fits(len(scenario.agents)) else None
+
+    def _fits(self, agents: int) -> bool:
+        """Whether `agents` columns of (ticks + 1) rows may be kept in memory (`keep_max`)."""
+        return self.keep_max is None or (self.ticks + 1) * agents <= self.keep_max
 
     def add_agent(self, scenario: Scenario) -> None:
         self.scenario = scenario
         self.ids = np.array(scenario.ids, dtype=np.int64)
         self.writer.add_agent(scenario.agents[-1], self.t_last)
         if self.memory is not None:
-            self.memory.add_agent(scenario)
+            if self._fits(len(scenario.agents)):
+                self.memory.add_agent(scenario)
+            else:  # too large to keep now: the results are read back from the recording
+                self.memory = None
 
     def event(self, ev: dict) -> None:
         self.writer.event(ev)

@@ -21,6 +21,7 @@ import numpy as np
 
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.vocabulary import EventKind
+from swarm.world.files import RECORDING_FILE, RESULT_FILES, SUMMARY_FILE, TRAJECTORY_FILE
 from swarm.world.metrics import agent_metrics, converged, recovery, relative_errors, switch_ticks
 from swarm.world.recorders import DeferredRecorder as DeferredRecorder
 from swarm.world.recorders import HasArrays, Recorder, StreamRecorder, static_arrays
@@ -29,11 +30,8 @@ from swarm.world.recorders import recording_arrays as recording_arrays
 from swarm.world.recorders import streamed_arrays as streamed_arrays
 from swarm.world.results_metrics import Metrics, follow_counts, state_seconds
 from swarm.world.results_stream import Scan, scan, streamed, write_npz
-from swarm.world.stream import RECORDING_FILE, RecordingError
+from swarm.world.stream import RecordingError
 
-TRAJECTORY_FILE = "trajectory.npz"
-SUMMARY_FILE = "summary.json"
-RESULT_FILES = (RECORDING_FILE, TRAJECTORY_FILE, SUMMARY_FILE)
 __all__ = [
     "RECORDING_FILE",
     "RESULT_FILES",

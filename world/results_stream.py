@@ -42,6 +42,7 @@ from typing import IO, Any
 import numpy as np
 
 from swarm.contracts.scenario import Scenario
+from swarm.world.files import RESULTS_TMP as RESULTS_TMP
 from swarm.world.stream import TICK_BYTES, TICK_ENCODING, RecordingError, read_recording, tick_width
 
 CHUNK = 4096  # rows per chunk: memory is O(agents x CHUNK)
@@ -49,7 +50,6 @@ COPY_BLOCK = 1 << 20  # bytes per read when a .npy file is copied into the zip
 PER_TICK = ("t", "missed", "x", "y", "heading", "u", "out", "alive", "follow")  # after the static arrays, in this order
 AGENT_COLUMNS = ("x", "y", "heading", "u", "out", "alive", "follow")  # the per-tick arrays of one column per agent
 _TIME_HEAD = 32  # bytes of a tick message's head (tick, time, n, missed)
-RESULTS_TMP = ".results-"  # the temporary directory's prefix (swarm/offline/results.py removes one left behind)
 
 
 @dataclass

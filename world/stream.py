@@ -43,9 +43,9 @@ import numpy as np
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.scenario_tables import AgentSpec
 from swarm.contracts.vocabulary import Coded, ExitCode
+from swarm.world.files import RECORDING_FILE as RECORDING_FILE
 from swarm.world.scene import SCENE_RATE, SceneChannels, log_time
 
-RECORDING_FILE = "recording.mcap"
 TICK_ENCODING = "swarm-tick-v2"
 TICK_BYTES_V1 = 6 * 8 + 1  # bytes per agent of a swarm-tick-v1 message (no follow states)
 TICK_BYTES = TICK_BYTES_V1 + 1  # and of a swarm-tick-v2 one

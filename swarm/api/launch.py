@@ -29,16 +29,18 @@ import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from swarm.api.runs import Results, Summary, open_run
+from swarm.api.record import Summary
 from swarm.api.scenario import as_scenario, source_of, to_toml, with_duration
 from swarm.contracts.errors import UsageError
 from swarm.contracts.vocabulary import ExitCode, signal_exit
 from swarm.offline.results import Recovery, claim_out_dir, recover
 from swarm.robots.config import check_against, load_robots
 from swarm.runtime.launcher import Launcher, UpConfig
-from swarm.world.stream import RecordingError
+
+if TYPE_CHECKING:  # (numpy: the launcher imports none, swarm/api/record.py)
+    from swarm.api.runs import Results
 
 __all__ = ["Launch", "UpOutcome", "launch"]
 
@@ -66,6 +68,8 @@ class UpOutcome:
 
     def results(self) -> Results:
         """The run's results: `swarm.open_run(out)`."""
+        from swarm.api.runs import open_run  # lazy: numpy (see swarm/api/record.py)
+
         return open_run(self.out)
 
 
@@ -208,7 +212,13 @@ class Launch:
         )
         try:
             o.recovered = recover(out)
-        except (ValueError, RecordingError) as e:  # the exit code stays the run's
+        except ValueError as e:  # the exit code stays the run's
+            o.recovery_error = str(e)
+        except Exception as e:
+            from swarm.world.stream import RecordingError  # lazy: numpy (imported by the rebuild that raised)
+
+            if not isinstance(e, RecordingError):
+                raise
             o.recovery_error = str(e)
         summary = out / "summary.json"
         if summary.exists():

@@ -1,13 +1,14 @@
 """`Record`: a JSON object with attribute access, what the API returns for summaries and live
-readings (swarm/api/runs.py, swarm/api/live.py). Its own module so that the live path imports
-neither numpy nor the scenario model."""
+readings (swarm/api/runs.py, swarm/api/live.py), and `Summary`, summary.json as one (exported
+by swarm/api/runs.py). Their own module so that the live path imports neither numpy nor the
+scenario model, and the `swarm up` launcher (swarm/api/launch.py) no numpy."""
 
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
 from typing import Any
 
-__all__ = ["Record"]
+__all__ = ["Record", "Summary"]
 
 
 def _wrap(v: Any) -> Any:
@@ -54,3 +55,19 @@ class Record(Mapping):
 
     def to_dict(self) -> dict:
         return self._data
+
+
+class Summary(Record):
+    """summary.json (docs/reference/outputs.md#summary) with attribute access; `agents` is keyed
+    by int id, `events` is a list of Records (`ev["from"]` for a switch's `from`)."""
+
+    @property
+    def agents(self) -> dict[int, Record]:
+        return {int(k): Record(v) for k, v in self._data.get("agents", {}).items()}
+
+    def per_agent(self, field: str) -> dict[int, Any]:
+        """One field of every agent, by id: `summary.per_agent("radial_error")`."""
+        return {aid: a.get(field) for aid, a in self.agents.items()}
+
+    def events_of(self, kind: str) -> list[Record]:
+        return [e for e in self.events if e.get("kind") == kind]

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from swarm.api.record import Record
+from swarm.api.record import Record, Summary
 from swarm.api.scenario import Builder, Scenario, ScenarioError, as_scenario, source_of, with_duration
 from swarm.offline.csv_export import write_agent_csvs
 from swarm.offline.results import OutDirError, Recovery, claim_out_dir
@@ -43,22 +43,6 @@ __all__ = ["AgentTrack", "Record", "Results", "RunReadError", "Summary", "open_r
 TICK_ARRAYS = ("t", "x", "y", "heading", "u", "out", "alive", "missed", "follow")
 #: Per-agent and per-run constants.
 STATIC_ARRAYS = ("ids", "role", "speed", "orbit_radius", "target", "dt")
-
-
-class Summary(Record):
-    """summary.json (docs/reference/outputs.md#summary) with attribute access; `agents` is keyed
-    by int id, `events` is a list of Records (`ev["from"]` for a switch's `from`)."""
-
-    @property
-    def agents(self) -> dict[int, Record]:
-        return {int(k): Record(v) for k, v in self._data.get("agents", {}).items()}
-
-    def per_agent(self, field: str) -> dict[int, Any]:
-        """One field of every agent, by id: `summary.per_agent("radial_error")`."""
-        return {aid: a.get(field) for aid, a in self.agents.items()}
-
-    def events_of(self, kind: str) -> list[Record]:
-        return [e for e in self.events if e.get("kind") == kind]
 
 
 @dataclass(frozen=True)

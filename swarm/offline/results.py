@@ -15,8 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from swarm.contracts.vocabulary import Coded, ExitCode
-from swarm.world.recording import RECORDING_FILE, RESULT_FILES, SUMMARY_FILE, TRAJECTORY_FILE, recover_run
-from swarm.world.results_stream import RESULTS_TMP
+from swarm.world.files import RECORDING_FILE, RESULT_FILES, RESULTS_TMP, SUMMARY_FILE, TRAJECTORY_FILE
 
 PLOT_NAMES = (
     "trajectories.png",
@@ -108,5 +107,7 @@ def recover(run_dir: Path) -> Recovery | None:
     swarm.world.stream.RecordingError (the files cannot be written)."""
     if not needs_export(run_dir):
         return None
+    from swarm.world.recording import recover_run  # lazy: numpy, only to rebuild (the launcher imports none)
+
     summary = recover_run(run_dir)
     return Recovery(run_dir, int(summary["ticks"]), float(summary["sim_time"]), bool(summary.get("recording_finished")))

@@ -17,6 +17,7 @@ from __future__ import annotations
 import atexit
 import math
 import os
+import struct
 import sys
 import time
 from dataclasses import dataclass
@@ -32,6 +33,29 @@ if TYPE_CHECKING:  # annotations only: `swarm up` imports this module for every 
     from swarm.contracts.scenario import Scenario
 
 ACTIVE = wire.STATES.index(AgentState.ACTIVE)  # the state byte of a live agent in a truth record
+# A truth record (wire.TRUTH_FIELDS, numpy's packed little-endian layout) as a struct, so that
+# the launcher reads ground truth without numpy (wire.decode_truth's 0.1 s import)
+_TRUTH_RECORD = struct.Struct("<" + "".join({"<i4": "i", "<f8": "d", "u1": "B"}[t] for _, t in wire.TRUTH_FIELDS))
+_TRUTH_NAMES = tuple(name for name, _ in wire.TRUTH_FIELDS)
+
+
+def truth_records(buf: bytes) -> tuple[int, float, list[dict[str, Any]]]:
+    """wire.decode_truth without numpy: (tick, time, records), each record a dict of
+    TRUTH_FIELDS' names and the same numbers (Python ints and floats); WireError as it raises."""
+    head = wire.TRUTH_HEAD
+    if len(buf) < head.size:
+        raise wire.WireError(f"truth: {len(buf)} bytes, shorter than its {head.size}-byte header")
+    kind, version, _, _, n, tick, t = head.unpack_from(buf)
+    if kind != wire.KIND_TRUTH:
+        raise wire.WireError(f"truth: kind byte {kind}, expected {wire.KIND_TRUTH}")
+    if version != wire.VERSION:
+        raise wire.WireError(f"truth: protocol version {version}, this build speaks {wire.VERSION}")
+    if n > wire.MAX_AGENTS or len(buf) != head.size + n * _TRUTH_RECORD.size:
+        raise wire.WireError(f"truth: {len(buf)} bytes do not hold {n} agent records")
+    recs = [dict(zip(_TRUTH_NAMES, r)) for r in _TRUTH_RECORD.iter_unpack(memoryview(buf)[head.size :])]
+    return tick, t, recs
+
+
 PROGRESS_AGENTS = 12  # more agents than this: the progress line sums them up
 WORST_SHOWN = 3  # unsettled agents named on a summed-up line
 
@@ -79,7 +103,7 @@ def truth_progress(buf: bytes | None, s: Scenario, added: dict[int, AddedSpec] |
     if buf is None:
         return None
     try:
-        tick, t, recs = wire.decode_truth(buf)
+        tick, t, recs = truth_records(buf)
     except wire.WireError:
         return None
     spec = {a.id: a for a in s.agents} | dict(added or {})
@@ -112,13 +136,13 @@ def progress_errors(p: dict) -> str:
     """The progress line's radial errors: one per agent for a small swarm; for a large one
     how many are settled, the worst few of the others, how many have no leader to follow
     and how many dropped."""
-    from swarm.world.metrics import SETTLING_BAND  # lazy: it imports numpy (0.1 s), which the launcher never needs else
-
     errs, dropped = p["errors"], p["dropped"]
     gone = f"dropped {', '.join(map(str, dropped))}" if dropped else ""
     if len(errs) + len(dropped) <= PROGRESS_AGENTS:
         text = " ".join(f"{i}:{'-' if e is None else _pct(e)}" for i, e in sorted(errs.items()))
         return f"radial error {text}" + (f"  {gone}" if gone else "")
+    from swarm.world.metrics import SETTLING_BAND  # lazy: numpy (0.1 s), which the launcher needs nowhere else
+
     rooted = [(e, i) for i, e in errs.items() if e is not None]
     off = sorted(((e, i) for e, i in rooted if not e <= SETTLING_BAND), key=lambda x: (-x[0], x[1]))
     text = f"{len(errs)} live: {len(rooted) - len(off)} settled"

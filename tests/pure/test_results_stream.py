@@ -322,3 +322,23 @@ def test_force_removes_a_temporary_directory_left_behind(tmp_path):
     (left / "x.npy").write_bytes(b"0" * 10)
     claim_out_dir(tmp_path, force=True)
     assert not left.exists() and not (tmp_path / RECORDING_FILE).exists()
+
+
+def test_keep_max_keeps_a_small_run_and_streams_a_larger_one(tmp_path):
+    """`StreamRecorder(keep=True, keep_max=M)` (the world process): the ticks kept in memory
+    while (ticks + 1) x agents <= M, agents added at run time included; past it nothing is
+    kept and the results are streamed from the recording."""
+    s = load_scenario(ROOT / "scenarios" / "case2.toml")
+    ticks, n = 20, len(s.agents)
+    cells = (ticks + 1) * n
+    for keep_max, kept in ((None, True), (cells, True), (cells - 1, False)):
+        r = StreamRecorder(s, ticks, tmp_path / f"{keep_max}.mcap", keep=True, keep_max=keep_max)
+        assert (r.memory is not None) is kept, keep_max
+        r.close()
+    r = StreamRecorder(s, ticks, tmp_path / "added.mcap", keep=True, keep_max=cells + ticks + 1)
+    spec = {"role": "follower", "x": 1.0, "y": 2.0, "heading": 0.0, "speed": 12.0}
+    more = s.model_copy(update={"agents": [*s.agents, AgentSpec(id=98, **spec)]})
+    r.add_agent(more)  # n + 1 columns: still kept
+    assert r.memory is not None and r.memory.x.shape == (ticks + 1, n + 1)
+    r.add_agent(more.model_copy(update={"agents": [*more.agents, AgentSpec(id=99, **spec)]}))
+    assert r.memory is None and r.kept() is None  # too large now: streamed from the recording
