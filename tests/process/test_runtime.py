@@ -148,8 +148,9 @@ def test_lockstep_up_equals_sim(lockstep_runs, name):
 # The other shipped scenarios (pinned graphs, limited sensing), over a prefix: the same engine
 # path, at a fraction of the suite's time. The pinned graphs make every choice at tick 0 (no
 # switch and no follow state change later in their first 20 s): 5 s. Limited sensing: every
-# re-choice (the last at 4.4, 17.1 and 10.7 s) and the follow states of their losses (changing
-# until 18.5, 19.6 and 16.6 s): 19, 20 and 17 s. rooted is compared over its first 34 s in
+# re-choice (the last at 4.4, 17.1 and 10.7 s) and every kind of follow-state transition of the
+# whole run (the last new kind at 2.5, 7.4 and 7.3 s; swarm30-range's states stop changing at
+# 16.6 s, the others' go on between keep and coast): 19, 20 and 17 s. rooted is compared over its first 34 s in
 # test_resilience.py (the run that shows it never closes a cycle); case2-leader-loss (and with it
 # case2) above, faults.toml in test_resilience.py.
 SHORT_EQUIV = {
