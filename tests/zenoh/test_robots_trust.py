@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import threading
@@ -23,6 +24,7 @@ import zenoh
 
 from swarm.contracts.scenario import parse_scenario
 from swarm.contracts.transport import client_config
+from swarm.robots import robot as robot_module
 from swarm.robots.config import RobotsError, check_against, load_robots, parse_robots
 from swarm.robots.fleet import router_config
 from swarm.robots.plant import RobotPlant, robot_scenario
@@ -352,7 +354,7 @@ def test_two_publishers_of_a_robots_poses_at_start_are_refused_naming_them(tmp_p
 
 
 @pytest.mark.slow  # zenoh sessions
-def test_a_router_closed_with_usrpwd_and_an_acl_refuses_a_stranger_and_lets_the_world_in(tmp_path):
+def test_a_router_closed_with_usrpwd_and_an_acl_refuses_a_stranger_and_lets_the_world_in(tmp_path, monkeypatch):
     users = tmp_path / "users.txt"
     users.write_text("swarm:pw-of-swarm\n")
     acl_rule = {
@@ -394,6 +396,9 @@ def test_a_router_closed_with_usrpwd_and_an_acl_refuses_a_stranger_and_lets_the_
         (tmp_path / "bad").write_text("not-the-password\n")
         wrong.write_text(path.read_text().replace('password_file = "pw"', 'password_file = "bad"'))
         other = RobotPlant(load_robots(wrong), parse_scenario(SCENARIO), str(wrong))
+        # the refused session waits out its connect timeout: 1.5 s as the stranger's, not the 10 s
+        # default (the product's own open_robots_session, credentials and all, with a shorter wait)
+        monkeypatch.setattr(robot_module, "client_config", functools.partial(client_config, timeout_ms=1500))
         with pytest.raises(RobotsError, match="cannot reach the robots' zenoh router .* refuses a wrong or missing"):
             other.prepare()
         other.stop()
