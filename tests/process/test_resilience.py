@@ -123,13 +123,14 @@ def assert_equals_sim_prefix(traj: dict, sim_traj: dict, sim_summ: dict, ticks: 
 
 
 # --- 1. scenarios/faults.toml: one fault of each kind -------------------------------------------
-# Every fault is over by t = 65 s and the last recovery ends at t = 91.33 s: the first 95 s of the
-# 200 s scenario hold every fault, every recovery (each recovery time equal to the whole run's) and
-# the end in the 2% band (max relative error 0.0142 at 95 s; 0.0017 at 120 s, 3e-5 at 200 s).
-# Lockstep `swarm up` equals `swarm sim` on any prefix, and the session's whole `swarm sim` run of
-# faults.toml converges (under the 1% of `converged`: checked here, and in
-# tests/pure/test_cli_offline.py).
-FAULTS_DURATION = 95.0
+# Every fault is over by t = 65 s (the noise, 60-65 s) and the whole run's last event is at t = 60 s:
+# the first 66 s of the 200 s scenario hold every fault and every event. Each fault's window ends at
+# the next fault, the last's (the noise's) at the end of the run: the seven windows that end inside
+# the 66 s are the whole run's, fault for fault (no recovery in any: the next fault comes first), and
+# the noise's recovery ends at t = 91.33 s, which, with the convergence (max relative error 3e-5 at
+# 200 s), the session's whole `swarm sim` run of faults.toml shows (checked here, and in
+# tests/pure/test_cli_offline.py). Lockstep `swarm up` equals `swarm sim` on any prefix.
+FAULTS_DURATION = 66.0
 
 
 def test_faults_toml_through_up(rt, tmp_path, shipped_sim):
@@ -192,23 +193,34 @@ def test_faults_toml_through_up(rt, tmp_path, shipped_sim):
     res, sim_out = shipped_sim("faults")  # the session's whole run of faults.toml (conftest)
     assert res.exit_code == ExitCode.OK, res.output[-3000:]
     sim_traj, sim_summ = sim_results(sim_out)
-    assert_equals_sim_prefix(traj, sim_traj, sim_summ, ticks, "  swarm up vs swarm sim")  # the same first 95 s
-    # every recovery is inside the first 95 s: its time is the whole run's
-    assert [f["recovery_time"] for f in faults] == [f["recovery_time"] for f in sim_summ["faults"]]
+    assert max(e["tick"] for e in sim_summ["events"]) < ticks, "an event of the whole run is past the prefix"
+    assert_equals_sim_prefix(traj, sim_traj, sim_summ, ticks, "  swarm up vs swarm sim")  # the same first 66 s
+    # The windows that end inside the prefix are the whole run's, recovery and all; the last
+    # (the noise's) ends with this run, before its recovery (at 91.33 s), which the whole run shows.
+    sim_faults = sim_summ["faults"]
+    inside = [f for f in sim_faults if f["window_end_time"] < FAULTS_DURATION]
+    assert len(inside) == len(faults) - 1 and faults[:-1] == inside, (faults, sim_faults)
+    last, last_sim = faults[-1], sim_faults[-1]
+    assert last["window_end_time"] == FAULTS_DURATION < last_sim["window_end_time"], (last, last_sim)
+    assert last_sim["recovery_time"] is not None, last_sim
+    assert last["recovery_time"] is None and last["at"] + last_sim["recovery_time"] > FAULTS_DURATION, (last, last_sim)
+    assert {k: v for k, v in last.items() if k not in ("window_end_time", "recovery_time")} == {
+        k: v for k, v in last_sim.items() if k not in ("window_end_time", "recovery_time")
+    }, (last, last_sim)
 
-    # Recovered after the last fault, and at the end every agent is in the band; the whole run
-    # (`swarm sim`, which this run is the first 95 s of) converges.
-    last = max(faults, key=lambda f: f["tick"])
-    assert last["recovery_time"] is not None, last
+    # Every agent alive and following at the end of the prefix; the whole run (`swarm sim`, which
+    # this run is the first 66 s of) recovers from the last fault and ends with every agent in the band.
     worst = max(a["relative_error"] for a in summ["agents"].values())
     worst_end = max(a["relative_error"] for a in sim_summ["agents"].values())
     print(
-        f"  last fault recovered after {last['recovery_time']} s (t = {last['at'] + last['recovery_time']:.2f} s); "
-        f"worst relative error at t = {FAULTS_DURATION:g} s: {worst:.4f} (BAND {BAND}), at the end of the "
-        f"whole run ({sim_summ['ticks'] * 0.01:g} s, swarm sim): {worst_end:.2g}"
+        f"  last fault recovered after {last_sim['recovery_time']} s "
+        f"(t = {last['at'] + last_sim['recovery_time']:.2f} s, "
+        f"swarm sim); worst relative error at t = {FAULTS_DURATION:g} s: {worst:.4f}, at the end of the whole run "
+        f"({sim_summ['ticks'] * 0.01:g} s, swarm sim): {worst_end:.2g} (BAND {BAND})"
     )
     for aid, a in summ["agents"].items():
         assert a["alive"] and a["root"] is not None, (aid, a)
+    for aid, a in sim_summ["agents"].items():
         assert a["relative_error"] < BAND, (aid, a)
     assert sim_summ["converged"] is True
 
