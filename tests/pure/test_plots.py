@@ -36,7 +36,7 @@ from swarm.plots.context import make_context
 from swarm.plots.graph import panel_graph
 from swarm.plots.palette import agent_looks, palette
 from swarm.plots.placement import spread_1d, stack_offsets
-from swarm.plots.render import figure, save_figure
+from swarm.plots.render import RC, figure, save_figure
 from swarm.plots.style import EVENT_COLOURS, FAULT_COLOUR
 from swarm.plots.trajectories import panel_trajectories
 from swarm.study.figures import plot_sweep, sweep_figure
@@ -67,21 +67,23 @@ def assert_pngs(run_dir: Path, paths: list[Path], expected: list[str] = EXPECTED
 
 
 ALL_FORMATS = ("png", "pdf", "svg")
+RENDERED_FORMATS = ("png", "svg")  # the module's render (`rendered`); PDF: test_render_writes_every_format
 LONG_TICKS, FEW_POINTS = 9001, 500  # more rows than points per line: decimated
 
 
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory) -> dict:
-    """One synthetic run's figures rendered once, in every format, with fewer points per line
+    """One synthetic run's figures rendered once, as PNG and SVG, with fewer points per line
     than it has rows (render_plots(max_points=FEW_POINTS): the stride and the min/max envelope),
     leader 1 and followers 2 -> 1, 3 -> 2, 4 -> 3, 5 -> 4, 6 -> 5 of which follower 4 drops, so
     that 5 and 6 have no leader path: its dir, the paths returned, and matplotlib's open figures
-    before and after (the tests below read it: a render in every format costs 10-15 s of CPU,
-    the PDFs' fonts most of it)."""
+    before and after (the tests below read it). PDF is test_render_writes_every_format's: every
+    figure as PDF too cost 5-7 s of CPU (fontTools subsetting the fonts of each file), for the
+    same writer (save_figure) that writes every figure in every format."""
     run_dir = make_run(tmp_path_factory.mktemp("rendered") / "run", ticks=LONG_TICKS, n_followers=5, drop=(2, 4000))
     pngs_before = list(run_dir.glob("*.png"))
     before = len(plt.get_fignums())
-    paths = render_plots(run_dir, max_points=FEW_POINTS, formats=ALL_FORMATS)
+    paths = render_plots(run_dir, max_points=FEW_POINTS, formats=RENDERED_FORMATS)
     return {"run_dir": run_dir, "pngs_before": pngs_before, "paths": paths, "figs": (before, len(plt.get_fignums()))}
 
 
@@ -359,12 +361,21 @@ def test_export_writes_only_what_was_asked_unless_the_results_are_missing(
     assert drawn == [run_dir] and (run_dir / "trajectory.npz").is_file()
 
 
-@pytest.mark.slow  # renders every figure in three formats: the long tier
+@pytest.mark.slow  # renders every figure in two formats and the overview in a third: the long tier
 def test_render_writes_every_format(rendered) -> None:
+    """render_plots writes every figure in each format asked, in order (the module's render: PNG
+    and SVG); PDF from the same writer, for the overview (four of the six panels: graph,
+    trajectories, distance, control); save_figure's every format: test_save_figure_writes_every_format."""
     run_dir, paths = rendered["run_dir"], rendered["paths"]
-    assert paths == [run_dir / Path(n).with_suffix("." + f).name for n in EXPECTED_PNGS for f in ALL_FORMATS]
+    assert paths == [run_dir / Path(n).with_suffix("." + f).name for n in EXPECTED_PNGS for f in RENDERED_FORMATS]
     for p in paths:
         assert_valid_figure(p)
+    ctx = make_context(load_run(run_dir), FEW_POINTS)
+    with plt.rc_context(RC):  # render_plots' settings: TrueType fonts embedded
+        (pdf,) = save_figure(figure("overview.png", ctx, ""), run_dir / "overview.png", ("pdf",))
+    assert pdf == run_dir / "overview.pdf"
+    assert_valid_figure(pdf)
+    assert b"/FontFile2" in pdf.read_bytes()  # TrueType embedded (docs/reference/outputs.md#plots), not Type 3
 
 
 @pytest.mark.slow  # draws two panels of a 30-agent run: the long tier
