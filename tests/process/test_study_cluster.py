@@ -10,9 +10,9 @@ veth pair to each worker; docs/design/studies.md#cluster).
   same study gives on this machine's processes, each run's row exactly once, the rows of before
   the Ctrl-C kept as they were (the last test: the cluster has one worker after it). One study
   on the cluster for the three (they were three studies of 400 runs: a run costs about 25 ms of
-  CPU, most of it not its ticks, so the cost is the count of runs; 200 runs make the same 8
-  tasks of the batch engine, 25 runs each, so Ctrl-C, the resume and the kill meet the same
-  study, for half the CPU of 400).
+  CPU, most of it not its ticks, so the cost is the count of runs; 100 runs make the same 8
+  tasks of the batch engine, 13 runs each (0.3 s of CPU a task), so Ctrl-C, the resume and the
+  kill meet the same study, for a quarter of the CPU of 400).
 
 Needs root (`ip netns add`) and the package distributed (in the `test` extra); skips, saying
 why, where either is missing. Every namespace is the test's own and deleted at the end, even on
@@ -43,8 +43,8 @@ pytest.importorskip("distributed", reason="the cluster executor needs distribute
 ROOT = Path(__file__).resolve().parents[2]
 PORT = 8786
 DASK = [sys.executable, "-m", "dask"]
-# 200 tiny runs (4 agents, 4 s of 0.1 s ticks) in 8 batches of 25 (the batch engine, 4 per worker)
-RUNS = 200
+# 100 tiny runs (4 agents, 4 s of 0.1 s ticks) in 8 batches of 13 (the batch engine, 4 per worker)
+RUNS = 100
 STUDY = ["swarms", "--n", "4", "--leaders", "1", "--seeds", str(RUNS), "--duration", "4", "--dt", "0.1"]
 STUDY += ["--no-plot", "-q"]
 
