@@ -5,7 +5,7 @@ veth pair to each worker; docs/design/studies.md#cluster).
 
 - a law that hangs, with --run-timeout: its runs are `timeout` rows (the task's child process
   killed on the worker), the others finish;
-- a study of 200 runs, Ctrl-C'd after its first rows, then resumed, and one worker SIGKILLed
+- a study of 100 runs, Ctrl-C'd after its first rows, then resumed, and one worker SIGKILLed
   mid-resume: the scheduler runs its tasks on the other one; the study ends with the rows the
   same study gives on this machine's processes, each run's row exactly once, the rows of before
   the Ctrl-C kept as they were (the last test: the cluster has one worker after it). One study
@@ -143,7 +143,7 @@ def test_ctrl_c_resume_and_a_killed_worker_on_the_cluster_give_the_local_rows_on
     expected = without_wall(rows(tmp_path / "local" / "runs.csv"))
     assert len(expected) == RUNS
 
-    # the study on the cluster (8 batches of 25 as tasks), Ctrl-C'd after its first rows
+    # the study on the cluster (8 batches of 13 as tasks), Ctrl-C'd after its first rows
     out = tmp_path / "dask"
     args = [*STUDY, "--scheduler", address, "--workers", 1000, "--out", out]
     group = Group(session=True)
