@@ -42,8 +42,8 @@ import numpy as np
 
 from swarm.contracts.scenario import Scenario
 from swarm.contracts.scenario_tables import AgentSpec
-from swarm.contracts.vocabulary import Coded, ExitCode
 from swarm.world.files import RECORDING_FILE as RECORDING_FILE
+from swarm.world.files import RecordingError as RecordingError
 from swarm.world.scene import SCENE_RATE, SceneChannels, log_time
 
 TICK_ENCODING = "swarm-tick-v2"
@@ -51,12 +51,6 @@ TICK_BYTES_V1 = 6 * 8 + 1  # bytes per agent of a swarm-tick-v1 message (no foll
 TICK_BYTES = TICK_BYTES_V1 + 1  # and of a swarm-tick-v2 one
 FLUSH_PERIOD = 0.5  # s of wall time between flushes (a SIGKILL loses at most about this)
 _HEAD = np.dtype([("tick", "<i8"), ("time", "<f8"), ("n", "<i8"), ("missed", "<i8")])
-
-
-class RecordingError(Coded):
-    """The recording cannot be written (disk full, file too large, I/O error)."""
-
-    exit_code = ExitCode.NO_SPACE
 
 
 def encode_tick(

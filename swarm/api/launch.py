@@ -38,6 +38,7 @@ from swarm.contracts.vocabulary import ExitCode, signal_exit
 from swarm.offline.results import Recovery, claim_out_dir, recover
 from swarm.robots.config import check_against, load_robots
 from swarm.runtime.launcher import Launcher, UpConfig
+from swarm.world.files import RecordingError
 
 if TYPE_CHECKING:  # (numpy: the launcher imports none, swarm/api/record.py)
     from swarm.api.runs import Results
@@ -212,13 +213,7 @@ class Launch:
         )
         try:
             o.recovered = recover(out)
-        except ValueError as e:  # the exit code stays the run's
-            o.recovery_error = str(e)
-        except Exception as e:
-            from swarm.world.stream import RecordingError  # lazy: numpy (imported by the rebuild that raised)
-
-            if not isinstance(e, RecordingError):
-                raise
+        except (ValueError, RecordingError) as e:  # the exit code stays the run's
             o.recovery_error = str(e)
         summary = out / "summary.json"
         if summary.exists():
